@@ -1,0 +1,131 @@
+"""Networks: batched per-world policies (pure functions of their parameters) and the critic.
+
+Policy (paper, section 5): MLP ``s -> a`` with two hidden layers of 64 units and tanh. Every world
+has its own parameters; they are stored stacked with a leading world dimension ``W`` so that one
+batched matmul evaluates all policies, and an inner update is ``theta - alpha * grad`` on plain
+tensors (no module, no in-place mutation).
+
+Critic ``L_critic(s, a, g)``: MLP with two hidden layers of 400 units and ELU, one scalar output.
+
+Input normalisation (documented, fixed from the scene, not learned):
+  * joint positions and goals: ``(q - centre) / half_range`` of the joint limits,
+  * joint velocities: ``qd / qd_scale`` (``qd_scale`` a flag, rad/s),
+  * actions: ``tau / max_torque``.
+Policy output shaping: ``tau = max_torque * tanh(out)``, so torque limits always hold.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+PolicyParams = dict[str, torch.Tensor]
+
+POLICY_INIT_SCHEMES = ("fresh", "fixed", "persistent")
+
+
+@dataclass(frozen=True)
+class Normalizer:
+    """Fixed affine input scales (all ``(dof,)`` tensors)."""
+
+    q_centre: torch.Tensor
+    q_half_range: torch.Tensor
+    qd_scale: float
+    max_torque: torch.Tensor
+
+    @staticmethod
+    def from_limits(q_lower: torch.Tensor, q_upper: torch.Tensor, max_torque: torch.Tensor,
+                    qd_scale: float) -> "Normalizer":
+        return Normalizer((q_upper + q_lower) / 2, (q_upper - q_lower) / 2, float(qd_scale), max_torque)
+
+    def q(self, q: torch.Tensor) -> torch.Tensor:
+        return (q - self.q_centre) / self.q_half_range
+
+    def state(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        return torch.cat([self.q(q), qd / self.qd_scale], dim=-1)
+
+    def action(self, tau: torch.Tensor) -> torch.Tensor:
+        return tau / self.max_torque
+
+
+# ------------------------------------------------------------------------------------------------
+# policy: W independent MLPs evaluated in one batched call
+# ------------------------------------------------------------------------------------------------
+
+def init_policy(worlds: int, obs_dim: int, act_dim: int, *, hidden: int = 64, generator=None,
+                device="cpu", out_scale: float = 0.1) -> PolicyParams:
+    """PyTorch-default (Kaiming-uniform) initialisation for ``W`` policies.
+
+    The last layer is scaled by ``out_scale`` so fresh policies start with small torques.
+    Returns tensors ``w1 (W,h,obs) b1 (W,h) w2 (W,h,h) b2 (W,h) w3 (W,act,h) b3 (W,act)``.
+    """
+    def layer(n_out, n_in, scale=1.0):
+        bound = 1.0 / math.sqrt(n_in)
+        w = (torch.rand(worlds, n_out, n_in, generator=generator) * 2 - 1) * bound * scale
+        b = (torch.rand(worlds, n_out, generator=generator) * 2 - 1) * bound * scale
+        return w.to(device), b.to(device)
+
+    w1, b1 = layer(hidden, obs_dim)
+    w2, b2 = layer(hidden, hidden)
+    w3, b3 = layer(act_dim, hidden, out_scale)
+    return {"w1": w1, "b1": b1, "w2": w2, "b2": b2, "w3": w3, "b3": b3}
+
+
+def policy_forward(params: PolicyParams, obs: torch.Tensor) -> torch.Tensor:
+    """``obs (W, obs_dim)`` or ``(T, W, obs_dim)`` -> pre-shaping output ``(..., W, act_dim)``."""
+    h = torch.tanh(torch.einsum("wij,...wj->...wi", params["w1"], obs) + params["b1"])
+    h = torch.tanh(torch.einsum("wij,...wj->...wi", params["w2"], h) + params["b2"])
+    return torch.einsum("wij,...wj->...wi", params["w3"], h) + params["b3"]
+
+
+def policy_action(params: PolicyParams, norm: Normalizer, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+    """Joint torques ``(..., W, dof)`` within ``+-max_torque``."""
+    return norm.max_torque * torch.tanh(policy_forward(params, norm.state(q, qd)))
+
+
+def detach_params(params: PolicyParams, requires_grad: bool = True) -> PolicyParams:
+    return {k: v.detach().clone().requires_grad_(requires_grad) for k, v in params.items()}
+
+
+def flat_params(params: PolicyParams) -> torch.Tensor:
+    """``(W, n_params)``: all parameters of each world's policy in one row (for traces)."""
+    return torch.cat([v.reshape(v.shape[0], -1) for v in params.values()], dim=1)
+
+
+# ------------------------------------------------------------------------------------------------
+# critic
+# ------------------------------------------------------------------------------------------------
+
+class Critic(nn.Module):
+    """``L_critic(s, a, g)``: MLP ``[state, action, goal] -> scalar`` (2 x 400, ELU).
+
+    Inputs are normalised with the scene's fixed :class:`Normalizer` (stored as buffers so that a
+    checkpoint is self-contained).
+    """
+
+    def __init__(self, dof: int, norm: Normalizer, hidden: int = 400, goal_dim: int | None = None):
+        super().__init__()
+        goal_dim = dof if goal_dim is None else goal_dim
+        self.dof = dof
+        self.net = nn.Sequential(
+            nn.Linear(2 * dof + dof + goal_dim, hidden), nn.ELU(),
+            nn.Linear(hidden, hidden), nn.ELU(),
+            nn.Linear(hidden, 1),
+        )
+        self.register_buffer("q_centre", norm.q_centre.clone())
+        self.register_buffer("q_half_range", norm.q_half_range.clone())
+        self.register_buffer("max_torque", norm.max_torque.clone())
+        self.qd_scale = norm.qd_scale
+
+    def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """All ``(..., dof)`` -> ``(...)``."""
+        x = torch.cat([
+            (q - self.q_centre) / self.q_half_range,
+            qd / self.qd_scale,
+            tau / self.max_torque,
+            (goal - self.q_centre) / self.q_half_range,
+        ], dim=-1)
+        return self.net(x).squeeze(-1)
