@@ -117,4 +117,97 @@ def read_entity_paths(path: str | Path) -> set[str]:
     return {str(p) for p in schema.entity_paths()}
 
 
-__all__ = ["Recorder", "read_entity_paths", "rrb"]
+_GOAL_COLORS = [(230, 25, 75), (60, 180, 75), (0, 130, 200), (245, 130, 48), (145, 30, 180),
+                (70, 240, 240), (240, 50, 230), (210, 245, 60), (128, 128, 0), (0, 0, 128)]
+
+
+class TrainingRecorder:
+    """Records a training run (any method) into ``recording.rrd``; used as a training callback.
+
+    Logs, on the ``iteration`` timeline: the task loss per goal and its mean, the task loss of the
+    untrained policies, and a policy-parameter trace (the first parameters and the norm of the
+    updated policy of world 0). Every ``record_every`` iterations (and the first and last ones) it
+    logs the rollout of one world per goal *before* and *after* the inner update as 3-D link
+    transforms on the ``step`` timeline under ``rollout/<before|after>/it<k>/goal<i>/body<j>``.
+
+    Args:
+        path: output ``.rrd``.
+        sim: the training :class:`~warp_critic.simulator.Simulator` (for forward kinematics).
+        goals: ``(G, dof)`` training goals.
+        history: metrics rows of earlier iterations (a resumed run re-logs them so the recording is complete).
+        record_every: rollout recording period (iterations).
+        last_iteration: index of the final iteration (always recorded).
+    """
+
+    def __init__(self, path, sim, goals, history=(), record_every: int = 50, last_iteration: int | None = None,
+                 method: str = "ours"):
+        self.sim, self.goals = sim, goals
+        self.record_every, self.last_iteration = record_every, last_iteration
+        G = goals.shape[0]
+        blueprint = rrb.Blueprint(
+            rrb.Horizontal(
+                rrb.Vertical(
+                    rrb.TimeSeriesView(origin="/train/task_loss", name="task loss per goal"),
+                    rrb.TimeSeriesView(origin="/train/policy", name="policy parameters"),
+                ),
+                rrb.Spatial3DView(origin="/rollout", name="rollouts (before / after the inner update)"),
+            ),
+            collapse_panels=True,
+        )
+        self.rec = Recorder(path, application_id=f"warp-critic {method} {sim.scene.name}", blueprint=blueprint)
+        for i in range(G):
+            self.rec.series_style(f"train/task_loss/goal{i}", f"goal {i}", _GOAL_COLORS[i % len(_GOAL_COLORS)])
+        self.rec.series_style("train/task_loss/mean", "mean")
+        self.rec.series_style("train/task_loss_before/mean", "untrained policies")
+        for row in history:
+            self._log_row(row)
+
+    def _log_row(self, row: dict) -> None:
+        self.rec.set_time("iteration", row["iteration"])
+        self.rec.scalar("train/task_loss/mean", row["task_loss"])
+        if "task_loss_before" in row:
+            self.rec.scalar("train/task_loss_before/mean", row["task_loss_before"])
+        for i, v in enumerate(row.get("task_loss_per_goal", [])):
+            self.rec.scalar(f"train/task_loss/goal{i}", v)
+        for name in ("grad_norm", "seconds"):
+            if name in row:
+                self.rec.scalar(f"train/{name}", row[name])
+
+    def __call__(self, info) -> None:
+        self._log_row(info.metrics)
+        res = info.result
+        params = getattr(res, "params_new", None)
+        if params is not None:
+            from .networks import flat_params
+
+            flat = flat_params(params)[0].detach().cpu().numpy()
+            self.rec.scalar("train/policy/norm", float(np.linalg.norm(flat)))
+            for j in range(min(4, flat.size)):
+                self.rec.scalar(f"train/policy/theta{j}", float(flat[j]))
+        it = info.iteration
+        if it == 0 or (it + 1) % self.record_every == 0 or it == self.last_iteration:
+            worlds = [int(np.nonzero(info.goal_index.cpu().numpy() == g)[0][0]) for g in range(self.goals.shape[0])]
+            for label, traj in (("before", getattr(res, "before", None)), ("after", getattr(res, "after", None))):
+                if traj is not None:
+                    self.log_rollout(f"rollout/{label}/it{it}", traj.q, worlds)
+
+    def log_rollout(self, prefix: str, q, worlds) -> None:
+        """Link transforms of ``worlds`` along a trajectory ``q (T+1, W, dof)``."""
+        T1 = q.shape[0]
+        poses = np.stack([self.sim.body_poses(q[t]) for t in range(T1)])  # (T+1, W, B, 7)
+        for gi, w in enumerate(worlds):
+            color = _GOAL_COLORS[gi % len(_GOAL_COLORS)]
+            for b in range(poses.shape[2]):
+                self.rec.static_box(f"{prefix}/goal{gi}/body{b}", (0.03, 0.03, 0.03), color=color)
+            for t in range(T1):
+                self.rec.set_time("step", t)
+                for b in range(poses.shape[2]):
+                    self.rec.transform(f"{prefix}/goal{gi}/body{b}", poses[t, w, b, :3], poses[t, w, b, 3:])
+                self.rec.line_strips3d(f"{prefix}/goal{gi}/skeleton", [poses[t, w, :, :3]], colors=[color])
+        self.rec.reset_time()
+
+    def close(self) -> None:
+        self.rec.close()
+
+
+__all__ = ["Recorder", "TrainingRecorder", "read_entity_paths", "rrb"]

@@ -112,7 +112,13 @@ class TrainResult:
 Callback = Callable[[IterationInfo], None]
 
 
-def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progress: bool = True) -> TrainResult:
+def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progress: bool = True,
+               recorder_factory: Callable | None = None) -> TrainResult:
+    """Run (or resume) meta-training; returns the run directory, metrics and critic.
+
+    ``recorder_factory(run_dir, sim, goals, history)`` may return a callback that records the run
+    (see :class:`warp_critic.recording.TrainingRecorder`); it is called once the worlds exist.
+    """
     cfg.with_scene_defaults()
     cfg.validate()
     scene = load_scene(cfg.scene)
@@ -159,6 +165,9 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
         start = ckpt["iteration"] + 1
         history = _read_metrics(run_dir / "metrics.jsonl", upto=start)
     cfg.save(run_dir / "config.json")
+    callbacks = list(callbacks or [])
+    if recorder_factory is not None:
+        callbacks.append(recorder_factory(run_dir, sim, goals, history))
 
     def save_checkpoint(iteration: int) -> None:
         atomic_torch_save({
@@ -207,7 +216,7 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
             metrics_file.write(json.dumps(row) + "\n")
             metrics_file.flush()
             info = IterationInfo(it, row, res, goal_index)
-            for cb in callbacks or []:
+            for cb in callbacks:
                 cb(info)
             bar.update(it + 1, f"task {row['task_loss']:.4f} (before {row['task_loss_before']:.3f}) {row['seconds']:.2f}s/it")
             if (it + 1) % cfg.checkpoint_every == 0 or it + 1 == cfg.iterations:

@@ -1,0 +1,148 @@
+"""Meta-test (the paper's Algorithm 3): train fresh policies with a learned critic, model-free.
+
+The simulator is built **without gradients** (``requires_grad=False``): it only produces rollouts,
+and the policies follow ``-alpha * grad_theta sum_t L(s_t, pi_theta(s_t), g)`` of the saved critic.
+Works for every method's run directory: our critic, and the Q functions of DDPG / Meta-Critic
+(through :func:`test_critic_from_checkpoint`, which returns a module with the same signature
+``L(q, qd, tau, g)`` -- for a Q function, ``L = -Q``).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import torch
+
+from .config import TrainConfig
+from .errors import UserError
+from .inner import inner_update, policy_fn
+from .losses import final_error
+from .networks import Critic, Normalizer, init_policy
+from .rollout import rollout
+from .scene import Variant, load_scene
+from .simulator import Simulator
+from .train import goals_tensor, load_checkpoint, max_torque_tensor, seed_everything
+
+
+@dataclass
+class TestConfig:
+    """Meta-test settings; ``None`` = the value the run was trained with."""
+
+    run_dir: str = ""
+    goals: list[list[float]] | None = None  # explicit goals, else sampled around the training goals
+    num_goals: int = 10
+    goal_std: float = 0.3
+    around: list[int] | None = None  # which training goals to sample around (default: all, cycled)
+    inits: int = 5  # fresh policy initialisations per goal
+    policy_steps: int | None = None  # critic-gradient steps per policy (default: training inner steps)
+    alpha: float | None = None
+    horizon: int | None = None
+    ee_mass: float = 0.0
+    link_length: float | None = None
+    link_scale: float = 1.0
+    seed: int = 1
+    device: str = "auto"
+    out: str | None = None  # write results JSON here (default RUN_DIR/metatest.json)
+
+
+def build_test_critic(ckpt: dict, norm: Normalizer) -> torch.nn.Module:
+    """The loss ``L(q, qd, tau, g)`` a fresh policy descends, for any method's checkpoint."""
+    method = ckpt.get("method", "ours")
+    if method == "ours":
+        critic = Critic(ckpt["dof"], norm, hidden=ckpt.get("critic_hidden", 400))
+        critic.load_state_dict(ckpt["critic_state"])
+        return critic
+    from .baselines import common  # local import: baselines depend on this module's siblings
+
+    return common.test_critic_from_checkpoint(ckpt, norm)
+
+
+def sample_goals(train_goals: torch.Tensor, num: int, std: float, around: list[int] | None,
+                 lower: torch.Tensor, upper: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
+    """``num`` goals ``N(g_i, std^2 I)`` around training goals (cycled), clipped into the limits."""
+    idx = around if around else list(range(train_goals.shape[0]))
+    for i in idx:
+        if not 0 <= i < train_goals.shape[0]:
+            raise UserError(f"--around {i}: the run has {train_goals.shape[0]} training goals")
+    centres = train_goals[[idx[k % len(idx)] for k in range(num)]]
+    noise = torch.randn(num, train_goals.shape[1], generator=gen) * std
+    return torch.clamp(centres + noise, lower * 0.98, upper * 0.98)
+
+
+def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) -> dict:
+    ckpt = load_checkpoint(tc.run_dir)
+    cfg = TrainConfig.from_dict(ckpt["config"])
+    scene = load_scene(cfg.scene)
+    if scene.name != ckpt["scene"] or scene.dof != ckpt["dof"]:
+        raise UserError(f"{tc.run_dir}: checkpoint is for scene {ckpt['scene']} ({ckpt['dof']} dof), "
+                        f"but {cfg.scene} is {scene.name} ({scene.dof} dof)")
+    for name in ("num_goals", "inits"):
+        if getattr(tc, name) < 1:
+            raise UserError(f"--{name.replace('_', '-')} must be >= 1 (got {getattr(tc, name)})")
+    if tc.goal_std < 0:
+        raise UserError(f"--goal-std must be >= 0 (got {tc.goal_std})")
+    horizon = tc.horizon or cfg.horizon
+    alpha = tc.alpha or cfg.alpha
+    steps = tc.policy_steps or cfg.inner_steps
+    for name, value in (("horizon", horizon), ("alpha", alpha), ("policy-steps", steps)):
+        if not value > 0:
+            raise UserError(f"--{name} must be > 0 (got {value})")
+
+    gen = seed_everything(tc.seed)
+    train_goals = torch.tensor(cfg.goals, dtype=torch.float32)
+    lo = torch.as_tensor(scene.q_lower, dtype=torch.float32)
+    hi = torch.as_tensor(scene.q_upper, dtype=torch.float32)
+    if tc.goals is not None:
+        goals = goals_tensor(tc.goals, scene, "cpu")
+    else:
+        goals = sample_goals(train_goals, tc.num_goals, tc.goal_std, tc.around, lo, hi, gen)
+    G, K = goals.shape[0], tc.inits
+    W = G * K
+    variant = Variant(ee_mass=tc.ee_mass, link_length=tc.link_length, link_scale=tc.link_scale)
+    # differentiable=False: the model has no gradient buffers, a taped rollout is impossible.
+    sim = Simulator(scene, [variant] * W, dt=cfg.dt, substeps=cfg.substeps, device=tc.device,
+                    differentiable=False)
+    dev = sim.torch_device
+    norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale)
+    critic = build_test_critic(ckpt, norm).to(dev)
+    for p in critic.parameters():
+        p.requires_grad_(False)
+    goal_index = torch.arange(G, device=dev).repeat_interleave(K)
+    goal = goals.to(dev)[goal_index]
+    q0, qd0 = sim.zeros(), sim.zeros()
+    params = init_policy(W, 2 * scene.dof, scene.dof, generator=gen, device=dev)
+    params = {k: v.requires_grad_(True) for k, v in params.items()}
+    before = rollout(sim, policy_fn(params, norm), q0, qd0, horizon)
+    params, _ = inner_update(critic, params, norm, sim, q0, qd0, goal, horizon=horizon, alpha=alpha,
+                             steps=steps, create_graph=False)
+    after = rollout(sim, policy_fn(params, norm), q0, qd0, horizon)
+    err = final_error(after.q[-1], goal).view(G, K).cpu()
+    err0 = final_error(before.q[-1], goal).view(G, K).cpu()
+    per_goal = err.mean(1)
+    result = {
+        "run_dir": str(tc.run_dir), "method": ckpt.get("method", "ours"), "scene": scene.name,
+        "goals": goals.tolist(), "goal_std": tc.goal_std if tc.goals is None else None,
+        "inits": K, "policy_steps": steps, "alpha": alpha, "horizon": horizon,
+        "variant": {"ee_mass": tc.ee_mass, "link_length": tc.link_length, "link_scale": tc.link_scale},
+        "final_error_per_goal": per_goal.tolist(),
+        "final_error_all": err.tolist(),
+        "mean": float(err.mean()), "std": float(err.std(unbiased=False)),
+        "mean_before": float(err0.mean()),
+    }
+    if progress:
+        progress(f"meta-test {result['method']} on {scene.name}: {G} goals x {K} inits, "
+                 f"{steps} policy step(s), no model gradient")
+        for i, e in enumerate(per_goal.tolist()):
+            progress(f"  goal {i:2d} {np.array2string(goals[i].numpy(), precision=2)}  final sq. error {e:.4f}")
+        progress(f"  mean {result['mean']:.4f}  std {result['std']:.4f}  (untrained policies: {result['mean_before']:.4f})")
+    out = Path(tc.out) if tc.out else Path(tc.run_dir) / "metatest.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".tmp")
+    tmp.write_text(json.dumps(result, indent=2))
+    tmp.replace(out)
+    result["output"] = str(out)
+    return result
