@@ -1,0 +1,371 @@
+#!/usr/bin/env python
+"""Regenerate ``scenes/*.usda`` from the one table of numbers below.
+
+Usage: ``python tools/make_scenes.py [OUT_DIR]`` (default: ``scenes/`` next to this folder).
+
+Every number of every robot lives in :data:`ROBOTS` (plus the few shared constants above it), so a
+change to a robot is one edit here followed by a re-run. The reacher and the KUKA iiwa7 copy the
+URDFs shipped with ``differentiable-robot-model`` (``diff_robot_data/2link_robot.urdf`` and
+``diff_robot_data/kuka_iiwa/urdf/iiwa7.urdf``) number for number.
+
+Conventions of the written USD (all SI: metres, kilograms, seconds; ``upAxis = Z``):
+
+* ``/<robot>`` is an Xform with ``UsdPhysics.ArticulationRootAPI``. Its children are one Xform per
+  moving link (``RigidBodyAPI`` + ``MassAPI``) placed at its pose for q = 0, and ``/<robot>/joints``.
+* The base is welded to the world by giving the first joint no ``body0``: the world-side frame
+  (``localPos0``/``localRot0``) is then the joint frame in world coordinates. Links that are
+  welded to the world (the iiwa's ``iiwa_link_0``) or massless (the URDFs' ``endEffector`` /
+  ``iiwa_link_ee``) are not bodies, so newton builds exactly the actuated DoFs.
+* Joints follow URDF: ``localPos0``/``localRot0`` = the URDF ``<origin>`` in the parent link frame,
+  ``localPos1``/``localRot1`` = identity (the child link frame *is* the joint frame), axis = the
+  URDF axis (X, Y or Z). No drives.
+* USD revolute limits are in DEGREES. Newton's importer also reads the per-joint gains
+  ``newton:damping``, ``newton:limitStiffness`` and ``newton:limitDamping`` of revolute joints
+  per DEGREE (it multiplies them by 180/pi), so we author ``value_per_rad * pi/180`` for revolute
+  joints and the plain value (per metre) for prismatic ones.
+* Mass properties: ``physics:mass``, ``physics:centerOfMass`` (link frame) and the full inertia
+  tensor about the centre of mass, diagonalised with numpy and stored as ``physics:diagonalInertia``
+  plus ``physics:principalAxes`` (quaternion q with I = R(q) diag(d) R(q)^T).
+* Custom data: ``warp_critic:effortLimit`` (float, N*m or N) on every joint;
+  ``warp_critic:endEffectorBody`` (string, the end-effector link's prim name) and
+  ``warp_critic:tipOffset`` (float3, m, in that link's frame) on the articulation root.
+* Visual geometry (capsules/spheres/cylinders) has NO ``CollisionAPI``: newton loads it as
+  zero-density visual shapes, so it never changes the authored mass properties.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics
+
+# ================================================================================================
+# THE TABLE. Units: m, kg, kg*m^2, rad, N*m (N for prismatic), N*m*s/rad (N*s/m).
+# ================================================================================================
+
+DEG = math.pi / 180.0
+PASSIVE_DAMPING = 0.5  # N*m*s/rad on every revolute joint (both URDFs: <dynamics damping="0.5"/>)
+
+# Joint-limit penalty gains [N*m/rad, N*m*s/rad] (prismatic: N/m, N*s/m), applied by newton only
+# while a joint is outside its limits. Explicit (semi-implicit Euler) integration at dt = 2.5 ms is
+# stable when dt*sqrt(ke/I) < 2 and the total damping rate dt*(kd + damping)/I stays below ~1,
+# for the smallest inertia I about a limited axis: the iiwa wrist (joint 7, I = 0.0029 kg*m^2)
+# allows ke = 1000 with kd = 0.5 (spectral radius 0.91 per step, kd = 10 would diverge); the
+# reacher's smallest axis inertia is 0.25 kg*m^2 and the point mass has 1 kg, so kd = 10 is fine.
+
+IIWA_LIMITS = (2.9670597283903604, 2.0943951023931953, 2.9670597283903604, 2.0943951023931953,
+               2.9670597283903604, 2.0943951023931953, 3.0543261909900763)
+HALF_PI, PI = 1.5707963267948966, 3.141592653589793
+
+
+@dataclass(frozen=True)
+class Link:
+    name: str
+    mass: float                                   # kg
+    com: tuple[float, float, float]               # m, link frame
+    inertia: tuple[float, float, float, float, float, float]  # ixx iyy izz ixy ixz iyz about com
+    visual_radius: float = 0.03                   # m, capsule radius of the drawn link
+
+
+@dataclass(frozen=True)
+class Joint:
+    name: str
+    kind: str                                     # "revolute" | "prismatic"
+    parent: str | None                            # None = world
+    child: str
+    xyz: tuple[float, float, float]               # m, origin in the parent frame (world if None)
+    rpy: tuple[float, float, float]               # rad, URDF fixed-axis roll-pitch-yaw
+    axis: str                                     # "X" | "Y" | "Z" in the joint frame
+    lower: float                                  # rad or m
+    upper: float
+    effort: float                                 # N*m or N
+    damping: float                                # N*m*s/rad or N*s/m
+
+
+@dataclass(frozen=True)
+class Robot:
+    links: tuple[Link, ...]
+    joints: tuple[Joint, ...]
+    ee: str                                       # end-effector link name
+    tip: tuple[float, float, float]               # m, tip in the ee link frame
+    limit_ke: float
+    limit_kd: float
+    base_visual: tuple[float, float] | None = None  # (radius, height) of a static base cylinder
+    point_visual: dict[str, float] = field(default_factory=dict)  # link -> sphere radius
+
+
+ROBOTS: dict[str, Robot] = {
+    # Planar point mass: world -x-> carriage -y-> mass. The carriage is a light slider (1 g) so the
+    # point's effective mass is 1.001 kg along x and 1 kg along y. Moves in the horizontal x-y
+    # plane, so newton's gravity (-z) does no work.
+    "point_mass": Robot(
+        links=(
+            Link("carriage", 1e-3, (0.0, 0.0, 0.0), (1e-6, 1e-6, 1e-6, 0.0, 0.0, 0.0), 0.0),
+            Link("mass", 1.0, (0.0, 0.0, 0.0), (1e-3, 1e-3, 1e-3, 0.0, 0.0, 0.0), 0.0),
+        ),
+        joints=(
+            Joint("slide_x", "prismatic", None, "carriage", (0, 0, 0), (0, 0, 0), "X",
+                  -5.0, 5.0, 10.0, 0.0),
+            Joint("slide_y", "prismatic", "carriage", "mass", (0, 0, 0), (0, 0, 0), "Y",
+                  -5.0, 5.0, 10.0, 0.0),
+        ),
+        ee="mass", tip=(0.0, 0.0, 0.0), limit_ke=1000.0, limit_kd=10.0,
+        point_visual={"mass": 0.05},
+    ),
+    # diff_robot_data/2link_robot.urdf
+    "reacher": Robot(
+        links=(
+            Link("arm1", 1.0, (0.5, 0.0, 0.0), (0.001, 0.001, 0.001, 0.0, 0.0, 0.0), 0.025),
+            Link("arm2", 1.0, (0.5, 0.0, 0.0), (0.001, 0.001, 0.001, 0.0, 0.0, 0.0), 0.025),
+        ),
+        joints=(
+            Joint("baseHinge", "revolute", None, "arm1", (0, 0, 0.15), (0, 0, 0), "Z",
+                  -2.9670597283903604, 2.9670597283903604, 20.0, PASSIVE_DAMPING),
+            Joint("interArm", "revolute", "arm1", "arm2", (1, 0, 0), (0, 0, 0), "Z",
+                  -2.9670597283903604, 2.9670597283903604, 20.0, PASSIVE_DAMPING),
+        ),
+        ee="arm2", tip=(1.0, 0.0, 0.0), limit_ke=1000.0, limit_kd=10.0,
+        base_visual=(0.05, 0.15),
+    ),
+    # diff_robot_data/kuka_iiwa/urdf/iiwa7.urdf (iiwa_link_0 is welded to the world and dropped)
+    "kuka": Robot(
+        links=(
+            Link("iiwa_link_1", 3.4525, (0, -0.03, 0.12), (0.02183, 0.007703, 0.02083, 0, 0, -0.003887)),
+            Link("iiwa_link_2", 3.4821, (0.0003, 0.059, 0.042), (0.02076, 0.02179, 0.00779, 0, -0.003626, 0)),
+            Link("iiwa_link_3", 4.05623, (0, 0.03, 0.13), (0.03204, 0.00972, 0.03042, 0, 0, 0.006227)),
+            Link("iiwa_link_4", 3.4822, (0, 0.067, 0.034), (0.02178, 0.02075, 0.007785, 0, 0, -0.003625)),
+            Link("iiwa_link_5", 2.1633, (0.0001, 0.021, 0.076), (0.01287, 0.005708, 0.01112, 0, 0, -0.003946)),
+            Link("iiwa_link_6", 2.3466, (0, 0.0006, 0.0004), (0.006509, 0.006259, 0.004527, 0, 0, 0.00031891)),
+            Link("iiwa_link_7", 3.129, (0, 0, 0.02), (0.01464, 0.01465, 0.002872, 0.0005912, 0, 0)),
+        ),
+        joints=tuple(
+            Joint(f"iiwa_joint_{i + 1}", "revolute", None if i == 0 else f"iiwa_link_{i}",
+                  f"iiwa_link_{i + 1}", xyz, rpy, "Z", -IIWA_LIMITS[i], IIWA_LIMITS[i], 300.0,
+                  PASSIVE_DAMPING)
+            for i, (xyz, rpy) in enumerate([
+                ((0, 0, 0.15), (0, 0, 0)),
+                ((0, 0, 0.19), (HALF_PI, 0, PI)),
+                ((0, 0.21, 0), (HALF_PI, 0, PI)),
+                ((0, 0, 0.19), (HALF_PI, 0, 0)),
+                ((0, 0.21, 0), (-HALF_PI, PI, 0)),
+                ((0, 0.06070, 0.19), (HALF_PI, 0, 0)),
+                ((0, 0.081, 0.06070), (-HALF_PI, PI, 0)),
+            ])
+        ),
+        ee="iiwa_link_7", tip=(0.0, 0.0, 0.045), limit_ke=1000.0, limit_kd=0.5,
+        base_visual=(0.1, 0.15),
+    ),
+}
+
+# ================================================================================================
+# Geometry helpers (numpy, float64)
+# ================================================================================================
+
+
+def rpy_to_matrix(rpy) -> np.ndarray:
+    """URDF roll-pitch-yaw (fixed X, then Y, then Z axes): R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def matrix_to_quat(m: np.ndarray) -> np.ndarray:
+    """Rotation matrix -> unit quaternion (w, x, y, z) with w >= 0."""
+    w = math.sqrt(max(0.0, 1.0 + m[0, 0] + m[1, 1] + m[2, 2])) / 2.0
+    x = math.sqrt(max(0.0, 1.0 + m[0, 0] - m[1, 1] - m[2, 2])) / 2.0
+    y = math.sqrt(max(0.0, 1.0 - m[0, 0] + m[1, 1] - m[2, 2])) / 2.0
+    z = math.sqrt(max(0.0, 1.0 - m[0, 0] - m[1, 1] + m[2, 2])) / 2.0
+    x = math.copysign(x, m[2, 1] - m[1, 2])
+    y = math.copysign(y, m[0, 2] - m[2, 0])
+    z = math.copysign(z, m[1, 0] - m[0, 1])
+    q = np.array([w, x, y, z])
+    return q / np.linalg.norm(q)
+
+
+def quat_to_matrix(q) -> np.ndarray:
+    w, x, y, z = q
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def inertia_matrix(i6) -> np.ndarray:
+    ixx, iyy, izz, ixy, ixz, iyz = i6
+    return np.array([[ixx, ixy, ixz], [ixy, iyy, iyz], [ixz, iyz, izz]], dtype=float)
+
+
+def principal_inertia(i6) -> tuple[np.ndarray, np.ndarray]:
+    """Diagonalise a symmetric inertia tensor: returns (diag, quat wxyz) with I = R diag R^T."""
+    inertia = inertia_matrix(i6)
+    if not np.any(inertia - np.diag(np.diag(inertia))):
+        return np.diag(inertia).copy(), np.array([1.0, 0.0, 0.0, 0.0])
+    diag, vecs = np.linalg.eigh(inertia)
+    if np.linalg.det(vecs) < 0.0:  # make the eigenvector basis a proper rotation
+        vecs[:, 0] = -vecs[:, 0]
+    quat = matrix_to_quat(vecs)
+    rot = quat_to_matrix(quat)
+    err = np.abs(rot @ np.diag(diag) @ rot.T - inertia).max()
+    assert err < 1e-12 * max(1.0, np.abs(inertia).max()), f"inertia diagonalisation error {err}"
+    return diag, quat
+
+
+def gf_quat(q) -> Gf.Quatf:
+    return Gf.Quatf(float(q[0]), Gf.Vec3f(float(q[1]), float(q[2]), float(q[3])))
+
+
+def set_pose(xformable: UsdGeom.Xformable, pos, quat) -> None:
+    xformable.AddTranslateOp().Set(Gf.Vec3d(*map(float, pos)))
+    xformable.AddOrientOp().Set(gf_quat(quat))
+
+
+def add_capsule(stage: Usd.Stage, path: str, a, b, radius: float, color) -> None:
+    """A visual capsule (no CollisionAPI) from point ``a`` to point ``b`` in its parent's frame."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    d = b - a
+    length = float(np.linalg.norm(d))
+    if length < 1e-9:
+        geom = UsdGeom.Sphere.Define(stage, path)
+        geom.CreateRadiusAttr(radius)
+        set_pose(geom, a, (1, 0, 0, 0))
+    else:
+        geom = UsdGeom.Capsule.Define(stage, path)
+        geom.CreateAxisAttr("Z")
+        geom.CreateRadiusAttr(radius)
+        geom.CreateHeightAttr(length)
+        z = np.array([0.0, 0.0, 1.0])
+        u = d / length
+        axis = np.cross(z, u)
+        s, c = np.linalg.norm(axis), float(z @ u)
+        if s < 1e-12:
+            quat = (1, 0, 0, 0) if c > 0 else (0, 1, 0, 0)
+        else:
+            half = math.atan2(s, c) / 2.0
+            quat = (math.cos(half), *(math.sin(half) * axis / s))
+        set_pose(geom, (a + b) / 2.0, quat)
+    geom.CreateDisplayColorAttr([Gf.Vec3f(*color)])
+
+
+# ================================================================================================
+# Writer
+# ================================================================================================
+
+COLORS = [(0.9, 0.45, 0.1), (0.7, 0.7, 0.7)]
+
+
+def write_robot(name: str, robot: Robot, path: Path) -> None:
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdPhysics.SetStageKilogramsPerUnit(stage, 1.0)
+    stage.SetMetadata("comment", "Generated by tools/make_scenes.py -- edit the table there, not this file.")
+
+    root = UsdGeom.Xform.Define(stage, f"/{name}")
+    stage.SetDefaultPrim(root.GetPrim())
+    UsdPhysics.ArticulationRootAPI.Apply(root.GetPrim())
+    root.GetPrim().CreateAttribute("warp_critic:endEffectorBody", Sdf.ValueTypeNames.String,
+                                   custom=True).Set(robot.ee)
+    root.GetPrim().CreateAttribute("warp_critic:tipOffset", Sdf.ValueTypeNames.Float3,
+                                   custom=True).Set(Gf.Vec3f(*map(float, robot.tip)))
+
+    if robot.base_visual is not None:  # static (not a rigid body): drawn only
+        radius, height = robot.base_visual
+        UsdGeom.Xform.Define(stage, f"/{name}/base")
+        cyl = UsdGeom.Cylinder.Define(stage, f"/{name}/base/geom")
+        cyl.CreateAxisAttr("Z")
+        cyl.CreateRadiusAttr(radius)
+        cyl.CreateHeightAttr(height)
+        set_pose(cyl, (0, 0, height / 2.0), (1, 0, 0, 0))
+        cyl.CreateDisplayColorAttr([Gf.Vec3f(0.3, 0.3, 0.3)])
+
+    assert robot.ee in {link.name for link in robot.links}, f"{name}: end-effector {robot.ee!r} is not a link"
+    # World pose of every link at q = 0 (URDF: the child link frame is the joint frame).
+    world_rot: dict[str | None, np.ndarray] = {None: np.eye(3)}
+    world_pos: dict[str | None, np.ndarray] = {None: np.zeros(3)}
+    for joint in robot.joints:
+        rot = rpy_to_matrix(joint.rpy)
+        world_pos[joint.child] = world_pos[joint.parent] + world_rot[joint.parent] @ np.asarray(joint.xyz, float)
+        world_rot[joint.child] = world_rot[joint.parent] @ rot
+
+    children = {j.parent: [] for j in robot.joints}
+    for j in robot.joints:
+        children[j.parent].append(j)
+
+    for k, link in enumerate(robot.links):
+        xform = UsdGeom.Xform.Define(stage, f"/{name}/{link.name}")
+        set_pose(xform, world_pos[link.name], matrix_to_quat(world_rot[link.name]))
+        prim = xform.GetPrim()
+        UsdPhysics.RigidBodyAPI.Apply(prim)
+        mass_api = UsdPhysics.MassAPI.Apply(prim)
+        diag, quat = principal_inertia(link.inertia)
+        mass_api.CreateMassAttr(float(link.mass))
+        mass_api.CreateCenterOfMassAttr(Gf.Vec3f(*map(float, link.com)))
+        mass_api.CreateDiagonalInertiaAttr(Gf.Vec3f(*map(float, diag)))
+        mass_api.CreatePrincipalAxesAttr(gf_quat(quat))
+        # drawn geometry: a capsule from the link origin to each child joint (or to the tip)
+        ends = [np.asarray(j.xyz, float) for j in children.get(link.name, [])]
+        if link.name == robot.ee:
+            ends.append(np.asarray(robot.tip, float))
+        color = COLORS[k % len(COLORS)]
+        if link.visual_radius > 0.0:
+            for e, end in enumerate(ends):
+                add_capsule(stage, f"/{name}/{link.name}/visual_{e}", np.zeros(3), end,
+                            link.visual_radius, color)
+        if link.name in robot.point_visual:
+            add_capsule(stage, f"/{name}/{link.name}/visual_point", np.zeros(3), np.zeros(3),
+                        robot.point_visual[link.name], color)
+
+    UsdGeom.Scope.Define(stage, f"/{name}/joints")
+    for joint in robot.joints:
+        jpath = f"/{name}/joints/{joint.name}"
+        revolute = joint.kind == "revolute"
+        if revolute:
+            uj = UsdPhysics.RevoluteJoint.Define(stage, jpath)
+            lower, upper, gain_scale = joint.lower / DEG, joint.upper / DEG, DEG
+        elif joint.kind == "prismatic":
+            uj = UsdPhysics.PrismaticJoint.Define(stage, jpath)
+            lower, upper, gain_scale = joint.lower, joint.upper, 1.0
+        else:
+            raise ValueError(f"{name}/{joint.name}: unsupported joint kind {joint.kind!r}")
+        uj.CreateAxisAttr(joint.axis)
+        uj.CreateLowerLimitAttr(float(lower))
+        uj.CreateUpperLimitAttr(float(upper))
+        if joint.parent is not None:
+            uj.CreateBody0Rel().SetTargets([Sdf.Path(f"/{name}/{joint.parent}")])
+        uj.CreateBody1Rel().SetTargets([Sdf.Path(f"/{name}/{joint.child}")])
+        uj.CreateLocalPos0Attr(Gf.Vec3f(*map(float, joint.xyz)))
+        uj.CreateLocalRot0Attr(gf_quat(matrix_to_quat(rpy_to_matrix(joint.rpy))))
+        uj.CreateLocalPos1Attr(Gf.Vec3f(0.0, 0.0, 0.0))
+        uj.CreateLocalRot1Attr(Gf.Quatf(1.0))
+        prim = uj.GetPrim()
+        # newton reads these per degree for revolute joints (value * 180/pi), per metre otherwise
+        prim.CreateAttribute("newton:damping", Sdf.ValueTypeNames.Float).Set(joint.damping * gain_scale)
+        prim.CreateAttribute("newton:limitStiffness", Sdf.ValueTypeNames.Float).Set(robot.limit_ke * gain_scale)
+        prim.CreateAttribute("newton:limitDamping", Sdf.ValueTypeNames.Float).Set(robot.limit_kd * gain_scale)
+        prim.CreateAttribute("warp_critic:effortLimit", Sdf.ValueTypeNames.Float, custom=True).Set(joint.effort)
+
+    stage.GetRootLayer().Save()
+
+
+def main(argv: list[str]) -> int:
+    out_dir = Path(argv[1]) if len(argv) > 1 else Path(__file__).resolve().parent.parent / "scenes"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    for name, robot in ROBOTS.items():
+        path = out_dir / f"{name}.usda"
+        if path.exists():
+            path.unlink()  # Usd.Stage.CreateNew refuses to overwrite
+        write_robot(name, robot, path)
+        print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv))
