@@ -32,6 +32,8 @@ from .train import goals_tensor, load_checkpoint, max_torque_tensor, seed_everyt
 class TestConfig:
     """Meta-test settings; ``None`` = the value the run was trained with."""
 
+    __test__ = False  # not a pytest class
+
     run_dir: str = ""
     goals: list[list[float]] | None = None  # explicit goals, else sampled around the training goals
     num_goals: int = 10

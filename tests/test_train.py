@@ -1,0 +1,205 @@
+"""Meta-training (Algorithm 2) and meta-test (Algorithm 3) end to end on tiny problems."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import torch
+
+from warp_critic import bridge, train
+from warp_critic.cli import main
+from warp_critic.config import TrainConfig
+from warp_critic.metatest import TestConfig, meta_test
+from warp_critic.recording import read_entity_paths
+
+ROOT = Path(__file__).resolve().parents[1]
+REACHER = str(ROOT / "scenes" / "reacher.usda")
+KUKA = str(ROOT / "scenes" / "kuka.usda")
+TINY = ["--goals", "0.5,0.3;-0.4,0.2", "--worlds-per-goal", "2", "--horizon", "6", "--device", "cpu"]
+
+
+def tiny_cfg(out: Path, **kw) -> TrainConfig:
+    cfg = TrainConfig(scene=REACHER, goals=[[0.5, 0.3], [-0.4, 0.2]], worlds_per_goal=2, horizon=6,
+                      iterations=3, device="cpu", out=str(out), checkpoint_every=1, record_every=2)
+    for k, v in kw.items():
+        setattr(cfg, k, v)
+    return cfg
+
+
+def test_meta_train_cli_writes_run_directory_and_resumes(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["meta-train", REACHER, *TINY, "--iterations", "3", "--out", str(out)]) == 0
+    for name in ("config.json", "checkpoint.pt", "metrics.jsonl", "recording.rrd"):
+        assert (out / name).is_file(), name
+    rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
+    assert [r["iteration"] for r in rows] == [0, 1, 2]
+    assert all(len(r["task_loss_per_goal"]) == 2 for r in rows)
+    entities = read_entity_paths(out / "recording.rrd")
+    assert "/train/task_loss/goal0" in entities and "/train/task_loss/goal1" in entities
+    assert any(e.startswith("/rollout/before/it0/goal0/body") for e in entities)
+    assert any(e.startswith("/rollout/after/it2/goal1/body") for e in entities)
+    assert any(e.startswith("/train/policy/") for e in entities)
+
+    # an existing run is never overwritten without --resume
+    assert main(["meta-train", REACHER, *TINY, "--iterations", "3", "--out", str(out)]) == 2
+    assert "--resume" in capsys.readouterr().err
+
+    assert main(["meta-train", REACHER, "--iterations", "5", "--out", str(out), "--resume", "--device", "cpu"]) == 0
+    rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
+    assert [r["iteration"] for r in rows] == [0, 1, 2, 3, 4]
+    assert torch.load(out / "checkpoint.pt", weights_only=False)["iteration"] == 4
+    assert "/train/task_loss/mean" in read_entity_paths(out / "recording.rrd")
+
+
+def test_resume_is_exact_on_cpu(tmp_path):
+    straight = train.meta_train(tiny_cfg(tmp_path / "a", iterations=4), progress=False)
+    train.meta_train(tiny_cfg(tmp_path / "b", iterations=2), progress=False)
+    resumed = train.meta_train(tiny_cfg(tmp_path / "b", iterations=4, resume=True), progress=False)
+    a = [r["task_loss"] for r in straight.metrics]
+    b = [r["task_loss"] for r in resumed.metrics]
+    assert a == pytest.approx(b, rel=1e-5)
+    again = train.meta_train(tiny_cfg(tmp_path / "c", iterations=4), progress=False)
+    assert [r["task_loss"] for r in again.metrics] == a  # same seed, same numbers
+
+
+def test_outer_gradient_reaches_the_critic_through_model_and_inner_update(tmp_path):
+    """The critic gradient is second order: it exists only through theta_new(phi) and the model."""
+    from warp_critic.networks import Critic, Normalizer, init_policy
+    from warp_critic.outer import meta_loss
+    from warp_critic.scene import Variant, load_scene
+    from warp_critic.simulator import Simulator
+
+    scene = load_scene(REACHER)
+    sim = Simulator(scene, [Variant()] * 2, dt=0.01, substeps=2, device="cpu")
+    norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, torch.tensor([20.0, 20.0]), 5.0)
+    critic = Critic(2, norm)
+    params = {k: v.requires_grad_() for k, v in init_policy(2, 4, 2, generator=torch.Generator().manual_seed(0)).items()}
+    goal = torch.tensor([[0.5, 0.3], [0.5, 0.3]])
+    res = meta_loss(critic, params, norm, sim, sim.zeros(), sim.zeros(), goal, horizon=8, alpha=1e-3)
+    grads = torch.autograd.grad(res.loss, list(critic.parameters()), allow_unused=True)
+    # a constant offset of the critic cannot change the policy update: no path from the output bias
+    assert grads[-1] is None
+    assert all(torch.isfinite(g).all() for g in grads[:-1])
+    assert sum(float(g.abs().sum()) for g in grads[:-1]) > 0
+
+    # finite differences on the critic's output weights, through the whole bi-level graph
+    w = critic.net[-1].weight
+    (g_w,) = torch.autograd.grad(meta_loss(critic, params, norm, sim, sim.zeros(), sim.zeros(), goal,
+                                           horizon=8, alpha=1e-3).loss, [w])
+    direction = torch.randn_like(w)
+    eps = 1e-2
+    def loss_at(shift):
+        with torch.no_grad():
+            w.add_(shift * direction)
+        value = meta_loss(critic, params, norm, sim, sim.zeros(), sim.zeros(), goal, horizon=8, alpha=1e-3).loss.item()
+        with torch.no_grad():
+            w.sub_(shift * direction)
+        return value
+
+    lp, lm = loss_at(eps), loss_at(-eps)
+    fd = (lp - lm) / (2 * eps)
+    assert float((g_w * direction).sum()) == pytest.approx(fd, rel=0.05, abs=1e-6)
+
+
+def test_meta_test_uses_no_model_gradient(tmp_path, monkeypatch, capsys):
+    out = tmp_path / "run"
+    train.meta_train(tiny_cfg(out, iterations=2), progress=False)
+
+    def forbidden(*a, **k):
+        raise AssertionError("meta-test took a model gradient")
+
+    monkeypatch.setattr(bridge.NewtonBridge, "_forward_taped", forbidden)
+    monkeypatch.setattr(bridge.NewtonBridge, "begin_rollout", forbidden)
+    built = []
+    real_init = bridge.NewtonBridge.__init__
+
+    def spy(self, model, *a, **k):
+        built.append(model.requires_grad)
+        real_init(self, model, *a, **k)
+
+    monkeypatch.setattr(bridge.NewtonBridge, "__init__", spy)
+    res = meta_test(TestConfig(run_dir=str(out), num_goals=3, inits=2, goal_std=0.2, device="cpu"), progress=None)
+    assert built == [False]  # the test-time model has no gradient buffers at all
+    assert len(res["final_error_per_goal"]) == 3 and res["mean"] >= 0
+    assert (out / "metatest.json").is_file()
+
+    assert main(["meta-test", str(out), "--num-goals", "2", "--inits", "1", "--ee-mass", "0.5",
+                 "--link-scale", "1.2", "--device", "cpu"]) == 0
+    text = capsys.readouterr().out
+    assert "mean" in text and "goal  1" in text
+
+
+def test_divergence_stops_with_iteration_and_keeps_last_good_checkpoint(tmp_path, monkeypatch, capsys):
+    real = train.meta_loss
+    calls = {"n": 0}
+
+    def sometimes_nan(*a, **k):
+        res = real(*a, **k)
+        calls["n"] += 1
+        if calls["n"] == 3:
+            res.loss = res.loss * float("nan")
+        return res
+
+    monkeypatch.setattr(train, "meta_loss", sometimes_nan)
+    out = tmp_path / "run"
+    code = main(["meta-train", REACHER, *TINY, "--iterations", "5", "--checkpoint-every", "1", "--out", str(out)])
+    err = [line for line in capsys.readouterr().err.splitlines() if not line.startswith("[")]  # minus progress
+    assert code == 1 and len(err) == 1 and "iteration 2" in err[0], err
+    assert torch.load(out / "checkpoint.pt", weights_only=False)["iteration"] == 1
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["meta-train", REACHER, "--goals", "0.1,0.2,0.3"], "needs 2 joint values"),
+    (["meta-train", REACHER, "--goals", "5.0,0.0"], "outside the joint limits"),
+    (["meta-train", REACHER, "--horizon", "0"], "--horizon must be > 0"),
+    (["meta-train", REACHER, "--lr", "-1"], "--lr must be > 0"),
+    (["meta-train", REACHER, "--alpha", "0"], "--alpha must be > 0"),
+    (["meta-train", REACHER, "--ee-mass", "-1"], "--ee-mass"),
+    (["meta-train", REACHER, "--link-length", "-0.5"], "--link-length"),
+    (["meta-train", REACHER, "--horizon", "abc"], "invalid int value"),
+    (["meta-train", "nope/missing.usda"], "missing.usda"),
+    (["meta-train", REACHER, "--policy-init", "weird"], "--policy-init"),
+    (["meta-train", REACHER, "--goals", "goals_missing.json"], "goals_missing.json"),
+])
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, fragment):
+    try:
+        code = main([*argv, "--out", str(tmp_path / "run"), "--device", "cpu", "--iterations", "1"])
+    except SystemExit as e:  # argparse's own errors exit from the parser
+        code = e.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and fragment in err[0], err
+    assert not (tmp_path / "run" / "checkpoint.pt").exists()
+
+
+def test_meta_test_bad_run_dirs(tmp_path, capsys):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert main(["meta-test", str(empty)]) == 2
+    assert "no checkpoint" in capsys.readouterr().err
+    assert main(["meta-test", str(tmp_path / "nothing")]) == 2
+    assert "not found" in capsys.readouterr().err
+
+    out = tmp_path / "run"
+    train.meta_train(tiny_cfg(out, iterations=1), progress=False)
+    ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
+    ckpt["config"]["scene"] = KUKA  # a checkpoint from another scene
+    torch.save(ckpt, out / "checkpoint.pt")
+    assert main(["meta-test", str(out), "--device", "cpu"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "scene" in err[0]
+    assert main(["meta-test", str(empty), "--inits", "0"]) == 2
+
+
+def test_help_and_version(capsys):
+    with pytest.raises(SystemExit) as e:
+        main(["--version"])
+    assert e.value.code == 0 and "warp-critic" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["meta-train", "--help"])
+    text = capsys.readouterr().out
+    for flag in ("--goals", "--iterations", "--horizon", "--dt", "--lr", "--alpha", "--inner-steps",
+                 "--worlds-per-goal", "--seed", "--device", "--out", "--resume", "--policy-init"):
+        assert flag in text
