@@ -1,0 +1,103 @@
+"""Tests of the 2-D landscape analysis (section 4.2, Figure 1): small end-to-end run, analytic optimum,
+descent check, recording contents, CLI errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from warp_critic.analysis import landscape as L
+from warp_critic.recording import read_entity_paths
+
+GOAL, TEST_GOALS, INITS = (1.0, 1.0), ((-1.5, 0.5), (0.5, -1.5)), ((0.0, 0.0), (-0.5, 0.5))
+
+
+@pytest.fixture(scope="module")
+def result(tmp_path_factory):
+    out = tmp_path_factory.mktemp("landscape")
+    cfg = L.LandscapeConfig(out=out, iterations=4, grid=9, inits_per_state=2, sup_fit_steps=2, quiet=True,
+                            goal=GOAL, test_goals=TEST_GOALS, init_states=INITS)
+    return L.run_landscape(cfg)
+
+
+def test_analytic_gain_semi_implicit_euler():
+    # N steps of constant force from rest: qd_k = k dt a, q_N = dt^2 a (1 + ... + N) = a dt^2 N (N+1)/2
+    dt, T = 0.05, 20
+    a = 1.0 / np.array(L.AXIS_MASS)
+    q, qd = np.zeros(2), np.zeros(2)
+    for _ in range(T):
+        qd = qd + dt * a
+        q = q + dt * qd
+    assert np.allclose(L.analytic_gain(dt, T), q)
+    assert np.allclose(L.analytic_gain(dt, T), dt * dt * T * (T + 1) / 2 / np.array([1.001, 1.0]))
+    assert np.allclose(L.analytic_gain(0.025, 10, substeps=2), 0.025 ** 2 * 20 * 21 / 2 / np.array(L.AXIS_MASS))
+
+
+def test_shapes_and_finite(result):
+    n, G = 9, 3
+    assert result["values"].shape == (G, 3, n, n)
+    assert result["grads"].shape == (G, 3, n, n, 2)
+    assert np.isfinite(result["values"]).all() and np.isfinite(result["grads"]).all()
+    assert result["trace_new"].shape == (4, 4, 2) and np.isfinite(result["trace_new"]).all()
+    assert len(result["fractions"]) == G and all(set(f) == set(L.METHODS) for f in result["fractions"])
+
+
+def test_q_true_matches_newton_and_analytic_optimum(result):
+    axis, values, grads, goals = result["axis"], result["values"], result["grads"], result["goals"]
+    gain = L.analytic_gain(0.05, 20)
+    t1, t2 = np.meshgrid(axis, axis, indexing="ij")
+    theta = np.stack([t1, t2], -1)
+    q0 = np.array(INITS[0])
+    for gi, g in enumerate(goals):
+        err = q0 + theta * gain - g
+        # the Newton rollout agrees with the closed form q_T = q0 + theta dt^2 T(T+1)/(2m) ...
+        np.testing.assert_allclose(values[gi, 0], (err ** 2).sum(-1), rtol=2e-3, atol=2e-4)
+        # ... and so does its gradient through the differentiable model
+        np.testing.assert_allclose(grads[gi, 0], 2 * err * gain, rtol=2e-3, atol=2e-4)
+        opt = L.analytic_optimum(g, q0, 0.05, 20)
+        np.testing.assert_allclose(result["optima"][gi], opt)
+        np.testing.assert_allclose(q0 + opt * gain, g, atol=1e-12)
+        i1, i2 = np.unravel_index(np.argmin(values[gi, 0]), values[gi, 0].shape)
+        assert (i1, i2) == (np.argmin(abs(axis - opt[0])), np.argmin(abs(axis - opt[1])))
+        assert result["fractions"][gi]["Q_true"] == 1.0
+
+
+def test_descent_fraction_can_fail():
+    axis = np.linspace(-5, 5, 21)
+    t1, t2 = np.meshgrid(axis, axis, indexing="ij")
+    opt = np.array([1.9, -2.3])
+    bowl = np.stack([t1 - opt[0], t2 - opt[1]], -1)
+    assert L.descent_fraction(bowl, axis, opt, 0.5) == 1.0
+    assert L.descent_fraction(-bowl, axis, opt, 0.5) == 0.0  # ascent field: nobody arrives
+    shifted = np.stack([t1 - 0.0, t2 - 0.0], -1)  # minimum in the wrong place
+    assert L.descent_fraction(shifted, axis, opt, 0.5) == 0.0
+
+
+def test_outputs(result):
+    out = result["out"]
+    for name in ("landscape.rrd", "landscape.png", "exploration.png"):
+        assert (out / name).is_file() and (out / name).stat().st_size > 0
+    paths = read_entity_paths(out / "landscape.rrd")
+    for gn in ("train", "test1", "test2"):
+        for m in L.METHODS:
+            for leaf in ("value", "descent_direction", "optimum"):
+                assert f"/landscape/{gn}/{m}/{leaf}" in paths, (gn, m, leaf, sorted(paths)[:20])
+    assert "/trace/theta_new" in paths
+    assert "/train/ours_task_loss" in paths
+
+
+@pytest.mark.parametrize("argv,flag", [
+    (["--grid", "2"], "--grid"),
+    (["--iterations", "0"], "--iterations"),
+    (["--range", "-1"], "--range"),
+    (["--goal", "1"], "--goal"),
+    (["--test-goals", "a,b"], "--test-goals"),
+    (["--tolerance", "nan"], "--tolerance"),
+])
+def test_cli_errors_name_the_flag(argv, flag, capsys, tmp_path):
+    from warp_critic.cli import main
+
+    code = main(["analyze", "landscape", "--out", str(tmp_path / "x"), *argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and flag in err[0] and "error" in err[0]
