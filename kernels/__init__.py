@@ -1,6 +1,5 @@
 """Warp kernels of warp-critic, installed as ``warp_critic.kernels``.
 
-Kernels sit in small modules next to the Python that launches them conceptually:
-``state_io`` packs torch tensors into Newton's per-world state arrays and checks them for
-non-finite values.
+``kinematics``: end-effector tip positions of all worlds from Newton's body poses (used for
+recordings and analyses, one launch for every world).
 """

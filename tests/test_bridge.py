@@ -172,3 +172,17 @@ def test_model_free_simulator_has_no_gradient_path():
     sim = Simulator(scene, [Variant()], dt=0.01, substeps=1, device="cpu", differentiable=False)
     with pytest.raises(RuntimeError, match="requires_grad"):
         sim.begin_rollout()
+
+
+def test_tip_kernel_matches_link_geometry():
+    """Reacher tip = planar 2-link forward kinematics (links 1 m); a longer link moves it."""
+    import math
+
+    scene = load_scene(ROOT / "scenes" / "reacher.usda")
+    sim = Simulator(scene, [Variant(), Variant(link_scale=1.5)], dt=0.01, device="cpu", differentiable=False)
+    q = torch.tensor([[0.3, -0.7], [0.3, -0.7]])
+    tips = sim.tip_positions(q)
+    for w, l2 in ((0, 1.0), (1, 1.5)):
+        x = math.cos(0.3) + l2 * math.cos(0.3 - 0.7)
+        y = math.sin(0.3) + l2 * math.sin(0.3 - 0.7)
+        assert tips[w, 0] == pytest.approx(x, abs=1e-5) and tips[w, 1] == pytest.approx(y, abs=1e-5)

@@ -195,6 +195,9 @@ class TrainingRecorder:
         """Link transforms of ``worlds`` along a trajectory ``q (T+1, W, dof)``."""
         T1 = q.shape[0]
         poses = np.stack([self.sim.body_poses(q[t]) for t in range(T1)])  # (T+1, W, B, 7)
+        tips = np.stack([self.sim.tip_positions(q[t]) for t in range(T1)])  # (T+1, W, 3)
+        for gi, w in enumerate(worlds):
+            self.stream_static_strip(f"{prefix}/goal{gi}/tip_path", tips[:, w], _GOAL_COLORS[gi % len(_GOAL_COLORS)])
         for gi, w in enumerate(worlds):
             color = _GOAL_COLORS[gi % len(_GOAL_COLORS)]
             for b in range(poses.shape[2]):
@@ -205,6 +208,9 @@ class TrainingRecorder:
                     self.rec.transform(f"{prefix}/goal{gi}/body{b}", poses[t, w, b, :3], poses[t, w, b, 3:])
                 self.rec.line_strips3d(f"{prefix}/goal{gi}/skeleton", [poses[t, w, :, :3]], colors=[color])
         self.rec.reset_time()
+
+    def stream_static_strip(self, entity: str, points: np.ndarray, color) -> None:
+        self.rec.stream.log(entity, rr.LineStrips3D([points], colors=[color]), static=True)
 
     def close(self) -> None:
         self.rec.close()

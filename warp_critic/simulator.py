@@ -94,3 +94,21 @@ class Simulator:
         newton.eval_fk(self.model, state.joint_q, state.joint_qd, state)
         poses = state.body_q.numpy().reshape(self.worlds, -1, 7)
         return poses
+
+    @torch.no_grad()
+    def tip_positions(self, q: torch.Tensor) -> np.ndarray:
+        """End-effector tip of every world for joint positions ``q`` ``(W, dof)`` -> ``(W, 3)`` (m)."""
+        import newton
+
+        from .kernels.kinematics import tip_positions_kernel
+
+        state = self.model.state(requires_grad=False)
+        wp.to_torch(state.joint_q).view(self.worlds, self.dof).copy_(q)
+        newton.eval_fk(self.model, state.joint_q, state.joint_qd, state)
+        offsets = np.stack([self.scene.tip_offset_of(v) for v in self.variants]).astype(np.float32)
+        tip_offset = wp.array(offsets, dtype=wp.vec3, device=self.model.device)
+        tips = wp.zeros(self.worlds, dtype=wp.vec3, device=self.model.device)
+        wp.launch(tip_positions_kernel, dim=self.worlds,
+                  inputs=[state.body_q, self.model.body_count // self.worlds, self.scene.ee_body, tip_offset],
+                  outputs=[tips], device=self.model.device)
+        return tips.numpy()
