@@ -44,6 +44,16 @@ state). The states do not depend on the goal, so one rollout serves all goals. `
 are summed along each rollout, ``sum_t C(s_t, theta)``, and differentiated with respect to ``theta``
 with the states as data (torch autograd) -- exactly the policy gradient each critic gives.
 
+Note: for the critics the colour (``sum_t C(s_t(theta), theta)``, the states depend on ``theta``) is *not*
+the potential of the arrows (the policy gradient with the states as data, as in the paper). They can
+disagree: e.g. with the defaults ours' summed value is lowest near ``(1, 0.5)`` while its arrows lead to
+``theta* = (1.91, 1.90)``. The descent check below follows the arrows, since that is what a policy
+trained with the critic does.
+
+Generalisation: with one training goal the critic's goal input never varies during training, so nothing
+ties its landscape to ``g``; in our runs neither ours (``--ours-goal-input absolute`` or ``relative``) nor
+``Q_sup`` moves its minimum to the unseen goals' optima (see the printed table).
+
 Quantitative check: from every grid point, run normalised-gradient descent on the *precomputed* gradient
 field (bilinear interpolation between grid points, clamped to the box), step sizes
 ``eta_k = h * 0.98^k`` (``h`` the grid spacing) for 300 steps. A start succeeds if it ends within
@@ -94,6 +104,7 @@ class LandscapeConfig:
     sup_batch: int = 512
     sup_reward: str = "terminal"
     tolerance: float = 0.5
+    ours_goal_input: str = "absolute"
     qd_scale: float = 2.0
     scene: str = SCENE
     quiet: bool = False
@@ -169,8 +180,13 @@ def _make_critic(sim, cfg, seed):
     return Critic(2, norm).to(sim.torch_device)
 
 
-def critic_sum(critic, q, qd, theta, goal):
-    """``sum_t C(s_t, theta, g)`` per world; ``q, qd (T, W, 2)`` data, ``theta (W, 2)``, ``goal (W, 2)``."""
+def critic_sum(critic, q, qd, theta, goal, relative: bool = False):
+    """``sum_t C(s_t, theta, g)`` per world; ``q, qd (T, W, 2)`` data, ``theta (W, 2)``, ``goal (W, 2)``.
+
+    ``relative``: feed ``(q - g, qd, a, 0)`` instead of ``(q, qd, a, g)`` (the ``--ours-goal-input relative``
+    variant, the same goal conditioning as ``Q_sup``)."""
+    if relative:
+        return sup_sum(critic, q, qd, theta, goal)
     T = q.shape[0]
     tau = theta.unsqueeze(0).expand(T, -1, -1)
     return critic(q, qd, tau, goal.unsqueeze(0).expand_as(q)).sum(0)
@@ -198,7 +214,7 @@ def train_ours(cfg, sim, q0, goal, gen, log=print):
     for it in range(cfg.iterations):
         theta = ((torch.rand(W, 2, generator=gen) * 2 - 1) * cfg.range).to(q0.device).requires_grad_(True)
         data = rollout(sim, _constant(theta.detach()), q0, qd0, cfg.horizon, differentiable=False)
-        inner = critic_sum(critic, data.q[:-1], data.qd[:-1], theta, goals).sum()
+        inner = critic_sum(critic, data.q[:-1], data.qd[:-1], theta, goals, cfg.ours_goal_input == "relative").sum()
         (grad,) = torch.autograd.grad(inner, theta, create_graph=True)
         theta_new = theta - cfg.alpha * grad
         after = rollout(sim, _constant(theta_new), q0, qd0, cfg.horizon, differentiable=True)
@@ -264,7 +280,7 @@ def train_sup(cfg, sim, q0, goal, gen, log=print):
         theta = (theta - cfg.sup_alpha * g).clamp(-cfg.range, cfg.range).detach()
         thetas.append(theta.cpu().numpy())
         if not cfg.quiet and (it % 50 == 0 or it == cfg.iterations - 1):
-            log(f"  Q_sup it {it:4d}  TD loss {float(td):.5f}")
+            log(f"  Q_sup it {it:4d}  TD loss {td_losses[-1]:.5f}")
     return qsup, np.stack(thetas), np.array(td_losses)
 
 
@@ -302,7 +318,8 @@ def compute_landscapes(cfg, eval_sim, grad_sim, critic, qsup, goals: np.ndarray,
         err = qT_data - gt
         values[gi, 0] = (err ** 2).sum(-1).reshape(n, n).cpu().numpy()
         grads[gi, 0] = (2 * torch.einsum("pj,pjk->pk", qT.detach() - gt, jac)).reshape(n, n, 2).cpu().numpy()
-        for mi, (net, fn) in ((1, (qsup, sup_sum)), (2, (critic, critic_sum))):
+        ours_fn = sup_sum if cfg.ours_goal_input == "relative" else critic_sum
+        for mi, (net, fn) in ((1, (qsup, sup_sum)), (2, (critic, ours_fn))):
             th = theta.clone().requires_grad_(True)
             v = fn(net, qs, qds, th, gt)
             (gr,) = torch.autograd.grad(v.sum(), th)
@@ -418,8 +435,9 @@ def write_figures(out: Path, cfg, axis, values, grads, goals, optima, trace_new,
     per = W // len(init_states)
     for si, s0 in enumerate(init_states):
         th = analytic_optimum(goals[0], s0, cfg.dt, cfg.horizon, cfg.substeps)
-        ax.plot(*th, marker="*", color="red", markersize=14, label=f"theta* from q0=({s0[0]:g},{s0[1]:g})"
-                if si == 0 else f"theta* from q0=({s0[0]:g},{s0[1]:g})")
+        ax.plot(*th, marker="**^sD"[si % 5], color=["red", "orange", "magenta", "cyan", "white"][si % 5],
+                markeredgecolor="black", markersize=14, linestyle="none",
+                label=f"theta* from q0=({s0[0]:g},{s0[1]:g})")
     fig.colorbar(sc, ax=ax, label="meta-iteration (dark -> light)")
     ax.set_xlim(axis[0] * 1.5, axis[-1] * 1.5)
     ax.set_ylim(axis[0] * 1.5, axis[-1] * 1.5)
@@ -562,6 +580,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
       help=f"TD minibatch steps per Q_sup iteration (>= 1; default {d.sup_fit_steps})")
     A("--sup-reward", type=str, default=d.sup_reward, choices=("terminal", "running"),
       help="Q_sup cost: terminal ||q_T-g||^2 (the task cost) or running ||q_{t+1}-g||^2 (default terminal)")
+    A("--ours-goal-input", type=str, default=d.ours_goal_input, choices=("absolute", "relative"),
+      help="how L_critic sees the goal: absolute M(s, a, g) (the paper's) or relative M(s - g, a), "
+           "like Q_sup (default absolute)")
     A("--tolerance", type=float, default=d.tolerance, metavar="N",
       help=f"success radius around theta* for the descent check, in N (> 0; default {d.tolerance})")
 
@@ -603,7 +624,8 @@ def config_from_args(args: argparse.Namespace) -> LandscapeConfig:
                            alpha=args.alpha, lr=args.lr, inits_per_state=args.inits_per_state,
                            goal=args._goal, test_goals=args._test_goals, init_states=args._init_states,
                            sup_alpha=args.sup_alpha, sup_fit_steps=args.sup_fit_steps,
-                           sup_reward=args.sup_reward, tolerance=args.tolerance)
+                           sup_reward=args.sup_reward, tolerance=args.tolerance,
+                           ours_goal_input=args.ours_goal_input)
 
 
 def run_from_args(args: argparse.Namespace) -> int:
