@@ -19,7 +19,7 @@ SCENE_DEFAULTS: dict[str, dict[str, Any]] = {
     "reacher": dict(
         goals=[[1.0, 0.5], [-1.0, -0.5], [0.5, -1.0], [-0.5, 1.0]],
         horizon=50, dt=0.01, substeps=2, max_torque=[20.0, 20.0], qd_scale=5.0,
-        alpha=1e-3, lr=3e-3,
+        alpha=1e-3, lr=1e-3,
     ),
     "kuka": dict(
         goals=[[0.5, 0.4, 0.0, -0.8, 0.0, 0.5, 0.0],
@@ -27,7 +27,7 @@ SCENE_DEFAULTS: dict[str, dict[str, Any]] = {
                [0.3, -0.4, -0.3, -1.0, 0.2, 0.4, 0.0],
                [-0.3, -0.6, 0.0, -0.4, -0.2, 0.6, 0.0]],
         horizon=50, dt=0.0025, substeps=4, max_torque=[150.0, 150.0, 80.0, 80.0, 20.0, 10.0, 5.0],
-        qd_scale=5.0, alpha=1e-3, lr=3e-3,
+        qd_scale=5.0, alpha=1e-3, lr=1e-3,
     ),
     "point_mass": dict(
         goals=[[1.0, 1.0]], horizon=20, dt=0.05, substeps=1, max_torque=[5.0, 5.0], qd_scale=2.0,
