@@ -53,9 +53,16 @@ def test_meta_train_cli_writes_run_directory_and_resumes(tmp_path, capsys):
     assert "/train/task_loss/mean" in read_entity_paths(out / "recording.rrd")
 
 
-def test_resume_is_exact_on_cpu(tmp_path):
+def test_interrupted_run_resumes_exactly_on_cpu(tmp_path):
     straight = train.meta_train(tiny_cfg(tmp_path / "a", iterations=4), progress=False)
-    train.meta_train(tiny_cfg(tmp_path / "b", iterations=2), progress=False)
+
+    def interrupt(info):
+        if info.iteration == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        train.meta_train(tiny_cfg(tmp_path / "b", iterations=4), callbacks=[interrupt], progress=False)
+    assert torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=False)["iteration"] == 1
     resumed = train.meta_train(tiny_cfg(tmp_path / "b", iterations=4, resume=True), progress=False)
     a = [r["task_loss"] for r in straight.metrics]
     b = [r["task_loss"] for r in resumed.metrics]

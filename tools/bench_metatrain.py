@@ -57,9 +57,11 @@ def main() -> None:
     p.add_argument("--device", default="auto")
     p.add_argument("--quick", action="store_true", help="tiny smoke version")
     args = p.parse_args()
+    import torch
     import warp as wp
 
     wp.config.quiet = True
+    torch.set_num_threads(1)  # small networks; avoids oversubscription next to Warp's CPU kernels
     lines = []
     for s in args.scenes:
         lines += run_scene(s, args.iterations, args.device, args.quick)

@@ -50,6 +50,7 @@ class TrainConfig:
     substeps: int | None = field(default=None, metadata={"help": "physics steps per control step"})
     alpha: float | None = field(default=None, metadata={"help": "inner learning rate (policy update with the critic)"})
     lr: float | None = field(default=None, metadata={"help": "outer learning rate (Adam on the critic)"})
+    lr_schedule: str = field(default="cosine", metadata={"help": "outer learning-rate schedule: constant, or cosine decay to 10%% over --iterations"})
     inner_steps: int = field(default=1, metadata={"help": "inner critic-gradient steps per outer iteration"})
     worlds_per_goal: int = field(default=4, metadata={"help": "policy initialisations per goal (parallel worlds)"})
     policy_init: str = field(default="fresh", metadata={"help": "fresh: new random policies every iteration (paper); fixed: the same initial policies every iteration; persistent: continue from the updated policies"})
@@ -90,6 +91,8 @@ class TrainConfig:
         for name, value in positive.items():
             if value is not None and not value > 0:
                 raise UserError(f"--{name} must be > 0 (got {value})")
+        if self.lr_schedule not in ("constant", "cosine"):
+            raise UserError(f"--lr-schedule must be constant or cosine (got {self.lr_schedule!r})")
         if self.policy_init not in ("fresh", "fixed", "persistent"):
             raise UserError(f"--policy-init must be fresh, fixed or persistent (got {self.policy_init!r})")
         if self.running_weight < 0 or self.clip_grad < 0:

@@ -6,6 +6,8 @@ batched matmul evaluates all policies, and an inner update is ``theta - alpha * 
 tensors (no module, no in-place mutation).
 
 Critic ``L_critic(s, a, g)``: MLP with two hidden layers of 400 units and ELU, one scalar output.
+Its input is ``[q, qd, a, g, q - g]`` (normalised): the goal-relative position ``q - g`` is a fixed
+feature of ``(s, g)`` that makes goal generalisation easier to learn; it adds no information.
 
 Input normalisation (documented, fixed from the scene, not learned):
   * joint positions and goals: ``(q - centre) / half_range`` of the joint limits,
@@ -111,7 +113,7 @@ class Critic(nn.Module):
         goal_dim = dof if goal_dim is None else goal_dim
         self.dof = dof
         self.net = nn.Sequential(
-            nn.Linear(2 * dof + dof + goal_dim, hidden), nn.ELU(),
+            nn.Linear(2 * dof + dof + 2 * goal_dim, hidden), nn.ELU(),
             nn.Linear(hidden, hidden), nn.ELU(),
             nn.Linear(hidden, 1),
         )
@@ -127,5 +129,6 @@ class Critic(nn.Module):
             qd / self.qd_scale,
             tau / self.max_torque,
             (goal - self.q_centre) / self.q_half_range,
+            (q - goal) / self.q_half_range,
         ], dim=-1)
         return self.net(x).squeeze(-1)

@@ -149,6 +149,11 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
     norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale)
     critic = Critic(scene.dof, norm).to(dev)
     opt = torch.optim.Adam(critic.parameters(), lr=cfg.lr)
+
+    def lr_at(it: int) -> float:
+        if cfg.lr_schedule == "cosine":  # decay to 10% of --lr at the last iteration
+            return cfg.lr * (0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * it / max(cfg.iterations - 1, 1))))
+        return cfg.lr
     q0, qd0 = sim.zeros(), sim.zeros()
 
     def new_policies():
@@ -203,6 +208,8 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
                                       f"{run_dir} is kept", world=e.world, step=e.step) from None
             if cfg.clip_grad:
                 torch.nn.utils.clip_grad_norm_(critic.parameters(), cfg.clip_grad)
+            for group in opt.param_groups:
+                group["lr"] = lr_at(it)
             opt.step()
             if cfg.policy_init == "persistent":
                 params = res.params_new
