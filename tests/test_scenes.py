@@ -419,3 +419,14 @@ def test_bad_variants_raise_user_error_naming_the_flag(variant, flag):
     scene = load_scene(SCENES / "reacher.usda")
     with pytest.raises(UserError, match=re.escape(flag)):
         scene.build_model([Variant(), variant])
+
+
+@pytest.mark.parametrize("case", ["missing", "text", "urdf", "no_articulation", "spherical", "negative_mass"])
+def test_bad_scene_files_on_the_command_line_exit_2_with_one_line(case, tmp_path, capsys):
+    from warp_critic.cli import main
+
+    make, _ = BAD_SCENES[case]
+    path = make(tmp_path)
+    code = main(["meta-train", str(path), "--iterations", "1", "--out", str(tmp_path / "run"), "--device", "cpu"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and path.name in err[0] and err[0].startswith("warp-critic: error:"), err
