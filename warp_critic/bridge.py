@@ -25,6 +25,9 @@ Two paths:
   counted twice. Between sub-steps we therefore read the joint-space gradient, zero the tape and
   re-seed only ``joint_q``/``joint_qd``, which fully determine the next step.
 
+On CUDA, Warp launches go to torch's current stream (``wp.stream_from_torch``), so torch copies into
+the zero-copy views and Warp kernels are ordered without host synchronisation.
+
 Buffers are reused across rollouts. A rollout that has started (``begin_rollout``) invalidates the
 buffers of the previous one; calling ``backward`` on an older graph raises instead of silently
 returning wrong gradients.
@@ -33,6 +36,8 @@ returning wrong gradients.
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+import contextlib
 
 import newton
 import torch
@@ -76,9 +81,10 @@ class NewtonBridge:
         self.worlds, self.dof = worlds, dof
         self.dt, self.substeps = float(dt), int(substeps)
         self.device = model.device
-        self.torch_device = wp.device_to_torch(model.device)
+        self.torch_device = torch.device(wp.device_to_torch(model.device))
         self.requires_grad = bool(model.requires_grad)
         self.solver = newton.solvers.SolverFeatherstone(model, use_tile_gemm=False)
+        self._is_cuda = self.torch_device.type == "cuda"
         self._base_scratch = {n: getattr(self.solver, n) for n in _SCRATCH}
 
         # forward-only path: two states without gradients, one control
@@ -101,10 +107,20 @@ class NewtonBridge:
         """Zero-copy ``(W, dof)`` torch view of a per-dof Warp array."""
         return wp.to_torch(arr).view(self.worlds, self.dof)
 
+    def _stream(self):
+        """Run Warp on torch's current CUDA stream (no-op on CPU)."""
+        if self._is_cuda:
+            return wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(self.torch_device)))
+        return contextlib.nullcontext()
+
     # -- forward only --------------------------------------------------------------------------
     @torch.no_grad()
     def step_forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor):
         """One control step (``substeps`` physics steps) without gradients. Returns new tensors."""
+        with self._stream():
+            return self._step_forward(q, qd, tau)
+
+    def _step_forward(self, q, qd, tau):
         self._fw_q[0].copy_(q)
         self._fw_qd[0].copy_(qd)
         self._fw_tau.copy_(tau)
@@ -163,6 +179,10 @@ class NewtonBridge:
 
     # called by _SimStep ----------------------------------------------------------------------
     def _forward_taped(self, q, qd, tau):
+        with self._stream():
+            return self._forward_taped_impl(q, qd, tau)
+
+    def _forward_taped_impl(self, q, qd, tau):
         k0, c = self._k, self._c
         self._grow(k0 + self.substeps - 1, c)
         state_in = self._state_in(k0)
@@ -184,6 +204,10 @@ class NewtonBridge:
         return k0, c, last.q_out.clone(), last.qd_out.clone()
 
     def _backward_taped(self, k0: int, c: int, generation: int, gq, gqd):
+        with self._stream():
+            return self._backward_taped_impl(k0, c, generation, gq, gqd)
+
+    def _backward_taped_impl(self, k0: int, c: int, generation: int, gq, gqd):
         if generation != self.generation:
             raise RuntimeError(
                 "this rollout's simulation buffers were reused by a newer rollout before backward(); "
