@@ -1,0 +1,196 @@
+"""Baselines (DDPG, Meta-Critic): they learn on a small reacher problem, their Q runs through
+meta-test, their run directories resume exactly, and bad input is one line with exit code 2."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+import torch
+import warp as wp
+
+from warp_critic.baselines import common
+from warp_critic.baselines.common import BaselineConfig, ReplayBuffer, rewards
+from warp_critic.baselines.ddpg import train_ddpg
+from warp_critic.baselines.meta_critic import train_meta_critic
+from warp_critic.cli import main
+from warp_critic.config import TrainConfig
+from warp_critic.metatest import TestConfig, build_test_critic, meta_test
+from warp_critic.networks import Normalizer
+from warp_critic.recording import read_entity_paths
+from warp_critic.rollout import Trajectory
+from warp_critic.train import CHECKPOINT_KIND
+
+wp.config.quiet = True
+
+ROOT = Path(__file__).resolve().parents[1]
+REACHER = str(ROOT / "scenes" / "reacher.usda")
+TRAIN = {"ddpg": train_ddpg, "meta-critic": train_meta_critic}
+# tiny settings for the CLI / resume tests (no learning expected)
+TINY = ["--goals", "0.5,0.3", "--worlds-per-goal", "2", "--horizon", "5", "--device", "cpu",
+        "--critic-hidden", "32", "--updates-per-iteration", "3", "--batch-size", "8", "--warmup-iterations", "1"]
+
+
+def tiny_cfg(out: Path, method: str, **kw) -> BaselineConfig:
+    cfg = BaselineConfig(scene=REACHER, method=method, goals=[[0.5, 0.3]], worlds_per_goal=2, horizon=5,
+                         iterations=3, device="cpu", out=str(out), critic_hidden=32, updates_per_iteration=3,
+                         batch_size=8, warmup_iterations=1, checkpoint_every=1)
+    for k, v in kw.items():
+        setattr(cfg, k, v)
+    return cfg
+
+
+# ------------------------------------------------------------------------------------------------
+# learning + meta-test
+# ------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("method", ["ddpg", "meta-critic"])
+def test_baseline_learns_and_its_q_runs_through_meta_test(tmp_path, method):
+    # the reacher's four default goals, 4 worlds each, a shortened horizon; published DDPG settings
+    out = tmp_path / method
+    cfg = BaselineConfig(scene=REACHER, method=method, iterations=40, horizon=30, worlds_per_goal=4,
+                         device="cpu", out=str(out), checkpoint_every=20, record_every=100, seed=0)
+    res = TRAIN[method](cfg, progress=False)
+    losses = [r["task_loss"] for r in res.metrics]
+    assert len(losses) == 40 and all(math.isfinite(x) for x in losses)
+    first, last = sum(losses[:3]) / 3, sum(losses[-3:]) / 3
+    # the untrained actor (~0 torque) leaves ||q_T - g||^2 = ||g||^2 ~ 1.25; DDPG roughly halves it
+    assert last < 0.75 * first, (first, last, losses)
+    assert all(len(r["task_loss_per_goal"]) == 4 for r in res.metrics)
+    if method == "meta-critic":
+        assert all("meta_loss" in r for r in res.metrics[5:])  # the actor trains after the warm-up
+
+    # run directory: same layout as meta-train
+    for name in ("config.json", "checkpoint.pt", "metrics.jsonl", "recording.rrd"):
+        assert (out / name).is_file(), name
+    entities = read_entity_paths(out / "recording.rrd")
+    assert "/train/task_loss/goal3" in entities
+    assert any(e.startswith("/rollout/after/it39/goal0/body") for e in entities)
+    ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
+    assert ckpt["kind"] == CHECKPOINT_KIND and ckpt["method"] == method and ckpt["scene"] == "reacher"
+    assert ckpt["iteration"] == 39 and ckpt["dof"] == 2 and ckpt["metrics"]["iteration"] == 39
+    tc = TrainConfig.from_dict(ckpt["config"])
+    assert tc.horizon == 30 and tc.inner_steps == 1 and tc.alpha > 0 and len(tc.goals) == 4
+    assert tc.alpha == ckpt["metrics"]["alpha"]  # selected by the fresh-policy grid search
+
+    # the meta-test critic is -Q(s - g, a)
+    norm = Normalizer.from_limits(torch.tensor([-2.97, -2.97]), torch.tensor([2.97, 2.97]),
+                                  torch.tensor(tc.max_torque), tc.qd_scale)
+    loss_fn = build_test_critic(ckpt, norm)
+    q, qd, tau = torch.randn(5, 2), torch.randn(5, 2), torch.randn(5, 2)
+    g = torch.tensor([[1.0, 0.5]]).expand(5, 2)
+    assert torch.allclose(loss_fn(q, qd, tau, g), -res.agent.q(q, qd, tau, g), atol=1e-6)
+
+    result = meta_test(TestConfig(run_dir=str(out), num_goals=2, inits=2, device="cpu"), progress=None)
+    assert result["method"] == method and math.isfinite(result["mean"])
+    assert len(result["final_error_per_goal"]) == 2
+
+
+# ------------------------------------------------------------------------------------------------
+# pieces
+# ------------------------------------------------------------------------------------------------
+
+def test_rewards_dense_and_sparse():
+    q = torch.tensor([[[0.0, 0.0]], [[1.0, 0.0]], [[1.0, 1.0]]])  # (T+1=3, W=1, 2)
+    traj = Trajectory(q, torch.zeros_like(q), torch.zeros(2, 1, 2))
+    goal = torch.tensor([[1.0, 1.0]])
+    r, done = rewards(traj, goal, "dense", 2.0)
+    assert r.squeeze(1).tolist() == [-2.0, 0.0] and done.sum() == 0
+    traj.q[-1] = torch.tensor([[3.0, 1.0]])
+    r, done = rewards(traj, goal, "sparse", 1.0)
+    assert r.squeeze(1).tolist() == [0.0, -4.0] and done.squeeze(1).tolist() == [0.0, 1.0]
+
+
+def test_replay_buffer_ring_and_state_dict():
+    buf = ReplayBuffer(5, 1, "cpu")
+    rows = torch.arange(7.0).unsqueeze(1).expand(7, buf.data.shape[1]).clone()
+    buf._add_rows(rows[:3])
+    buf._add_rows(rows[3:])
+    assert buf.size == 5 and buf.ptr == 2
+    kept = buf.state_dict()["rows"][:, 0].tolist()
+    assert kept == [2.0, 3.0, 4.0, 5.0, 6.0]  # oldest first
+    small = ReplayBuffer(3, 1, "cpu")
+    small.load_state_dict(buf.state_dict())
+    assert small.state_dict()["rows"][:, 0].tolist() == [4.0, 5.0, 6.0]
+    batch = buf.sample(16, torch.Generator().manual_seed(0))
+    assert batch["q"].shape == (16, 1) and batch["reward"].shape == (16,)
+
+
+@pytest.mark.parametrize("method", ["ddpg", "meta-critic"])
+def test_resume_is_exact_on_cpu(tmp_path, method):
+    straight = TRAIN[method](tiny_cfg(tmp_path / "a", method, iterations=4), progress=False, record=False)
+    TRAIN[method](tiny_cfg(tmp_path / "b", method, iterations=2), progress=False, record=False)
+    resumed = TRAIN[method](tiny_cfg(tmp_path / "b", method, iterations=4, resume=True), progress=False,
+                            record=False)
+    a = [(r["task_loss"], r.get("critic_loss")) for r in straight.metrics]
+    b = [(r["task_loss"], r.get("critic_loss")) for r in resumed.metrics]
+    assert a == b
+
+
+# ------------------------------------------------------------------------------------------------
+# command line
+# ------------------------------------------------------------------------------------------------
+
+def test_baseline_cli_writes_run_directory_and_resumes(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["baseline", "meta-critic", REACHER, *TINY, "--iterations", "2", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "final task loss" in printed and str(out) in printed
+    rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
+    assert [r["iteration"] for r in rows] == [0, 1]
+    assert json.loads((out / "config.json").read_text())["method"] == "meta-critic"
+
+    # never overwrite an existing run without --resume; never resume a run of another method
+    assert main(["baseline", "meta-critic", REACHER, *TINY, "--iterations", "2", "--out", str(out)]) == 2
+    assert "--resume" in capsys.readouterr().err
+    assert main(["baseline", "ddpg", REACHER, "--iterations", "3", "--out", str(out), "--resume"]) == 2
+    assert "meta-critic" in capsys.readouterr().err
+
+    assert main(["baseline", "meta-critic", REACHER, "--iterations", "3", "--out", str(out), "--resume",
+                 "--device", "cpu"]) == 0
+    rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
+    assert [r["iteration"] for r in rows] == [0, 1, 2]
+    assert torch.load(out / "checkpoint.pt", weights_only=False)["iteration"] == 2
+
+
+def test_default_out_directory():
+    cfg = BaselineConfig(scene="scenes/reacher.usda", method="meta-critic").with_scene_defaults()
+    assert cfg.out == "runs/reacher-meta-critic" and cfg.horizon is not None and cfg.goals
+
+
+@pytest.mark.parametrize("argv, fragment", [
+    (["baseline", "td3", REACHER], "invalid choice"),
+    (["baseline", "ddpg", REACHER, "--gamma", "1.5"], "--gamma must be in (0, 1]"),
+    (["baseline", "ddpg", REACHER, "--gamma", "0"], "--gamma must be in (0, 1]"),
+    (["baseline", "meta-critic", REACHER, "--tau", "0"], "--tau must be in (0, 1]"),
+    (["baseline", "ddpg", REACHER, "--tau", "2"], "--tau must be in (0, 1]"),
+    (["baseline", "ddpg", REACHER, "--actor-lr=-1e-4"], "--actor-lr must be > 0"),
+    (["baseline", "ddpg", REACHER, "--critic-lr", "0"], "--critic-lr must be > 0"),
+    (["baseline", "meta-critic", REACHER, "--aux-lr", "0"], "--aux-lr must be > 0"),
+    (["baseline", "ddpg", REACHER, "--batch-size", "0"], "--batch-size must be > 0"),
+    (["baseline", "ddpg", REACHER, "--horizon", "0"], "--horizon must be > 0"),
+    (["baseline", "ddpg", REACHER, "--buffer-size=-5"], "--buffer-size must be > 0"),
+    (["baseline", "ddpg", REACHER, "--noise", "pink"], "--noise"),
+    (["baseline", "ddpg", REACHER, "--reward", "shaped"], "--reward"),
+    (["baseline", "ddpg", REACHER, "--noise-std=-0.1"], "--noise-std"),
+    (["baseline", "ddpg", REACHER, "--batch-size", "abc"], "invalid int value"),
+    (["baseline", "ddpg", REACHER, "--goals", "0.1,0.2,0.3"], "needs 2 joint values"),
+    (["baseline", "ddpg", "nope/missing.usda"], "missing.usda"),
+])
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, fragment):
+    try:
+        code = main([*argv, "--out", str(tmp_path / "run"), "--device", "cpu", "--iterations", "1"])
+    except SystemExit as e:  # argparse's own errors (choices, types) exit from the parser
+        code = e.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and fragment in err[0], err
+    assert not (tmp_path / "run" / "checkpoint.pt").exists()
+
+
+def test_test_critic_rejects_broken_checkpoints():
+    norm = Normalizer.from_limits(-torch.ones(2), torch.ones(2), torch.ones(2), 1.0)
+    with pytest.raises(common.UserError, match="no usable Q"):
+        common.test_critic_from_checkpoint({"method": "ddpg", "dof": 2}, norm)
