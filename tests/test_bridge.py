@@ -186,3 +186,17 @@ def test_tip_kernel_matches_link_geometry():
         x = math.cos(0.3) + l2 * math.cos(0.3 - 0.7)
         y = math.sin(0.3) + l2 * math.sin(0.3 - 0.7)
         assert tips[w, 0] == pytest.approx(x, abs=1e-5) and tips[w, 1] == pytest.approx(y, abs=1e-5)
+
+
+def test_gravity_setting_is_per_simulator():
+    """gravity=0 is the gravity-compensated robot: at rest with zero torque it stays at rest."""
+    scene = load_scene(ROOT / "scenes" / "kuka.usda")
+    q0 = torch.tensor([[0.0, 0.5, 0.0, -0.5, 0.0, 0.3, 0.0]])
+    moved = {}
+    for g in (0.0, 9.81):
+        sim = Simulator(scene, [Variant()], dt=0.0025, substeps=4, device="cpu", differentiable=False, gravity=g)
+        q, qd = q0.clone(), torch.zeros(1, 7)
+        for _ in range(10):
+            q, qd = sim.step(q, qd, torch.zeros(1, 7))
+        moved[g] = float((q - q0).abs().max())
+    assert moved[0.0] < 1e-6 and moved[9.81] > 1e-2

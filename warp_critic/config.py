@@ -27,14 +27,14 @@ SCENE_DEFAULTS: dict[str, dict[str, Any]] = {
                [0.3, -0.4, -0.3, -1.0, 0.2, 0.4, 0.0],
                [-0.3, -0.6, 0.0, -0.4, -0.2, 0.6, 0.0]],
         horizon=50, dt=0.0025, substeps=4, max_torque=[150.0, 150.0, 80.0, 80.0, 20.0, 10.0, 5.0],
-        qd_scale=5.0, alpha=1e-3, lr=1e-3,
+        qd_scale=5.0, alpha=1e-3, lr=1e-3, gravity=0.0,
     ),
     "point_mass": dict(
         goals=[[1.0, 1.0]], horizon=20, dt=0.05, substeps=1, max_torque=[5.0, 5.0], qd_scale=2.0,
         alpha=1e-3, lr=3e-3,
     ),
 }
-FALLBACK_DEFAULTS = dict(goals=None, horizon=50, dt=0.01, substeps=1, max_torque=None, qd_scale=5.0,
+FALLBACK_DEFAULTS = dict(gravity=9.81, goals=None, horizon=50, dt=0.01, substeps=1, max_torque=None, qd_scale=5.0,
                          alpha=1e-3, lr=3e-3)
 
 
@@ -58,6 +58,7 @@ class TrainConfig:
     qd_scale: float | None = field(default=None, metadata={"help": "velocity normalisation (rad/s)"})
     running_weight: float = field(default=0.0, metadata={"help": "weight of the running term mean_t ||q_t-g||^2 added to the task loss"})
     clip_grad: float = field(default=10.0, metadata={"help": "clip the critic's gradient norm (0 = off)"})
+    gravity: float | None = field(default=None, metadata={"help": "gravity along -z (m/s^2); 0 = a perfectly gravity-compensated robot (the iiwa's torque mode), the kuka default"})
     ee_mass: float = field(default=0.0, metadata={"help": "mass added at the end-effector during training (kg)"})
     link_length: float | None = field(default=None, metadata={"help": "set the end-effector link length during training (m)"})
     link_scale: float = field(default=1.0, metadata={"help": "scale the end-effector link length during training"})
@@ -74,7 +75,7 @@ class TrainConfig:
 
     def with_scene_defaults(self) -> "TrainConfig":
         """Fill ``None`` fields from :data:`SCENE_DEFAULTS`."""
-        d = SCENE_DEFAULTS.get(self.scene_name(), FALLBACK_DEFAULTS)
+        d = {**FALLBACK_DEFAULTS, **SCENE_DEFAULTS.get(self.scene_name(), {})}
         for key, value in d.items():
             if getattr(self, key, "missing") is None:
                 setattr(self, key, value)

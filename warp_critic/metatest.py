@@ -107,7 +107,7 @@ def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) ->
     variant = Variant(ee_mass=tc.ee_mass, link_length=tc.link_length, link_scale=tc.link_scale)
     # differentiable=False: the model has no gradient buffers, a taped rollout is impossible.
     sim = Simulator(scene, [variant] * W, dt=cfg.dt, substeps=cfg.substeps, device=tc.device,
-                    differentiable=False)
+                    differentiable=False, gravity=cfg.gravity if cfg.gravity is not None else 9.81)
     dev = sim.torch_device
     norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale)
     critic = build_test_critic(ckpt, norm).to(dev)

@@ -42,10 +42,12 @@ class Simulator:
         substeps: physics steps per control step; the control period is ``dt * substeps``.
         device: ``cpu``/``cuda``/``auto``.
         differentiable: build the model with gradients (needed for model-based meta-training).
+        gravity: magnitude of gravity along -z (m/s^2). ``0`` is exactly a perfectly gravity-compensated
+            robot (``tau_applied = tau + g(q)``), as the iiwa's torque interface provides.
     """
 
     def __init__(self, scene: Scene, variants: Sequence[Variant], *, dt: float, substeps: int = 1,
-                 device: str = "cpu", differentiable: bool = True):
+                 device: str = "cpu", differentiable: bool = True, gravity: float = 9.81):
         if dt <= 0:
             raise UserError(f"--dt must be > 0 (got {dt})")
         if substeps < 1:
@@ -61,6 +63,10 @@ class Simulator:
         self.device = resolve_device(device)
         wp.init()
         self.model = scene.build_model(self.variants, device=self.device, requires_grad=differentiable)
+        if gravity < 0:
+            raise UserError(f"--gravity must be >= 0 (got {gravity})")
+        self.gravity = float(gravity)
+        self.model.set_gravity((0.0, 0.0, -self.gravity))
         self.bridge = NewtonBridge(self.model, self.worlds, self.dof, self.dt, self.substeps)
         self.torch_device = self.bridge.torch_device
         tdev = self.torch_device

@@ -142,7 +142,7 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
     G, K = goals.shape[0], cfg.worlds_per_goal
     W = G * K
     sim = Simulator(scene, [variant] * W, dt=cfg.dt, substeps=cfg.substeps, device=cfg.device,
-                    differentiable=True)
+                    differentiable=True, gravity=cfg.gravity)
     dev = sim.torch_device
     goal_index = torch.arange(G, device=dev).repeat_interleave(K)
     goal = goals.to(dev)[goal_index]  # (W, dof)
