@@ -210,6 +210,26 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def init_warp_quietly() -> None:
+    """Initialise Warp without its banner and without the native CUDA-driver warning on GPU-less
+    machines (it is printed unconditionally to file descriptor 2; ``--device cuda`` on such a machine
+    gets our own one-line error instead)."""
+    import warp as wp
+
+    wp.config.quiet = True
+    if hasattr(wp, "LOG_WARNING"):
+        wp.config.log_level = wp.LOG_WARNING
+    sys.stderr.flush()
+    saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 2)
+        wp.init()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(devnull)
+
+
 def main(argv: list[str] | None = None) -> int:
     os.environ.setdefault("WARP_CRITIC_CLI", "1")
     parser = build_parser()
@@ -219,9 +239,8 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USER_ERROR
     try:
         import torch
-        import warp as wp
 
-        wp.config.quiet = True
+        init_warp_quietly()
         # The networks are small and Warp's CPU kernels are single-threaded: one torch thread avoids
         # oversubscription stalls (measured 25x slower steps with 2 threads on a busy 2-core machine).
         torch.set_num_threads(int(os.environ.get("WARP_CRITIC_TORCH_THREADS", "1")))
