@@ -41,8 +41,23 @@ FALLBACK_DEFAULTS = dict(gravity=9.81, goals=None, horizon=50, dt=0.01, substeps
                          alpha=1e-3, lr=3e-3)
 
 
+class SerializableConfig:
+    """``to_dict`` / ``from_dict`` (unknown keys ignored) / atomic ``save`` for config dataclasses."""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict):
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+    def save(self, path: Path) -> None:
+        atomic_write_text(path, json.dumps(self.to_dict(), indent=2))
+
+
 @dataclass
-class TrainConfig:
+class TrainConfig(SerializableConfig):
     """Model-based meta-training of the critic (Algorithm 2). ``None`` = the scene's default."""
 
     scene: str = field(default="scenes/kuka.usda", metadata={"help": "USD scene file"})
@@ -106,16 +121,6 @@ class TrainConfig:
         if dof is not None and self.max_torque is not None and len(self.max_torque) not in (1, dof):
             raise UserError(f"--max-torque needs 1 or {dof} values (got {len(self.max_torque)})")
 
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "TrainConfig":
-        names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in d.items() if k in names})
-
-    def save(self, path: Path) -> None:
-        atomic_write_text(path, json.dumps(self.to_dict(), indent=2))
 
 
 def atomic_write_text(path: Path, text: str) -> None:

@@ -168,7 +168,7 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
         torch.set_rng_state(ckpt["torch_rng_state"])
         params = {k: v.to(dev) for k, v in ckpt["policy_params"].items()}
         start = ckpt["iteration"] + 1
-        history = _read_metrics(run_dir / "metrics.jsonl", upto=start)
+        history = read_metrics(run_dir / "metrics.jsonl", upto=start)
     cfg.save(run_dir / "config.json")
     callbacks = list(callbacks or [])
     if recorder_factory is not None:
@@ -184,11 +184,8 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
             "metrics": history[-1] if history else {},
         }, run_dir / "checkpoint.pt")
 
-    metrics_file = open(run_dir / "metrics.jsonl", "w")
-    for row in history:
-        metrics_file.write(json.dumps(row) + "\n")
-    metrics_file.flush()
-    bar = _Progress(cfg.iterations, enabled=progress)
+    metrics_file = open_metrics(run_dir / "metrics.jsonl", history)
+    bar = Progress(cfg.iterations, enabled=progress)
     try:
         for it in range(start, cfg.iterations):
             t0 = time.perf_counter()
@@ -242,14 +239,24 @@ def _grad_norm(module: torch.nn.Module) -> float:
     return math.sqrt(total)
 
 
-def _read_metrics(path: Path, upto: int) -> list[dict]:
+def open_metrics(path: Path, history: list[dict]):
+    """(Re)write ``metrics.jsonl`` with the rows kept from before a resume; returns the open file."""
+    f = open(path, "w")
+    for row in history:
+        f.write(json.dumps(row) + "\n")
+    f.flush()
+    return f
+
+
+def read_metrics(path: Path, upto: int) -> list[dict]:
+    """Rows of ``metrics.jsonl`` with ``iteration < upto`` (what a resumed run keeps)."""
     if not path.exists():
         return []
     rows = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
     return [r for r in rows if r["iteration"] < upto]
 
 
-class _Progress:
+class Progress:
     """A dependency-free progress bar on stderr."""
 
     def __init__(self, total: int, enabled: bool = True, width: int = 24):

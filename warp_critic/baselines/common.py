@@ -59,7 +59,7 @@ from typing import Any, Callable
 import torch
 from torch import nn
 
-from ..config import FALLBACK_DEFAULTS, SCENE_DEFAULTS, TrainConfig, atomic_write_text
+from ..config import FALLBACK_DEFAULTS, SCENE_DEFAULTS, SerializableConfig, TrainConfig, atomic_write_text
 from ..errors import DivergenceError, UserError
 from ..losses import critic_loss, final_error
 from ..networks import Normalizer, init_policy
@@ -67,7 +67,7 @@ from ..inner import inner_update, policy_fn
 from ..rollout import Trajectory, rollout
 from ..scene import Variant, load_scene
 from ..simulator import Simulator
-from ..train import (CHECKPOINT_KIND, _Progress, _read_metrics, atomic_torch_save, goals_tensor,
+from ..train import (CHECKPOINT_KIND, Progress, atomic_torch_save, goals_tensor, open_metrics, read_metrics,
                      load_checkpoint, max_torque_tensor, seed_everything)
 
 METHODS = ("ddpg", "meta-critic")
@@ -81,7 +81,7 @@ ALPHA_GRID = tuple(10.0 ** (k / 2) for k in range(-12, 1))  # 1e-6, 3.2e-6, ...,
 # ------------------------------------------------------------------------------------------------
 
 @dataclass
-class BaselineConfig:
+class BaselineConfig(SerializableConfig):
     """DDPG / Meta-Critic training. ``None`` = the scene's default (as for meta-train).
 
     Defaults follow the published DDPG settings (Lillicrap et al. 2015): Adam with actor lr 1e-4 and
@@ -192,17 +192,6 @@ class BaselineConfig:
             raise UserError(f"--max-torque must be > 0 (got {self.max_torque})")
         if dof is not None and self.max_torque is not None and len(self.max_torque) not in (1, dof):
             raise UserError(f"--max-torque needs 1 or {dof} values (got {len(self.max_torque)})")
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "BaselineConfig":
-        names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in d.items() if k in names})
-
-    def save(self, path: Path) -> None:
-        atomic_write_text(path, json.dumps(self.to_dict(), indent=2))
 
 
 def _finite(x) -> bool:
@@ -539,7 +528,7 @@ def _train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks:
         torch.set_rng_state(ckpt["torch_rng_state"])
         alpha = ckpt["selected_alpha"] if cfg.alpha is None else cfg.alpha
         start = ckpt["iteration"] + 1
-        history = _read_metrics(run_dir / "metrics.jsonl", upto=start)
+        history = read_metrics(run_dir / "metrics.jsonl", upto=start)
     cfg.save(run_dir / "config.json")
     callbacks = list(callbacks or [])
     recorder = None
@@ -570,11 +559,8 @@ def _train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks:
             "selected_alpha": alpha, "metrics": history[-1] if history else {},
         }, run_dir / "checkpoint.pt")
 
-    metrics_file = open(run_dir / "metrics.jsonl", "w")
-    for row in history:
-        metrics_file.write(json.dumps(row) + "\n")
-    metrics_file.flush()
-    bar = _Progress(cfg.iterations, enabled=progress)
+    metrics_file = open_metrics(run_dir / "metrics.jsonl", history)
+    bar = Progress(cfg.iterations, enabled=progress)
     n_updates = cfg.n_updates()
     try:
         for it in range(start, cfg.iterations):
