@@ -93,24 +93,12 @@ def _check_scene_arg(path: str) -> None:
 
 def cmd_meta_train(args: argparse.Namespace) -> int:
     from .config import TrainConfig, parse_goals
-    from .recording import TrainingRecorder
     from .train import meta_train
 
     _check_scene_arg(args.scene)
     cfg = dataclass_from_args(TrainConfig, args)
     cfg.goals = parse_goals(getattr(args, "goals", None))
-    recorder_holder = {}
-
-    def make_recorder(run_dir, sim, goals, history):
-        recorder_holder["r"] = TrainingRecorder(Path(run_dir) / "recording.rrd", sim, goals, history,
-                                                record_every=cfg.record_every, last_iteration=cfg.iterations - 1)
-        return recorder_holder["r"]
-
-    try:
-        result = meta_train(cfg, recorder_factory=make_recorder)
-    finally:
-        if "r" in recorder_holder:
-            recorder_holder["r"].close()
+    result = meta_train(cfg)
     last = result.metrics[-1] if result.metrics else {}
     print(f"run directory: {result.run_dir}")
     if last:

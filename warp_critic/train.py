@@ -113,11 +113,12 @@ Callback = Callable[[IterationInfo], None]
 
 
 def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progress: bool = True,
-               recorder_factory: Callable | None = None) -> TrainResult:
+               record: bool = True) -> TrainResult:
     """Run (or resume) meta-training; returns the run directory, metrics and critic.
 
-    ``recorder_factory(run_dir, sim, goals, history)`` may return a callback that records the run
-    (see :class:`warp_critic.recording.TrainingRecorder`); it is called once the worlds exist.
+    ``callbacks`` are called after every iteration with an :class:`IterationInfo`. With ``record``
+    the run is recorded to ``RUN_DIR/recording.rrd`` (:class:`warp_critic.recording.TrainingRecorder`;
+    a resumed run re-logs its earlier metrics, so the file always covers the whole run).
     """
     cfg.with_scene_defaults()
     cfg.validate()
@@ -171,8 +172,13 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
         history = read_metrics(run_dir / "metrics.jsonl", upto=start)
     cfg.save(run_dir / "config.json")
     callbacks = list(callbacks or [])
-    if recorder_factory is not None:
-        callbacks.append(recorder_factory(run_dir, sim, goals, history))
+    recorder = None
+    if record:
+        from .recording import TrainingRecorder
+
+        recorder = TrainingRecorder(run_dir / "recording.rrd", sim, goals, history,
+                                    record_every=cfg.record_every, last_iteration=cfg.iterations - 1)
+        callbacks.append(recorder)
 
     def save_checkpoint(iteration: int) -> None:
         atomic_torch_save({
@@ -228,6 +234,8 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
     finally:
         metrics_file.close()
         bar.close()
+        if recorder is not None:
+            recorder.close()
     return TrainResult(run_dir, history, critic)
 
 
