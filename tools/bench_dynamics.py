@@ -45,7 +45,7 @@ def bench_newton(worlds: int, horizon: int, dt: float, device: str, repeats: int
         loss.backward()
         if dev.type == "cuda":
             torch.cuda.synchronize()
-        return float(loss)
+        return float(loss.detach())
 
     run()  # warm-up: kernel compilation, buffer allocation
     best_fb = float("inf")
@@ -69,8 +69,12 @@ def bench_drm(worlds: int, horizon: int, dt: float) -> float:
     import differentiable_robot_model as drm_pkg
     from differentiable_robot_model.robot_model import DifferentiableRobotModel
 
+    import contextlib
+    import io
+
     urdf = Path(drm_pkg.__file__).resolve().parents[1] / "diff_robot_data" / "kuka_iiwa" / "urdf" / "iiwa7.urdf"
-    robot = DifferentiableRobotModel(str(urdf), "iiwa7", device="cpu")
+    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
+        robot = DifferentiableRobotModel(str(urdf), "iiwa7", device="cpu")  # its URDF parser is chatty
     gen = torch.Generator().manual_seed(0)
     tau = (torch.randn(horizon, worlds, 7, generator=gen) * 5).requires_grad_()
     w = torch.randn(horizon, worlds, 7, generator=gen)
