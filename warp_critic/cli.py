@@ -56,8 +56,11 @@ def add_dataclass_arguments(parser: argparse.ArgumentParser, cls, skip: tuple[st
         hint = hints[f.name]
         help_text = (helps or {}).get(f.name) or f.metadata.get("help", "")
         default = f.default if f.default is not dataclasses.MISSING else None
-        shown = "scene default" if default is None else default
-        kwargs = dict(dest=f.name, default=argparse.SUPPRESS, help=f"{help_text} (default: {shown})")
+        if default is None:
+            suffix = "" if "default" in help_text.lower() else " (default: the scene's)"
+        else:
+            suffix = f" (default: {default})"
+        kwargs = dict(dest=f.name, default=argparse.SUPPRESS, help=f"{help_text}{suffix}")
         if hint is bool:
             parser.add_argument(flag, action="store_true", **kwargs)
             continue
