@@ -42,6 +42,17 @@ def seed_everything(seed: int) -> torch.Generator:
     return torch.Generator().manual_seed(seed)
 
 
+def rng_state(gen: torch.Generator) -> dict:
+    """Random-number state to store in a checkpoint (our generator and torch's global one)."""
+    return {"rng_state": gen.get_state(), "torch_rng_state": torch.get_rng_state()}
+
+
+def restore_rng(gen: torch.Generator, ckpt: dict) -> None:
+    """Inverse of :func:`rng_state`: a resumed run draws the same numbers as an uninterrupted one."""
+    gen.set_state(ckpt["rng_state"])
+    torch.set_rng_state(ckpt["torch_rng_state"])
+
+
 def goals_tensor(goals: list[list[float]], scene: Scene, device, flag: str = "--goals") -> torch.Tensor:
     """Validate goals against the scene (dimension, joint limits) -> ``(G, dof)``."""
     g = torch.tensor(goals, dtype=torch.float32)
@@ -165,8 +176,7 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
     if ckpt is not None:
         critic.load_state_dict(ckpt["critic_state"])
         opt.load_state_dict(ckpt["optimizer_state"])
-        gen.set_state(ckpt["rng_state"])
-        torch.set_rng_state(ckpt["torch_rng_state"])
+        restore_rng(gen, ckpt)
         params = {k: v.to(dev) for k, v in ckpt["policy_params"].items()}
         start = ckpt["iteration"] + 1
         history = read_metrics(run_dir / "metrics.jsonl", upto=start)
@@ -185,8 +195,8 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
             "kind": CHECKPOINT_KIND, "method": "ours", "scene": scene.name, "scene_path": str(cfg.scene),
             "dof": scene.dof, "config": cfg.to_dict(), "iteration": iteration,
             "critic_state": critic.state_dict(), "critic_hidden": critic.net[0].out_features,
-            "optimizer_state": opt.state_dict(), "rng_state": gen.get_state(),
-            "torch_rng_state": torch.get_rng_state(), "policy_params": {k: v.cpu() for k, v in params.items()},
+            "optimizer_state": opt.state_dict(), **rng_state(gen),
+            "policy_params": {k: v.cpu() for k, v in params.items()},
             "metrics": history[-1] if history else {},
         }, run_dir / "checkpoint.pt")
 

@@ -68,7 +68,7 @@ from ..rollout import Trajectory, rollout
 from ..scene import Variant, load_scene
 from ..simulator import Simulator
 from ..train import (CHECKPOINT_KIND, Progress, atomic_torch_save, goals_tensor, open_metrics, read_metrics,
-                     load_checkpoint, max_torque_tensor, seed_everything)
+                     load_checkpoint, max_torque_tensor, restore_rng, rng_state, seed_everything)
 
 METHODS = ("ddpg", "meta-critic")
 NOISE_KINDS = ("ou", "gaussian")
@@ -524,8 +524,7 @@ def _train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks:
     if ckpt is not None:
         agent.load_state_dict(ckpt["agent_state"])
         buffer.load_state_dict(ckpt["buffer"])
-        gen.set_state(ckpt["rng_state"])
-        torch.set_rng_state(ckpt["torch_rng_state"])
+        restore_rng(gen, ckpt)
         alpha = ckpt["selected_alpha"] if cfg.alpha is None else cfg.alpha
         start = ckpt["iteration"] + 1
         history = read_metrics(run_dir / "metrics.jsonl", upto=start)
@@ -555,7 +554,7 @@ def _train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks:
             "critic_hidden": cfg.critic_hidden, "actor_hidden": cfg.actor_hidden,
             "q_state": agent.q.state_dict(), "actor_state": agent.actor.state_dict(),
             "agent_state": agent.state_dict(), "buffer": buffer.state_dict(),
-            "rng_state": gen.get_state(), "torch_rng_state": torch.get_rng_state(),
+            **rng_state(gen),
             "selected_alpha": alpha, "metrics": history[-1] if history else {},
         }, run_dir / "checkpoint.pt")
 
