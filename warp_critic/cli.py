@@ -128,18 +128,6 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     return baseline_cli.run(args)
 
 
-def cmd_analyze_toy(args: argparse.Namespace) -> int:
-    from .analysis import toy
-
-    return toy.run_from_args(args)
-
-
-def cmd_analyze_landscape(args: argparse.Namespace) -> int:
-    from .analysis import landscape
-
-    return landscape.run_from_args(args)
-
-
 def build_parser() -> argparse.ArgumentParser:
     from .config import TrainConfig
     from .metatest import TestConfig
@@ -172,32 +160,22 @@ def build_parser() -> argparse.ArgumentParser:
         "device": "cpu, cuda or auto", "out": "results JSON (default RUN_DIR/metatest.json)"})
     te.set_defaults(func=cmd_meta_test)
 
-    try:
-        from .baselines import cli as baseline_cli
-    except ImportError:  # pragma: no cover - baselines are part of the package
-        baseline_cli = None
-    if baseline_cli is not None:
-        bl = sub.add_parser("baseline", help="train a baseline: ddpg or meta-critic",
-                            description="Train a baseline critic (DDPG or Meta-Critic) on the same scenes and goals.")
-        baseline_cli.add_arguments(bl)
-        bl.set_defaults(func=cmd_baseline)
+    from .analysis import landscape, toy
+    from .baselines import cli as baseline_cli
+
+    bl = sub.add_parser("baseline", help="train a baseline: ddpg or meta-critic",
+                        description="Train a baseline critic (DDPG or Meta-Critic) on the same scenes and goals.")
+    baseline_cli.add_arguments(bl)
+    bl.set_defaults(func=cmd_baseline)
 
     an = sub.add_parser("analyze", help="the paper's analyses: toy (1-D, section 4.1) and landscape (2-D point mass, section 4.2)")
     an_sub = an.add_subparsers(dest="analysis", metavar="ANALYSIS", parser_class=_Parser)
-    try:
-        from .analysis import toy
-        at = an_sub.add_parser("toy", help="1-D analytic example: fixed points of Q learning, ours and Meta-Critic")
-        toy.add_arguments(at)
-        at.set_defaults(func=cmd_analyze_toy)
-    except ImportError:  # pragma: no cover
-        pass
-    try:
-        from .analysis import landscape
-        al = an_sub.add_parser("landscape", help="2-D point mass: Q_true, Q_sup and L_critic landscapes")
-        landscape.add_arguments(al)
-        al.set_defaults(func=cmd_analyze_landscape)
-    except ImportError:  # pragma: no cover
-        pass
+    at = an_sub.add_parser("toy", help="1-D analytic example: fixed points of Q learning, ours and Meta-Critic")
+    toy.add_arguments(at)
+    at.set_defaults(func=lambda args: toy.run_from_args(args))
+    al = an_sub.add_parser("landscape", help="2-D point mass: Q_true, Q_sup and L_critic landscapes")
+    landscape.add_arguments(al)
+    al.set_defaults(func=lambda args: landscape.run_from_args(args))
     return p
 
 
