@@ -53,21 +53,22 @@ def test_meta_train_cli_writes_run_directory_and_resumes(tmp_path, capsys):
     assert "/train/task_loss/mean" in read_entity_paths(out / "recording.rrd")
 
 
-def test_interrupted_run_resumes_exactly_on_cpu(tmp_path):
-    straight = train.meta_train(tiny_cfg(tmp_path / "a", iterations=4), progress=False)
+@pytest.mark.parametrize("extra", [{}, {"policy_lifetime": 3, "start_std": 0.2}])
+def test_interrupted_run_resumes_exactly_on_cpu(tmp_path, extra):
+    straight = train.meta_train(tiny_cfg(tmp_path / "a", iterations=4, **extra), progress=False)
 
     def interrupt(info):
         if info.iteration == 2:
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        train.meta_train(tiny_cfg(tmp_path / "b", iterations=4), callbacks=[interrupt], progress=False)
+        train.meta_train(tiny_cfg(tmp_path / "b", iterations=4, **extra), callbacks=[interrupt], progress=False)
     assert torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=False)["iteration"] == 1
-    resumed = train.meta_train(tiny_cfg(tmp_path / "b", iterations=4, resume=True), progress=False)
+    resumed = train.meta_train(tiny_cfg(tmp_path / "b", iterations=4, resume=True, **extra), progress=False)
     a = [r["task_loss"] for r in straight.metrics]
     b = [r["task_loss"] for r in resumed.metrics]
     assert a == pytest.approx(b, rel=1e-5)
-    again = train.meta_train(tiny_cfg(tmp_path / "c", iterations=4), progress=False)
+    again = train.meta_train(tiny_cfg(tmp_path / "c", iterations=4, **extra), progress=False)
     assert [r["task_loss"] for r in again.metrics] == a  # same seed, same numbers
 
 
@@ -168,6 +169,8 @@ def test_divergence_stops_with_iteration_and_keeps_last_good_checkpoint(tmp_path
     (["meta-train", REACHER, "--horizon", "abc"], "invalid int value"),
     (["meta-train", "nope/missing.usda"], "missing.usda"),
     (["meta-train", REACHER, "--policy-init", "weird"], "--policy-init"),
+    (["meta-train", REACHER, "--critic-input", "absolute"], "--critic-input"),
+    (["meta-train", REACHER, "--velocity-weight", "-1"], "--velocity-weight"),
     (["meta-train", REACHER, "--goals", "goals_missing.json"], "goals_missing.json"),
 ])
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, fragment):
@@ -210,3 +213,30 @@ def test_help_and_version(capsys):
     for flag in ("--goals", "--iterations", "--horizon", "--dt", "--lr", "--alpha", "--inner-steps",
                  "--worlds-per-goal", "--seed", "--device", "--out", "--resume", "--policy-init"):
         assert flag in text
+
+
+def test_relative_critic_run_meta_tests_from_its_checkpoint(tmp_path):
+    out = tmp_path / "rel"
+    train.meta_train(tiny_cfg(out, iterations=2, critic_input="relative", velocity_weight=0.01), progress=False)
+    ckpt = train.load_checkpoint(out)
+    assert ckpt["critic_input"] == "relative" and ckpt["config"]["velocity_weight"] == 0.01
+    res = meta_test(TestConfig(run_dir=str(out), num_goals=2, inits=1, device="cpu"), progress=None)
+    assert res["mean"] >= 0
+
+
+def test_staggered_policy_lifetime_continues_each_policy_until_it_is_replaced(tmp_path):
+    """lifetime 2, 2 worlds per goal: slot 0 is fresh at even iterations, slot 1 at odd ones."""
+    seen = []
+    train.meta_train(tiny_cfg(tmp_path / "s", iterations=3, policy_lifetime=2),
+                     callbacks=[lambda info: seen.append((info.result.before.q, info.result.after.q))],
+                     progress=False)
+    (_, after0), (before1, _), (before2, _) = seen
+    # world 0 (goal 0, slot 0) is not replaced at iteration 1: it starts from its updated policy ...
+    assert torch.allclose(before1[:, 0], after0[:, 0], atol=1e-6)
+    # ... world 1 (slot 1) is: a fresh policy, not the updated one; at iteration 2 the other way round
+    assert not torch.allclose(before1[:, 1], after0[:, 1], atol=1e-3)
+    assert not torch.allclose(before2[:, 0], seen[1][1][:, 0], atol=1e-3)
+    assert torch.allclose(before2[:, 1], seen[1][1][:, 1], atol=1e-6)
+    ckpt = train.load_checkpoint(tmp_path / "s")
+    res = meta_test(TestConfig(run_dir=str(tmp_path / "s"), num_goals=1, inits=1, device="cpu"), progress=None)
+    assert res["policy_steps"] == ckpt["config"]["inner_steps"] * 2

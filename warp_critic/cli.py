@@ -152,7 +152,7 @@ def build_parser() -> argparse.ArgumentParser:
         "num_goals": "number of sampled goals", "goal_std": "std (rad) of the Gaussian around the training goals",
         "around": "indices of the training goals to sample around (default: all, cycled)",
         "inits": "fresh policy initialisations per goal",
-        "policy_steps": "critic-gradient steps per fresh policy (default: the run's inner steps)",
+        "policy_steps": "critic-gradient steps per fresh policy (default: the run's inner steps x its policy lifetime)",
         "alpha": "policy learning rate (default: the run's inner learning rate)",
         "horizon": "rollout length (default: the run's)",
         "ee_mass": "mass added at the end-effector (kg)", "link_length": "set the end-effector link length (m)",

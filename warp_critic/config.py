@@ -72,9 +72,13 @@ class TrainConfig(SerializableConfig):
     inner_steps: int = field(default=1, metadata={"help": "inner critic-gradient steps per outer iteration"})
     worlds_per_goal: int = field(default=4, metadata={"help": "policy initialisations per goal (parallel worlds)"})
     policy_init: str = field(default="fresh", metadata={"help": "fresh: new random policies every iteration (paper); fixed: the same initial policies every iteration; persistent: continue from the updated policies"})
+    start_std: float = field(default=0.0, metadata={"help": "std (rad) of random initial joint positions around the home pose, drawn per world and iteration (0 = always start at home, as at meta-test)"})
+    policy_lifetime: int = field(default=1, metadata={"help": "with --policy-init fresh: outer iterations a policy lives before a fresh random one replaces it; 1 = new policies every iteration (paper). N > 1 staggers the worlds so policies of every age 0..N-1 are trained on at once: the critic learns to keep improving a policy, and meta-test takes N x inner-steps steps"})
     max_torque: list[float] | None = field(default=None, metadata={"help": "per-joint torque bound of the policy (N·m), comma-separated or one value"})
     qd_scale: float | None = field(default=None, metadata={"help": "velocity normalisation (rad/s)"})
+    critic_input: str = field(default="full", metadata={"help": "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant)"})
     running_weight: float = field(default=0.0, metadata={"help": "weight of the running term mean_t ||q_t-g||^2 added to the task loss"})
+    velocity_weight: float = field(default=0.0, metadata={"help": "weight (s^2) of the final-velocity term ||qd_T||^2 added to the task loss"})
     clip_grad: float = field(default=10.0, metadata={"help": "clip the critic's gradient norm (0 = off)"})
     gravity: float | None = field(default=None, metadata={"help": "gravity along -z (m/s^2); 0 = a perfectly gravity-compensated robot (the iiwa's torque mode), the kuka default"})
     ee_mass: float = field(default=0.0, metadata={"help": "mass added at the end-effector during training (kg)"})
@@ -106,7 +110,7 @@ class TrainConfig(SerializableConfig):
                     "substeps": self.substeps, "alpha": self.alpha, "lr": self.lr,
                     "inner-steps": self.inner_steps, "worlds-per-goal": self.worlds_per_goal,
                     "qd-scale": self.qd_scale, "checkpoint-every": self.checkpoint_every,
-                    "record-every": self.record_every}
+                    "record-every": self.record_every, "policy-lifetime": self.policy_lifetime}
         for name, value in positive.items():
             if value is not None and not value > 0:
                 raise UserError(f"--{name} must be > 0 (got {value})")
@@ -114,8 +118,11 @@ class TrainConfig(SerializableConfig):
             raise UserError(f"--lr-schedule must be constant or cosine (got {self.lr_schedule!r})")
         if self.policy_init not in ("fresh", "fixed", "persistent"):
             raise UserError(f"--policy-init must be fresh, fixed or persistent (got {self.policy_init!r})")
-        if self.running_weight < 0 or self.clip_grad < 0:
-            raise UserError("--running-weight and --clip-grad must be >= 0")
+        if self.critic_input not in ("full", "relative"):
+            raise UserError(f"--critic-input must be full or relative (got {self.critic_input!r})")
+        for name in ("running_weight", "velocity_weight", "clip_grad", "start_std"):
+            if getattr(self, name) < 0:
+                raise UserError(f"--{name.replace('_', '-')} must be >= 0 (got {getattr(self, name)})")
         if self.max_torque is not None and any(t <= 0 for t in self.max_torque):
             raise UserError(f"--max-torque must be > 0 (got {self.max_torque})")
         if dof is not None and self.max_torque is not None and len(self.max_torque) not in (1, dof):

@@ -1,7 +1,8 @@
 """Losses (pure functions).
 
 * task loss (outer loop, paper eq. 3 with the reward of section 5): ``||q_T - g||^2`` in joint space,
-  optionally plus ``running_weight * mean_t ||q_t - g||^2`` over the rollout (off by default);
+  optionally plus ``running_weight * mean_t ||q_t - g||^2`` over the rollout and
+  ``velocity_weight * ||qd_T||^2`` at the end (arrive and stop; both off by default);
 * critic loss (inner loop, Algorithm 2 line 7): ``sum_t L_critic(s_t, pi_theta(s_t), g)``.
 """
 
@@ -18,11 +19,14 @@ def final_error(q_final: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
     return ((q_final - goal) ** 2).sum(-1)
 
 
-def task_loss(traj: Trajectory, goal: torch.Tensor, running_weight: float = 0.0) -> torch.Tensor:
-    """Per-world task loss ``(W,)``; ``goal`` is ``(W, dof)``."""
+def task_loss(traj: Trajectory, goal: torch.Tensor, running_weight: float = 0.0,
+              velocity_weight: float = 0.0) -> torch.Tensor:
+    """Per-world task loss ``(W,)``; ``goal`` is ``(W, dof)``; ``velocity_weight`` in s^2."""
     loss = final_error(traj.q[-1], goal)
     if running_weight:
         loss = loss + running_weight * ((traj.q[1:] - goal) ** 2).sum(-1).mean(0)
+    if velocity_weight:
+        loss = loss + velocity_weight * (traj.qd[-1] ** 2).sum(-1)
     return loss
 
 

@@ -40,7 +40,7 @@ class TestConfig:
     goal_std: float = 0.3
     around: list[int] | None = None  # which training goals to sample around (default: all, cycled)
     inits: int = 5  # fresh policy initialisations per goal
-    policy_steps: int | None = None  # critic-gradient steps per policy (default: training inner steps)
+    policy_steps: int | None = None  # critic-gradient steps per policy (default: inner steps x policy lifetime)
     alpha: float | None = None
     horizon: int | None = None
     ee_mass: float = 0.0
@@ -55,7 +55,8 @@ def build_test_critic(ckpt: dict, norm: Normalizer) -> torch.nn.Module:
     """The loss ``L(q, qd, tau, g)`` a fresh policy descends, for any method's checkpoint."""
     method = ckpt.get("method", "ours")
     if method == "ours":
-        critic = Critic(ckpt["dof"], norm, hidden=ckpt.get("critic_hidden", 400))
+        critic = Critic(ckpt["dof"], norm, hidden=ckpt.get("critic_hidden", 400),
+                        inputs=ckpt.get("critic_input", "full"))
         critic.load_state_dict(ckpt["critic_state"])
         return critic
     from .baselines import common  # local import: baselines depend on this module's siblings
@@ -89,7 +90,8 @@ def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) ->
         raise UserError(f"--goal-std must be >= 0 (got {tc.goal_std})")
     horizon = tc.horizon or cfg.horizon
     alpha = tc.alpha or cfg.alpha
-    steps = tc.policy_steps or cfg.inner_steps
+    # a critic trained on policies of every age up to --policy-lifetime keeps improving them that long
+    steps = tc.policy_steps or cfg.inner_steps * (cfg.policy_lifetime if cfg.policy_init == "fresh" else 1)
     for name, value in (("horizon", horizon), ("alpha", alpha), ("policy-steps", steps)):
         if not value > 0:
             raise UserError(f"--{name} must be > 0 (got {value})")

@@ -6,8 +6,15 @@ batched matmul evaluates all policies, and an inner update is ``theta - alpha * 
 tensors (no module, no in-place mutation).
 
 Critic ``L_critic(s, a, g)``: MLP with two hidden layers of 400 units and ELU, one scalar output.
-Its input is ``[q, qd, a, g, q - g]`` (normalised): the goal-relative position ``q - g`` is a fixed
-feature of ``(s, g)`` that makes goal generalisation easier to learn; it adds no information.
+Two input layouts (``CRITIC_INPUTS``, normalised as below):
+
+* ``full``: ``[q, qd, a, g, q - g]`` -- everything; the goal-relative position ``q - g`` is a fixed
+  feature of ``(s, g)`` that adds no information but makes goal generalisation easier to learn;
+* ``relative``: ``[q - g, qd, a]`` -- the state seen from the goal. The critic is then equivariant
+  to shifting the goal and the state together, so it cannot memorise the few training goals and
+  has to describe how to move towards *a* goal; this is what lets it generalise to new goals on
+  the KUKA (see RESULTS.md). It suits robots whose dynamics change little with ``q`` over the goal
+  region, e.g. a gravity-compensated arm.
 
 Input normalisation (documented, fixed from the scene, not learned):
   * joint positions and goals: ``(q - centre) / half_range`` of the joint limits,
@@ -27,6 +34,7 @@ from torch import nn
 PolicyParams = dict[str, torch.Tensor]
 
 POLICY_INIT_SCHEMES = ("fresh", "fixed", "persistent")
+CRITIC_INPUTS = ("full", "relative")
 
 
 @dataclass(frozen=True)
@@ -108,12 +116,14 @@ class Critic(nn.Module):
     checkpoint is self-contained).
     """
 
-    def __init__(self, dof: int, norm: Normalizer, hidden: int = 400, goal_dim: int | None = None):
+    def __init__(self, dof: int, norm: Normalizer, hidden: int = 400, inputs: str = "full"):
         super().__init__()
-        goal_dim = dof if goal_dim is None else goal_dim
-        self.dof = dof
+        if inputs not in CRITIC_INPUTS:
+            raise ValueError(f"critic inputs must be one of {CRITIC_INPUTS} (got {inputs!r})")
+        self.dof, self.inputs = dof, inputs
+        n_in = 5 * dof if inputs == "full" else 3 * dof
         self.net = nn.Sequential(
-            nn.Linear(2 * dof + dof + 2 * goal_dim, hidden), nn.ELU(),
+            nn.Linear(n_in, hidden), nn.ELU(),
             nn.Linear(hidden, hidden), nn.ELU(),
             nn.Linear(hidden, 1),
         )
@@ -124,6 +134,9 @@ class Critic(nn.Module):
 
     def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """All ``(..., dof)`` -> ``(...)``."""
+        if self.inputs == "relative":
+            x = torch.cat([(q - goal) / self.q_half_range, qd / self.qd_scale, tau / self.max_torque], dim=-1)
+            return self.net(x).squeeze(-1)
         x = torch.cat([
             (q - self.q_centre) / self.q_half_range,
             qd / self.qd_scale,

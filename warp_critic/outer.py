@@ -25,12 +25,13 @@ class OuterResult:
 
 def meta_loss(critic: Critic, params: PolicyParams, norm: Normalizer, sim: Simulator,
               q0: torch.Tensor, qd0: torch.Tensor, goal: torch.Tensor, *, horizon: int,
-              alpha: float, inner_steps: int = 1, running_weight: float = 0.0) -> OuterResult:
+              alpha: float, inner_steps: int = 1, running_weight: float = 0.0,
+              velocity_weight: float = 0.0) -> OuterResult:
     """Task loss of ``pi_{theta_new(phi)}`` rolled out through the model, mean over worlds."""
     params_new, trajs = inner_update(critic, params, norm, sim, q0, qd0, goal, horizon=horizon,
                                      alpha=alpha, steps=inner_steps, create_graph=True)
     after = rollout(sim, policy_fn(params_new, norm), q0, qd0, horizon, differentiable=True)
-    per_world = task_loss(after, goal, running_weight)
+    per_world = task_loss(after, goal, running_weight, velocity_weight)
     return OuterResult(
         loss=per_world.mean(),
         per_world=per_world.detach(),

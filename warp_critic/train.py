@@ -157,9 +157,10 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
                     differentiable=True, gravity=cfg.gravity)
     dev = sim.torch_device
     goal_index = torch.arange(G, device=dev).repeat_interleave(K)
+    slot = torch.arange(K, device=dev).repeat(G)  # index of each world among its goal's worlds
     goal = goals.to(dev)[goal_index]  # (W, dof)
     norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale)
-    critic = Critic(scene.dof, norm).to(dev)
+    critic = Critic(scene.dof, norm, inputs=cfg.critic_input).to(dev)
     opt = torch.optim.Adam(critic.parameters(), lr=cfg.lr)
 
     def lr_at(it: int) -> float:
@@ -167,6 +168,11 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
             return cfg.lr * (0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * it / max(cfg.iterations - 1, 1))))
         return cfg.lr
     q0, qd0 = sim.zeros(), sim.zeros()
+    q_lo, q_hi = 0.95 * sim.q_lower, 0.95 * sim.q_upper
+
+    def new_start_states() -> torch.Tensor:  # (W, dof) joint positions around home, inside the limits
+        noise = torch.randn(W, scene.dof, generator=gen).to(dev) * cfg.start_std
+        return torch.minimum(torch.maximum(noise, q_lo), q_hi)
 
     def new_policies():
         return init_policy(W, 2 * scene.dof, scene.dof, generator=gen, device=dev)
@@ -195,6 +201,7 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
             "kind": CHECKPOINT_KIND, "method": "ours", "scene": scene.name, "scene_path": str(cfg.scene),
             "dof": scene.dof, "config": cfg.to_dict(), "iteration": iteration,
             "critic_state": critic.state_dict(), "critic_hidden": critic.net[0].out_features,
+            "critic_input": critic.inputs,
             "optimizer_state": opt.state_dict(), **rng_state(gen),
             "policy_params": {k: v.cpu() for k, v in params.items()},
             "metrics": history[-1] if history else {},
@@ -205,12 +212,21 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
     try:
         for it in range(start, cfg.iterations):
             t0 = time.perf_counter()
-            if cfg.policy_init == "fresh":  # Algorithm 2: new random policies every iteration
-                params = new_policies()
+            if cfg.policy_init == "fresh":  # Algorithm 2: new random policies every iteration ...
+                fresh = new_policies()
+                if cfg.policy_lifetime == 1:
+                    params = fresh
+                else:  # ... or, staggered, in the worlds whose policy has reached its lifetime
+                    reset = (it + slot) % cfg.policy_lifetime == 0  # (W,)
+                    params = {k: torch.where(reset.view(-1, *[1] * (v.dim() - 1)), fresh[k], v)
+                              for k, v in params.items()}
+            if cfg.start_std:
+                q0 = new_start_states()
             theta = detach_params(params)
             try:
                 res = meta_loss(critic, theta, norm, sim, q0, qd0, goal, horizon=cfg.horizon, alpha=cfg.alpha,
-                                inner_steps=cfg.inner_steps, running_weight=cfg.running_weight)
+                                inner_steps=cfg.inner_steps, running_weight=cfg.running_weight,
+                                velocity_weight=cfg.velocity_weight)
                 opt.zero_grad(set_to_none=True)
                 res.loss.backward()
                 grad_norm = _grad_norm(critic)
@@ -224,7 +240,7 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
             for group in opt.param_groups:
                 group["lr"] = lr_at(it)
             opt.step()
-            if cfg.policy_init == "persistent":
+            if cfg.policy_init == "persistent" or cfg.policy_lifetime > 1:
                 params = res.params_new
             before = ((res.before.q[-1] - goal) ** 2).sum(-1)
             per_goal = torch.zeros(G, device=dev).index_add_(0, goal_index, res.per_world) / K

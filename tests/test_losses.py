@@ -1,0 +1,50 @@
+"""Critic input layouts and task-loss terms (pure functions, no simulator)."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+
+from warp_critic.losses import task_loss
+from warp_critic.networks import Critic, Normalizer
+from warp_critic.rollout import Trajectory
+
+
+def _norm(dof=3):
+    return Normalizer.from_limits(-2 * torch.ones(dof), 2 * torch.ones(dof), 5 * torch.ones(dof), 4.0)
+
+
+def _batch(dof=3, n=16, seed=0):
+    g = torch.Generator().manual_seed(seed)
+    return [torch.randn(n, dof, generator=g) for _ in range(4)]  # q, qd, tau, goal
+
+
+def test_relative_critic_is_equivariant_to_moving_goal_and_state_together():
+    torch.manual_seed(0)
+    q, qd, tau, goal = _batch()
+    shift = torch.tensor([0.3, -0.7, 0.2])
+    rel, full = Critic(3, _norm(), hidden=32, inputs="relative"), Critic(3, _norm(), hidden=32, inputs="full")
+    assert torch.allclose(rel(q + shift, qd, tau, goal + shift), rel(q, qd, tau, goal), atol=1e-6)
+    # the full layout sees q and g themselves, so the same shift changes its value
+    assert not torch.allclose(full(q + shift, qd, tau, goal + shift), full(q, qd, tau, goal), atol=1e-3)
+    # ... and the relative one still depends on the goal
+    assert not torch.allclose(rel(q, qd, tau, goal + shift), rel(q, qd, tau, goal), atol=1e-3)
+
+
+def test_critic_rejects_unknown_input_layout():
+    with pytest.raises(ValueError, match="relative"):
+        Critic(3, _norm(), inputs="absolute")
+
+
+def test_task_loss_terms():
+    T, W, dof = 5, 4, 3
+    g = torch.Generator().manual_seed(1)
+    traj = Trajectory(torch.randn(T + 1, W, dof, generator=g), torch.randn(T + 1, W, dof, generator=g),
+                      torch.randn(T, W, dof, generator=g))
+    goal = torch.randn(W, dof, generator=g)
+    final = ((traj.q[-1] - goal) ** 2).sum(-1)
+    assert torch.allclose(task_loss(traj, goal), final)
+    running = ((traj.q[1:] - goal) ** 2).sum(-1).mean(0)
+    assert torch.allclose(task_loss(traj, goal, running_weight=0.5), final + 0.5 * running)
+    velocity = (traj.qd[-1] ** 2).sum(-1)
+    assert torch.allclose(task_loss(traj, goal, velocity_weight=0.1), final + 0.1 * velocity)
