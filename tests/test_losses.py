@@ -48,3 +48,21 @@ def test_task_loss_terms():
     assert torch.allclose(task_loss(traj, goal, running_weight=0.5), final + 0.5 * running)
     velocity = (traj.qd[-1] ** 2).sum(-1)
     assert torch.allclose(task_loss(traj, goal, velocity_weight=0.1), final + 0.1 * velocity)
+
+
+def test_goal_noise_readings_of_the_papers_protocol():
+    from warp_critic.errors import UserError
+    from warp_critic.metatest import sample_goals
+
+    centres = torch.zeros(2, 7)
+    lo, hi = -3 * torch.ones(7), 3 * torch.ones(7)
+    gen = torch.Generator().manual_seed(0)
+    per_joint = sample_goals(centres, 4000, 0.1, [0, 1], lo, hi, gen)
+    distance = sample_goals(centres, 4000, 0.1, [0, 1], lo, hi, gen, noise="distance")
+    # per joint: E||offset||^2 = 7 std^2; along a random direction: E||offset||^2 = std^2
+    assert (per_joint ** 2).sum(1).mean().item() == pytest.approx(0.07, rel=0.05)
+    assert (distance ** 2).sum(1).mean().item() == pytest.approx(0.01, rel=0.08)
+    # ... and the direction is isotropic: every joint gets the same share
+    assert torch.allclose((distance ** 2).mean(0), torch.full((7,), 0.01 / 7), rtol=0.2)
+    with pytest.raises(UserError, match="--goal-noise"):
+        sample_goals(centres, 1, 0.1, None, lo, hi, gen, noise="sphere")

@@ -51,14 +51,18 @@ def run_scene(name: str, iterations: int | None, device: str, quick: bool) -> li
     per_it = sum(r["seconds"] for r in rows) / max(len(rows), 1)
     lines = [f"{name}: meta-train {len(rows)} iterations, {per_it:.2f} s/iteration, this session {total:.0f} s; "
              f"final task loss (mean of last {len(last)} iterations) {train_err:.4f} rad^2"]
-    stds = [0.3] if name != "kuka" else [0.1, 0.4]
+    # kuka: both readings of the paper's "10 new goals at a distance of N(0, std)" (see sample_goals)
+    tests = [(0.3, "per-joint")] if name != "kuka" else [(0.1, "per-joint"), (0.4, "per-joint"),
+                                                         (0.1, "distance"), (0.4, "distance")]
     around = None if name != "kuka" else [0, 1]
-    for std in stds:
-        r = meta_test(TestConfig(run_dir=str(out), num_goals=10 if not quick else 2, goal_std=std, around=around,
-                                 inits=5 if not quick else 1, device=device, out=str(out / f"metatest-std{std}.json")),
+    for std, noise in tests:
+        tag = f"std{std}" + ("" if noise == "per-joint" else f"-{noise}")
+        r = meta_test(TestConfig(run_dir=str(out), num_goals=10 if not quick else 2, goal_std=std, goal_noise=noise,
+                                 around=around, inits=5 if not quick else 1, device=device,
+                                 out=str(out / f"metatest-{tag}.json")),
                       progress=None)
-        lines.append(f"{name}: meta-test std {std}: final sq. error mean {r['mean']:.4f} (std {r['std']:.4f}), "
-                     f"untrained {r['mean_before']:.4f}")
+        lines.append(f"{name}: meta-test std {std} ({noise}): final sq. error mean {r['mean']:.4f} "
+                     f"(std {r['std']:.4f}), untrained {r['mean_before']:.4f}")
     return lines
 
 

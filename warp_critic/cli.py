@@ -150,6 +150,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_dataclass_arguments(te, TestConfig, skip=("run_dir",), helps={
         "goals": "explicit goals, inline 'a,b;c,d' or a file; default: sampled around the training goals",
         "num_goals": "number of sampled goals", "goal_std": "std (rad) of the Gaussian around the training goals",
+        "goal_noise": "per-joint: N(g, std^2) on every joint; distance: a random direction at a distance N(0, std^2) "
+                      "(the paper's 'at a distance of N(0, std)' reads both ways)",
         "around": "indices of the training goals to sample around (default: all, cycled)",
         "inits": "fresh policy initialisations per goal",
         "policy_steps": "critic-gradient steps per fresh policy (default: the run's inner steps x its policy lifetime)",

@@ -38,6 +38,7 @@ class TestConfig:
     goals: list[list[float]] | None = None  # explicit goals, else sampled around the training goals
     num_goals: int = 10
     goal_std: float = 0.3
+    goal_noise: str = "per-joint"  # per-joint: N(g_i, std^2 I); distance: g_i + d u, d ~ N(0, std^2), |u| = 1
     around: list[int] | None = None  # which training goals to sample around (default: all, cycled)
     inits: int = 5  # fresh policy initialisations per goal
     policy_steps: int | None = None  # critic-gradient steps per policy (default: inner steps x policy lifetime)
@@ -64,16 +65,32 @@ def build_test_critic(ckpt: dict, norm: Normalizer) -> torch.nn.Module:
     return common.test_critic_from_checkpoint(ckpt, norm)
 
 
+GOAL_NOISE = ("per-joint", "distance")
+
+
 def sample_goals(train_goals: torch.Tensor, num: int, std: float, around: list[int] | None,
-                 lower: torch.Tensor, upper: torch.Tensor, gen: torch.Generator) -> torch.Tensor:
-    """``num`` goals ``N(g_i, std^2 I)`` around training goals (cycled), clipped into the limits."""
+                 lower: torch.Tensor, upper: torch.Tensor, gen: torch.Generator,
+                 noise: str = "per-joint") -> torch.Tensor:
+    """``num`` goals around training goals (cycled), clipped into the limits.
+
+    The paper (Table 1) samples new goals "at a distance of N(0, std)" around the training goals,
+    which reads two ways: ``per-joint`` (default) draws ``N(g_i, std^2 I)``, so a 7-dof goal moves by
+    ``std * sqrt(7)`` on average; ``distance`` moves it by ``d ~ N(0, std^2)`` along a uniformly random
+    direction, so the expected squared offset is ``std^2`` whatever the number of joints.
+    """
+    if noise not in GOAL_NOISE:
+        raise UserError(f"--goal-noise must be one of {', '.join(GOAL_NOISE)} (got {noise!r})")
     idx = around if around else list(range(train_goals.shape[0]))
     for i in idx:
         if not 0 <= i < train_goals.shape[0]:
             raise UserError(f"--around {i}: the run has {train_goals.shape[0]} training goals")
     centres = train_goals[[idx[k % len(idx)] for k in range(num)]]
-    noise = torch.randn(num, train_goals.shape[1], generator=gen) * std
-    return torch.clamp(centres + noise, lower * 0.98, upper * 0.98)
+    offset = torch.randn(num, train_goals.shape[1], generator=gen)
+    if noise == "per-joint":
+        offset = offset * std
+    else:
+        offset = offset / offset.norm(dim=1, keepdim=True) * (torch.randn(num, 1, generator=gen) * std)
+    return torch.clamp(centres + offset, lower * 0.98, upper * 0.98)
 
 
 def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) -> dict:
@@ -103,7 +120,7 @@ def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) ->
     if tc.goals is not None:
         goals = goals_tensor(tc.goals, scene, "cpu")
     else:
-        goals = sample_goals(train_goals, tc.num_goals, tc.goal_std, tc.around, lo, hi, gen)
+        goals = sample_goals(train_goals, tc.num_goals, tc.goal_std, tc.around, lo, hi, gen, tc.goal_noise)
     G, K = goals.shape[0], tc.inits
     W = G * K
     variant = Variant(ee_mass=tc.ee_mass, link_length=tc.link_length, link_scale=tc.link_scale)
@@ -130,6 +147,7 @@ def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) ->
     result = {
         "run_dir": str(tc.run_dir), "method": ckpt.get("method", "ours"), "scene": scene.name,
         "goals": goals.tolist(), "goal_std": tc.goal_std if tc.goals is None else None,
+        "goal_noise": tc.goal_noise if tc.goals is None else None,
         "inits": K, "policy_steps": steps, "alpha": alpha, "horizon": horizon,
         "variant": {"ee_mass": tc.ee_mass, "link_length": tc.link_length, "link_scale": tc.link_scale},
         "final_error_per_goal": per_goal.tolist(),
