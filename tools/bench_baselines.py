@@ -46,6 +46,8 @@ def parse_args(argv=None):
     p.add_argument("--iterations", type=int, default=None, help="training iterations (default: the config default, 300)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--stds", default="0.1,0.3,0.4", help="meta-test goal std values (rad)")
+    p.add_argument("--goal-noise", default="per-joint", choices=["per-joint", "distance"],
+                   help="how goals are sampled around the training goals (see warp_critic.metatest.sample_goals)")
     p.add_argument("--num-goals", type=int, default=10)
     p.add_argument("--inits", type=int, default=5)
     p.add_argument("--around", default="0,1", help="training goals to sample around (the paper: two of the four); '' = all")
@@ -95,9 +97,10 @@ def main(argv=None) -> int:
     for label, run_dir, summary in runs:
         row = {"run": label, "run_dir": str(run_dir), **summary, "meta_test": {}}
         for std in stds:
+            suffix = "" if args.goal_noise == "per-joint" else f"-{args.goal_noise}"
             tc = TestConfig(run_dir=str(run_dir), num_goals=args.num_goals, goal_std=std, around=around,
-                            inits=args.inits, device=args.device, seed=1,
-                            out=str(run_dir / f"metatest_std{std}.json"))
+                            goal_noise=args.goal_noise, inits=args.inits, device=args.device, seed=1,
+                            out=str(run_dir / f"metatest_std{std}{suffix}.json"))
             r = meta_test(tc, progress=None)
             row["method"], row["scene"] = r["method"], r["scene"]
             row["meta_test"][str(std)] = {"mean": r["mean"], "std": r["std"], "before": r["mean_before"],

@@ -26,10 +26,12 @@ SCENE_DEFAULTS: dict[str, dict[str, Any]] = {
                [-0.5, 0.6, 0.3, -0.6, 0.0, 0.3, 0.0],
                [0.3, -0.4, -0.3, -1.0, 0.2, 0.4, 0.0],
                [-0.3, -0.6, 0.0, -0.4, -0.2, 0.6, 0.0]],
-        # Torque bounds give every joint a peak acceleration of ~15-40 rad/s^2 at the home pose
-        # (mass-matrix diagonal 0.14, 6.35, 0.089, 1.39, 0.030, 0.051, 0.0029 kg m^2); the URDF's
-        # 300 N·m effort limits would let the wrist reach 1e5 rad/s^2 and slam into its limits.
-        horizon=50, dt=0.0025, substeps=4, max_torque=[20.0, 150.0, 8.0, 40.0, 1.5, 2.0, 0.1],
+        # Torque bounds scaled to the joints (mass-matrix diagonal at home 0.14, 6.35, 0.089, 1.39,
+        # 0.030, 0.051, 0.0029 kg m^2): joints 1-6 peak at 24-140 rad/s^2. The URDF's 300 N·m would
+        # let the wrist reach 1e5 rad/s^2 and slam into its limits. The last joint is limited by its
+        # 0.5 N·m·s/rad damping rather than its inertia: 1 N·m gives it 2 rad/s (the earlier 0.1 N·m
+        # allowed only 0.2 rad/s, i.e. 0.1 rad in a 0.5 s rollout).
+        horizon=50, dt=0.0025, substeps=4, max_torque=[20.0, 150.0, 8.0, 40.0, 1.5, 2.0, 1.0],
         qd_scale=5.0, alpha=1e-3, lr=1e-3, gravity=0.0,
     ),
     "point_mass": dict(
