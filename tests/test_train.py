@@ -171,6 +171,8 @@ def test_divergence_stops_with_iteration_and_keeps_last_good_checkpoint(tmp_path
     (["meta-train", REACHER, "--policy-init", "weird"], "--policy-init"),
     (["meta-train", REACHER, "--critic-input", "absolute"], "--critic-input"),
     (["meta-train", REACHER, "--velocity-weight", "-1"], "--velocity-weight"),
+    (["meta-train", REACHER, "--policy-lifetime", "3", "--policy-init", "fixed"], "--policy-lifetime"),
+    (["meta-train", REACHER, "--policy-lifetime", "0"], "--policy-lifetime"),
     (["meta-train", REACHER, "--goals", "goals_missing.json"], "goals_missing.json"),
 ])
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, fragment):

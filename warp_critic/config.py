@@ -120,6 +120,8 @@ class TrainConfig(SerializableConfig):
             raise UserError(f"--lr-schedule must be constant or cosine (got {self.lr_schedule!r})")
         if self.policy_init not in ("fresh", "fixed", "persistent"):
             raise UserError(f"--policy-init must be fresh, fixed or persistent (got {self.policy_init!r})")
+        if self.policy_lifetime > 1 and self.policy_init != "fresh":
+            raise UserError(f"--policy-lifetime {self.policy_lifetime} needs --policy-init fresh (got {self.policy_init})")
         if self.critic_input not in ("full", "relative"):
             raise UserError(f"--critic-input must be full or relative (got {self.critic_input!r})")
         for name in ("running_weight", "velocity_weight", "clip_grad", "start_std"):
