@@ -242,3 +242,21 @@ def test_staggered_policy_lifetime_continues_each_policy_until_it_is_replaced(tm
     ckpt = train.load_checkpoint(tmp_path / "s")
     res = meta_test(TestConfig(run_dir=str(tmp_path / "s"), num_goals=1, inits=1, device="cpu"), progress=None)
     assert res["policy_steps"] == ckpt["config"]["inner_steps"] * 2
+
+
+def test_diagnose_tool_runs_on_a_run_directory(tmp_path, capsys):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("diagnose_metatest", ROOT / "tools" / "diagnose_metatest.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    out = tmp_path / "run"
+    train.meta_train(tiny_cfg(out, iterations=1, horizon=30), progress=False)  # 0.3 s: goals reachable
+    assert tool.main([str(out), "--goal-std", "0", "--around", "", "--inits", "2", "--steps", "2",
+                      "--reachability", "--reach-iterations", "60"]) == 0
+    text = capsys.readouterr().out
+    assert "step 2: mean" in text and "goal  1" in text
+    reach = [float(x) for x in text.split("final sq. error per goal")[1].strip(" []\n").split()]
+    # zero torque leaves the arm at home (error ||g||^2 = 0.34, 0.2); 60 Adam steps must do far better
+    assert len(reach) == 2 and reach[0] < 0.2 * 0.34 and reach[1] < 0.2 * 0.2, reach
+    assert tool.main([str(tmp_path / "missing")]) == 2

@@ -1,0 +1,120 @@
+"""Where does a critic's meta-test error come from? Prints the numbers behind RESULTS.md's diagnosis.
+
+For a run directory written by ``warp-critic meta-train``:
+
+* trains fresh policies with the saved critic (model-free, as ``warp-critic meta-test``) and, after
+  every policy step, prints the mean final squared error, its split over the joints, the final
+  joint speeds and how often each joint's torque sits at its bound;
+* prints the spread over initialisations per goal (a per-goal bias shows as a small spread);
+* with ``--reachability``, optimises open-loop torques ``(T, dof)`` for the same goals through the
+  *differentiable* model (Adam on ``max_torque * tanh(u)``) -- the error a perfect controller with
+  the same torque bounds and horizon reaches, i.e. whether the goals are physically reachable.
+
+Usage::
+
+    python tools/diagnose_metatest.py runs/bench-kuka --goal-std 0 --around 0,1 --steps 4
+    python tools/diagnose_metatest.py runs/bench-kuka --goal-std 0.1 --around 0,1 --reachability
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+import torch
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("run_dir")
+    p.add_argument("--goal-std", type=float, default=0.1, help="0 = the training goals themselves")
+    p.add_argument("--goal-noise", default="per-joint", choices=["per-joint", "distance"])
+    p.add_argument("--around", default="0,1", help="training goals to use / sample around ('' = all)")
+    p.add_argument("--num-goals", type=int, default=10)
+    p.add_argument("--inits", type=int, default=5)
+    p.add_argument("--steps", type=int, default=None, help="policy steps (default: the run's inner steps)")
+    p.add_argument("--seed", type=int, default=1)
+    p.add_argument("--reachability", action="store_true", help="also optimise open-loop torques through the model")
+    p.add_argument("--reach-iterations", type=int, default=150)
+    args = p.parse_args(argv)
+
+    import warp as wp
+
+    wp.config.quiet = True
+    torch.set_num_threads(1)
+    from warp_critic.config import TrainConfig
+    from warp_critic.errors import UserError
+    from warp_critic.inner import inner_update, policy_fn
+    from warp_critic.metatest import build_test_critic, sample_goals
+    from warp_critic.networks import Normalizer, init_policy
+    from warp_critic.rollout import rollout
+    from warp_critic.scene import Variant, load_scene
+    from warp_critic.simulator import Simulator
+    from warp_critic.train import load_checkpoint, max_torque_tensor, seed_everything
+
+    try:
+        ckpt = load_checkpoint(args.run_dir)
+    except UserError as e:
+        print(f"diagnose_metatest: error: {e}", file=sys.stderr)
+        return 2
+    cfg = TrainConfig.from_dict(ckpt["config"])
+    scene = load_scene(cfg.scene)
+    gen = seed_everything(args.seed)
+    train_goals = torch.tensor(cfg.goals, dtype=torch.float32)
+    around = [int(i) for i in args.around.split(",") if i.strip()] or list(range(len(train_goals)))
+    if args.goal_std == 0:
+        goals = train_goals[around]
+    else:
+        lo = torch.as_tensor(scene.q_lower, dtype=torch.float32)
+        hi = torch.as_tensor(scene.q_upper, dtype=torch.float32)
+        goals = sample_goals(train_goals, args.num_goals, args.goal_std, around, lo, hi, gen, args.goal_noise)
+    G, K = goals.shape[0], args.inits
+    W = G * K
+    sim = Simulator(scene, [Variant()] * W, dt=cfg.dt, substeps=cfg.substeps, device="cpu",
+                    differentiable=False, gravity=cfg.gravity)
+    norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, "cpu"),
+                                  cfg.qd_scale)
+    critic = build_test_critic(ckpt, norm)
+    for prm in critic.parameters():
+        prm.requires_grad_(False)
+    goal = goals[torch.arange(G).repeat_interleave(K)]
+    q0, qd0 = sim.zeros(), sim.zeros()
+    params = {k: v.requires_grad_(True) for k, v in init_policy(W, 2 * scene.dof, scene.dof, generator=gen).items()}
+    fmt = lambda t: np.array2string(t.numpy(), precision=3, floatmode="fixed", max_line_width=200)  # noqa: E731
+    steps = args.steps or cfg.inner_steps
+    print(f"{args.run_dir}: {G} goals x {K} inits, goal std {args.goal_std} ({args.goal_noise}), "
+          f"alpha {cfg.alpha}, {steps} policy steps")
+    for step in range(1, steps + 1):
+        params, _ = inner_update(critic, params, norm, sim, q0, qd0, goal, horizon=cfg.horizon,
+                                 alpha=cfg.alpha, steps=1, create_graph=False)
+        traj = rollout(sim, policy_fn(params, norm), q0, qd0, cfg.horizon)
+        sq = (traj.q[-1] - goal) ** 2
+        sat = (traj.tau.abs() / norm.max_torque > 0.9).float().mean((0, 1))
+        print(f"step {step}: mean {sq.sum(-1).mean():.4f}  per joint {fmt(sq.mean(0))}\n"
+              f"         final |qd| {fmt(traj.qd[-1].abs().mean(0))} rad/s  torque >90% of bound {fmt(sat)}")
+    per = sq.sum(-1).view(G, K)
+    print("per goal: mean, spread over inits (max - min)")
+    for i in range(G):
+        print(f"  goal {i:2d} {fmt(goals[i])}  {per[i].mean():.4f}  {per[i].max() - per[i].min():.4f}")
+
+    if args.reachability:
+        dsim = Simulator(scene, [Variant()] * G, dt=cfg.dt, substeps=cfg.substeps, device="cpu",
+                         differentiable=True, gravity=cfg.gravity)
+        u = torch.zeros(cfg.horizon, G, scene.dof, requires_grad=True)
+        opt = torch.optim.Adam([u], lr=0.1)
+        for _ in range(args.reach_iterations):
+            t = iter(range(cfg.horizon))
+            traj = rollout(dsim, lambda q, qd: norm.max_torque * torch.tanh(u[next(t)]), dsim.zeros(),
+                           dsim.zeros(), cfg.horizon, differentiable=True)
+            err = ((traj.q[-1] - goals) ** 2).sum(-1)
+            opt.zero_grad()
+            err.sum().backward()
+            opt.step()
+        print(f"open-loop torques through the model ({args.reach_iterations} Adam steps): "
+              f"final sq. error per goal {fmt(err.detach())}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
