@@ -260,3 +260,5 @@ def test_diagnose_tool_runs_on_a_run_directory(tmp_path, capsys):
     # zero torque leaves the arm at home (error ||g||^2 = 0.34, 0.2); 60 Adam steps must do far better
     assert len(reach) == 2 and reach[0] < 0.2 * 0.34 and reach[1] < 0.2 * 0.2, reach
     assert tool.main([str(tmp_path / "missing")]) == 2
+    assert tool.main([str(out), "--around", "7"]) == 2
+    assert "--around" in capsys.readouterr().err

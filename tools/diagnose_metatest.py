@@ -62,7 +62,14 @@ def main(argv=None) -> int:
     scene = load_scene(cfg.scene)
     gen = seed_everything(args.seed)
     train_goals = torch.tensor(cfg.goals, dtype=torch.float32)
-    around = [int(i) for i in args.around.split(",") if i.strip()] or list(range(len(train_goals)))
+    try:
+        around = [int(i) for i in args.around.split(",") if i.strip()] or list(range(len(train_goals)))
+    except ValueError:
+        around = [-1]
+    if not all(0 <= i < len(train_goals) for i in around):
+        print(f"diagnose_metatest: error: --around {args.around!r}: the run has {len(train_goals)} training goals "
+              f"(indices 0..{len(train_goals) - 1})", file=sys.stderr)
+        return 2
     if args.goal_std == 0:
         goals = train_goals[around]
     else:
@@ -81,7 +88,10 @@ def main(argv=None) -> int:
     goal = goals[torch.arange(G).repeat_interleave(K)]
     q0, qd0 = sim.zeros(), sim.zeros()
     params = {k: v.requires_grad_(True) for k, v in init_policy(W, 2 * scene.dof, scene.dof, generator=gen).items()}
-    fmt = lambda t: np.array2string(t.numpy(), precision=3, floatmode="fixed", max_line_width=200)  # noqa: E731
+
+    def fmt(t: torch.Tensor) -> str:
+        return np.array2string(t.numpy(), precision=3, floatmode="fixed", max_line_width=200)
+
     steps = args.steps or cfg.inner_steps
     print(f"{args.run_dir}: {G} goals x {K} inits, goal std {args.goal_std} ({args.goal_noise}), "
           f"alpha {cfg.alpha}, {steps} policy steps")

@@ -108,7 +108,7 @@ def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) ->
     horizon = tc.horizon or cfg.horizon
     alpha = tc.alpha or cfg.alpha
     # a critic trained on policies of every age up to --policy-lifetime keeps improving them that long
-    steps = tc.policy_steps or cfg.inner_steps * (cfg.policy_lifetime if cfg.policy_init == "fresh" else 1)
+    steps = tc.policy_steps or cfg.inner_steps * cfg.policy_lifetime
     for name, value in (("horizon", horizon), ("alpha", alpha), ("policy-steps", steps)):
         if not value > 0:
             raise UserError(f"--{name} must be > 0 (got {value})")

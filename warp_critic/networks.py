@@ -12,9 +12,9 @@ Two input layouts (``CRITIC_INPUTS``, normalised as below):
   feature of ``(s, g)`` that adds no information but makes goal generalisation easier to learn;
 * ``relative``: ``[q - g, qd, a]`` -- the state seen from the goal. The critic is then equivariant
   to shifting the goal and the state together, so it cannot memorise the few training goals and
-  has to describe how to move towards *a* goal; this is what lets it generalise to new goals on
-  the KUKA (see RESULTS.md). It suits robots whose dynamics change little with ``q`` over the goal
-  region, e.g. a gravity-compensated arm.
+  has to describe how to move towards *a* goal. It suits robots whose dynamics change little with
+  ``q`` over the goal region, e.g. a gravity-compensated arm. On the KUKA it generalises about as
+  well as ``full`` (RESULTS.md has the measurements).
 
 Input normalisation (documented, fixed from the scene, not learned):
   * joint positions and goals: ``(q - centre) / half_range`` of the joint limits,

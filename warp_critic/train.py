@@ -172,7 +172,7 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
 
     def new_start_states() -> torch.Tensor:  # (W, dof) joint positions around home, inside the limits
         noise = torch.randn(W, scene.dof, generator=gen).to(dev) * cfg.start_std
-        return torch.minimum(torch.maximum(noise, q_lo), q_hi)
+        return torch.clamp(noise, q_lo, q_hi)
 
     def new_policies():
         return init_policy(W, 2 * scene.dof, scene.dof, generator=gen, device=dev)
@@ -240,7 +240,7 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
             for group in opt.param_groups:
                 group["lr"] = lr_at(it)
             opt.step()
-            if cfg.policy_init == "persistent" or (cfg.policy_init == "fresh" and cfg.policy_lifetime > 1):
+            if cfg.policy_init == "persistent" or cfg.policy_lifetime > 1:  # lifetime > 1 implies fresh
                 params = res.params_new
             before = ((res.before.q[-1] - goal) ** 2).sum(-1)
             per_goal = torch.zeros(G, device=dev).index_add_(0, goal_index, res.per_world) / K

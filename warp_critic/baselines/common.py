@@ -145,7 +145,7 @@ class BaselineConfig(SerializableConfig):
         return Path(self.scene).stem
 
     def with_scene_defaults(self) -> "BaselineConfig":
-        d = {"gravity": 9.81, **FALLBACK_DEFAULTS, **SCENE_DEFAULTS.get(self.scene_name(), {})}
+        d = {**FALLBACK_DEFAULTS, **SCENE_DEFAULTS.get(self.scene_name(), {})}
         for key in ("goals", "horizon", "dt", "substeps", "max_torque", "qd_scale", "gravity"):
             if getattr(self, key) is None:
                 setattr(self, key, copy.deepcopy(d.get(key)))
