@@ -82,7 +82,7 @@ def test_interrupted_run_resumes_exactly_on_cpu(tmp_path, extra):
 
 def test_outer_gradient_reaches_the_critic_through_model_and_inner_update(tmp_path):
     """The critic gradient is second order: it exists only through theta_new(phi) and the model."""
-    from warp_critic.networks import Critic, Normalizer, init_policy
+    from warp_critic.networks import Critic, MLPPolicy, Normalizer, init_policy
     from warp_critic.outer import meta_loss
     from warp_critic.scene import Variant, load_scene
     from warp_critic.simulator import Simulator
@@ -93,7 +93,7 @@ def test_outer_gradient_reaches_the_critic_through_model_and_inner_update(tmp_pa
     critic = Critic(2, norm)
     params = {k: v.requires_grad_() for k, v in init_policy(2, 4, 2, generator=torch.Generator().manual_seed(0)).items()}
     goal = torch.tensor([[0.5, 0.3], [0.5, 0.3]])
-    res = meta_loss(critic, params, norm, sim, sim.zeros(), sim.zeros(), goal, horizon=8, alpha=1e-3)
+    res = meta_loss(critic, MLPPolicy(norm), params, sim, sim.zeros(), sim.zeros(), goal, horizon=8, alpha=1e-3)
     grads = torch.autograd.grad(res.loss, list(critic.parameters()), allow_unused=True)
     # a constant offset of the critic cannot change the policy update: no path from the output bias
     assert grads[-1] is None
@@ -102,14 +102,14 @@ def test_outer_gradient_reaches_the_critic_through_model_and_inner_update(tmp_pa
 
     # finite differences on the critic's output weights, through the whole bi-level graph
     w = critic.net[-1].weight
-    (g_w,) = torch.autograd.grad(meta_loss(critic, params, norm, sim, sim.zeros(), sim.zeros(), goal,
+    (g_w,) = torch.autograd.grad(meta_loss(critic, MLPPolicy(norm), params, sim, sim.zeros(), sim.zeros(), goal,
                                            horizon=8, alpha=1e-3).loss, [w])
     direction = torch.randn_like(w)
     eps = 1e-2
     def loss_at(shift):
         with torch.no_grad():
             w.add_(shift * direction)
-        value = meta_loss(critic, params, norm, sim, sim.zeros(), sim.zeros(), goal, horizon=8, alpha=1e-3).loss.item()
+        value = meta_loss(critic, MLPPolicy(norm), params, sim, sim.zeros(), sim.zeros(), goal, horizon=8, alpha=1e-3).loss.item()
         with torch.no_grad():
             w.sub_(shift * direction)
         return value

@@ -45,6 +45,7 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     from warp_critic.errors import UserError
     from warp_critic.inner import inner_update, policy_fn
+    from warp_critic.networks import MLPPolicy
     from warp_critic.metatest import TestConfig, setup_meta_test
     from warp_critic.rollout import rollout
     from warp_critic.scene import Variant
@@ -75,9 +76,9 @@ def main(argv=None) -> int:
     print(f"{args.run_dir}: {G} goals x {K} inits, goal std {args.goal_std} ({args.goal_noise}), "
           f"alpha {cfg.alpha}, {steps} policy steps")
     for step in range(1, steps + 1):
-        params, _ = inner_update(critic, params, norm, sim, q0, qd0, goal, horizon=cfg.horizon,
+        params, _ = inner_update(critic, MLPPolicy(norm), params, sim, q0, qd0, goal, horizon=cfg.horizon,
                                  alpha=cfg.alpha, steps=1, create_graph=False)
-        traj = rollout(sim, policy_fn(params, norm), q0, qd0, cfg.horizon)
+        traj = rollout(sim, policy_fn(MLPPolicy(norm), params), q0, qd0, cfg.horizon)
         sq = (traj.q[-1] - goal) ** 2
         sat = (traj.tau.abs() / norm.max_torque > 0.9).float().mean((0, 1))
         print(f"step {step}: mean {sq.sum(-1).mean():.4f}  per joint {fmt(sq.mean(0))}\n"

@@ -11,22 +11,25 @@ from __future__ import annotations
 import torch
 
 from .losses import critic_loss
-from .networks import Critic, Normalizer, PolicyParams, policy_action
+from .networks import PolicyParams
 from .rollout import Trajectory, rollout
 from .simulator import Simulator
 
 
-def policy_fn(params: PolicyParams, norm: Normalizer):
-    return lambda q, qd: policy_action(params, norm, q, qd)
+def policy_fn(policy, params: PolicyParams):
+    """Bind parameters: ``policy(params, q, qd)`` -> a rollout's ``(q, qd) -> tau``."""
+    return lambda q, qd: policy(params, q, qd)
 
 
-def inner_update(critic: Critic, params: PolicyParams, norm: Normalizer, sim: Simulator,
+def inner_update(critic, policy, params: PolicyParams, sim: Simulator,
                  q0: torch.Tensor, qd0: torch.Tensor, goal: torch.Tensor, *, horizon: int,
                  alpha: float, steps: int = 1, create_graph: bool = False,
                  ) -> tuple[PolicyParams, list[Trajectory]]:
     """``steps`` critic-gradient steps on ``W`` policies at once.
 
     Args:
+        critic: the loss ``L(q, qd, tau, g)`` the policies descend.
+        policy: ``(params, q, qd) -> tau``, e.g. :class:`~warp_critic.networks.MLPPolicy`.
         params: per-world policy parameters (leading dim ``W``); must require grad.
         goal: ``(W, dof)`` goal per world.
         alpha: inner learning rate.
@@ -36,8 +39,8 @@ def inner_update(critic: Critic, params: PolicyParams, norm: Normalizer, sim: Si
     """
     trajs = []
     for _ in range(steps):
-        traj = rollout(sim, policy_fn(params, norm), q0, qd0, horizon, differentiable=False)
-        loss = critic_loss(critic, params, norm, traj, goal).sum()  # worlds are independent
+        traj = rollout(sim, policy_fn(policy, params), q0, qd0, horizon, differentiable=False)
+        loss = critic_loss(critic, policy, params, traj, goal).sum()  # worlds are independent
         grads = torch.autograd.grad(loss, list(params.values()), create_graph=create_graph)
         params = {k: v - alpha * g for (k, v), g in zip(params.items(), grads)}
         if not create_graph:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import torch
 
-from .networks import Critic, Normalizer, PolicyParams, policy_action
+from .networks import PolicyParams
 from .rollout import Trajectory
 
 
@@ -30,14 +30,13 @@ def task_loss(traj: Trajectory, goal: torch.Tensor, running_weight: float = 0.0,
     return loss
 
 
-def critic_loss(critic: Critic, params: PolicyParams, norm: Normalizer, traj: Trajectory,
-                goal: torch.Tensor) -> torch.Tensor:
+def critic_loss(critic, policy, params: PolicyParams, traj: Trajectory, goal: torch.Tensor) -> torch.Tensor:
     """Per-world ``sum_t L_critic(s_t, pi_theta(s_t), g)`` ``(W,)``.
 
     The visited states are data (detached): the gradient reaches the policy parameters through the
     actions only, so no model gradient is needed (the paper's model-free policy update).
     """
     q, qd = traj.q[:-1].detach(), traj.qd[:-1].detach()  # (T, W, dof)
-    tau = policy_action(params, norm, q, qd)
+    tau = policy(params, q, qd)
     g = goal.unsqueeze(0).expand_as(q)
     return critic(q, qd, tau, g).sum(0)

@@ -30,7 +30,7 @@ from .config import TrainConfig
 from .errors import UserError
 from .inner import inner_update, policy_fn
 from .losses import final_error
-from .networks import Critic, Normalizer, init_policy
+from .networks import Critic, MLPPolicy, Normalizer, init_policy
 from .rollout import rollout
 from .scene import Variant, load_scene
 from .simulator import Simulator
@@ -178,10 +178,11 @@ def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) ->
     ckpt, scene, goals, goal, sim, norm, critic = m.ckpt, m.scene, m.goals, m.goal, m.sim, m.norm, m.critic
     params, q0, qd0, steps, horizon, alpha = m.params, m.q0, m.qd0, m.steps, m.horizon, m.alpha
     G, K = goals.shape[0], m.inits
-    before = rollout(sim, policy_fn(params, norm), q0, qd0, horizon)
-    params, _ = inner_update(critic, params, norm, sim, q0, qd0, goal, horizon=horizon, alpha=alpha,
+    policy = MLPPolicy(norm)
+    before = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
+    params, _ = inner_update(critic, policy, params, sim, q0, qd0, goal, horizon=horizon, alpha=alpha,
                              steps=steps, create_graph=False)
-    after = rollout(sim, policy_fn(params, norm), q0, qd0, horizon)
+    after = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
     err = final_error(after.q[-1], goal).view(G, K).cpu()
     err0 = final_error(before.q[-1], goal).view(G, K).cpu()
     per_goal = err.mean(1)

@@ -97,6 +97,23 @@ def policy_action(params: PolicyParams, norm: Normalizer, q: torch.Tensor, qd: t
     return norm.max_torque * torch.tanh(policy_forward(params, norm.state(q, qd)))
 
 
+class MLPPolicy:
+    """The paper's policy family as a function ``(params, q, qd) -> tau``: per-world MLPs over the
+    normalised state, ``max_torque * tanh`` output. :mod:`warp_critic.inner` takes any such function
+    (the point-mass landscape uses a constant-force policy ``(params, q, qd) -> theta``)."""
+
+    def __init__(self, norm: Normalizer, hidden: int = 64):
+        self.norm, self.hidden = norm, hidden
+
+    def __call__(self, params: PolicyParams, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        return policy_action(params, self.norm, q, qd)
+
+    def init(self, worlds: int, *, generator=None, device="cpu") -> PolicyParams:
+        """Fresh parameters for ``worlds`` policies (see :func:`init_policy`)."""
+        dof = self.norm.max_torque.shape[0]
+        return init_policy(worlds, 2 * dof, dof, hidden=self.hidden, generator=generator, device=device)
+
+
 def detach_params(params: PolicyParams, requires_grad: bool = True) -> PolicyParams:
     return {k: v.detach().clone().requires_grad_(requires_grad) for k, v in params.items()}
 

@@ -23,7 +23,7 @@ import torch
 
 from .config import TrainConfig, atomic_write_text
 from .errors import DivergenceError, UserError
-from .networks import Critic, Normalizer, POLICY_INIT_SCHEMES, detach_params, init_policy
+from .networks import Critic, MLPPolicy, Normalizer, POLICY_INIT_SCHEMES, detach_params, init_policy
 from .outer import OuterResult, meta_loss
 from .scene import Scene, Variant, load_scene
 from .simulator import Simulator
@@ -162,6 +162,7 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
     goal = goals.to(dev)[goal_index]  # (W, dof)
     norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale)
     critic = Critic(scene.dof, norm, inputs=cfg.critic_input).to(dev)
+    policy = MLPPolicy(norm)
     opt = torch.optim.Adam(critic.parameters(), lr=cfg.lr)
 
     def lr_at(it: int) -> float:
@@ -227,7 +228,7 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
                 q0 = new_start_states()
             theta = detach_params(params)
             try:
-                res = meta_loss(critic, theta, norm, sim, q0, qd0, goal, horizon=cfg.horizon, alpha=cfg.alpha,
+                res = meta_loss(critic, policy, theta, sim, q0, qd0, goal, horizon=cfg.horizon, alpha=cfg.alpha,
                                 inner_steps=cfg.inner_steps, running_weight=cfg.running_weight,
                                 velocity_weight=cfg.velocity_weight)
                 opt.zero_grad(set_to_none=True)

@@ -62,7 +62,7 @@ from torch import nn
 from ..config import FALLBACK_DEFAULTS, SCENE_DEFAULTS, SerializableConfig, TrainConfig, atomic_write_text
 from ..errors import DivergenceError, UserError
 from ..losses import critic_loss, final_error
-from ..networks import Normalizer, init_policy
+from ..networks import MLPPolicy, Normalizer, init_policy
 from ..inner import inner_update, policy_fn
 from ..rollout import Trajectory, rollout
 from ..scene import Variant, load_scene
@@ -415,17 +415,18 @@ def fresh_policy_errors(qnet: QNetwork, norm: Normalizer, sim: Simulator, goal: 
     params = {k: v.requires_grad_(True) for k, v in init_policy(W, 2 * dof, dof, generator=gen, device=dev).items()}
     errors = []
     if steps == 1:  # one gradient serves every alpha
-        traj = rollout(sim, policy_fn(params, norm), q0, qd0, horizon)
-        loss = critic_loss(neg_q, params, norm, traj, goal).sum()
+        policy = MLPPolicy(norm)
+        traj = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
+        loss = critic_loss(neg_q, policy, params, traj, goal).sum()
         grads = torch.autograd.grad(loss, list(params.values()))
     for alpha in alphas:
         try:
             if steps == 1:
                 new = {k: (v - alpha * g).detach() for (k, v), g in zip(params.items(), grads)}
             else:
-                new, _ = inner_update(neg_q, params, norm, sim, q0, qd0, goal, horizon=horizon, alpha=alpha,
+                new, _ = inner_update(neg_q, MLPPolicy(norm), params, sim, q0, qd0, goal, horizon=horizon, alpha=alpha,
                                       steps=steps, create_graph=False)
-            after = rollout(sim, policy_fn(new, norm), q0, qd0, horizon)
+            after = rollout(sim, policy_fn(MLPPolicy(norm), new), q0, qd0, horizon)
             err = float(final_error(after.q[-1], goal).mean())
         except DivergenceError:
             err = math.inf
