@@ -1,15 +1,26 @@
 """User-facing errors.
 
-Every mistake a user can make (a bad path, a bad flag value, an incompatible checkpoint) is raised
-as :class:`UserError`. The CLI catches it, prints ``warp-critic: error: <message>`` on one line and
-exits with code 2 -- never a traceback. Library users get an ordinary exception they can catch.
+Every mistake a user can make (a bad path, a bad setting, an incompatible checkpoint) is raised as
+:class:`UserError`. The CLI catches it, prints ``warp-critic: error: <message>`` on one line and exits
+with code 2 -- never a traceback. Library users get an ordinary exception they can catch.
+
+Library code never names a command-line flag: a bad setting raises :class:`FieldError` with the
+config field's name (``worlds_per_goal``); the CLI maps it to the flag (``--worlds-per-goal``).
 """
 
 from __future__ import annotations
 
 
 class UserError(ValueError):
-    """A mistake in the user's input; the message names the file/flag and the problem."""
+    """A mistake in the user's input; the message names the file/setting and the problem."""
+
+
+class FieldError(UserError):
+    """A bad value of one config field: ``field`` is its name, ``problem`` says what is wrong."""
+
+    def __init__(self, field: str, problem: str):
+        super().__init__(f"{field}: {problem}")
+        self.field, self.problem = field, problem
 
 
 class SceneError(UserError):
