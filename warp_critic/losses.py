@@ -3,6 +3,8 @@
 * task loss (outer loop, paper eq. 3 with the reward of section 5): ``||q_T - g||^2`` in joint space,
   optionally plus ``running_weight * mean_t ||q_t - g||^2`` over the rollout and
   ``velocity_weight * ||qd_T||^2`` at the end (arrive and stop; both off by default);
+* TD loss (the baselines' and the landscape's supervised Q, the paper's Algorithm 1):
+  ``mean (Q(s, a) - y)^2`` with ``y = r + gamma (1 - done) Q'(s', a')``;
 * critic loss (inner loop, Algorithm 2 line 7): ``sum_t L_critic(s_t, pi_theta(s_t), g)``.
 """
 
@@ -40,3 +42,14 @@ def critic_loss(critic, policy, params: PolicyParams, traj: Trajectory, goal: to
     tau = policy(params, q, qd)
     g = goal.unsqueeze(0).expand_as(q)
     return critic(q, qd, tau, g).sum(0)
+
+
+def td_loss(q: torch.Tensor, reward: torch.Tensor, done: torch.Tensor, q_next: torch.Tensor,
+            gamma: float = 1.0) -> torch.Tensor:
+    """Mean squared TD error ``(q - y)^2`` with the target ``y = r + gamma (1 - done) q_next`` held fixed.
+
+    All ``(B,)``: ``q = Q(s, a)``, ``q_next = Q'(s', a')`` from the target network at the next state
+    and action (DDPG: ``a' = mu'(s')``), ``done`` 1 where the episode ends without bootstrap.
+    """
+    y = (reward + gamma * (1.0 - done) * q_next).detach()
+    return ((q - y) ** 2).mean()

@@ -18,10 +18,12 @@ from __future__ import annotations
 import copy
 
 import torch
-import torch.nn.functional as F
 
+from ..losses import td_loss
 from ..networks import Normalizer
-from .common import Actor, BaselineConfig, BaselineResult, QNetwork, ReplayBuffer, soft_update, train_baseline
+from .common import BaselineConfig, BaselineResult, train_baseline
+from .networks import Actor, QNetwork, soft_update
+from .replay import ReplayBuffer
 
 
 class DDPGAgent:
@@ -41,9 +43,9 @@ class DDPGAgent:
         cfg = self.cfg
         with torch.no_grad():
             a2 = self.actor_target(b["q2"], b["qd2"], b["goal"])
-            y = b["reward"] + cfg.gamma * (1.0 - b["done"]) * self.q_target(b["q2"], b["qd2"], a2, b["goal"])
+            q_next = self.q_target(b["q2"], b["qd2"], a2, b["goal"])
         q = self.q(b["q"], b["qd"], b["tau"], b["goal"])
-        loss = F.mse_loss(q, y)
+        loss = td_loss(q, b["reward"], b["done"], q_next, cfg.gamma)
         self.q_opt.zero_grad(set_to_none=True)
         loss.backward()
         self.q_opt.step()

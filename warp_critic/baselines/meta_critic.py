@@ -37,7 +37,9 @@ from torch import nn
 from torch.func import functional_call
 
 from ..networks import Normalizer
-from .common import BaselineConfig, BaselineResult, ReplayBuffer, _GoalInput, train_baseline
+from .common import BaselineConfig, BaselineResult, train_baseline
+from .networks import _GoalInput
+from .replay import ReplayBuffer
 from .ddpg import DDPGAgent
 
 
