@@ -29,6 +29,27 @@ Conventions of the written USD (all SI: metres, kilograms, seconds; ``upAxis = Z
 * Custom data: ``warp_critic:effortLimit`` (float, N*m or N) on every joint;
   ``warp_critic:endEffectorBody`` (string, the end-effector link's prim name) and
   ``warp_critic:tipOffset`` (float3, m, in that link's frame) on the articulation root.
+* Training defaults of the scene (:class:`Defaults`), also custom attributes of the articulation
+  root, so that they travel with the file's content, not its name (``warp_critic.scene`` reads them
+  into ``Scene.defaults`` / ``Scene.home``). Real numbers are DOUBLES so that they read back as the
+  exact Python floats of the table (a float32 would turn 0.0025 into 0.0024999999441206455):
+
+  ====================================  =========  ==============================================
+  attribute                             type       meaning
+  ====================================  =========  ==============================================
+  ``warp_critic:goals``                 double[]   G training goals in joint space (rad or m),
+                                                   G x dof flattened row-major
+  ``warp_critic:horizon``               int        control steps per rollout
+  ``warp_critic:dt``                    double     physics time step (s)
+  ``warp_critic:substeps``              int        physics steps per control step
+  ``warp_critic:maxTorque``             double[]   policy torque bound per joint (N*m or N),
+                                                   dof values (or 1 for all joints)
+  ``warp_critic:qdScale``               double     velocity normalisation (rad/s or m/s)
+  ``warp_critic:alpha``                 double     inner learning rate (policy update)
+  ``warp_critic:lr``                    double     outer learning rate (Adam on the critic)
+  ``warp_critic:gravity``               double     gravity along -z (m/s^2)
+  ``warp_critic:homePose``              double[]   home (start) joint positions, dof values
+  ====================================  =========  ==============================================
 * Visual geometry (capsules/spheres/cylinders) has NO ``CollisionAPI``: newton loads it as
   zero-density visual shapes, so it never changes the authored mass properties.
 """
@@ -87,6 +108,22 @@ class Joint:
 
 
 @dataclass(frozen=True)
+class Defaults:
+    """Training defaults of a scene, written as ``warp_critic:*`` attributes of the root (see above)."""
+
+    goals: tuple[tuple[float, ...], ...]          # G x dof, rad or m
+    horizon: int                                  # control steps per rollout
+    dt: float                                     # s
+    substeps: int                                 # physics steps per control step
+    max_torque: tuple[float, ...]                 # N*m or N, dof values (or 1)
+    qd_scale: float                               # rad/s
+    alpha: float                                  # inner learning rate
+    lr: float                                     # outer learning rate
+    gravity: float                                # m/s^2 along -z
+    home: tuple[float, ...] | None = None         # rad or m; None = zeros
+
+
+@dataclass(frozen=True)
 class Robot:
     links: tuple[Link, ...]
     joints: tuple[Joint, ...]
@@ -96,6 +133,7 @@ class Robot:
     limit_kd: float
     base_visual: tuple[float, float] | None = None  # (radius, height) of a static base cylinder
     point_visual: dict[str, float] = field(default_factory=dict)  # link -> sphere radius
+    defaults: Defaults | None = None              # training defaults (None: none authored)
 
 
 ROBOTS: dict[str, Robot] = {
@@ -115,6 +153,8 @@ ROBOTS: dict[str, Robot] = {
         ),
         ee="mass", tip=(0.0, 0.0, 0.0), limit_ke=1000.0, limit_kd=10.0,
         point_visual={"mass": 0.05},
+        defaults=Defaults(goals=((1.0, 1.0),), horizon=20, dt=0.05, substeps=1, max_torque=(5.0, 5.0),
+                          qd_scale=2.0, alpha=1e-3, lr=3e-3, gravity=9.81),
     ),
     # diff_robot_data/2link_robot.urdf
     "reacher": Robot(
@@ -130,6 +170,11 @@ ROBOTS: dict[str, Robot] = {
         ),
         ee="arm2", tip=(1.0, 0.0, 0.0), limit_ke=1000.0, limit_kd=10.0,
         base_visual=(0.05, 0.15),
+        # Goals in joint space (rad), four per robot as in the paper's section 5 (the paper does not
+        # list its goals; these are spread over the workspace, well inside the limits).
+        defaults=Defaults(goals=((1.0, 0.5), (-1.0, -0.5), (0.5, -1.0), (-0.5, 1.0)),
+                          horizon=50, dt=0.01, substeps=2, max_torque=(20.0, 20.0), qd_scale=5.0,
+                          alpha=1e-3, lr=1e-3, gravity=9.81),
     ),
     # diff_robot_data/kuka_iiwa/urdf/iiwa7.urdf (iiwa_link_0 is welded to the world and dropped)
     "kuka": Robot(
@@ -158,6 +203,19 @@ ROBOTS: dict[str, Robot] = {
         ),
         ee="iiwa_link_7", tip=(0.0, 0.0, 0.045), limit_ke=1000.0, limit_kd=0.5,
         base_visual=(0.1, 0.15),
+        # Torque bounds scaled to the joints (mass-matrix diagonal at home 0.14, 6.35, 0.089, 1.39,
+        # 0.030, 0.051, 0.0029 kg m^2): joints 1-6 peak at 24-140 rad/s^2. The URDF's 300 N·m would
+        # let the wrist reach 1e5 rad/s^2 and slam into its limits. The last joint is limited by its
+        # 0.5 N·m·s/rad damping rather than its inertia: 1 N·m gives it 2 rad/s (the earlier 0.1 N·m
+        # allowed only 0.2 rad/s, i.e. 0.1 rad in a 0.5 s rollout). Gravity 0: a perfectly
+        # gravity-compensated robot (the iiwa's torque mode).
+        defaults=Defaults(goals=((0.5, 0.4, 0.0, -0.8, 0.0, 0.5, 0.0),
+                                 (-0.5, 0.6, 0.3, -0.6, 0.0, 0.3, 0.0),
+                                 (0.3, -0.4, -0.3, -1.0, 0.2, 0.4, 0.0),
+                                 (-0.3, -0.6, 0.0, -0.4, -0.2, 0.6, 0.0)),
+                          horizon=50, dt=0.0025, substeps=4,
+                          max_torque=(20.0, 150.0, 8.0, 40.0, 1.5, 2.0, 1.0),
+                          qd_scale=5.0, alpha=1e-3, lr=1e-3, gravity=0.0),
     ),
 }
 
@@ -261,6 +319,31 @@ def add_capsule(stage: Usd.Stage, path: str, a, b, radius: float, color) -> None
 COLORS = [(0.9, 0.45, 0.1), (0.7, 0.7, 0.7)]
 
 
+def write_defaults(name: str, robot: Robot, prim: Usd.Prim) -> None:
+    """Author ``robot.defaults`` as the ``warp_critic:*`` training-default attributes of ``prim``."""
+    d, dof = robot.defaults, len(robot.joints)
+    home = d.home if d.home is not None else (0.0,) * dof
+    assert d.goals and all(len(g) == dof for g in d.goals), f"{name}: goals need {dof} values each"
+    assert len(d.max_torque) in (1, dof) and len(home) == dof, f"{name}: maxTorque/homePose length"
+    for q in (*d.goals, home):
+        assert all(j.lower <= v <= j.upper for v, j in zip(q, robot.joints)), f"{name}: {q} outside the limits"
+    double, double_array, int_ = Sdf.ValueTypeNames.Double, Sdf.ValueTypeNames.DoubleArray, Sdf.ValueTypeNames.Int
+    values = {
+        "goals": (double_array, [float(v) for g in d.goals for v in g]),
+        "horizon": (int_, int(d.horizon)),
+        "dt": (double, float(d.dt)),
+        "substeps": (int_, int(d.substeps)),
+        "maxTorque": (double_array, [float(v) for v in d.max_torque]),
+        "qdScale": (double, float(d.qd_scale)),
+        "alpha": (double, float(d.alpha)),
+        "lr": (double, float(d.lr)),
+        "gravity": (double, float(d.gravity)),
+        "homePose": (double_array, [float(v) for v in home]),
+    }
+    for attr, (type_name, value) in values.items():
+        prim.CreateAttribute(f"warp_critic:{attr}", type_name, custom=True).Set(value)
+
+
 def write_robot(name: str, robot: Robot, path: Path) -> None:
     stage = Usd.Stage.CreateNew(str(path))
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
@@ -275,6 +358,8 @@ def write_robot(name: str, robot: Robot, path: Path) -> None:
                                    custom=True).Set(robot.ee)
     root.GetPrim().CreateAttribute("warp_critic:tipOffset", Sdf.ValueTypeNames.Float3,
                                    custom=True).Set(Gf.Vec3f(*map(float, robot.tip)))
+    if robot.defaults is not None:
+        write_defaults(name, robot, root.GetPrim())
 
     if robot.base_visual is not None:  # static (not a rigid body): drawn only
         radius, height = robot.base_visual
