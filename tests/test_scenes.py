@@ -430,3 +430,140 @@ def test_bad_scene_files_on_the_command_line_exit_2_with_one_line(case, tmp_path
     code = main(["meta-train", str(path), "--iterations", "1", "--out", str(tmp_path / "run"), "--device", "cpu"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and path.name in err[0] and err[0].startswith("warp-critic: error:"), err
+
+
+# ------------------------------------------------------------------------------------------------
+# 5. Training defaults and content hash: from the file's content, not its name
+# ------------------------------------------------------------------------------------------------
+
+DEFAULT_LINE = re.compile(r"^\s*custom \S+ warp_critic:(goals|horizon|dt|substeps|maxTorque|qdScale|alpha|lr|gravity"
+                          r"|homePose) = .*\n", re.M)
+
+
+def test_scene_defaults_are_read_exactly():
+    reacher = load_scene(SCENES / "reacher.usda")
+    assert reacher.defaults == dict(
+        goals=[[1.0, 0.5], [-1.0, -0.5], [0.5, -1.0], [-0.5, 1.0]], horizon=50, dt=0.01, substeps=2,
+        max_torque=[20.0, 20.0], qd_scale=5.0, alpha=1e-3, lr=1e-3, gravity=9.81)
+    assert type(reacher.defaults["horizon"]) is int and type(reacher.defaults["dt"]) is float
+    np.testing.assert_array_equal(reacher.home, [0.0, 0.0])
+    kuka = load_scene(SCENES / "kuka.usda")
+    d = kuka.defaults
+    assert (d["dt"], d["substeps"], d["gravity"], d["alpha"]) == (0.0025, 4, 0.0, 0.001)  # exact: doubles
+    assert d["max_torque"] == [20.0, 150.0, 8.0, 40.0, 1.5, 2.0, 1.0]
+    assert len(d["goals"]) == 4 and all(len(g) == kuka.dof for g in d["goals"])
+    assert d["goals"][2] == [0.3, -0.4, -0.3, -1.0, 0.2, 0.4, 0.0]
+    np.testing.assert_array_equal(kuka.home, np.zeros(7))
+    point = load_scene(SCENES / "point_mass.usda")
+    assert point.defaults == dict(goals=[[1.0, 1.0]], horizon=20, dt=0.05, substeps=1, max_torque=[5.0, 5.0],
+                                  qd_scale=2.0, alpha=1e-3, lr=3e-3, gravity=9.81)
+    # the cached scene hands out copies
+    reacher.defaults["goals"].append([0.0, 0.0])
+    reacher.home[0] = 1.0
+    assert len(reacher.defaults["goals"]) == 4 and reacher.home[0] == 0.0
+    hashes = {s.content_hash for s in (reacher, kuka, point)}
+    assert len(hashes) == 3 and all(re.fullmatch(r"[0-9a-f]{64}", h) for h in hashes)
+
+
+def test_renamed_and_moved_copy_has_the_same_defaults_home_and_hash(tmp_path):
+    original = load_scene(SCENES / "reacher.usda")
+    (tmp_path / "elsewhere").mkdir()
+    for path in (tmp_path / "myrobot.usda", tmp_path / "elsewhere" / "reacher.usda"):
+        path.write_bytes((SCENES / "reacher.usda").read_bytes())
+        copy = load_scene(path)
+        assert copy is not original and copy.path == path.resolve()
+        assert copy.defaults == original.defaults
+        np.testing.assert_array_equal(copy.home, original.home)
+        assert copy.content_hash == original.content_hash
+    assert load_scene(tmp_path / "myrobot.usda").name == "myrobot"
+
+
+def test_content_hash_changes_with_any_value_and_ignores_the_folder_of_assets(tmp_path):
+    original = load_scene(SCENES / "reacher.usda").content_hash
+    heavier = _edited_reacher(
+        tmp_path, lambda s: s.GetPrimAtPath("/reacher/arm2").GetAttribute("physics:mass").Set(1.001), "heavier.usda")
+    assert load_scene(heavier).content_hash != original
+    slower = _edited_reacher(
+        tmp_path, lambda s: s.GetPrimAtPath("/reacher").GetAttribute("warp_critic:dt").Set(0.02), "slower.usda")
+    assert load_scene(slower).defaults["dt"] == 0.02
+    assert load_scene(slower).content_hash != original
+    same = _edited_reacher(tmp_path, lambda s: None, "same.usda")
+    assert load_scene(same).content_hash == original
+
+    # an asset path relative to the scene (flattening makes it absolute) does not tie the hash to the folder
+    def texture(stage):
+        from pxr import Sdf
+
+        stage.GetPrimAtPath("/reacher/base/geom").CreateAttribute("note:texture", Sdf.ValueTypeNames.Asset).Set(
+            Sdf.AssetPath("./wood.png"))
+
+    textured = _edited_reacher(tmp_path, texture, "textured.usda")
+    (tmp_path / "moved").mkdir()
+    moved = tmp_path / "moved" / "renamed.usda"
+    moved.write_bytes(textured.read_bytes())
+    assert load_scene(moved).content_hash == load_scene(textured).content_hash != original
+
+
+def test_scene_without_default_attributes_loads_with_empty_defaults(tmp_path):
+    text = (SCENES / "reacher.usda").read_text()
+    stripped = DEFAULT_LINE.sub("", text)
+    assert len(text.splitlines()) - len(stripped.splitlines()) == 10
+    path = tmp_path / "plain.usda"
+    path.write_text(stripped)
+    scene = load_scene(path)
+    assert scene.defaults == {}
+    np.testing.assert_array_equal(scene.home, [0.0, 0.0])
+    assert scene.dof == 2 and scene.content_hash != load_scene(SCENES / "reacher.usda").content_hash
+
+    # a scene authoring only some of them: only those keys
+    path = tmp_path / "some.usda"
+    path.write_text(stripped.replace('custom string warp_critic:endEffectorBody',
+                                     'custom int warp_critic:horizon = 7\n    custom string warp_critic:endEffectorBody'))
+    assert load_scene(path).defaults == {"horizon": 7}
+
+
+def _set_root(attr: str, value, type_name: str | None = None):
+    def edit(stage):
+        from pxr import Sdf
+
+        prim = stage.GetPrimAtPath("/reacher")
+        if type_name is not None:  # re-create with another type
+            prim.RemoveProperty(attr)
+            prim.CreateAttribute(attr, getattr(Sdf.ValueTypeNames, type_name), custom=True)
+        prim.GetAttribute(attr).Set(value)
+    return edit
+
+
+BAD_DEFAULTS = {
+    "nan_dt": ("warp_critic:dt", float("nan"), None, "finite"),
+    "zero_dt": ("warp_critic:dt", 0.0, None, "> 0"),
+    "inf_gravity": ("warp_critic:gravity", float("inf"), None, "finite"),
+    "negative_lr": ("warp_critic:lr", -1e-3, None, "> 0"),
+    "negative_horizon": ("warp_critic:horizon", -5, None, "positive integer"),
+    "zero_substeps": ("warp_critic:substeps", 0, None, "positive integer"),
+    "fractional_horizon": ("warp_critic:horizon", 2.5, "Double", "positive integer"),
+    "string_qd_scale": ("warp_critic:qdScale", "fast", "String", "number"),
+    "goals_wrong_length": ("warp_critic:goals", [1.0, 0.5, -1.0], None, "G x 2"),
+    "no_goals": ("warp_critic:goals", [], None, "G x 2"),
+    "goal_outside_limits": ("warp_critic:goals", [1.0, 0.5, 0.5, 3.5], None, "goal 1 has interArm = 3.5"),
+    "nan_goal": ("warp_critic:goals", [1.0, float("nan")], None, "finite"),
+    "torque_wrong_length": ("warp_critic:maxTorque", [1.0, 2.0, 3.0], None, "1 or 2 values"),
+    "negative_torque": ("warp_critic:maxTorque", [5.0, -1.0], None, "> 0"),
+    "home_wrong_length": ("warp_critic:homePose", [0.0], None, "needs 2 values"),
+    "home_outside_limits": ("warp_critic:homePose", [-3.0, 0.0], None, "baseHinge = -3.0"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_DEFAULTS))
+def test_bad_default_attributes_raise_one_line_scene_error(case, tmp_path):
+    attr, value, type_name, needle = BAD_DEFAULTS[case]
+    path = _edited_reacher(tmp_path, _set_root(attr, value, type_name), f"{case}.usda")
+    with pytest.raises(SceneError) as info:
+        load_scene(path)
+    message = str(info.value)
+    assert path.name in message and attr in message and needle in message and "\n" not in message, message
+
+
+def test_one_torque_bound_for_all_joints_is_accepted(tmp_path):
+    path = _edited_reacher(tmp_path, _set_root("warp_critic:maxTorque", [7.5]), "one_torque.usda")
+    assert load_scene(path).defaults["max_torque"] == [7.5]

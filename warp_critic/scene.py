@@ -11,6 +11,32 @@ articulation:
 * only ``UsdPhysics.RevoluteJoint``/``PrismaticJoint`` joints (the first one with no ``body0``:
   welded to the world), each with ``warp_critic:effortLimit`` (float, N*m or N).
 
+Training defaults travel with the scene's CONTENT (not its file name): optional custom attributes of
+the articulation root, read into :attr:`Scene.defaults` (only the keys the file authors) and
+:attr:`Scene.home`. Real numbers may be ``double`` or ``float`` (the generated scenes use double so
+that 0.0025 reads back as exactly 0.0025):
+
+============================  =========  ==================  ====================================================
+attribute                     type       ``defaults`` key    rule
+============================  =========  ==================  ====================================================
+``warp_critic:goals``         double[]   ``goals``           G x dof goals flattened row-major (rad or m), G >= 1,
+                                                             each inside the joint limits; read as G lists
+``warp_critic:horizon``       int        ``horizon``         control steps per rollout, > 0
+``warp_critic:dt``            double     ``dt``              physics time step (s), > 0
+``warp_critic:substeps``      int        ``substeps``        physics steps per control step, > 0
+``warp_critic:maxTorque``     double[]   ``max_torque``      policy torque bound (N*m or N), dof values or 1,
+                                                             each > 0; read as a list
+``warp_critic:qdScale``       double     ``qd_scale``        velocity normalisation (rad/s), > 0
+``warp_critic:alpha``         double     ``alpha``           inner learning rate, > 0
+``warp_critic:lr``            double     ``lr``              outer learning rate, > 0
+``warp_critic:gravity``       double     ``gravity``         gravity along -z (m/s^2), finite
+``warp_critic:homePose``      double[]   (``Scene.home``)    dof joint positions inside the limits; zeros
+                                                             when not authored
+============================  =========  ==================  ====================================================
+
+Every value must be finite; a bad one raises :class:`~warp_critic.errors.SceneError` naming the file
+and the attribute. :attr:`Scene.content_hash` identifies the content (see :func:`content_hash`).
+
 Units are SI throughout: metres, kilograms, seconds, radians (USD authors revolute limits in
 degrees; newton converts them). Passive damping and limit gains come from ``newton:damping``,
 ``newton:limitStiffness``, ``newton:limitDamping``, which newton reads per DEGREE for revolute
@@ -42,13 +68,15 @@ All user mistakes raise :class:`~warp_critic.errors.SceneError` (bad scene file)
 
 from __future__ import annotations
 
+import copy
+import hashlib
 import importlib.util
 import math
 import re
 import threading
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
@@ -62,6 +90,19 @@ __all__ = ["Variant", "Scene", "load_scene"]
 EFFORT_ATTR = "warp_critic:effortLimit"
 EE_ATTR = "warp_critic:endEffectorBody"
 TIP_ATTR = "warp_critic:tipOffset"
+HOME_ATTR = "warp_critic:homePose"
+# training-default attributes of the articulation root: attribute -> (Scene.defaults key, kind)
+DEFAULT_ATTRS: dict[str, tuple[str, str]] = {
+    "warp_critic:goals": ("goals", "goals"),
+    "warp_critic:horizon": ("horizon", "count"),
+    "warp_critic:dt": ("dt", "positive"),
+    "warp_critic:substeps": ("substeps", "count"),
+    "warp_critic:maxTorque": ("max_torque", "torques"),
+    "warp_critic:qdScale": ("qd_scale", "positive"),
+    "warp_critic:alpha": ("alpha", "positive"),
+    "warp_critic:lr": ("lr", "positive"),
+    "warp_critic:gravity": ("gravity", "finite"),
+}
 
 
 # ------------------------------------------------------------------------------------------------
@@ -124,12 +165,21 @@ class Scene:
         limit_ke, limit_kd: ``(dof,)`` joint-limit penalty stiffness [N*m/rad or N/m] and damping.
         ee_body: index of the end-effector body within ONE world.
         tip_offset: ``(3,)`` end-effector tip [m] in the ee body frame, as authored.
+        defaults: the training defaults the file authors (module docstring): a subset of the keys
+            ``goals`` (G lists of dof floats), ``horizon``, ``dt``, ``substeps``, ``max_torque``
+            (list of dof or 1 floats), ``qd_scale``, ``alpha``, ``lr``, ``gravity``; ``{}`` if none.
+        home: ``(dof,)`` home joint positions [rad or m] (``warp_critic:homePose``; zeros if absent).
+        content_hash: sha256 hex digest of the scene's content; equal for a renamed or moved copy,
+            different when any authored value changes (see :func:`content_hash`).
     """
 
     def __init__(self, path: Path, base: "newton.ModelBuilder", ee_body: int, tip_offset: np.ndarray,
-                 effort_limit: np.ndarray):
+                 effort_limit: np.ndarray, *, defaults: dict[str, Any] | None = None,
+                 home: np.ndarray | None = None, content_hash: str = ""):
         self.path = path
         self.name = path.stem
+        self.content_hash = content_hash
+        self._defaults = copy.deepcopy(defaults or {})
         self._base = base
         self.dof = base.joint_dof_count
         self.joint_names = [label.rsplit("/", 1)[-1] for label in base.joint_label]
@@ -142,6 +192,7 @@ class Scene:
             "limit_ke": _array(base.joint_limit_ke),
             "limit_kd": _array(base.joint_limit_kd),
             "tip_offset": _array(tip_offset),
+            "home": _array(np.zeros(self.dof) if home is None else home),
         }
         self.ee_body = ee_body
 
@@ -153,6 +204,12 @@ class Scene:
     limit_ke = property(lambda self: self._arrays["limit_ke"].copy(), doc="(dof,) limit stiffness")
     limit_kd = property(lambda self: self._arrays["limit_kd"].copy(), doc="(dof,) limit damping")
     tip_offset = property(lambda self: self._arrays["tip_offset"].copy(), doc="(3,) tip [m] in the ee frame")
+    home = property(lambda self: self._arrays["home"].copy(), doc="(dof,) home joint positions [rad or m]")
+
+    @property
+    def defaults(self) -> dict[str, Any]:
+        """The training defaults authored in the file (a fresh deep copy; see the class docstring)."""
+        return copy.deepcopy(self._defaults)
 
     def __repr__(self) -> str:
         return f"Scene({self.name!r}, dof={self.dof}, ee={self.body_names[self.ee_body]!r})"
@@ -420,6 +477,117 @@ def _read_root(path: Path, root) -> tuple[str, np.ndarray]:
     return ee_name, tip
 
 
+def _number(value) -> float | None:
+    """A real number (not bool/str/vector) as float, else None."""
+    if isinstance(value, (bool, str, bytes)) or value is None:
+        return None
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        return None
+
+
+def _numbers(value) -> list[float] | None:
+    """A 1-D array of real numbers as a list of floats, else None."""
+    if isinstance(value, (str, bytes)) or value is None:
+        return None
+    try:
+        out = [_number(v) for v in value]
+    except TypeError:
+        return None
+    return None if any(v is None for v in out) else out
+
+
+def _read_defaults(path: Path, root, q_lower: np.ndarray, q_upper: np.ndarray,
+                   joint_names: list[str]) -> tuple[dict[str, Any], np.ndarray]:
+    """Read and validate the training-default attributes of the articulation root (module docstring)."""
+    dof = len(joint_names)
+    tol = 1e-6 * np.maximum(1.0, np.maximum(np.abs(q_lower), np.abs(q_upper)))
+
+    def fail(attr: str, problem: str) -> SceneError:
+        return _fail(path, f"articulation root {root.GetPath()}: {attr} {problem}")
+
+    def authored(attr: str):
+        prop = root.GetAttribute(attr) if root.HasAttribute(attr) else None
+        return prop.Get() if prop is not None and prop.HasAuthoredValue() else None
+
+    def inside_limits(attr: str, q: list[float], what: str) -> None:
+        for j, v in enumerate(q):
+            if not q_lower[j] - tol[j] <= v <= q_upper[j] + tol[j]:
+                raise fail(attr, f"{what} has {joint_names[j]} = {v}, outside the joint limits "
+                                 f"[{q_lower[j]:.6g}, {q_upper[j]:.6g}]")
+
+    defaults: dict[str, Any] = {}
+    for attr, (key, kind) in DEFAULT_ATTRS.items():
+        raw = authored(attr)
+        if raw is None:
+            continue
+        if kind in ("goals", "torques"):
+            values = _numbers(raw)
+            if values is None:
+                raise fail(attr, f"must be an array of numbers (got {raw!r})")
+            if not all(math.isfinite(v) for v in values):
+                raise fail(attr, f"must be finite (got {values})")
+            if kind == "goals":
+                if not values or len(values) % dof:
+                    raise fail(attr, f"needs G x {dof} values (G >= 1 goals of {dof} joint positions, "
+                                     f"flattened), got {len(values)}")
+                goals = [values[i:i + dof] for i in range(0, len(values), dof)]
+                for g, goal in enumerate(goals):
+                    inside_limits(attr, goal, f"goal {g}")
+                defaults[key] = goals
+            else:
+                if len(values) not in (1, dof):
+                    raise fail(attr, f"needs 1 or {dof} values (got {len(values)})")
+                if any(v <= 0.0 for v in values):
+                    raise fail(attr, f"must be > 0 (got {values})")
+                defaults[key] = values
+            continue
+        value = _number(raw)
+        if value is None:
+            raise fail(attr, f"must be a number (got {raw!r})")
+        if not math.isfinite(value):
+            raise fail(attr, f"must be finite (got {value})")
+        if kind == "count":
+            if value <= 0 or not value.is_integer():
+                raise fail(attr, f"must be a positive integer (got {raw!r})")
+            defaults[key] = int(value)
+        else:
+            if kind == "positive" and value <= 0.0:
+                raise fail(attr, f"must be > 0 (got {value})")
+            defaults[key] = value
+
+    home = np.zeros(dof)
+    raw = authored(HOME_ATTR)
+    if raw is not None:
+        values = _numbers(raw)
+        if values is None:
+            raise fail(HOME_ATTR, f"must be an array of numbers (got {raw!r})")
+        if len(values) != dof:
+            raise fail(HOME_ATTR, f"needs {dof} values (got {len(values)})")
+        if not all(math.isfinite(v) for v in values):
+            raise fail(HOME_ATTR, f"must be finite (got {values})")
+        inside_limits(HOME_ATTR, values, "the home pose")
+        home = np.array(values, dtype=np.float64)
+    return defaults, home
+
+
+def content_hash(path: Path, stage) -> str:
+    """sha256 hex digest of the scene's composed content, independent of where the file lives.
+
+    Hashes the text export of the FLATTENED stage (sublayers and references composed in), without
+    the "Generated from Composed Stage of root layer <path>" note that :meth:`Usd.Stage.Flatten`
+    would add, and with asset paths under the scene's own folder (which flattening makes absolute)
+    written back relative to it (``@/abs/dir/x.png@`` -> ``@./x.png@``). So a renamed or moved
+    copy (or the .usdc of the same stage) hashes the same, and any change of an authored value --
+    a mass, a limit, a default -- changes the hash. The text format is the installed USD's:
+    compare hashes made with the same USD version.
+    """
+    text = stage.Flatten(addSourceFileComment=False).ExportToString()
+    text = text.replace(f"@{path.parent.as_posix()}/", "@./")
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
 def _load(path: Path) -> Scene:
     import newton
 
@@ -427,6 +595,7 @@ def _load(path: Path) -> Scene:
     try:
         root, effort = _check_stage(path, stage)
         ee_name, tip = _read_root(path, root)
+        digest = content_hash(path, stage)
     except SceneError:
         raise
     except Exception as exc:  # unexpected pxr errors on odd files must not escape either
@@ -463,4 +632,14 @@ def _load(path: Path) -> Scene:
     except KeyError as exc:
         raise _fail(path, f"imported joint {exc} not found in the file") from None
     builder.joint_effort_limit = [float(v) for v in effort_limit]
-    return Scene(path, builder, matches[0], tip, effort_limit)
+
+    joint_names = [label.rsplit("/", 1)[-1] for label in builder.joint_label]
+    try:
+        defaults, home = _read_defaults(path, root, _array(builder.joint_limit_lower),
+                                        _array(builder.joint_limit_upper), joint_names)
+    except SceneError:
+        raise
+    except Exception as exc:  # unexpected pxr errors on odd attributes must not escape either
+        raise _fail(path, f"invalid training defaults ({_first_line(exc)})") from None
+    return Scene(path, builder, matches[0], tip, effort_limit, defaults=defaults, home=home,
+                 content_hash=digest)
