@@ -18,7 +18,7 @@ Two aggregations of the final error are reported, for every goal and init:
 
 from __future__ import annotations
 
-import json
+import importlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -26,52 +26,89 @@ from typing import Callable
 import numpy as np
 import torch
 
-from .config import TrainConfig
-from .errors import UserError
+from .errors import FieldError, UserError
 from .inner import inner_update, policy_fn
 from .losses import final_error
-from .networks import Critic, MLPPolicy, Normalizer, init_policy
+from .networks import Critic, MLPPolicy, Normalizer
 from .rollout import rollout
+from .rundir import RunDir, check_output_file, write_result
+from .runtime import seed_everything
 from .scene import Variant, load_scene
 from .simulator import Simulator
-from .train import goals_tensor, load_checkpoint, max_torque_tensor, seed_everything
+from .task import SerializableConfig, TaskConfig, check_fields, goals_tensor, max_torque_tensor, spec
+
+RESULT_KIND = "warp-critic/metatest-v1"
 
 
 @dataclass
-class TestConfig:
+class TestConfig(SerializableConfig):
     """Meta-test settings; ``None`` = the value the run was trained with."""
 
     __test__ = False  # not a pytest class
 
-    run_dir: str = ""
-    goals: list[list[float]] | None = None  # explicit goals, else sampled around the training goals
-    num_goals: int = 10
-    goal_std: float = 0.3
-    goal_noise: str = "per-joint"  # per-joint: N(g_i, std^2 I); distance: g_i + d u, d ~ N(0, std^2), |u| = 1
-    around: list[int] | None = None  # which training goals to sample around (default: all, cycled)
-    inits: int = 5  # fresh policy initialisations per goal
-    policy_steps: int | None = None  # critic-gradient steps per policy (default: inner steps x policy lifetime)
-    alpha: float | None = None
-    horizon: int | None = None
-    ee_mass: float = 0.0
-    link_length: float | None = None
-    link_scale: float = 1.0
-    seed: int = 1
-    device: str = "auto"
-    out: str | None = None  # write results JSON here (default RUN_DIR/metatest.json)
+    run_dir: str = spec("", "run directory written by meta-train or baseline")
+    goals: list[list[float]] | None = spec(None, "explicit goals, inline 'a,b;c,d' or a file; default: sampled around the training goals")
+    num_goals: int = spec(10, "number of sampled goals", gt=0, le=10**6)
+    goal_std: float = spec(0.3, "std (rad) of the Gaussian around the training goals", ge=0, le=100)
+    goal_noise: str = spec("per-joint", "per-joint: N(g, std^2) on every joint; distance: a random direction at a distance N(0, std^2) (the paper's 'at a distance of N(0, std)' reads both ways)", choices=("per-joint", "distance"))
+    around: list[int] | None = spec(None, "indices of the training goals to sample around (default: all, cycled)", ge=0)
+    inits: int = spec(5, "fresh policy initialisations per goal", gt=0, le=10**6)
+    policy_steps: int | None = spec(None, "critic-gradient steps per fresh policy (default: the run's inner steps x its policy lifetime)", gt=0, le=10**6)
+    alpha: float | None = spec(None, "policy learning rate (default: the run's inner learning rate)", gt=0, le=1e6)
+    horizon: int | None = spec(None, "rollout length (default: the run's)", gt=0, le=10**6)
+    ee_mass: float = spec(0.0, "mass added at the end-effector (kg)", ge=0, le=1e4)
+    link_length: float | None = spec(None, "set the end-effector link length (m)", gt=0, le=100)
+    link_scale: float = spec(1.0, "scale the end-effector link length", gt=0, le=100)
+    seed: int = spec(1, "random seed", ge=0, le=2**32 - 1)
+    device: str = spec("auto", "cpu, cuda or auto")
+    out: str | None = spec(None, "results JSON (default RUN_DIR/metatest.json)")
 
 
-def build_test_critic(ckpt: dict, norm: Normalizer) -> torch.nn.Module:
-    """The loss ``L(q, qd, tau, g)`` a fresh policy descends, for any method's checkpoint."""
+# ------------------------------------------------------------------------------------------------
+# critic loaders: method -> the loss a fresh policy descends, and the run's meta-test defaults
+# ------------------------------------------------------------------------------------------------
+
+def load_our_critic(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, dict]:
+    """Our meta-learned critic; meta-test defaults: its inner lr, inner steps x policy lifetime."""
+    cfg = ckpt["config"]
+    critic = Critic(ckpt["dof"], norm, hidden=ckpt.get("critic_hidden", 400), inputs=ckpt.get("critic_input", "full"))
+    critic.load_state_dict(ckpt["critic_state"])
+    # a critic trained on policies of every age up to the policy lifetime keeps improving them that long
+    steps = int(cfg.get("inner_steps", 1)) * int(cfg.get("policy_lifetime", 1))
+    return critic, {"alpha": cfg.get("alpha"), "steps": steps}
+
+
+# Registry by name ("module:function"), so meta-test imports no method's code until a run of that
+# method is tested. A loader takes ``(checkpoint, normaliser)`` and returns ``(L, defaults)`` with
+# ``L(q, qd, tau, g)`` and ``defaults = {"alpha": ..., "steps": ...}``.
+CRITIC_LOADERS: dict[str, str | Callable] = {
+    "ours": load_our_critic,
+    "ddpg": "warp_critic.baselines.networks:test_critic_from_checkpoint",
+    "meta-critic": "warp_critic.baselines.networks:test_critic_from_checkpoint",
+}
+
+
+def register_critic_loader(method: str, loader: str | Callable) -> None:
+    """Make ``meta-test`` understand run directories of another method."""
+    CRITIC_LOADERS[method] = loader
+
+
+def build_test_critic(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, dict]:
+    """The loss ``L(q, qd, tau, g)`` a fresh policy descends and the run's defaults, for any method."""
     method = ckpt.get("method", "ours")
-    if method == "ours":
-        critic = Critic(ckpt["dof"], norm, hidden=ckpt.get("critic_hidden", 400),
-                        inputs=ckpt.get("critic_input", "full"))
-        critic.load_state_dict(ckpt["critic_state"])
-        return critic
-    from .baselines import common  # local import: baselines depend on this module's siblings
-
-    return common.test_critic_from_checkpoint(ckpt, norm)
+    loader = CRITIC_LOADERS.get(method)
+    if loader is None:
+        raise UserError(f"checkpoint of method {method!r}: meta-test knows {', '.join(CRITIC_LOADERS)}")
+    if isinstance(loader, str):
+        module, name = loader.split(":")
+        loader = getattr(importlib.import_module(module), name)
+    try:
+        return loader(ckpt, norm)
+    except (KeyError, RuntimeError, TypeError, ValueError) as e:
+        if isinstance(e, UserError):
+            raise
+        raise UserError(f"{method} checkpoint has no usable critic ({type(e).__name__}: "
+                        f"{str(e).splitlines()[0] if str(e) else ''})") from None
 
 
 GOAL_NOISE = ("per-joint", "distance")
@@ -88,11 +125,11 @@ def sample_goals(train_goals: torch.Tensor, num: int, std: float, around: list[i
     direction, so the expected squared offset is ``std^2`` whatever the number of joints.
     """
     if noise not in GOAL_NOISE:
-        raise UserError(f"--goal-noise must be one of {', '.join(GOAL_NOISE)} (got {noise!r})")
+        raise FieldError("goal_noise", f"must be one of {', '.join(GOAL_NOISE)} (got {noise!r})")
     idx = around if around else list(range(train_goals.shape[0]))
     for i in idx:
         if not 0 <= i < train_goals.shape[0]:
-            raise UserError(f"--around {i}: the run has {train_goals.shape[0]} training goals")
+            raise FieldError("around", f"{i}: the run has {train_goals.shape[0]} training goals")
     centres = train_goals[[idx[k % len(idx)] for k in range(num)]]
     offset = torch.randn(num, train_goals.shape[1], generator=gen)
     if noise == "per-joint":
@@ -107,13 +144,14 @@ class MetaTestSetup:
     """Everything a model-free meta-test needs: ``W = G x K`` worlds (goal-major), fresh policies."""
 
     ckpt: dict
-    cfg: TrainConfig
+    cfg: TaskConfig  # the run's task
     scene: object
     goals: torch.Tensor  # (G, dof) rad, on the CPU
     goal: torch.Tensor  # (W, dof) rad, each world's goal
     sim: Simulator  # built without gradient buffers
     norm: Normalizer
     critic: torch.nn.Module  # frozen
+    policy: MLPPolicy
     params: dict  # fresh policy parameters, (W, ...) each
     q0: torch.Tensor
     qd0: torch.Tensor
@@ -125,31 +163,27 @@ class MetaTestSetup:
 
 def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
     """Load the run, check ``tc``, sample the goals and build the gradient-free model and fresh policies."""
-    ckpt = load_checkpoint(tc.run_dir)
-    cfg = TrainConfig.from_dict(ckpt["config"])
+    check_fields(tc)
+    ckpt = RunDir.open(tc.run_dir).load_checkpoint(require=("config", "dof", "scene", "method"))
+    try:
+        cfg = TaskConfig.from_dict(ckpt["config"])
+        check_fields(cfg)
+    except (TypeError, UserError) as e:
+        raise UserError(f"{tc.run_dir}: checkpoint holds an unusable config ({e})") from None
     scene = load_scene(cfg.scene)
     if scene.name != ckpt["scene"] or scene.dof != ckpt["dof"]:
         raise UserError(f"{tc.run_dir}: checkpoint is for scene {ckpt['scene']} ({ckpt['dof']} dof), "
                         f"but {cfg.scene} is {scene.name} ({scene.dof} dof)")
-    for name in ("num_goals", "inits"):
-        if getattr(tc, name) < 1:
-            raise UserError(f"--{name.replace('_', '-')} must be >= 1 (got {getattr(tc, name)})")
-    if tc.goal_std < 0:
-        raise UserError(f"--goal-std must be >= 0 (got {tc.goal_std})")
-    horizon = tc.horizon or cfg.horizon
-    alpha = tc.alpha or cfg.alpha
-    # a critic trained on policies of every age up to --policy-lifetime keeps improving them that long
-    steps = tc.policy_steps or cfg.inner_steps * cfg.policy_lifetime
-    for name, value in (("horizon", horizon), ("alpha", alpha), ("policy-steps", steps)):
-        if not value > 0:
-            raise UserError(f"--{name} must be > 0 (got {value})")
+    if ckpt.get("scene_hash") and getattr(scene, "content_hash", None) not in (None, ckpt["scene_hash"]):
+        raise UserError(f"{tc.run_dir}: the scene file {cfg.scene} has changed since the run was trained")
+    horizon = tc.horizon if tc.horizon is not None else cfg.horizon
 
     gen = seed_everything(tc.seed)
     train_goals = torch.tensor(cfg.goals, dtype=torch.float32)
     lo = torch.as_tensor(scene.q_lower, dtype=torch.float32)
     hi = torch.as_tensor(scene.q_upper, dtype=torch.float32)
     if tc.goals is not None:
-        goals = goals_tensor(tc.goals, scene, "cpu")
+        goals = goals_tensor(tc.goals, scene)
     else:
         goals = sample_goals(train_goals, tc.num_goals, tc.goal_std, tc.around, lo, hi, gen, tc.goal_noise)
     G, K = goals.shape[0], tc.inits
@@ -160,25 +194,31 @@ def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
                     differentiable=False, gravity=cfg.gravity if cfg.gravity is not None else 9.81)
     dev = sim.torch_device
     norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale)
-    critic = build_test_critic(ckpt, norm).to(dev)
+    critic, defaults = build_test_critic(ckpt, norm)
+    critic = critic.to(dev)
     for p in critic.parameters():
         p.requires_grad_(False)
+    alpha = tc.alpha if tc.alpha is not None else defaults.get("alpha")
+    steps = tc.policy_steps if tc.policy_steps is not None else defaults.get("steps", 1)
+    if not (isinstance(alpha, (int, float)) and alpha > 0):
+        raise UserError(f"{tc.run_dir}: the run stores no usable policy learning rate (alpha {alpha!r}); give one")
     goal_index = torch.arange(G, device=dev).repeat_interleave(K)
     goal = goals.to(dev)[goal_index]
     q0, qd0 = sim.zeros(), sim.zeros()
-    params = init_policy(W, 2 * scene.dof, scene.dof, generator=gen, device=dev)
-    params = {k: v.requires_grad_(True) for k, v in params.items()}
+    policy = MLPPolicy(norm)
+    params = {k: v.requires_grad_(True) for k, v in policy.init(W, generator=gen, device=dev).items()}
     return MetaTestSetup(ckpt=ckpt, cfg=cfg, scene=scene, goals=goals, goal=goal, sim=sim, norm=norm,
-                         critic=critic, params=params, q0=q0, qd0=qd0, inits=K, steps=steps, horizon=horizon,
-                         alpha=alpha)
+                         critic=critic, policy=policy, params=params, q0=q0, qd0=qd0, inits=K, steps=steps,
+                         horizon=horizon, alpha=alpha)
 
 
 def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) -> dict:
+    """Algorithm 3 on ``G x K`` fresh policies; writes and returns the results (see the module docstring)."""
+    out = check_output_file(Path(tc.out) if tc.out else Path(tc.run_dir) / "metatest.json", "out")
     m = setup_meta_test(tc)
-    ckpt, scene, goals, goal, sim, norm, critic = m.ckpt, m.scene, m.goals, m.goal, m.sim, m.norm, m.critic
+    ckpt, scene, goals, goal, sim, critic, policy = m.ckpt, m.scene, m.goals, m.goal, m.sim, m.critic, m.policy
     params, q0, qd0, steps, horizon, alpha = m.params, m.q0, m.qd0, m.steps, m.horizon, m.alpha
     G, K = goals.shape[0], m.inits
-    policy = MLPPolicy(norm)
     before = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
     params, _ = inner_update(critic, policy, params, sim, q0, qd0, goal, horizon=horizon, alpha=alpha,
                              steps=steps, create_graph=False)
@@ -188,6 +228,7 @@ def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) ->
     per_goal = err.mean(1)
     mse, mse0 = err / scene.dof, err0 / scene.dof  # mean over the joints instead of the sum
     result = {
+        "kind": RESULT_KIND,
         "run_dir": str(tc.run_dir), "method": ckpt.get("method", "ours"), "scene": scene.name,
         "goals": goals.tolist(), "goal_std": tc.goal_std if tc.goals is None else None,
         "goal_noise": tc.goal_noise if tc.goals is None else None,
@@ -214,10 +255,6 @@ def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) ->
                  f"(untrained policies: {result['mean_before']:.4f})")
         progress(f"  MSE:       mean {result['mse_mean']:.4f}  std {result['mse_std']:.4f}  "
                  f"(untrained policies: {result['mse_mean_before']:.4f})")
-    out = Path(tc.out) if tc.out else Path(tc.run_dir) / "metatest.json"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(json.dumps(result, indent=2))
-    tmp.replace(out)
+    write_result(out, result)
     result["output"] = str(out)
     return result

@@ -26,10 +26,13 @@ class Recorder:
         blueprint: optional layout sent with the recording.
     """
 
-    def __init__(self, path: str | Path, application_id: str = "warp-critic", blueprint=None):
+    def __init__(self, path: str | Path, application_id: str = "warp-critic", blueprint=None,
+                 recording_id: str | None = None):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.stream = rr.RecordingStream(application_id)
+        # segments of one run (a resumed run records each segment) share the run's recording id, so
+        # merged or opened together they are one recording
+        self.stream = rr.RecordingStream(application_id, recording_id=recording_id)
         self.stream.save(str(self.path), default_blueprint=blueprint)
         self._closed = False
 
@@ -140,7 +143,7 @@ class TrainingRecorder:
     """
 
     def __init__(self, path, sim, goals, history=(), record_every: int = 50, last_iteration: int | None = None,
-                 method: str = "ours"):
+                 method: str = "ours", recording_id: str | None = None):
         self.sim, self.goals = sim, goals
         self.record_every, self.last_iteration = record_every, last_iteration
         G = goals.shape[0]
@@ -154,7 +157,8 @@ class TrainingRecorder:
             ),
             collapse_panels=True,
         )
-        self.rec = Recorder(path, application_id=f"warp-critic {method} {sim.scene.name}", blueprint=blueprint)
+        self.rec = Recorder(path, application_id=f"warp-critic {method} {sim.scene.name}", blueprint=blueprint,
+                            recording_id=recording_id)
         for i in range(G):
             self.rec.series_style(f"train/task_loss/goal{i}", f"goal {i}", _GOAL_COLORS[i % len(_GOAL_COLORS)])
         self.rec.series_style("train/task_loss/mean", "mean")

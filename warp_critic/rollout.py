@@ -42,7 +42,7 @@ def check_finite(traj: Trajectory, what: str = "rollout") -> None:
         step, world = int(steps[first]), int(worlds[first])
         raise DivergenceError(
             f"{what}: non-finite state in world {world} at step {step} "
-            f"(unstable dynamics: lower --dt, raise --substeps or reduce the torque scale)",
+            f"(unstable dynamics: lower dt, raise substeps or reduce the torque scale)",
             world=world, step=step,
         )
 

@@ -13,14 +13,14 @@ import torch
 import warp as wp
 
 from .bridge import NewtonBridge
-from .errors import UserError
+from .errors import FieldError
 from .scene import Scene, Variant
 
 
 def resolve_device(device: str) -> str:
     """``auto`` -> ``cuda`` when Warp and torch both see a GPU, else ``cpu``."""
     if device not in ("auto", "cpu", "cuda") and not device.startswith("cuda:"):
-        raise UserError(f"--device must be one of auto, cpu, cuda (got {device!r})")
+        raise FieldError("device", f"must be one of auto, cpu, cuda (got {device!r})")
     if device == "auto":
         try:
             has_cuda = wp.is_cuda_available() and torch.cuda.is_available()
@@ -28,7 +28,7 @@ def resolve_device(device: str) -> str:
             has_cuda = False
         return "cuda" if has_cuda else "cpu"
     if device.startswith("cuda") and not (wp.is_cuda_available() and torch.cuda.is_available()):
-        raise UserError(f"--device {device}: no CUDA device is available to both Warp and torch")
+        raise FieldError("device", f"{device}: no CUDA device is available to both Warp and torch")
     return device
 
 
@@ -49,9 +49,9 @@ class Simulator:
     def __init__(self, scene: Scene, variants: Sequence[Variant], *, dt: float, substeps: int = 1,
                  device: str = "cpu", differentiable: bool = True, gravity: float = 9.81):
         if dt <= 0:
-            raise UserError(f"--dt must be > 0 (got {dt})")
+            raise FieldError("dt", f"must be > 0 (got {dt})")
         if substeps < 1:
-            raise UserError(f"--substeps must be >= 1 (got {substeps})")
+            raise FieldError("substeps", f"must be >= 1 (got {substeps})")
         for v in variants:
             v.validate()
         self.scene = scene
@@ -64,7 +64,7 @@ class Simulator:
         wp.init()
         self.model = scene.build_model(self.variants, device=self.device, requires_grad=differentiable)
         if gravity < 0:
-            raise UserError(f"--gravity must be >= 0 (got {gravity})")
+            raise FieldError("gravity", f"must be >= 0 (got {gravity})")
         self.gravity = float(gravity)
         self.model.set_gravity((0.0, 0.0, -self.gravity))
         self.bridge = NewtonBridge(self.model, self.worlds, self.dof, self.dt, self.substeps)

@@ -1,7 +1,7 @@
 """DDPG (Lillicrap et al. 2015): supervised Q learning, the paper's Algorithm 1.
 
 One gradient update from a minibatch ``(s, a, r, s', done)`` of the replay buffer (all states
-goal-conditioned, ``s - g``; see :mod:`warp_critic.baselines.common`):
+goal-conditioned, ``s - g``; see :mod:`warp_critic.baselines.train`):
 
 * Q: TD regression ``(Q(s, a) - y)^2`` with ``y = r + gamma (1 - done) Q'(s', mu'(s'))`` from the
   target networks ``Q'``, ``mu'`` (Adam, ``--critic-lr``, optional L2 ``--critic-weight-decay``);
@@ -9,7 +9,7 @@ goal-conditioned, ``s - g``; see :mod:`warp_critic.baselines.common`):
 * targets: soft updates ``theta' <- tau theta + (1 - tau) theta'``.
 
 Experience collection, exploration noise, rewards, checkpoints and the training loop are shared
-with Meta-Critic in :mod:`warp_critic.baselines.common`. The learned Q is what meta-test uses
+with Meta-Critic in :mod:`warp_critic.baselines.train`. The learned Q is what meta-test uses
 (``L = -Q``).
 """
 
@@ -21,7 +21,8 @@ import torch
 
 from ..losses import td_loss
 from ..networks import Normalizer
-from .common import BaselineConfig, BaselineResult, train_baseline
+from ..loop import TrainResult
+from .train import BaselineConfig, train_baseline
 from .networks import Actor, QNetwork, soft_update
 from .replay import ReplayBuffer
 
@@ -84,7 +85,7 @@ class DDPGAgent:
         self.q_opt.load_state_dict(state["q_opt"])
 
 
-def train_ddpg(cfg: BaselineConfig, **kwargs) -> BaselineResult:
-    """Train (or resume) DDPG; ``kwargs`` go to :func:`~warp_critic.baselines.common.train_baseline`."""
+def train_ddpg(cfg: BaselineConfig, **kwargs) -> TrainResult:
+    """Train (or resume) DDPG; ``kwargs`` go to :func:`~warp_critic.baselines.train.train_baseline`."""
     cfg.method = "ddpg"
     return train_baseline(cfg, DDPGAgent, **kwargs)

@@ -18,7 +18,7 @@ Variant implemented (documented choice):
       phi_old          = phi - eta grad L_main(phi; d_trn)                          (main only)
       phi_new(omega)   = phi - eta grad [L_main + w h_omega](phi; d_trn)      (main + auxiliary)
       L_meta(omega)    = -tanh( L_main(phi_old; d_val) - L_main(phi_new; d_val) )
-      omega <- Adam step on L_meta        (--aux-lr, --aux-weight-decay)
+      omega <- Adam step on L_meta        (aux_lr, aux_weight_decay)
 
   i.e. ``omega`` is trained so that adding the auxiliary loss improves the validation objective,
   measured with the MAIN critic Q. The real actor update is one Adam step on
@@ -37,7 +37,8 @@ from torch import nn
 from torch.func import functional_call
 
 from ..networks import Normalizer
-from .common import BaselineConfig, BaselineResult, train_baseline
+from ..loop import TrainResult
+from .train import BaselineConfig, train_baseline
 from .networks import _GoalInput
 from .replay import ReplayBuffer
 from .ddpg import DDPGAgent
@@ -113,7 +114,7 @@ class MetaCriticAgent(DDPGAgent):
         self.aux_opt.load_state_dict(state["aux_opt"])
 
 
-def train_meta_critic(cfg: BaselineConfig, **kwargs) -> BaselineResult:
-    """Train (or resume) Meta-Critic; ``kwargs`` go to :func:`~warp_critic.baselines.common.train_baseline`."""
+def train_meta_critic(cfg: BaselineConfig, **kwargs) -> TrainResult:
+    """Train (or resume) Meta-Critic; ``kwargs`` go to :func:`~warp_critic.baselines.train.train_baseline`."""
     cfg.method = "meta-critic"
     return train_baseline(cfg, MetaCriticAgent, **kwargs)

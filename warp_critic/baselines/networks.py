@@ -78,8 +78,9 @@ class NegQ(nn.Module):
         return -self.q(q, qd, tau, goal)
 
 
-def test_critic_from_checkpoint(ckpt: dict, norm: Normalizer) -> torch.nn.Module:
-    """``-Q`` of a DDPG / Meta-Critic checkpoint (Meta-Critic: its main Q, not h_omega).
+def test_critic_from_checkpoint(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, dict]:
+    """``-Q`` of a DDPG / Meta-Critic checkpoint (Meta-Critic: its main Q, not h_omega), and the run's
+    meta-test defaults (the alpha selected at its last checkpoint, its inner steps).
 
     ``norm`` is meta-test's normaliser (built from the run's ``max_torque``/``qd_scale``); the
     checkpoint's own normaliser buffers are loaded over it, so the Q sees exactly the inputs it was
@@ -93,7 +94,9 @@ def test_critic_from_checkpoint(ckpt: dict, norm: Normalizer) -> torch.nn.Module
         qnet.load_state_dict(ckpt["q_state"])
     except (KeyError, RuntimeError) as e:
         raise UserError(f"{method} checkpoint has no usable Q network ({type(e).__name__}: {str(e).splitlines()[0]})") from None
-    return NegQ(qnet.eval())
+    cfg = ckpt.get("config", {})
+    alpha = cfg.get("alpha") if cfg.get("alpha") is not None else ckpt.get("selected_alpha")
+    return NegQ(qnet.eval()), {"alpha": alpha, "steps": int(cfg.get("inner_steps", 1))}
 
 
 def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
