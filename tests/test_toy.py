@@ -8,17 +8,24 @@ import numpy as np
 import pytest
 
 from warp_critic.analysis import toy
+from warp_critic.analysis.toy_closed_forms import (closed_form, closed_form_critic_params, fixed_points,
+                                                   paper_meta_critic_theta)
+from warp_critic.analysis.toy_curves import curves, default_thetas
+from warp_critic.analysis.toy_loops import init_sweep, run_meta_critic, run_ours, run_supervised
+from warp_critic.analysis.toy_problem import METHODS
+from warp_critic.analysis.toy_report import run_toy
+from warp_critic.analysis.toy_roots import stationary_points
 from warp_critic.errors import UserError
 from warp_critic.recording import read_entity_paths
 
 PAIRS = [(-6.0, 0.0), (1.0, 3.0), (2.0, -2.0), (0.5, 4.0)]
 INITS = [0.1, -1.3, 2.7]
-RUNNERS = {"supervised": toy.run_supervised, "ours": toy.run_ours, "meta_critic": toy.run_meta_critic}
+RUNNERS = {"supervised": run_supervised, "ours": run_ours, "meta_critic": run_meta_critic}
 
 
 @pytest.mark.parametrize("s0,g", PAIRS)
 def test_closed_forms_are_what_the_formulas_say(s0, g):
-    cf = toy.closed_form(s0, g)
+    cf = closed_form(s0, g)
     assert set(cf) == {"supervised", "ours", "meta_critic", "optimal"}
     # the optimum minimises Q_true = (s0 + 2 theta - g)^2 ...
     assert (s0 + 2 * cf["optimal"] - g) == pytest.approx(0.0, abs=1e-12)
@@ -31,7 +38,7 @@ def test_closed_forms_are_what_the_formulas_say(s0, g):
 
 @pytest.mark.parametrize("s0,g", PAIRS)
 def test_loops_converge_to_the_closed_forms(s0, g):
-    cf = toy.closed_form(s0, g)
+    cf = closed_form(s0, g)
     final = {}
     for method, run in RUNNERS.items():
         for theta0 in INITS:
@@ -51,13 +58,13 @@ def test_loops_converge_to_the_closed_forms(s0, g):
 @pytest.mark.parametrize("s0,g", PAIRS)
 def test_converged_critics(s0, g):
     # supervised / Meta-Critic TD critic at theta = -2 s0/3: phi* = ((s0 + 3g)/s0)^2; ours vanishes at the optimum
-    _, phi_sup, tr_sup = toy.run_supervised(s0, g)
+    _, phi_sup, tr_sup = run_supervised(s0, g)
     assert phi_sup == pytest.approx(((s0 + 3 * g) / s0) ** 2, rel=1e-8)
-    _, phi_ours, tr_ours = toy.run_ours(s0, g)
+    _, phi_ours, tr_ours = run_ours(s0, g)
     assert phi_ours == pytest.approx(0.0, abs=1e-10)
     assert tr_ours["cost"][-1] == pytest.approx(0.0, abs=1e-16)
     assert len(tr_ours["theta"]) <= 3  # one iteration to the optimum, one to confirm
-    _, phi_m, tr_m = toy.run_meta_critic(s0, g, alpha=0.5)
+    _, phi_m, tr_m = run_meta_critic(s0, g, alpha=0.5)
     assert phi_m == pytest.approx(phi_sup, rel=1e-8)
     # phi + beta = 1 / (4 alpha) along the trace (first 20 iterations: later c -> 0 and the beta fit,
     # whose curvature is ~c^2, loses precision)
@@ -66,9 +73,9 @@ def test_converged_critics(s0, g):
 
 @pytest.mark.parametrize("s0,g", PAIRS)
 def test_autograd_critic_fits_match_closed_form(s0, g):
-    thetas = toy.default_thetas(s0, g, 60)
-    cv = toy.curves(s0, g, thetas)
-    ref = toy.closed_form_critic_params(s0, g, thetas)
+    thetas = default_thetas(s0, g, 60)
+    cv = curves(s0, g, thetas)
+    ref = closed_form_critic_params(s0, g, thetas)
     for key, ref_key in (("supervised_phi", "supervised"), ("ours_phi", "ours"),
                          ("meta_critic_beta", "meta_critic_beta")):
         ok = np.isfinite(ref[ref_key])
@@ -83,25 +90,25 @@ def test_autograd_critic_fits_match_closed_form(s0, g):
 
 def test_stationary_points_helper():
     x = np.linspace(-1.0, 2.0, 300)  # 0 and 1 are not grid points
-    pts = toy.stationary_points(x, (x + 0.5) * (x - 1.0) ** 4)  # sign change at -0.5, flat touch at 1
+    pts = stationary_points(x, (x + 0.5) * (x - 1.0) ** 4)  # sign change at -0.5, flat touch at 1
     assert [k for _, k in pts] == ["sign change", "touch"]
     assert pts[0][0] == pytest.approx(-0.5, abs=1e-3)
     assert pts[1][0] == pytest.approx(1.0, abs=0.01)
     xi = np.arange(-100, 201) / 100.0  # contains 1.0 exactly: an exact zero is a touch even if not flat
-    assert [k for _, k in toy.stationary_points(xi, (xi + 0.5) * (xi - 1.0) ** 2)] == ["sign change", "touch"]
-    assert toy.stationary_points(x, (x + 0.5) * ((x - 1.0) ** 2 + 0.1)) == [(pytest.approx(-0.5, abs=1e-3), "sign change")]
+    assert [k for _, k in stationary_points(xi, (xi + 0.5) * (xi - 1.0) ** 2)] == ["sign change", "touch"]
+    assert stationary_points(x, (x + 0.5) * ((x - 1.0) ** 2 + 0.1)) == [(pytest.approx(-0.5, abs=1e-3), "sign change")]
     # a double zero between grid points: found by the parabola through the neighbouring samples
-    quad = toy.stationary_points(x, (x + 0.5) * (x - 1.0) ** 2)
+    quad = stationary_points(x, (x + 0.5) * (x - 1.0) ** 2)
     assert [k for _, k in quad] == ["sign change", "touch"] and quad[1][0] == pytest.approx(1.0, abs=0.01)
-    assert toy.stationary_points(x, x + 5.0) == []
-    assert len(toy.stationary_points(x, np.sin(6 * x))) == 5  # 6x = k pi, k = -1..3
+    assert stationary_points(x, x + 5.0) == []
+    assert len(stationary_points(x, np.sin(6 * x))) == 5  # 6x = k pi, k = -1..3
 
 
 def test_curves_stationary_points_for_the_paper_example():
-    cv = toy.curves(-6.0, 0.0)
-    sup = toy.stationary_points(cv["theta"], cv["supervised_dQ"])
-    ours = toy.stationary_points(cv["theta"], cv["ours_dL"])
-    meta = toy.stationary_points(cv["theta"], cv["meta_critic_dQ"])
+    cv = curves(-6.0, 0.0)
+    sup = stationary_points(cv["theta"], cv["supervised_dQ"])
+    ours = stationary_points(cv["theta"], cv["ours_dL"])
+    meta = stationary_points(cv["theta"], cv["meta_critic_dQ"])
     # supervised: zero at theta = 3 (phi* = 0, no sign change) and at theta = 4 (sign change)
     assert len(sup) == 2
     assert sup[0][0] == pytest.approx(3.0, abs=0.01) and sup[0][1] == "touch"
@@ -115,52 +122,52 @@ def test_curves_stationary_points_for_the_paper_example():
     # critics frozen at the loops' converged values: supervised phi = 1, ours phi = 0 (= Q_true, zero gradient)
     np.testing.assert_allclose(cv["ours_L_fixed"], cv["Q_true"], atol=1e-9)
     np.testing.assert_allclose(cv["ours_dL_fixed"], 0.0, atol=1e-9)
-    fixed = toy.stationary_points(cv["theta"], cv["supervised_dQ_fixed"])
+    fixed = stationary_points(cv["theta"], cv["supervised_dQ_fixed"])
     assert len(fixed) == 1 and fixed[0][0] == pytest.approx(4.0, abs=1e-6)
 
 
 @pytest.mark.parametrize("s0,g", PAIRS)
 def test_supervised_curve_zeros_are_the_loop_fixed_points(s0, g):
-    thetas = toy.default_thetas(s0, g)
-    cv = toy.curves(s0, g, thetas)
+    thetas = default_thetas(s0, g)
+    cv = curves(s0, g, thetas)
     step = thetas[1] - thetas[0]
-    found = toy.stationary_points(thetas, cv["supervised_dQ"])
-    expected = toy.fixed_points(s0, g)["supervised"]
+    found = stationary_points(thetas, cv["supervised_dQ"])
+    expected = fixed_points(s0, g)["supervised"]
     assert len(found) == len(expected)
     for fp in expected:
         x, kind = min(found, key=lambda f: abs(f[0] - fp["theta"]))
         assert abs(x - fp["theta"]) < step
         assert kind == ("sign change" if fp["kind"] == "attracting" else "touch")
-    ours = toy.stationary_points(thetas, cv["ours_dL"])
-    assert len(ours) == 1 and ours[0][0] == pytest.approx(toy.closed_form(s0, g)["optimal"], abs=1e-9)
+    ours = stationary_points(thetas, cv["ours_dL"])
+    assert len(ours) == 1 and ours[0][0] == pytest.approx(closed_form(s0, g)["optimal"], abs=1e-9)
 
 
 def test_paper_printed_meta_critic_formula_is_not_a_fixed_point():
     s0, g = -6.0, 0.0
-    th_paper = toy.paper_meta_critic_theta(s0)
+    th_paper = paper_meta_critic_theta(s0)
     s1 = s0 + th_paper
     assert th_paper == pytest.approx(-(s0 + s1) / (2 * ((s0 + th_paper) ** 2 + (s1 + th_paper) ** 2)), abs=1e-9)
-    theta, _, trace = toy.run_meta_critic(s0, g, theta0=th_paper)
+    theta, _, trace = run_meta_critic(s0, g, theta0=th_paper)
     assert trace["theta"][1] == pytest.approx(-(s0 + s1) / 2.0, abs=1e-9)  # jumps to the TD critic's minimiser
     assert abs(trace["theta"][1] - th_paper) > 1.0
-    assert theta == pytest.approx(toy.closed_form(s0, g)["meta_critic"], abs=1e-8)
+    assert theta == pytest.approx(closed_form(s0, g)["meta_critic"], abs=1e-8)
 
 
 def test_degenerate_fixed_points_and_initialisations():
     s0, g = -6.0, 0.0
     # ours: c = 0 makes the inner gradient vanish for every phi -> stays at -2 s0/3 = 4
-    assert toy.run_ours(s0, g, theta0=4.0)[0] == pytest.approx(4.0)
-    assert toy.run_ours(s0, g, theta0=4.0 + 1e-6)[0] == pytest.approx(3.0)
+    assert run_ours(s0, g, theta0=4.0)[0] == pytest.approx(4.0)
+    assert run_ours(s0, g, theta0=4.0 + 1e-6)[0] == pytest.approx(3.0)
     # Meta-Critic from 0: 0 -> -s0 (beta* = 0) -> -s0/2 (phi* = 0): stuck at 3
-    theta, _, tr = toy.run_meta_critic(s0, g, theta0=0.0)
+    theta, _, tr = run_meta_critic(s0, g, theta0=0.0)
     assert tr["theta"][1:3] == pytest.approx([6.0, 3.0])
     assert theta == pytest.approx(3.0)
     # supervised with a plain learning rate creeps towards the degenerate point 3 from below, 4 from above
-    th_lo = toy.run_supervised(s0, g, theta0=2.0, iters=150, policy_lr=0.05)[0]
-    th_hi = toy.run_supervised(s0, g, theta0=6.0, iters=150, policy_lr=0.05)[0]
+    th_lo = run_supervised(s0, g, theta0=2.0, iters=150, policy_lr=0.05)[0]
+    th_hi = run_supervised(s0, g, theta0=6.0, iters=150, policy_lr=0.05)[0]
     assert 2.0 < th_lo < 3.0
     assert th_hi == pytest.approx(4.0, abs=1e-6)
-    rows = toy.init_sweep(s0, g, thetas0=[0.0, 2.0, 6.0], iters=60)
+    rows = init_sweep(s0, g, thetas0=[0.0, 2.0, 6.0], iters=60)
     byv = {(r["variant"], r["theta0"]): r for r in rows}
     assert byv[("supervised", 0.0)]["nearest"] == pytest.approx(4.0)
     assert byv[("meta_critic", 0.0)]["kind"] == "degenerate"
@@ -168,9 +175,9 @@ def test_degenerate_fixed_points_and_initialisations():
 
 
 def test_run_toy_writes_outputs(tmp_path, capsys):
-    res = toy.run_toy(tmp_path)
+    res = run_toy(tmp_path)
     out = capsys.readouterr().out
-    for m in toy.METHODS:
+    for m in METHODS:
         png = tmp_path / f"toy_{m}.png"
         assert png.is_file() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert m in out
@@ -181,7 +188,7 @@ def test_run_toy_writes_outputs(tmp_path, capsys):
     rrd = tmp_path / "toy.rrd"
     assert rrd.is_file()
     paths = read_entity_paths(rrd)
-    for m in toy.METHODS:
+    for m in METHODS:
         for e in ("value/Q_true", "value/critic", "gradient/critic", "gradient/dQ_true", "trace/theta", "trace/phi"):
             assert f"/toy/{m}/{e}" in paths
     assert "/toy/meta_critic/trace/beta" in paths
@@ -211,3 +218,36 @@ def test_cli(tmp_path, monkeypatch):
     afile.write_text("x")
     with pytest.raises(UserError, match="--out"):
         toy.run_from_args(parser.parse_args(["--out", str(afile)]))
+
+
+@pytest.mark.parametrize("argv,flag,words", [
+    (["--s0", "1e300"], "--s0", "within"),
+    (["--s0", "1e-9"], "--s0", "non-zero"),
+    (["--goal=-1e300"], "--goal", "within"),
+    (["--theta0", "inf"], "--theta0", "finite"),
+    (["--alpha", "1e300"], "--alpha", "<="),
+    (["--plain-lr", "0"], "--plain-lr", "> 0"),
+    (["--iters", "10000000000"], "--iters", "<="),
+    (["--grid", "1000000000000000"], "--grid", "memory"),
+])
+def test_cli_rejects_absurd_values_on_one_line(argv, flag, words, tmp_path, capsys):
+    from warp_critic.cli import main
+
+    out = tmp_path / "o"
+    code = main(["analyze", "toy", "--out", str(out), *argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and flag in err[0] and words in err[0] and "error" in err[0], err
+    assert not out.exists()  # refused before any work
+
+
+def test_run_toy_validates_its_settings(tmp_path):
+    from warp_critic.errors import FieldError
+
+    with pytest.raises(FieldError) as err:
+        run_toy(tmp_path / "o", 1e300, 0.0)
+    assert err.value.field == "s0"
+    with pytest.raises(FieldError) as err:
+        run_toy(tmp_path / "o", -6.0, 0.0, thetas=[0.0, 1.0])
+    assert err.value.field == "grid"
+    assert not (tmp_path / "o").exists()

@@ -1,0 +1,107 @@
+"""Range checks of the analyses' settings, run before any work.
+
+Each check raises :class:`~warp_critic.errors.FieldError` naming the setting; :func:`flag_errors`
+turns that into a one-line :class:`~warp_critic.errors.UserError` naming the command-line flag.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import os
+from contextlib import contextmanager
+from pathlib import Path
+
+from warp_critic.errors import FieldError, UserError
+
+
+def number(field: str, value, *, lo: float | None = None, hi: float | None = None,
+           positive: bool = False, max_abs: float | None = None) -> float:
+    """A finite float, optionally ``> 0``, within ``[lo, hi]`` and with ``|value| <= max_abs``."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise FieldError(field, f"must be a number, got {value!r}") from None
+    if not math.isfinite(x):
+        raise FieldError(field, f"must be a finite number, got {value!r}")
+    if positive and x <= 0:
+        raise FieldError(field, f"must be > 0, got {value!r}")
+    if lo is not None and x < lo:
+        raise FieldError(field, f"must be >= {lo:g}, got {value!r}")
+    if hi is not None and x > hi:
+        raise FieldError(field, f"must be <= {hi:g}, got {value!r}")
+    if max_abs is not None and abs(x) > max_abs:
+        raise FieldError(field, f"must be within +-{max_abs:g}, got {value!r}")
+    return x
+
+
+def integer(field: str, value, lo: int, hi: int | None = None) -> int:
+    """An integer in ``[lo, hi]``."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise FieldError(field, f"must be an integer, got {value!r}")
+    if value < lo or (hi is not None and value > hi):
+        raise FieldError(field, f"must be an integer >= {lo}" + (f" and <= {hi}" if hi is not None else "")
+                         + f", got {value!r}")
+    return int(value)
+
+
+def out_dir(field: str, path) -> Path:
+    """An output folder that is not an existing file."""
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise FieldError(field, f"{p} exists and is not a folder")
+    return p
+
+
+def available_memory(device: str = "cpu") -> int | None:
+    """Free memory in bytes on ``device`` (host RAM for the CPU), or ``None`` when unknown."""
+    if str(device).startswith("cuda"):
+        import torch
+
+        try:
+            return int(torch.cuda.mem_get_info(torch.device(device))[0])
+        except Exception:  # noqa: BLE001 - no driver: let the run report the device itself
+            return None
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def _size(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"  # pragma: no cover
+
+
+def memory(field: str, value, need: float, device: str = "cpu", what: str = "") -> None:
+    """Refuse a size setting whose estimated memory ``need`` (bytes) exceeds the free memory."""
+    free = available_memory(device)
+    if free is not None and need > free:
+        raise FieldError(field, f"{value!r} needs about {_size(need)} of memory{what}, more than the "
+                                f"{_size(free)} available on {device}")
+
+
+def flag(field: str) -> str:
+    """The command-line flag of a setting: ``plain_lr`` -> ``--plain-lr``."""
+    return "--" + field.replace("_", "-")
+
+
+@contextmanager
+def flag_errors(flags: dict[str, str] | None = None):
+    """Re-raise a :class:`FieldError` as a one-line :class:`UserError` naming the flag
+    (``flags`` maps field names whose flag is not :func:`flag` of the name)."""
+    try:
+        yield
+    except FieldError as e:
+        name = (flags or {}).get(e.field, flag(e.field))
+        raise UserError(f"{name}: {e.problem}") from None
