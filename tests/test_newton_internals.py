@@ -1,0 +1,164 @@
+"""Pins of the Newton / Warp internals that ``warp_critic/bridge.py`` depends on.
+
+The bridge's exact reverse mode swaps a private copy of ``SolverFeatherstone``'s mass-matrix scratch
+(``M, J, P, H, L`` and, with tile GEMM, the grouped views ``_J_by_size``, ``_M_by_size``,
+``_H_by_size``, ``_L_by_size`` built from ``_group_to_art`` and ``articulation_*_start``) into the
+solver before every taped step. None of that is public API. These fast checks fail, with one message,
+as soon as a Newton or Warp upgrade changes any of it; ``tests/test_bridge.py``'s exactness tests are
+the real proof and must be re-run before the pins here and in ``pyproject.toml`` are moved.
+"""
+
+from __future__ import annotations
+
+import inspect
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+TESTED = {"newton": "1.8.0", "warp-lang": "1.19.0"}
+ADVICE = ("bridge.py depends on Newton internals; re-run tests/test_bridge.py's exactness tests and update "
+          "the pins (tests/test_newton_internals.py, pyproject.toml)")
+SCRATCH = ("M", "J", "P", "H", "L")
+TILE_VIEWS = {"_J_by_size": ("J", "articulation_J_start"), "_M_by_size": ("M", "articulation_M_start"),
+              "_H_by_size": ("H", "articulation_H_start"), "_L_by_size": ("L", "articulation_H_start")}
+
+
+def pin(ok: bool, what: str) -> None:
+    if not ok:
+        pytest.fail(f"{what}: {ADVICE}", pytrace=False)
+
+
+@pytest.fixture(scope="module")
+def sim():
+    from warp_critic import runtime
+    from warp_critic.scene import Variant, load_scene
+    from warp_critic.simulator import Simulator
+
+    runtime.init_warp()
+    scene = load_scene(ROOT / "scenes" / "reacher.usda")
+    return Simulator(scene, [Variant()] * 3, dt=0.01, substeps=1, device="cpu", differentiable=True)
+
+
+def test_versions_are_the_tested_ones():
+    import newton
+    import warp as wp
+
+    pin(newton.__version__ == TESTED["newton"], f"newton {newton.__version__} is installed, tested: {TESTED['newton']}")
+    pin(wp.config.version == TESTED["warp-lang"], f"warp-lang {wp.config.version} is installed, tested: {TESTED['warp-lang']}")
+    pyproject = (ROOT / "pyproject.toml").read_text()
+    for name, version in TESTED.items():
+        pin(f'"{name}=={version}"' in pyproject, f"pyproject.toml does not pin {name}=={version}")
+
+
+def test_solver_signatures():
+    import newton
+
+    cls = newton.solvers.SolverFeatherstone
+    init = inspect.signature(cls.__init__).parameters
+    pin("use_tile_gemm" in init, "SolverFeatherstone(model, use_tile_gemm=...) is gone")
+    pin(init.get("update_mass_matrix_interval") is not None and init["update_mass_matrix_interval"].default == 1,
+        "SolverFeatherstone's update_mass_matrix_interval no longer defaults to 1 (every step must rebuild M, J, H, L)")
+    step = list(inspect.signature(cls.step).parameters)
+    pin(step[:6] == ["self", "state_in", "state_out", "control", "contacts", "dt"],
+        f"SolverFeatherstone.step's signature changed: {step}")
+
+
+def test_step_reads_the_scratch_from_the_solver_attributes():
+    """The bridge swaps arrays by ``setattr``: ``step`` must read them from ``self`` every call, and keep
+    its other per-step intermediates on the output state when differentiating."""
+    import newton
+
+    src = inspect.getsource(newton.solvers.SolverFeatherstone.step)
+    for name in SCRATCH:
+        pin(f"self.{name}" in src, f"SolverFeatherstone.step no longer reads self.{name}")
+    for name in (*TILE_VIEWS, "_group_to_art"):
+        pin(f"self.{name}[size]" in src, f"SolverFeatherstone.step no longer reads self.{name}[size]")
+    pin("state_aug = state_out" in src,
+        "SolverFeatherstone.step no longer keeps its differentiable intermediates on state_out")
+
+
+def test_solver_scratch_layout(sim):
+    import warp as wp
+
+    solver, model = sim.bridge.solver, sim.model
+    pin(solver.use_tile_gemm is True, "the bridge's solver does not use tile GEMM")
+    pin(solver.update_mass_matrix_interval == 1, "the mass matrix is not rebuilt every step")
+    sizes = {"M": solver.M_size, "J": solver.J_size, "P": solver.J_size, "H": solver.H_size, "L": solver.H_size}
+    for name in SCRATCH:
+        arr = getattr(solver, name, None)
+        pin(isinstance(arr, wp.array), f"SolverFeatherstone.{name} is not a wp.array")
+        pin(arr.ndim == 1 and arr.dtype == wp.float32 and arr.shape == (sizes[name],),
+            f"SolverFeatherstone.{name}: {arr.dtype} {arr.shape}, expected flat float32 ({sizes[name]},)")
+        pin(arr.requires_grad, f"SolverFeatherstone.{name} has no gradient on a requires_grad model")
+    arts = model.articulation_count
+    for name in ("articulation_J_start", "articulation_M_start", "articulation_H_start"):
+        arr = getattr(solver, name, None)
+        pin(isinstance(arr, wp.array) and arr.dtype == wp.int32 and arr.shape == (arts,),
+            f"SolverFeatherstone.{name} is not an int32 array with one start per articulation")
+
+    groups = getattr(solver, "_group_to_art", None)
+    pin(isinstance(groups, dict) and groups, "SolverFeatherstone._group_to_art is not a non-empty dict")
+    seen = []
+    for size, group in groups.items():
+        pin(isinstance(size, tuple) and len(size) == 2 and all(isinstance(x, int) for x in size),
+            f"_group_to_art key {size!r} is not (joint_count, dof_count)")
+        pin(isinstance(group, wp.array) and group.dtype == wp.int32, "_group_to_art values are not int32 arrays")
+        seen += group.numpy().tolist()
+    pin(sorted(seen) == list(range(arts)), "_group_to_art does not cover every articulation once")
+    pin(sim.dof == 2 and set(groups) == {(2, 2)}, f"reacher worlds are not one (2 joints, 2 dofs) group: {set(groups)}")
+
+    for view_name, (array_name, start_name) in TILE_VIEWS.items():
+        views = getattr(solver, view_name, None)
+        pin(isinstance(views, dict) and set(views) == set(groups), f"SolverFeatherstone.{view_name} is not keyed like _group_to_art")
+        base, starts = getattr(solver, array_name), getattr(solver, start_name).numpy()
+        for (joints, dofs), view in views.items():
+            group = groups[joints, dofs]
+            rows = {"J": (6 * joints, dofs), "M": (6 * joints, 6 * joints), "H": (dofs, dofs), "L": (dofs, dofs)}[array_name]
+            pin(isinstance(view, wp.array) and view.shape == (group.shape[0], *rows),
+                f"{view_name}[{(joints, dofs)}] has shape {getattr(view, 'shape', None)}, expected {(group.shape[0], *rows)}")
+            first = int(group.numpy()[0])
+            pin(view.ptr == base.ptr + int(starts[first]) * 4,
+                f"{view_name}[{(joints, dofs)}] is not a view into {array_name} at articulation {first}'s start")
+
+
+def test_model_and_warp_api_the_bridge_uses(sim):
+    import warp as wp
+
+    model = sim.model
+    pin(model.requires_grad is True and model.joint_dof_count == model.joint_coord_count == 3 * 2,
+        "Model.requires_grad / joint_dof_count / joint_coord_count changed")
+    state = model.state(requires_grad=True)
+    control = model.control(clone_variables=True, requires_grad=True)
+    for arr, name in ((state.joint_q, "State.joint_q"), (state.joint_qd, "State.joint_qd"),
+                      (control.joint_f, "Control.joint_f")):
+        pin(isinstance(arr, wp.array) and arr.shape == (6,) and arr.grad is not None, f"{name} is not a per-dof array with a gradient")
+    for name in ("Tape", "ScopedStream", "stream_from_torch", "to_torch", "device_to_torch", "zeros_like"):
+        pin(callable(getattr(wp, name, None)), f"wp.{name} is gone")
+
+
+def test_a_step_writes_the_swapped_in_scratch_and_leaves_the_solver_own(sim):
+    """What the bridge does before every taped step, on Newton directly."""
+    import warp as wp
+
+    bridge, solver, model = sim.bridge, sim.bridge.solver, sim.model
+    own = {n: getattr(solver, n) for n in (*SCRATCH, *TILE_VIEWS)}
+    before = {n: own[n].numpy().copy() for n in SCRATCH}
+    scratch = bridge._new_scratch()
+    s_in, s_out = model.state(requires_grad=True), model.state(requires_grad=True)
+    control = model.control(clone_variables=True, requires_grad=True)
+    s_in.joint_q.assign(np.linspace(-0.8, 0.9, 6).astype(np.float32))
+    for name, arr in scratch.items():
+        setattr(solver, name, arr)
+    try:
+        tape = wp.Tape()
+        with tape:
+            solver.step(s_in, s_out, control, None, 0.01)
+    finally:
+        for name, arr in own.items():
+            setattr(solver, name, arr)
+    for name in ("M", "J", "H", "L"):
+        pin(np.abs(scratch[name].numpy()).sum() > 0, f"a step did not write the swapped-in {name}")
+    for name in SCRATCH:
+        pin(np.array_equal(own[name].numpy(), before[name]), f"a step wrote the solver's own {name} while it was swapped out")
