@@ -11,17 +11,20 @@ import pytest
 import torch
 import warp as wp
 
-from warp_critic.baselines import common
-from warp_critic.baselines.common import BaselineConfig, ReplayBuffer, rewards
+from warp_critic.baselines import networks as baseline_networks
+from warp_critic.baselines.replay import ReplayBuffer, rewards
+from warp_critic.baselines.train import BaselineConfig
 from warp_critic.baselines.ddpg import train_ddpg
 from warp_critic.baselines.meta_critic import train_meta_critic
 from warp_critic.cli import main
-from warp_critic.config import TrainConfig
+from warp_critic.errors import UserError
+from warp_critic.scene import load_scene
+from warp_critic.task import TaskConfig
 from warp_critic.metatest import TestConfig, build_test_critic, meta_test
 from warp_critic.networks import Normalizer
 from warp_critic.recording import read_entity_paths
 from warp_critic.rollout import Trajectory
-from warp_critic.train import CHECKPOINT_KIND
+from warp_critic.rundir import CHECKPOINT_KIND
 
 wp.config.quiet = True
 
@@ -71,17 +74,18 @@ def test_baseline_learns_and_its_q_runs_through_meta_test(tmp_path, method):
     ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
     assert ckpt["kind"] == CHECKPOINT_KIND and ckpt["method"] == method and ckpt["scene"] == "reacher"
     assert ckpt["iteration"] == 39 and ckpt["dof"] == 2 and ckpt["metrics"]["iteration"] == 39
-    tc = TrainConfig.from_dict(ckpt["config"])
-    assert tc.horizon == 30 and tc.inner_steps == 1 and tc.alpha > 0 and len(tc.goals) == 4
-    assert tc.alpha == ckpt["metrics"]["alpha"]  # selected by the fresh-policy grid search
+    tc = TaskConfig.from_dict(ckpt["config"])
+    assert tc.horizon == 30 and ckpt["config"]["inner_steps"] == 1 and len(tc.goals) == 4
 
     # the meta-test critic is -Q(s - g, a)
     norm = Normalizer.from_limits(torch.tensor([-2.97, -2.97]), torch.tensor([2.97, 2.97]),
                                   torch.tensor(tc.max_torque), tc.qd_scale)
-    loss_fn = build_test_critic(ckpt, norm)
+    loss_fn, defaults = build_test_critic(ckpt, norm)
+    assert defaults["alpha"] > 0 and defaults["steps"] == 1
+    assert defaults["alpha"] == ckpt["metrics"]["alpha"]  # selected by the fresh-policy grid search
     q, qd, tau = torch.randn(5, 2), torch.randn(5, 2), torch.randn(5, 2)
     g = torch.tensor([[1.0, 0.5]]).expand(5, 2)
-    assert torch.allclose(loss_fn(q, qd, tau, g), -res.agent.q(q, qd, tau, g), atol=1e-6)
+    assert torch.allclose(loss_fn(q, qd, tau, g), -res.model.q(q, qd, tau, g), atol=1e-6)
 
     result = meta_test(TestConfig(run_dir=str(out), num_goals=2, inits=2, device="cpu"), progress=None)
     assert result["method"] == method and math.isfinite(result["mean"])
@@ -156,7 +160,8 @@ def test_baseline_cli_writes_run_directory_and_resumes(tmp_path, capsys):
 
 
 def test_default_out_directory():
-    cfg = BaselineConfig(scene="scenes/reacher.usda", method="meta-critic").with_scene_defaults()
+    cfg = BaselineConfig(scene=REACHER, method="meta-critic")
+    cfg.fill_defaults(load_scene(REACHER))
     assert cfg.out == "runs/reacher-meta-critic" and cfg.horizon is not None and cfg.goals
 
 
@@ -192,5 +197,5 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, fragment):
 
 def test_test_critic_rejects_broken_checkpoints():
     norm = Normalizer.from_limits(-torch.ones(2), torch.ones(2), torch.ones(2), 1.0)
-    with pytest.raises(common.UserError, match="no usable Q"):
-        common.test_critic_from_checkpoint({"method": "ddpg", "dof": 2}, norm)
+    with pytest.raises(UserError, match="no usable Q"):
+        baseline_networks.test_critic_from_checkpoint({"method": "ddpg", "dof": 2}, norm)

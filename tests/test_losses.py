@@ -64,5 +64,5 @@ def test_goal_noise_readings_of_the_papers_protocol():
     assert (distance ** 2).sum(1).mean().item() == pytest.approx(0.01, rel=0.08)
     # ... and the direction is isotropic: every joint gets the same share
     assert torch.allclose((distance ** 2).mean(0), torch.full((7,), 0.01 / 7), rtol=0.2)
-    with pytest.raises(UserError, match="--goal-noise"):
+    with pytest.raises(UserError, match="goal_noise"):
         sample_goals(centres, 1, 0.1, None, lo, hi, gen, noise="sphere")

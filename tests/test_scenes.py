@@ -179,7 +179,7 @@ def test_scene_metadata():
     # a push along x and along y: a = F/m (the 1 g carriage adds to x only), gravity does no work
     qdd = newton_qdd(model, [0.0, 0.0], [0.0, 0.0], [2.0, 3.0])[0]
     np.testing.assert_allclose(qdd, [2.0 / 1.001, 3.0], rtol=1e-5)
-    with pytest.raises(UserError, match="--link-scale"):
+    with pytest.raises(UserError, match="link_scale"):
         point.build_model([Variant(link_scale=2.0)])
 
 
@@ -406,14 +406,14 @@ def test_bad_scene_files_raise_one_line_scene_error(case, tmp_path):
 
 
 @pytest.mark.parametrize("variant, flag", [
-    (Variant(ee_mass=-1.0), "--ee-mass must be >= 0 (got -1.0)"),
-    (Variant(ee_mass=float("nan")), "--ee-mass"),
-    (Variant(link_length=0.0), "--link-length must be > 0"),
-    (Variant(link_length=-0.5), "--link-length must be > 0"),
-    (Variant(link_scale=0.0), "--link-scale must be > 0"),
-    (Variant(link_scale=-2.0), "--link-scale must be > 0"),
+    (Variant(ee_mass=-1.0), "ee_mass: must be >= 0 (got -1.0)"),
+    (Variant(ee_mass=float("nan")), "ee_mass"),
+    (Variant(link_length=0.0), "link_length: must be > 0"),
+    (Variant(link_length=-0.5), "link_length: must be > 0"),
+    (Variant(link_scale=0.0), "link_scale: must be > 0"),
+    (Variant(link_scale=-2.0), "link_scale: must be > 0"),
 ])
-def test_bad_variants_raise_user_error_naming_the_flag(variant, flag):
+def test_bad_variants_raise_user_error_naming_the_field(variant, flag):
     with pytest.raises(UserError, match=re.escape(flag)):
         variant.validate()
     scene = load_scene(SCENES / "reacher.usda")

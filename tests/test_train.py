@@ -11,7 +11,8 @@ import torch
 
 from warp_critic import bridge, train
 from warp_critic.cli import main
-from warp_critic.config import TrainConfig
+from warp_critic.rundir import load_checkpoint
+from warp_critic.train import TrainConfig
 from warp_critic.metatest import TestConfig, meta_test
 from warp_critic.recording import read_entity_paths
 
@@ -233,7 +234,7 @@ def test_help_and_version(capsys):
 def test_relative_critic_run_meta_tests_from_its_checkpoint(tmp_path):
     out = tmp_path / "rel"
     train.meta_train(tiny_cfg(out, iterations=2, critic_input="relative", velocity_weight=0.01), progress=False)
-    ckpt = train.load_checkpoint(out)
+    ckpt = load_checkpoint(out)
     assert ckpt["critic_input"] == "relative" and ckpt["config"]["velocity_weight"] == 0.01
     res = meta_test(TestConfig(run_dir=str(out), num_goals=2, inits=1, device="cpu"), progress=None)
     assert res["mean"] >= 0
@@ -252,7 +253,7 @@ def test_staggered_policy_lifetime_continues_each_policy_until_it_is_replaced(tm
     assert not torch.allclose(before1[:, 1], after0[:, 1], atol=1e-3)
     assert not torch.allclose(before2[:, 0], seen[1][1][:, 0], atol=1e-3)
     assert torch.allclose(before2[:, 1], seen[1][1][:, 1], atol=1e-6)
-    ckpt = train.load_checkpoint(tmp_path / "s")
+    ckpt = load_checkpoint(tmp_path / "s")
     res = meta_test(TestConfig(run_dir=str(tmp_path / "s"), num_goals=1, inits=1, device="cpu"), progress=None)
     assert res["policy_steps"] == ckpt["config"]["inner_steps"] * 2
 
@@ -318,7 +319,7 @@ def test_benchmark_quick_version_trains_two_seeds_and_prints_the_pooled_table(tm
     assert "reacher seed 0: meta-train 2 iterations" in text and "reacher seed 3: meta-train 2 iterations" in text
     assert "2 seed(s) x 2 goals x 1 inits" in text and "| per-joint | MSE |" in text
     assert "paper (Table 1)" not in text  # the paper's row is the KUKA's
-    seeds = [train.load_checkpoint(tmp_path / d)["config"]["seed"] for d in ("bench-reacher-quick", "bench-reacher-quick-seed3")]
+    seeds = [load_checkpoint(tmp_path / d)["config"]["seed"] for d in ("bench-reacher-quick", "bench-reacher-quick-seed3")]
     assert seeds == [0, 3]
 
 

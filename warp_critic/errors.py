@@ -38,3 +38,11 @@ class DivergenceError(RuntimeError):
         super().__init__(message)
         self.world = world
         self.step = step
+
+
+def warn(message: str) -> None:
+    """One line ``warp-critic: warning: ...`` on stderr (something the user should know; work goes on)."""
+    import sys
+
+    sys.stderr.write(f"warp-critic: warning: {' '.join(message.split())}\n")
+    sys.stderr.flush()

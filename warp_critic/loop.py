@@ -276,6 +276,6 @@ def progress_bar(total: int, start: int = 0, enabled: bool = True, desc: str | N
     from tqdm import tqdm
 
     tty = sys.stderr.isatty()
-    return tqdm(total=total, initial=start, disable=not enabled, desc=desc, dynamic_ncols=tty, ascii=not tty,
+    return tqdm(total=total, initial=start, disable=not enabled, desc=desc or "", dynamic_ncols=tty, ascii=not tty,
                 file=sys.stderr if tty else _Lines(sys.stderr), mininterval=0.1 if tty else 5.0,
-                leave=True, bar_format="{l_bar}{bar:24}| {n_fmt}/{total_fmt} {postfix}")
+                leave=True, bar_format="[{bar:24}] {n_fmt}/{total_fmt} {desc}{postfix} [{elapsed}<{remaining}]")

@@ -33,13 +33,12 @@ import sys
 import tempfile
 import time
 import uuid
-import warnings
 from pathlib import Path
 from typing import Iterable
 
 import torch
 
-from .errors import UserError
+from .errors import UserError, warn
 
 MARKER = ".warp-critic-run"
 LOCK = ".lock"
@@ -226,8 +225,7 @@ class RunDir:
                     owner = {}
                 pid, host = owner.get("pid"), owner.get("host")
                 if isinstance(pid, int) and host == me["host"] and not _pid_alive(pid):
-                    warnings.warn(f"{self.path}: taking over the lock of process {pid}, which is no longer running",
-                                  stacklevel=2)
+                    warn(f"run directory {self.path}: taking over the lock of process {pid}, which is no longer running")
                     with contextlib.suppress(OSError):
                         path.unlink()
                     continue
@@ -273,7 +271,7 @@ class RunDir:
         path = self.path / "metrics.jsonl"
         if not path.exists():
             if upto > 0:
-                warnings.warn(f"{path}: missing; the resumed run's metrics start at iteration {upto}", stacklevel=2)
+                warn(f"{path}: missing; the resumed run's metrics start at iteration {upto}")
             return []
         rows = []
         lines = path.read_text(errors="replace").splitlines()
@@ -342,3 +340,8 @@ def load_checkpoint_file(path: str | Path, require: Iterable[str] = ()) -> dict:
     if missing:
         raise UserError(f"{path}: incomplete checkpoint (no {', '.join(missing)})")
     return ckpt
+
+
+def load_checkpoint(run_dir: str | Path, require: Iterable[str] = ()) -> dict:
+    """``RUN_DIR/checkpoint.pt`` of a run directory (see :meth:`RunDir.load_checkpoint`)."""
+    return RunDir.open(run_dir).load_checkpoint(require)

@@ -80,7 +80,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
 
-from warp_critic.errors import SceneError, UserError
+from warp_critic.errors import FieldError, SceneError, UserError
 
 if TYPE_CHECKING:
     import newton
@@ -125,13 +125,13 @@ class Variant:
     link_scale: float = 1.0
 
     def validate(self) -> None:
-        """Raise :class:`UserError` naming the offending command-line flag."""
+        """Raise :class:`FieldError` naming the offending field."""
         if not _finite(self.ee_mass) or self.ee_mass < 0.0:
-            raise UserError(f"--ee-mass must be >= 0 (got {self.ee_mass})")
+            raise FieldError("ee_mass", f"must be >= 0 (got {self.ee_mass})")
         if self.link_length is not None and (not _finite(self.link_length) or self.link_length <= 0.0):
-            raise UserError(f"--link-length must be > 0 (got {self.link_length})")
+            raise FieldError("link_length", f"must be > 0 (got {self.link_length})")
         if not _finite(self.link_scale) or self.link_scale <= 0.0:
-            raise UserError(f"--link-scale must be > 0 (got {self.link_scale})")
+            raise FieldError("link_scale", f"must be > 0 (got {self.link_scale})")
 
     @property
     def changes_length(self) -> bool:
@@ -226,8 +226,8 @@ class Scene:
             return 1.0, np.eye(3)
         old = float(np.linalg.norm(self.tip_offset))
         if old == 0.0:
-            flag = "--link-length" if variant.link_length is not None else "--link-scale"
-            raise UserError(f"{flag} does not apply to scene '{self.name}': its end-effector "
+            name = "link_length" if variant.link_length is not None else "link_scale"
+            raise FieldError(name, f"does not apply to scene '{self.name}': its end-effector "
                             f"'{self.body_names[self.ee_body]}' has a zero tip offset (no link length)")
         new = (variant.link_length if variant.link_length is not None else old) * variant.link_scale
         s = new / old

@@ -40,10 +40,14 @@ DEVICES = ("auto", "cpu", "cuda")
 RUNTIME_FIELDS = ("out", "device", "resume", "cpu_threads", "checkpoint_every", "record_every", "iterations")
 
 
-def spec(default, help: str, *, gt=None, ge=None, le=None, lt=None, choices=None):
-    """A dataclass field with its help text and its valid range (checked by :func:`check_fields`)."""
+def spec(default, help: str, *, gt=None, ge=None, le=None, lt=None, cap=None, choices=None):
+    """A dataclass field with its help text and its valid range (checked by :func:`check_fields`).
+
+    ``gt``/``ge``/``lt``/``le``: the range where the value means something; ``cap``: a sanity limit
+    beyond which a value can only be a typo (it would not fit in memory or time).
+    """
     meta = {"help": help}
-    for key, value in (("gt", gt), ("ge", ge), ("le", le), ("lt", lt), ("choices", choices)):
+    for key, value in (("gt", gt), ("ge", ge), ("le", le), ("lt", lt), ("cap", cap), ("choices", choices)):
         if value is not None:
             meta[key] = value
     if isinstance(default, list):
@@ -87,10 +91,20 @@ def _check_value(name: str, x, meta) -> None:
         return
     if not isinstance(x, (int, float)) or not math.isfinite(x):
         raise FieldError(name, f"must be a finite number (got {x!r})")
-    for key, ok, word in (("gt", lambda a, b: a > b, ">"), ("ge", lambda a, b: a >= b, ">="),
-                          ("lt", lambda a, b: a < b, "<"), ("le", lambda a, b: a <= b, "<=")):
-        if key in meta and not ok(x, meta[key]):
-            raise FieldError(name, f"must be {word} {meta[key]} (got {x!r})")
+    if "cap" in meta and x > meta["cap"]:
+        raise FieldError(name, f"must be <= {meta['cap']:g} (got {x!r}; larger values cannot be meant)")
+    lo = ("gt", meta["gt"]) if "gt" in meta else ("ge", meta["ge"]) if "ge" in meta else None
+    hi = ("lt", meta["lt"]) if "lt" in meta else ("le", meta["le"]) if "le" in meta else None
+    ok_lo = lo is None or (x > lo[1] if lo[0] == "gt" else x >= lo[1])
+    ok_hi = hi is None or (x < hi[1] if hi[0] == "lt" else x <= hi[1])
+    if ok_lo and ok_hi:
+        return
+    if lo and hi:
+        raise FieldError(name, f"must be in {'(' if lo[0] == 'gt' else '['}{lo[1]:g}, {hi[1]:g}"
+                               f"{')' if hi[0] == 'lt' else ']'} (got {x!r})")
+    key, bound = lo if lo else hi
+    word = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}[key]
+    raise FieldError(name, f"must be {word} {bound:g} (got {x!r})")
 
 
 @dataclass
@@ -99,19 +113,19 @@ class TaskConfig(SerializableConfig):
 
     scene: str = spec("scenes/kuka.usda", "USD scene file")
     goals: list[list[float]] | None = spec(None, "training goals in joint space: inline '0.1,0.2;0.3,0.4' or a .json/.txt file (one goal per line); default: the scene's")
-    iterations: int = spec(300, "outer iterations (critic updates)", gt=0, le=10**8)
-    horizon: int | None = spec(None, "control steps per rollout", gt=0, le=10**6)
-    dt: float | None = spec(None, "physics time step (s)", gt=0, le=1.0)
-    substeps: int | None = spec(None, "physics steps per control step", gt=0, le=10**4)
+    iterations: int = spec(300, "outer iterations (critic updates)", gt=0, cap=10**8)
+    horizon: int | None = spec(None, "control steps per rollout", gt=0, cap=10**6)
+    dt: float | None = spec(None, "physics time step (s)", gt=0, cap=1.0)
+    substeps: int | None = spec(None, "physics steps per control step", gt=0, cap=10**4)
     worlds_per_goal: int = spec(4, "policy initialisations per goal (parallel worlds)", gt=0)
-    start_std: float = spec(0.0, "std (rad) of random initial joint positions around the home pose, drawn per world and iteration (0 = always start at home, as at meta-test)", ge=0, le=100)
+    start_std: float = spec(0.0, "std (rad) of random initial joint positions around the home pose, drawn per world and iteration (0 = always start at home, as at meta-test)", ge=0, cap=100)
     home_starts: int = spec(0, "with a start std: this many of each goal's worlds still start at the home pose (as at meta-test) every iteration", ge=0)
     max_torque: list[float] | None = spec(None, "per-joint torque bound of the policy (N·m), comma-separated or one value", gt=0)
     qd_scale: float | None = spec(None, "velocity normalisation (rad/s)", gt=0)
-    gravity: float | None = spec(None, "gravity along -z (m/s^2); 0 = a perfectly gravity-compensated robot (the iiwa's torque mode, the kuka default)", ge=0, le=1000)
-    ee_mass: float = spec(0.0, "mass added at the end-effector during training (kg)", ge=0, le=1e4)
-    link_length: float | None = spec(None, "set the end-effector link length during training (m)", gt=0, le=100)
-    link_scale: float = spec(1.0, "scale the end-effector link length during training", gt=0, le=100)
+    gravity: float | None = spec(None, "gravity along -z (m/s^2); 0 = a perfectly gravity-compensated robot (the iiwa's torque mode, the kuka default)", ge=0, cap=1000)
+    ee_mass: float = spec(0.0, "mass added at the end-effector during training (kg)", ge=0, cap=1e4)
+    link_length: float | None = spec(None, "set the end-effector link length during training (m)", gt=0, cap=100)
+    link_scale: float = spec(1.0, "scale the end-effector link length during training", gt=0, cap=100)
     seed: int = spec(0, "random seed (fixes everything on CPU)", ge=0, le=MAX_SEED)
     device: str = spec("auto", "cpu, cuda or auto (cuda when present)")
     cpu_threads: int | None = spec(None, "torch CPU threads while training (0 = torch's default; default: $WARP_CRITIC_TORCH_THREADS or 1: small networks run fastest on one)")
