@@ -6,7 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warp_critic.analysis import landscape as L
+from warp_critic.analysis.landscape_fields import METHODS, descent_fraction
+from warp_critic.analysis.landscape_problem import AXIS_MASS, analytic_gain, analytic_optimum
+from warp_critic.analysis.landscape_run import LandscapeConfig, run_landscape
 from warp_critic.recording import read_entity_paths
 
 GOAL, TEST_GOALS, INITS = (1.0, 1.0), ((-1.5, 0.5), (0.5, -1.5)), ((0.0, 0.0), (-0.5, 0.5))
@@ -14,23 +16,26 @@ GOAL, TEST_GOALS, INITS = (1.0, 1.0), ((-1.5, 0.5), (0.5, -1.5)), ((0.0, 0.0), (
 
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):
+    from warp_critic import runtime
+
+    runtime.init()  # one torch thread, Warp started quietly: what the CLI does
     out = tmp_path_factory.mktemp("landscape")
-    cfg = L.LandscapeConfig(out=out, iterations=4, grid=9, inits_per_state=2, sup_fit_steps=2, quiet=True,
+    cfg = LandscapeConfig(out=out, iterations=4, grid=9, inits_per_state=2, sup_fit_steps=2, quiet=True,
                             goal=GOAL, test_goals=TEST_GOALS, init_states=INITS)
-    return L.run_landscape(cfg)
+    return run_landscape(cfg)
 
 
 def test_analytic_gain_semi_implicit_euler():
     # N steps of constant force from rest: qd_k = k dt a, q_N = dt^2 a (1 + ... + N) = a dt^2 N (N+1)/2
     dt, T = 0.05, 20
-    a = 1.0 / np.array(L.AXIS_MASS)
+    a = 1.0 / np.array(AXIS_MASS)
     q, qd = np.zeros(2), np.zeros(2)
     for _ in range(T):
         qd = qd + dt * a
         q = q + dt * qd
-    assert np.allclose(L.analytic_gain(dt, T), q)
-    assert np.allclose(L.analytic_gain(dt, T), dt * dt * T * (T + 1) / 2 / np.array([1.001, 1.0]))
-    assert np.allclose(L.analytic_gain(0.025, 10, substeps=2), 0.025 ** 2 * 20 * 21 / 2 / np.array(L.AXIS_MASS))
+    assert np.allclose(analytic_gain(dt, T), q)
+    assert np.allclose(analytic_gain(dt, T), dt * dt * T * (T + 1) / 2 / np.array([1.001, 1.0]))
+    assert np.allclose(analytic_gain(0.025, 10, substeps=2), 0.025 ** 2 * 20 * 21 / 2 / np.array(AXIS_MASS))
 
 
 def test_shapes_and_finite(result):
@@ -39,12 +44,12 @@ def test_shapes_and_finite(result):
     assert result["grads"].shape == (G, 3, n, n, 2)
     assert np.isfinite(result["values"]).all() and np.isfinite(result["grads"]).all()
     assert result["trace_new"].shape == (4, 4, 2) and np.isfinite(result["trace_new"]).all()
-    assert len(result["fractions"]) == G and all(set(f) == set(L.METHODS) for f in result["fractions"])
+    assert len(result["fractions"]) == G and all(set(f) == set(METHODS) for f in result["fractions"])
 
 
 def test_q_true_matches_newton_and_analytic_optimum(result):
     axis, values, grads, goals = result["axis"], result["values"], result["grads"], result["goals"]
-    gain = L.analytic_gain(0.05, 20)
+    gain = analytic_gain(0.05, 20)
     t1, t2 = np.meshgrid(axis, axis, indexing="ij")
     theta = np.stack([t1, t2], -1)
     q0 = np.array(INITS[0])
@@ -54,7 +59,7 @@ def test_q_true_matches_newton_and_analytic_optimum(result):
         np.testing.assert_allclose(values[gi, 0], (err ** 2).sum(-1), rtol=2e-3, atol=2e-4)
         # ... and so does its gradient through the differentiable model
         np.testing.assert_allclose(grads[gi, 0], 2 * err * gain, rtol=2e-3, atol=2e-4)
-        opt = L.analytic_optimum(g, q0, 0.05, 20)
+        opt = analytic_optimum(g, q0, 0.05, 20)
         np.testing.assert_allclose(result["optima"][gi], opt)
         np.testing.assert_allclose(q0 + opt * gain, g, atol=1e-12)
         i1, i2 = np.unravel_index(np.argmin(values[gi, 0]), values[gi, 0].shape)
@@ -67,10 +72,10 @@ def test_descent_fraction_can_fail():
     t1, t2 = np.meshgrid(axis, axis, indexing="ij")
     opt = np.array([1.9, -2.3])
     bowl = np.stack([t1 - opt[0], t2 - opt[1]], -1)
-    assert L.descent_fraction(bowl, axis, opt, 0.5) == 1.0
-    assert L.descent_fraction(-bowl, axis, opt, 0.5) == 0.0  # ascent field: nobody arrives
+    assert descent_fraction(bowl, axis, opt, 0.5) == 1.0
+    assert descent_fraction(-bowl, axis, opt, 0.5) == 0.0  # ascent field: nobody arrives
     shifted = np.stack([t1 - 0.0, t2 - 0.0], -1)  # minimum in the wrong place
-    assert L.descent_fraction(shifted, axis, opt, 0.5) == 0.0
+    assert descent_fraction(shifted, axis, opt, 0.5) == 0.0
 
 
 def test_outputs(result):
@@ -79,7 +84,7 @@ def test_outputs(result):
         assert (out / name).is_file() and (out / name).stat().st_size > 0
     paths = read_entity_paths(out / "landscape.rrd")
     for gn in ("train", "test1", "test2"):
-        for m in L.METHODS:
+        for m in METHODS:
             for leaf in ("value", "descent_direction", "optimum"):
                 assert f"/landscape/{gn}/{m}/{leaf}" in paths, (gn, m, leaf, sorted(paths)[:20])
     assert "/trace/theta_new" in paths
@@ -93,6 +98,11 @@ def test_outputs(result):
     (["--goal", "1"], "--goal"),
     (["--test-goals", "a,b"], "--test-goals"),
     (["--tolerance", "nan"], "--tolerance"),
+    (["--dt", "inf"], "--dt"),
+    (["--seed", "-1"], "--seed"),
+    (["--init-states", "0,0;1"], "--init-states"),
+    (["--grid", "100000"], "--grid"),
+    (["--iterations", "1000000000000"], "--iterations"),
 ])
 def test_cli_errors_name_the_flag(argv, flag, capsys, tmp_path):
     from warp_critic.cli import main
@@ -101,3 +111,23 @@ def test_cli_errors_name_the_flag(argv, flag, capsys, tmp_path):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2
     assert len(err) == 1 and flag in err[0] and "error" in err[0]
+    assert not (tmp_path / "x").exists()  # refused before any work
+
+
+def test_huge_grid_is_refused_with_its_memory_estimate(capsys, tmp_path):
+    from warp_critic.cli import main
+
+    assert main(["analyze", "landscape", "--out", str(tmp_path / "x"), "--grid", "100000"]) == 2
+    (err,) = capsys.readouterr().err.strip().splitlines()
+    assert "--grid" in err and "needs about" in err and "available" in err
+
+
+def test_default_scene_is_found_from_any_directory(tmp_path, monkeypatch, capsys):
+    from warp_critic.cli import main
+
+    monkeypatch.chdir(tmp_path)  # no scenes/ here: the scene comes from the installed package
+    assert LandscapeConfig().scene.is_file()
+    code = main(["analyze", "landscape", "--out", "o", "--iterations", "1", "--grid", "3", "--horizon", "3",
+                 "--inits-per-state", "1", "--sup-fit-steps", "1"])
+    assert code == 0, capsys.readouterr().err
+    assert (tmp_path / "o" / "landscape.npz").is_file()

@@ -79,14 +79,12 @@ def write_recording(path, cfg, axis, values, grads, goals, optima, trace_new, ou
 
 
 def write_figures(out: Path, cfg, axis, values, grads, goals, optima, trace_new, init_states, fractions):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure  # no pyplot: no global backend or figure state
 
     names = goal_names(len(goals))
     G = len(goals)
-    fig, axes = plt.subplots(G, 3, figsize=(12, 4 * G), squeeze=False)
+    fig = Figure(figsize=(12, 4 * G))
+    axes = fig.subplots(G, 3, squeeze=False)
     T1, T2 = np.meshgrid(axis, axis, indexing="ij")
     ext = [axis[0], axis[-1], axis[0], axis[-1]]
     for gi in range(G):
@@ -104,9 +102,9 @@ def write_figures(out: Path, cfg, axis, values, grads, goals, optima, trace_new,
             ax.set_ylabel("theta_2 (N)")
     fig.tight_layout()
     fig.savefig(out / "landscape.png", dpi=90)
-    plt.close(fig)
 
-    fig, ax = plt.subplots(figsize=(6, 6))
+    fig = Figure(figsize=(6, 6))
+    ax = fig.subplots()
     K = trace_new.shape[0]
     colors = np.repeat(np.arange(K), trace_new.shape[1])
     sc = ax.scatter(trace_new[..., 0].ravel(), trace_new[..., 1].ravel(), c=colors, cmap="viridis", s=6)
@@ -126,4 +124,3 @@ def write_figures(out: Path, cfg, axis, values, grads, goals, optima, trace_new,
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(out / "exploration.png", dpi=90)
-    plt.close(fig)
