@@ -32,11 +32,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
       help=f"policy parameters (constant forces) span [-R, R]^2 N (> 0; default {d.range})")
     A("--seed", type=int, default=d.seed, metavar="S", help=f"random seed (default {d.seed})")
     A("--device", type=str, default=d.device, metavar="DEV", help=f"cpu, cuda or auto (default {d.device})")
-    A("--horizon", type=int, default=d.horizon, metavar="T", help=f"control steps per rollout (>= 1; default {d.horizon})")
+    A("--horizon", type=int, default=d.horizon, metavar="T",
+      help=f"control steps per rollout (>= 1; default {d.horizon})")
     A("--dt", type=float, default=d.dt, metavar="S", help=f"physics time step in s (> 0; default {d.dt})")
     A("--substeps", type=int, default=d.substeps, metavar="N",
       help=f"physics steps per control step (>= 1; default {d.substeps})")
-    A("--alpha", type=float, default=d.alpha, metavar="LR", help=f"inner policy learning rate of ours (> 0; default {d.alpha})")
+    A("--alpha", type=float, default=d.alpha, metavar="LR",
+      help=f"inner policy learning rate of ours (> 0; default {d.alpha})")
     A("--lr", type=float, default=d.lr, metavar="LR", help=f"Adam learning rate of both critics (> 0; default {d.lr})")
     A("--inits-per-state", type=int, default=d.inits_per_state, metavar="K",
       help=f"random policy initialisations per initial state (worlds = 2K; >= 1; default {d.inits_per_state})")
