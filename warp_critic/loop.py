@@ -26,7 +26,7 @@ from typing import Any, Callable
 import torch
 
 from .errors import DivergenceError, FieldError, UserError
-from .rundir import RunDir
+from .rundir import RunDir, _fault_point
 from .runtime import restore_rng, rng_state, seed_everything, set_threads
 from .task import RUNTIME_FIELDS, Task, TaskConfig, build_task, check_fields, load_task_scene
 
@@ -193,12 +193,15 @@ class Session:
                 history.append(row)
                 metrics_file.write(_json_line(row))
                 metrics_file.flush()
+                _fault_point("metrics-row")
                 info = IterationInfo(it, row, result, task.goal_index)
                 for cb in callbacks:
                     cb(info)
-                bar.set_postfix_str(f"{describe(row)} {row['seconds']:.2f}s/it", refresh=False)
+                bar.set_description_str(f"{describe(row)} {row['seconds']:.2f}s/it", refresh=False)
                 bar.update(1)
                 if (it + 1) % cfg.checkpoint_every == 0 or it + 1 == cfg.iterations:
+                    if recorder is not None:  # on disk before the checkpoint: a crash loses nothing it covers
+                        recorder.flush()
                     self.checkpoint(it, state(), history)
         except KeyboardInterrupt as e:
             if isinstance(e, Interrupted):
@@ -278,4 +281,4 @@ def progress_bar(total: int, start: int = 0, enabled: bool = True, desc: str | N
     tty = sys.stderr.isatty()
     return tqdm(total=total, initial=start, disable=not enabled, desc=desc or "", dynamic_ncols=tty, ascii=not tty,
                 file=sys.stderr if tty else _Lines(sys.stderr), mininterval=0.1 if tty else 5.0,
-                leave=True, bar_format="[{bar:24}] {n_fmt}/{total_fmt} {desc}{postfix} [{elapsed}<{remaining}]")
+                leave=True, bar_format="[{bar:24}] {n_fmt}/{total_fmt} {desc} [{elapsed}<{remaining}]")

@@ -213,6 +213,10 @@ class TrainingRecorder:
                 self.rec.line_strips3d(f"{prefix}/goal{gi}/skeleton", [poses[t, w, :, :3]], colors=[color])
         self.rec.reset_time()
 
+    def flush(self) -> None:
+        """Wait until everything logged so far is written to the file."""
+        self.rec.stream.flush()
+
     def stream_static_strip(self, entity: str, points: np.ndarray, color) -> None:
         self.rec.stream.log(entity, rr.LineStrips3D([points], colors=[color]), static=True)
 

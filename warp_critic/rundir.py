@@ -57,14 +57,38 @@ class RunExistsError(UserError):
 # atomic writes
 # ------------------------------------------------------------------------------------------------
 
+FAULT_ENV = "WARP_CRITIC_FAULT"  # fault injection for the tests: "<file name>:<n>"
+_writes: dict[str, int] = {}
+
+
+def _fault_point(name: str) -> None:
+    """Kill this process (SIGKILL, as a crash or an OOM kill would) at the n-th write of ``name`` when
+    ``$WARP_CRITIC_FAULT`` asks for it: how the fault tests interrupt a run at an exact point."""
+    spec = os.environ.get(FAULT_ENV)
+    if not spec:
+        return
+    _writes[name] = _writes.get(name, 0) + 1
+    target, _, n = spec.rpartition(":")
+    if target == name and n.isdigit() and _writes[name] == int(n):
+        import signal
+
+        os.kill(os.getpid(), signal.SIGKILL)
+
+
+_UMASK = os.umask(0)
+os.umask(_UMASK)
+
+
 @contextlib.contextmanager
 def _atomic(path: Path):
     """Yield a temporary path next to ``path``; on success it replaces ``path``, on failure it is removed."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
+    os.chmod(tmp, 0o666 & ~_UMASK)  # an ordinary file, not mkstemp's private 0600
     try:
         yield Path(tmp)
+        _fault_point(path.name)  # written, not yet in place: the worst moment to die
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -238,6 +262,9 @@ class RunDir:
             with os.fdopen(fd, "w") as f:
                 f.write(json.dumps(me))
             self._locked = True
+            for stale in self.path.glob(".*.tmp"):  # half-written files of a killed process
+                with contextlib.suppress(OSError):
+                    stale.unlink()
             return
         raise UserError(f"run directory {self.path}: cannot take over its lock")
 
