@@ -8,18 +8,20 @@ The rollout: open-loop joint torques ``tau_t`` (a leaf tensor), semi-implicit Eu
 ``dt`` in both, joint damping on, gravity on, loss ``sum_t <w_t, q_t>``; one backward pass to the
 torques and the initial state. A world-step is one physics step of one world.
 
-Usage: ``python tools/bench_dynamics.py [--worlds 1 64 512] [--horizon 100] [--device cpu]``
+Usage: ``python tools/bench_dynamics.py [--worlds 1,64,512] [--horizon 100] [--device cpu]``
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+import typing
 from pathlib import Path
 
 import torch
-import warp as wp
 
+PROG = "bench_dynamics"
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -90,16 +92,35 @@ def bench_drm(worlds: int, horizon: int, dt: float) -> float:
     return worlds * horizon / (time.perf_counter() - t0)
 
 
-def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--worlds", type=int, nargs="+", default=[1, 64, 512], help="world counts")
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> typing.NoReturn:
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        sys.exit(2)
+
+
+def _int_list(text: str) -> list[int]:
+    try:
+        values = [int(x.strip()) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
+    if not values or min(values) < 1:
+        raise argparse.ArgumentTypeError(f"expected world counts >= 1, got {text!r}")
+    return values
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
+    p.add_argument("--worlds", type=_int_list, default=[1, 64, 512], help="world counts, e.g. 1,64,512")
     p.add_argument("--horizon", type=int, default=100, help="physics steps per rollout")
     p.add_argument("--dt", type=float, default=0.0025, help="time step (s)")
     p.add_argument("--device", default="cpu", help="cpu or cuda for Newton (the paper's model runs on CPU)")
     p.add_argument("--no-reference", action="store_true", help="skip the paper's model (e.g. for 4096 worlds on GPU)")
-    args = p.parse_args()
-    wp.config.quiet = True
-    torch.set_num_threads(max(1, torch.get_num_threads()))
+    args = p.parse_args(argv)
+    from warp_critic import runtime
+    from warp_critic.errors import UserError
+
+    # torch's default thread count: the paper's model (torch autograd) is the reference here
+    runtime.init(threads=0)
     import logging
     logging.getLogger().setLevel(logging.ERROR)
 
@@ -107,13 +128,18 @@ def main() -> None:
           f"(torch threads: {torch.get_num_threads()}, newton device: {args.device})")
     print(f"{'worlds':>7} | {'warp-critic fwd+bwd':>20} | {'warp-critic fwd':>16} | {'paper model fwd+bwd':>20} | {'ratio':>6}")
     for n in args.worlds:
-        fb, fw = bench_newton(n, args.horizon, args.dt, args.device)
+        try:
+            fb, fw = bench_newton(n, args.horizon, args.dt, args.device)
+        except UserError as e:
+            print(f"{PROG}: error: {e}", file=sys.stderr)
+            return 2
         if args.no_reference:
             print(f"{n:>7} | {fb:>20,.0f} | {fw:>16,.0f} | {'-':>20} | {'-':>6}")
         else:
             ref = bench_drm(n, args.horizon, args.dt)
             print(f"{n:>7} | {fb:>20,.0f} | {fw:>16,.0f} | {ref:>20,.0f} | {fb / ref:>5.1f}x")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -20,17 +20,57 @@ from __future__ import annotations
 
 import argparse
 import sys
+import typing
 
 import numpy as np
 import torch
 
+PROG = "diagnose_metatest"
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> typing.NoReturn:
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        sys.exit(2)
+
+
+def _int_list(text: str) -> list[int]:
+    try:
+        return [int(x.strip()) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
+
+
+def _user_error(e) -> str:
+    from warp_critic.errors import FieldError
+
+    if isinstance(e, FieldError):
+        return f"--{e.field.replace('_', '-')}: {e.problem}"
+    return str(e)
+
+
+def _training_goals(run_dir: str) -> int | None:
+    """How many training goals the run has (from its ``config.json``); ``None`` if unknown."""
+    import json
+    from pathlib import Path
+
+    from warp_critic.errors import UserError
+
+    if not Path(run_dir).is_dir():
+        raise UserError(f"{run_dir}: run directory not found")
+    try:
+        return len(json.loads((Path(run_dir) / "config.json").read_text())["goals"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None  # meta-test's set-up reports what is wrong with the run
+
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
     p.add_argument("run_dir")
     p.add_argument("--goal-std", type=float, default=0.1, help="0 = the training goals themselves")
     p.add_argument("--goal-noise", default="per-joint", choices=["per-joint", "distance"])
-    p.add_argument("--around", default="0,1", help="training goals to use / sample around ('' = all)")
+    p.add_argument("--around", type=_int_list, default=[0, 1],
+                   help="training goals to use / sample around, e.g. 0,1 ('' = all)")
     p.add_argument("--num-goals", type=int, default=10)
     p.add_argument("--inits", type=int, default=5)
     p.add_argument("--steps", type=int, default=None, help="policy steps (default: as meta-test, the run's inner steps x policy lifetime)")
@@ -39,10 +79,7 @@ def main(argv=None) -> int:
     p.add_argument("--reach-iterations", type=int, default=150)
     args = p.parse_args(argv)
 
-    from warp_critic.cli import init_warp_quietly
-
-    init_warp_quietly()
-    torch.set_num_threads(1)
+    from warp_critic import runtime
     from warp_critic.errors import UserError
     from warp_critic.inner import inner_update, policy_fn
     from warp_critic.networks import MLPPolicy
@@ -50,35 +87,32 @@ def main(argv=None) -> int:
     from warp_critic.rollout import rollout
     from warp_critic.scene import Variant
     from warp_critic.simulator import Simulator
-    from warp_critic.train import load_checkpoint
 
+    around = args.around or None
     try:
-        around = [int(i) for i in args.around.split(",") if i.strip()] or None
-    except ValueError:
-        around = [-1]
-    try:
-        n_train = len(load_checkpoint(args.run_dir)["config"]["goals"])
+        runtime.init()
+        n_train = _training_goals(args.run_dir)
         # goal std 0: one goal per training goal named in --around (sampling with std 0 returns them)
-        num_goals = (len(around) if around else n_train) if args.goal_std == 0 else args.num_goals
+        num_goals = (len(around) if around else n_train or args.num_goals) if args.goal_std == 0 else args.num_goals
         m = setup_meta_test(TestConfig(run_dir=args.run_dir, num_goals=num_goals, goal_std=args.goal_std,
                                        goal_noise=args.goal_noise, around=around, inits=args.inits,
                                        policy_steps=args.steps, seed=args.seed, device="cpu"))
     except UserError as e:
-        print(f"diagnose_metatest: error: {e}", file=sys.stderr)
+        print(f"{PROG}: error: {_user_error(e)}", file=sys.stderr)
         return 2
-    cfg, scene, goals, goal, sim, norm, critic = m.cfg, m.scene, m.goals, m.goal, m.sim, m.norm, m.critic
-    params, q0, qd0, steps = m.params, m.q0, m.qd0, m.steps
+    scene, goals, goal, sim, norm, critic = m.scene, m.goals, m.goal, m.sim, m.norm, m.critic
+    params, q0, qd0, steps, alpha, horizon = m.params, m.q0, m.qd0, m.steps, m.alpha, m.horizon
     G, K = goals.shape[0], m.inits
 
     def fmt(t: torch.Tensor) -> str:
         return np.array2string(t.numpy(), precision=3, floatmode="fixed", max_line_width=200)
 
     print(f"{args.run_dir}: {G} goals x {K} inits, goal std {args.goal_std} ({args.goal_noise}), "
-          f"alpha {cfg.alpha}, {steps} policy steps")
+          f"alpha {alpha}, {steps} policy steps")
     for step in range(1, steps + 1):
-        params, _ = inner_update(critic, MLPPolicy(norm), params, sim, q0, qd0, goal, horizon=cfg.horizon,
-                                 alpha=cfg.alpha, steps=1, create_graph=False)
-        traj = rollout(sim, policy_fn(MLPPolicy(norm), params), q0, qd0, cfg.horizon)
+        params, _ = inner_update(critic, MLPPolicy(norm), params, sim, q0, qd0, goal, horizon=horizon,
+                                 alpha=alpha, steps=1, create_graph=False)
+        traj = rollout(sim, policy_fn(MLPPolicy(norm), params), q0, qd0, horizon)
         sq = (traj.q[-1] - goal) ** 2
         sat = (traj.tau.abs() / norm.max_torque > 0.9).float().mean((0, 1))
         print(f"step {step}: mean {sq.sum(-1).mean():.4f}  per joint {fmt(sq.mean(0))}\n"
@@ -89,14 +123,14 @@ def main(argv=None) -> int:
         print(f"  goal {i:2d} {fmt(goals[i])}  {per[i].mean():.4f}  {per[i].max() - per[i].min():.4f}")
 
     if args.reachability:
-        dsim = Simulator(scene, [Variant()] * G, dt=cfg.dt, substeps=cfg.substeps, device="cpu",
-                         differentiable=True, gravity=cfg.gravity)
-        u = torch.zeros(cfg.horizon, G, scene.dof, requires_grad=True)
+        dsim = Simulator(scene, [Variant()] * G, dt=sim.dt, substeps=sim.substeps, device="cpu",
+                         differentiable=True, gravity=sim.gravity)
+        u = torch.zeros(horizon, G, scene.dof, requires_grad=True)
         opt = torch.optim.Adam([u], lr=0.1)
         for _ in range(args.reach_iterations):
-            t = iter(range(cfg.horizon))
+            t = iter(range(horizon))
             traj = rollout(dsim, lambda q, qd: norm.max_torque * torch.tanh(u[next(t)]), dsim.zeros(),
-                           dsim.zeros(), cfg.horizon, differentiable=True)
+                           dsim.zeros(), horizon, differentiable=True)
             err = ((traj.q[-1] - goals) ** 2).sum(-1)
             opt.zero_grad()
             err.sum().backward()

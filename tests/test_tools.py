@@ -1,0 +1,326 @@
+"""The scripts under tools/ and the package code they are thin over (protocol, presets)."""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from warp_critic.errors import FieldError, UserError
+
+ROOT = Path(__file__).resolve().parents[1]
+REACHER = str(ROOT / "scenes" / "reacher.usda")
+PAPER = Path("/work/shared/paper/model_based_meta_learning_of_critics.tex")
+
+
+def load_tool(name: str):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    return tool
+
+
+def tiny_cfg(out: Path, **kw):
+    from warp_critic.train import TrainConfig
+
+    cfg = TrainConfig(scene=REACHER, goals=[[0.5, 0.3], [-0.4, 0.2]], worlds_per_goal=2, horizon=6,
+                      iterations=3, device="cpu", out=str(out), checkpoint_every=1, record_every=2)
+    for k, v in kw.items():
+        setattr(cfg, k, v)
+    return cfg
+
+
+def meta_train(cfg):
+    from warp_critic.train import meta_train as train
+
+    return train(cfg, progress=False)
+
+
+def saved_config(run_dir: Path) -> dict:
+    return json.loads((Path(run_dir) / "config.json").read_text())
+
+
+# ------------------------------------------------------------------------------------------------
+# the tools (moved here from tests/test_train.py; every assertion kept, lists now comma-separated)
+# ------------------------------------------------------------------------------------------------
+
+def test_diagnose_tool_runs_on_a_run_directory(tmp_path, capsys):
+    tool = load_tool("diagnose_metatest")
+    out = tmp_path / "run"
+    meta_train(tiny_cfg(out, iterations=1, horizon=30))  # 0.3 s: goals reachable
+    assert tool.main([str(out), "--goal-std", "0", "--around", "", "--inits", "2", "--steps", "2",
+                      "--reachability", "--reach-iterations", "60"]) == 0
+    text = capsys.readouterr().out
+    assert "step 2: mean" in text and "goal  1" in text
+    reach = [float(x) for x in text.split("final sq. error per goal")[1].strip(" []\n").split()]
+    # zero torque leaves the arm at home (error ||g||^2 = 0.34, 0.2); 60 Adam steps must do far better
+    assert len(reach) == 2 and reach[0] < 0.2 * 0.34 and reach[1] < 0.2 * 0.2, reach
+    assert tool.main([str(tmp_path / "missing")]) == 2
+    assert tool.main([str(out), "--around", "7"]) == 2
+    assert "--around" in capsys.readouterr().err
+
+
+def test_paper_table_tool_pools_seeds_and_reports_the_mean_over_joints(tmp_path, capsys):
+    from warp_critic.metatest import TestConfig, meta_test
+
+    tool = load_tool("paper_table")
+    runs = [tmp_path / "s0", tmp_path / "s1"]
+    for seed, out in enumerate(runs):
+        meta_train(tiny_cfg(out, iterations=1, seed=seed))
+    table_json = tmp_path / "table.json"
+    assert tool.main([str(r) for r in runs] + ["--stds", "0.1,0.3", "--num-goals", "2", "--inits", "2",
+                                               "--around", "", "--device", "cpu", "--out", str(table_json)]) == 0
+    text = capsys.readouterr().out
+    assert "| per-joint | MSE |" in text and "| distance | sum sq. |" in text
+    table = json.loads(table_json.read_text())
+    assert len(table["cells"]) == 4
+    for cell in table["cells"]:
+        assert cell["n"] == 2 * 2 * 2 and cell["dof"] == 2
+        assert cell["sq_mean"] == pytest.approx(2 * cell["mse_mean"])
+        assert cell["mse_mean"] == pytest.approx(np.mean(cell["mse_mean_per_run"]))  # equal-sized runs
+    # each run's share is exactly that run's own meta-test on the same goals and inits
+    cell = next(c for c in table["cells"] if c["reading"] == "distance" and c["std"] == 0.3)
+    alone = meta_test(TestConfig(run_dir=str(runs[1]), num_goals=2, inits=2, goal_std=0.3, goal_noise="distance",
+                                 seed=table["seed"], device="cpu"), progress=None)
+    assert cell["mse_mean_per_run"][1] == pytest.approx(alone["mse_mean"])
+    assert tool.main([str(tmp_path / "missing")]) == 2
+    assert "run directory not found" in capsys.readouterr().err
+
+    # the saved table formats again through the package, as printed, with the paper's row (std 0.1, 0.3)
+    from warp_critic.protocol import ProtocolResult, format_table
+
+    again = "\n".join(format_table(ProtocolResult.from_dict(table)))
+    assert again in text and "| paper (Table 1) | MSE | 0.02(0.02) | 0.05(0.04) |" in again
+
+
+def test_benchmark_quick_version_trains_two_seeds_and_prints_the_pooled_table(tmp_path, capsys):
+    tool = load_tool("bench_metatrain")
+    assert tool.main(["--quick", "--scenes", "reacher", "--seeds", "0,3", "--iterations", "2",
+                      "--device", "cpu", "--runs-dir", str(tmp_path)]) == 0
+    text = capsys.readouterr().out
+    assert "reacher seed 0: meta-train 2 iterations" in text and "reacher seed 3: meta-train 2 iterations" in text
+    assert "2 seed(s) x 2 goals x 1 inits" in text and "| per-joint | MSE |" in text
+    assert "paper (Table 1)" not in text  # the paper's row is the KUKA's
+    seeds = [saved_config(tmp_path / d)["seed"] for d in ("bench-reacher-quick", "bench-reacher-quick-seed3")]
+    assert seeds == [0, 3]
+    # the preset's settings reached the runs (config field names)
+    from warp_critic.presets import preset
+
+    for key, value in preset("reacher").items():
+        if key != "iterations":
+            assert saved_config(tmp_path / "bench-reacher-quick")[key] == value, key
+
+
+def test_tools_print_one_line_errors_with_exit_code_2(tmp_path, capsys):
+    paper_table, bench = load_tool("paper_table"), load_tool("bench_metatrain")
+    # a bad value is refused by the library under its field name; the tool names its flag
+    assert paper_table.main([str(tmp_path), "--goal-noise", "sphere"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("paper_table: error: --goal-noise: ") and err.count("\n") == 1 and "sphere" in err
+    assert paper_table.main([str(tmp_path), "--stds", "0.1,-0.2"]) == 2
+    assert capsys.readouterr().err.startswith("paper_table: error: --stds: ")
+    # argparse's own errors are one line too
+    for tool, argv in ((paper_table, ["x", "--stds", "0.1,abc"]), (bench, ["--seeds", "0", "1"]),
+                       (bench, ["--scenes", "pendulum"])):
+        with pytest.raises(SystemExit) as e:
+            tool.main(argv)
+        assert e.value.code == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and ": error: " in err, err
+
+
+def test_no_tool_deletes_run_directories_or_edits_sys_path():
+    for path in sorted((ROOT / "tools").glob("*.py")):
+        src = path.read_text()
+        assert "rmtree" not in src and "os.remove" not in src, path.name
+        assert "sys.path" not in src, path.name
+        if path.name != "make_scenes.py":  # one list syntax: A,B,C (only positional run directories repeat)
+            assert 'nargs="*"' not in src and src.count('nargs="+"') == src.count('"run_dirs", nargs="+"'), path.name
+
+
+def test_bench_baselines_refuses_existing_directories_that_are_not_its_runs(tmp_path, capsys):
+    tool = load_tool("bench_baselines")
+    # a directory with someone's files: refused in one line, nothing touched
+    (tmp_path / "reacher-ddpg").mkdir()
+    (tmp_path / "reacher-ddpg" / "notes.txt").write_text("mine")
+    argv = ["--scenes", "reacher", "--methods", "ddpg", "--iterations", "2", "--num-goals", "1", "--inits", "1",
+            "--stds", "0.1", "--device", "cpu"]
+    assert tool.main(argv + ["--out-root", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("bench_baselines: error: ") and err.count("\n") == 1 and "never deleted" in err
+    assert (tmp_path / "reacher-ddpg" / "notes.txt").read_text() == "mine"
+    assert tool.plan_run(tmp_path / "nothing-here", "ddpg", 2) == "train"
+    # bad meta-test settings are refused before any training
+    assert tool.main(argv + ["--out-root", str(tmp_path / "new"), "--goal-noise", "sphere"]) == 2
+    assert "--goal-noise" in capsys.readouterr().err and not (tmp_path / "new").exists()
+    # --reuse of a missing run: one line
+    assert tool.main(["--scenes", "reacher", "--methods", "ddpg", "--reuse", "--out-root", str(tmp_path / "none")]) == 2
+    assert "run directory not found" in capsys.readouterr().err
+
+
+def test_bench_baselines_trains_then_only_meta_tests_a_complete_run(tmp_path, capsys):
+    tool = load_tool("bench_baselines")
+    argv = ["--scenes", "reacher", "--methods", "ddpg", "--iterations", "2", "--num-goals", "1", "--inits", "1",
+            "--stds", "0.1", "--device", "cpu", "--out-root", str(tmp_path)]
+    assert tool.main(argv) == 0
+    run = tmp_path / "reacher-ddpg"
+    stamp = (run / "checkpoint.pt").stat().st_mtime_ns
+    assert tool.plan_run(run, "ddpg", 2) == "complete" and tool.plan_run(run, "ddpg", 3) == "resume"
+    with pytest.raises(UserError, match="not meta-critic"):
+        tool.plan_run(run, "meta-critic", 2)
+    capsys.readouterr()
+    assert tool.main(argv) == 0
+    assert "is complete, meta-test only" in capsys.readouterr().out
+    assert (run / "checkpoint.pt").stat().st_mtime_ns == stamp
+    rows = json.loads((tmp_path / "bench_baselines.json").read_text())
+    assert rows[0]["run"] == "reacher-ddpg" and rows[0]["iterations"] == 2 and "0.1" in rows[0]["meta_test"]
+    # more iterations: the run is resumed, not started again (its first iterations stay)
+    first = rows[0]["task_loss_first"]
+    assert tool.main([*argv[:argv.index("--iterations")], "--iterations", "3", *argv[argv.index("--iterations") + 2:]]) == 0
+    assert "== resume ddpg on reacher: 3 iterations" in capsys.readouterr().out
+    rows = json.loads((tmp_path / "bench_baselines.json").read_text())
+    assert rows[0]["iterations"] == 3 and rows[0]["task_loss_first"] == first
+
+
+# ------------------------------------------------------------------------------------------------
+# warp_critic.protocol
+# ------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("field, value", [
+    ("goal_noise", ["sphere"]), ("goal_noise", "per-joint"), ("goal_noise", []),
+    ("stds", [0.1, -0.1]), ("stds", [float("nan")]), ("stds", [float("inf")]), ("stds", []), ("stds", ["0.1"]),
+    ("around", [-1]), ("around", "0,1"), ("num_goals", 0), ("inits", 1.5), ("seed", -1),
+])
+def test_protocol_refuses_bad_settings_by_field_name_before_any_work(tmp_path, field, value):
+    from warp_critic.protocol import ProtocolConfig, run_protocol
+
+    pc = ProtocolConfig(run_dirs=[str(tmp_path / "missing")], **{field: value})
+    with pytest.raises(FieldError) as e:
+        run_protocol(pc, log=lambda line: pytest.fail(f"worked before refusing: {line}"))
+    assert e.value.field == field and "--" not in str(e.value)
+
+
+def test_protocol_refuses_bad_run_directories_before_any_work(tmp_path):
+    from warp_critic.protocol import ProtocolConfig, run_protocol, validate
+
+    with pytest.raises(FieldError) as e:
+        validate(ProtocolConfig(run_dirs=[]))
+    assert e.value.field == "run_dirs"
+    with pytest.raises(UserError, match="run directory not found"):
+        run_protocol(ProtocolConfig(run_dirs=[str(tmp_path / "missing")]))
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(UserError, match="no checkpoint.pt"):
+        run_protocol(ProtocolConfig(run_dirs=[str(tmp_path / "empty")]))
+
+
+def test_protocol_pools_runs_and_checks_training_goal_indices(tmp_path):
+    from warp_critic.protocol import ProtocolConfig, ProtocolResult, format_table, run_protocol
+
+    runs = [tmp_path / "a", tmp_path / "b"]
+    for seed, out in enumerate(runs):
+        meta_train(tiny_cfg(out, iterations=1, seed=seed))
+    with pytest.raises(FieldError) as e:
+        run_protocol(ProtocolConfig(run_dirs=[str(r) for r in runs], around=[0, 2]))
+    assert e.value.field == "around" and "2 training goals" in e.value.problem
+    lines = []
+    res = run_protocol(ProtocolConfig(run_dirs=[str(r) for r in runs], stds=[0.0, 0.2], goal_noise=["distance"],
+                                      around=[1], num_goals=2, inits=1, device="cpu", write_run_json=False),
+                       log=lines.append)
+    assert len(lines) == 4 and all("distance std" in x for x in lines)
+    assert [(c.reading, c.std, c.n, c.dof) for c in res.cells] == [("distance", 0.0, 4, 2), ("distance", 0.2, 4, 2)]
+    for c in res.cells:
+        assert c.sq_mean == pytest.approx(2 * c.mse_mean) and len(c.mse_mean_per_run) == 2
+    assert not list(runs[0].glob("table-*.json"))
+    assert ProtocolResult.from_dict(json.loads(json.dumps(res.to_dict()))) == res
+    text = "\n".join(format_table(res, paper=None, per_run=False))
+    assert text.count("| distance |") == 2 and "per run" not in text
+    with pytest.raises(FieldError):
+        format_table(res, paper="sac")
+
+
+def _tex_table(label: str) -> tuple[list[float], dict[str, list[tuple[float, float]]]]:
+    """Columns and rows ``mean(std)`` of the paper's LaTeX table ``label``."""
+    tex = PAPER.read_text()
+    end = tex.index("\\label{" + label + "}")
+    body = tex[tex.rindex("\\begin{tabular}", 0, end):end]
+    lines = [x.strip().removesuffix("\\\\").strip() for x in body.splitlines() if "&" in x]
+    columns = [float(c.split("=")[1]) for c in lines[0].split("&")[1:]]
+    rows = {}
+    for line in lines[1:]:
+        cells = [c.strip() for c in line.split("&")]
+        method = {"DDPG": "ddpg", "Meta Critic": "meta-critic"}.get(cells[0], "ours")
+        rows[method] = [tuple(float(x) for x in re.fullmatch(r"(?:\\textbf\{)?([\d.]+)\(([\d.]+)\)\}?", c).groups())
+                        for c in cells[1:]]
+    return columns, rows
+
+
+@pytest.mark.skipif(not PAPER.is_file(), reason="the paper's LaTeX source is not on this machine")
+@pytest.mark.parametrize("label", ["table:gen_tasks_kuka", "table:gen_kuka_mass", "table:gen_kuka_link"])
+def test_paper_tables_are_the_papers_latex_tables(label):
+    from warp_critic.protocol import PAPER_METHODS, PAPER_TABLES
+
+    columns, rows = _tex_table(label)
+    _, table = PAPER_TABLES[label]
+    assert set(rows) == set(table) == set(PAPER_METHODS)
+    for method, values in rows.items():
+        assert list(table[method]) == columns
+        assert list(table[method].values()) == values, method
+
+
+def test_paper_table1_has_the_ten_stds():
+    from warp_critic.protocol import PAPER_TABLE1, TABLE1_STDS
+
+    assert TABLE1_STDS == (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
+    assert PAPER_TABLE1["ours"][0.1][0] == 0.02 and PAPER_TABLE1["ours"][0.4][0] == 0.07  # README, RESULTS.md
+
+
+def test_protocol_readings_are_meta_tests():
+    from warp_critic.metatest import TestConfig, meta_test  # noqa: F401  (the names the protocol uses)
+    from warp_critic.protocol import GOAL_NOISE, ProtocolConfig, check_settings
+
+    check_settings(ProtocolConfig(goal_noise=list(GOAL_NOISE)))
+    assert GOAL_NOISE == ("per-joint", "distance")
+    assert TestConfig().goal_noise in GOAL_NOISE
+
+
+# ------------------------------------------------------------------------------------------------
+# warp_critic.presets
+# ------------------------------------------------------------------------------------------------
+
+def test_presets_are_the_reported_settings_keyed_by_config_fields():
+    from warp_critic.baselines.ddpg import BaselineConfig
+    from warp_critic.presets import DESCRIPTIONS, EVALUATIONS, PRESETS, SCENES, evaluation, preset
+    from warp_critic.protocol import ProtocolConfig, check_settings
+    from warp_critic.train import TrainConfig
+
+    assert preset("kuka-table1") == {"critic_input": "relative", "start_std": 0.4, "home_starts": 2,
+                                     "iterations": 3000, "inner_steps": 3, "alpha": 3e-4, "lr": 3e-3}
+    assert preset("reacher") == {"iterations": 400, "inner_steps": 3, "alpha": 3e-4}
+    assert set(PRESETS) == set(DESCRIPTIONS) == set(SCENES) == set(EVALUATIONS)
+    train_fields = {f.name for f in dataclasses.fields(TrainConfig)}
+    baseline_fields = {f.name for f in dataclasses.fields(BaselineConfig)}
+    for name, settings in PRESETS.items():
+        fields = baseline_fields if "method" in settings else train_fields
+        assert set(settings) <= fields, (name, set(settings) - fields)
+        assert DESCRIPTIONS[name] and "\n" not in DESCRIPTIONS[name]
+        assert SCENES[name] is None or (ROOT / "scenes" / f"{SCENES[name]}.usda").is_file()
+        check_settings(ProtocolConfig(**evaluation(name)))
+        (BaselineConfig if "method" in settings else TrainConfig)(scene=REACHER, **preset(name))
+    # a copy: changing it leaves the preset alone
+    p = preset("kuka-table1")
+    p["iterations"] = 1
+    assert preset("kuka-table1")["iterations"] == 3000
+
+
+def test_unknown_preset_lists_the_known_ones():
+    from warp_critic.presets import PRESETS, evaluation, preset
+
+    for lookup in (preset, evaluation):
+        with pytest.raises(FieldError) as e:
+            lookup("kuka")
+        assert e.value.field == "preset" and all(name in e.value.problem for name in PRESETS)
