@@ -34,7 +34,7 @@ from .rollout import rollout
 from .rundir import RunDir, check_output_file, write_result
 from .runtime import seed_everything
 from .scene import Variant, load_scene
-from .simulator import Simulator
+from .simulator import STANDARD_GRAVITY, Simulator
 from .task import SerializableConfig, TaskConfig, check_fields, goals_tensor, max_torque_tensor, spec
 
 RESULT_KIND = "warp-critic/metatest-v1"
@@ -191,7 +191,7 @@ def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
     variant = Variant(ee_mass=tc.ee_mass, link_length=tc.link_length, link_scale=tc.link_scale)
     # differentiable=False: the model has no gradient buffers, a taped rollout is impossible.
     sim = Simulator(scene, [variant] * W, dt=cfg.dt, substeps=cfg.substeps, device=tc.device,
-                    differentiable=False, gravity=cfg.gravity if cfg.gravity is not None else 9.81)
+                    differentiable=False, gravity=cfg.gravity if cfg.gravity is not None else STANDARD_GRAVITY)
     dev = sim.torch_device
     norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale)
     critic, defaults = build_test_critic(ckpt, norm)

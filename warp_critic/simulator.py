@@ -17,6 +17,9 @@ from .errors import FieldError
 from .scene import Scene, Variant
 
 
+STANDARD_GRAVITY = 9.81  # m/s^2, along -z: a scene's gravity when it authors none
+
+
 def resolve_device(device: str) -> str:
     """``auto`` -> ``cuda`` when Warp and torch both see a GPU, else ``cpu``."""
     if device not in ("auto", "cpu", "cuda") and not device.startswith("cuda:"):
@@ -47,7 +50,7 @@ class Simulator:
     """
 
     def __init__(self, scene: Scene, variants: Sequence[Variant], *, dt: float, substeps: int = 1,
-                 device: str = "cpu", differentiable: bool = True, gravity: float = 9.81):
+                 device: str = "cpu", differentiable: bool = True, gravity: float = STANDARD_GRAVITY):
         if dt <= 0:
             raise FieldError("dt", f"must be > 0 (got {dt})")
         if substeps < 1:

@@ -31,10 +31,11 @@ from .errors import FieldError
 from .networks import Normalizer
 from .runtime import MAX_SEED, check_threads
 from .scene import Scene, Variant, load_scene
+from .simulator import STANDARD_GRAVITY
 
 # Used for a field that neither the user nor the scene sets.
 GENERIC_DEFAULTS: dict[str, Any] = dict(horizon=50, dt=0.01, substeps=1, qd_scale=5.0, alpha=1e-3, lr=3e-3,
-                                        gravity=9.81)
+                                        gravity=STANDARD_GRAVITY)
 DEVICES = ("auto", "cpu", "cuda")
 # Fields that say where/how a run executes, not what it computes: they may change on --resume.
 RUNTIME_FIELDS = ("out", "device", "resume", "cpu_threads", "checkpoint_every", "record_every", "iterations")
