@@ -199,3 +199,14 @@ def test_test_critic_rejects_broken_checkpoints():
     norm = Normalizer.from_limits(-torch.ones(2), torch.ones(2), torch.ones(2), 1.0)
     with pytest.raises(UserError, match="no usable Q"):
         baseline_networks.test_critic_from_checkpoint({"method": "ddpg", "dof": 2}, norm)
+
+
+def test_baseline_seeds_batched_equal_single_seed_runs(tmp_path):
+    # seeds' episodes share one simulator; each seed's agent, buffer and noise draw from its own seed
+    kw = dict(iterations=3, start_std=0.2, home_starts=1)
+    batched = train_ddpg(tiny_cfg(tmp_path / "b", "ddpg", seeds=[4, 1], **kw), progress=False)
+    single = train_ddpg(tiny_cfg(tmp_path / "s", "ddpg", seed=1, **kw), progress=False)
+    b, s = batched.seeds[1].metrics, single.metrics
+    for key in ("task_loss", "task_loss_explore", "critic_loss", "fresh_policy_loss", "alpha"):
+        assert [r.get(key) for r in b] == pytest.approx([r.get(key) for r in s], rel=1e-5), key
+    assert json.loads((tmp_path / "b" / "seed1" / "config.json").read_text())["seed"] == 1

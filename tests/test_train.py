@@ -11,6 +11,7 @@ import torch
 
 from warp_critic import bridge, train
 from warp_critic.cli import main
+from warp_critic.errors import UserError
 from warp_critic.rundir import load_checkpoint
 from warp_critic.train import TrainConfig
 from warp_critic.metatest import TestConfig, meta_test
@@ -267,3 +268,32 @@ def test_home_starts_keep_some_worlds_at_the_home_pose(tmp_path, capsys):
     assert main(["meta-train", REACHER, *TINY, "--start-std", "0.3", "--home-starts", "3",
                  "--out", str(tmp_path / "bad")]) == 2
     assert "--home-starts" in capsys.readouterr().err and not (tmp_path / "bad").exists()
+
+
+def test_seeds_batched_in_one_process_equal_single_seed_runs(tmp_path):
+    # three seeds share one simulator and one stacked critic; each seed's run directory holds what a
+    # run of that seed alone holds (random starts and two inner steps exercise every random draw)
+    extra = dict(iterations=3, inner_steps=2, start_std=0.2, home_starts=1)
+    batched = train.meta_train(tiny_cfg(tmp_path / "b", seeds=[0, 2, 5], **extra), progress=False)
+    assert [r.run_dir for r in batched.seeds] == [tmp_path / "b" / f"seed{s}" for s in (0, 2, 5)]
+    single = train.meta_train(tiny_cfg(tmp_path / "s2", seed=2, **extra), progress=False)
+    b, s = batched.seeds[1].metrics, single.metrics
+    for key in ("task_loss", "task_loss_before", "grad_norm"):
+        assert [r[key] for r in b] == pytest.approx([r[key] for r in s], rel=1e-5), key
+    ckb, cks = load_checkpoint(tmp_path / "b" / "seed2"), load_checkpoint(tmp_path / "s2")
+    assert ckb["config"]["seed"] == 2 and ckb["config"]["seeds"] is None
+    for k, v in cks["critic_state"].items():
+        assert torch.allclose(ckb["critic_state"][k], v, atol=1e-6), k
+    for k, v in cks["optimizer_state"]["state"].items():
+        assert torch.allclose(ckb["optimizer_state"]["state"][k]["exp_avg_sq"], v["exp_avg_sq"], atol=1e-9)
+    assert torch.equal(ckb["rng_state"], cks["rng_state"]) and torch.equal(ckb["torch_rng_state"], cks["torch_rng_state"])
+    # a seed of a batched run resumes on its own, and the batch resumes as a batch
+    alone = train.meta_train(tiny_cfg(tmp_path / "b" / "seed2", seed=2, resume=True, **{**extra, "iterations": 4}),
+                             progress=False)
+    assert [r["iteration"] for r in alone.metrics] == [0, 1, 2, 3]
+    with pytest.raises(UserError, match="different iterations"):
+        train.meta_train(tiny_cfg(tmp_path / "b", seeds=[0, 2, 5], resume=True, **{**extra, "iterations": 5}),
+                         progress=False)
+    again = train.meta_train(tiny_cfg(tmp_path / "b", seeds=[0, 5], resume=True, **{**extra, "iterations": 4}),
+                             progress=False)
+    assert [r["iteration"] for r in again.seeds[1].metrics] == [0, 1, 2, 3]

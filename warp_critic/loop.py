@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 import sys
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -27,8 +27,8 @@ import torch
 
 from .errors import DivergenceError, FieldError, UserError
 from .rundir import RunDir, _fault_point
-from .runtime import restore_rng, rng_state, seed_everything, set_threads
-from .task import RUNTIME_FIELDS, Task, TaskConfig, build_task, check_fields, load_task_scene
+from .runtime import restore_rng, seed_everything, set_threads
+from .task import RUNTIME_FIELDS, Task, TaskConfig, build_task, check_fields, check_memory, load_task_scene
 
 
 class Interrupted(KeyboardInterrupt):
@@ -55,6 +55,7 @@ class TrainResult:
     metrics: list[dict] = field(default_factory=list)
     model: Any = None  # the critic (ours) or the agent (baselines)
     config: TaskConfig | None = None
+    seeds: list["TrainResult"] = field(default_factory=list)  # every seed's result (a batched run)
 
 
 Callback = Callable[[IterationInfo], None]
@@ -82,33 +83,35 @@ def config_differences(saved: TaskConfig, requested: TaskConfig, given: set[str]
     return diffs
 
 
-class Session:
-    """One run of one method in its run directory (see the module docstring)."""
+class SeedRun:
+    """One seed's share of a session: its config, run directory, checkpoint, generator and files."""
 
-    def __init__(self, cfg: TaskConfig, *, differentiable: bool, given: set[str] | None = None):
+    def __init__(self, cfg: TaskConfig, given: set[str] | None):
         self.ckpt: dict | None = None
-        check_fields(cfg)
-        if cfg.resume:
-            cfg = self._resume_config(cfg, given)
-        scene = load_task_scene(cfg)
-        self.scene_hash = getattr(scene, "content_hash", None)
-        if self.ckpt is not None and self.ckpt.get("scene_hash") and self.scene_hash \
-                and self.ckpt["scene_hash"] != self.scene_hash:
-            raise FieldError("scene", f"{cfg.scene} differs in content from the scene the run in "
-                                      f"{cfg.out} was trained on")
-        if self.ckpt is None:
-            self.rundir = RunDir.create(cfg.out, cfg.method)
-        else:
+        self.rundir: RunDir | None = None
+        self.cfg = self._resume_config(cfg, given) if cfg.resume else cfg
+        self.gen: torch.Generator | None = None
+        self.global_rng: torch.Tensor | None = None  # torch's global RNG state after this seed's set-up
+        self.history: list[dict] = []
+        self.metrics_file = None
+        self.recorder = None
+        self.last_checkpoint = self.ckpt["iteration"] if self.ckpt is not None else None
+
+    @property
+    def start(self) -> int:
+        return 0 if self.ckpt is None else self.ckpt["iteration"] + 1
+
+    def claim(self, scene_hash: str | None) -> None:
+        """Create (new run) or lock (resume) the run directory; the scene content must match."""
+        cfg = self.cfg
+        if self.ckpt is not None:
+            if self.ckpt.get("scene_hash") and scene_hash and self.ckpt["scene_hash"] != scene_hash:
+                raise FieldError("scene", f"{cfg.scene} differs in content from the scene the run in "
+                                          f"{cfg.out} was trained on")
             self.rundir.lock()
-        self.cfg = cfg
-        try:
-            self.rundir.ensure_marker(cfg.method)
-            self.gen = seed_everything(cfg.seed)
-            self.task: Task = build_task(cfg, scene, differentiable=differentiable)
-        except BaseException:
-            self.close(failed=True)
-            raise
-        self.start = 0 if self.ckpt is None else self.ckpt["iteration"] + 1
+        else:
+            self.rundir = RunDir.create(cfg.out, cfg.method)
+        self.rundir.ensure_marker(cfg.method)
 
     def _resume_config(self, requested: TaskConfig, given: set[str] | None) -> TaskConfig:
         cls = type(requested)
@@ -118,7 +121,11 @@ class Session:
         ckpt = self.rundir.load_checkpoint(require=("config", "iteration", "method"))
         if ckpt["method"] != requested.method:
             raise UserError(f"run directory {requested.out}: holds a {ckpt['method']} run, not {requested.method}")
-        saved = cls.from_dict(ckpt["config"])
+        try:
+            saved = cls.from_dict(ckpt["config"])
+            check_fields(saved)
+        except (TypeError, UserError) as e:
+            raise UserError(f"run directory {requested.out}: its checkpoint holds an unusable config ({e})") from None
         diffs = config_differences(saved, requested, given)
         if diffs:
             raise UserError(f"resume: run directory {requested.out} was trained with other settings "
@@ -128,113 +135,197 @@ class Session:
         if iterations < done:
             raise FieldError("iterations", f"may only grow on resume: the run in {requested.out} has "
                                            f"{done} iterations done (got {iterations})")
-        if Path(saved.scene).name != Path(requested.scene).name and not Path(requested.scene).is_file():
+        if not Path(requested.scene).is_file():
             raise FieldError("scene", f"{requested.scene}: no such scene file")
         # a moved or copied run directory records where it now is; the scene is the one given now
         saved.iterations, saved.resume, saved.device, saved.out = iterations, True, requested.device, requested.out
-        saved.scene = requested.scene
+        saved.scene, saved.seeds = requested.scene, None
         if requested.cpu_threads is not None:
             saved.cpu_threads = requested.cpu_threads
         self.ckpt = ckpt
         return saved
 
-    # -- resume ------------------------------------------------------------------------------------
-    def restore(self) -> dict | None:
-        """The checkpoint to load the method's states from (RNG restored), or ``None`` for a new run."""
-        if self.ckpt is not None:
-            restore_rng(self.gen, self.ckpt)
-        return self.ckpt
+    def kept(self) -> str:
+        if self.last_checkpoint is None:
+            return f"no checkpoint was written yet in {self.rundir.path}"
+        return f"the checkpoint of iteration {self.last_checkpoint} in {self.rundir.path} is kept"
+
+
+def seed_configs(cfg: TaskConfig) -> list[TaskConfig]:
+    """One config per seed: ``cfg`` itself, or with ``seeds`` one copy per seed in ``OUT/seed<k>``."""
+    if not cfg.seeds:
+        return [cfg]
+    if len(set(cfg.seeds)) != len(cfg.seeds):
+        raise FieldError("seeds", f"must be distinct (got {cfg.seeds})")
+    out = cfg.out if cfg.out is not None else cfg.default_out()
+    return [replace(cfg, seed=s, seeds=None, out=str(Path(out) / f"seed{s}")) for s in cfg.seeds]
+
+
+class Session:
+    """One run of one method, for one seed or several seeds sharing one simulator (see the module
+    docstring). With ``S`` seeds the task holds ``S`` copies of the ``G x K`` worlds, seed-major."""
+
+    def __init__(self, cfg: TaskConfig, *, differentiable: bool, given: set[str] | None = None):
+        check_fields(cfg)
+        self.runs: list[SeedRun] = []
+        try:
+            for c in seed_configs(cfg):
+                self.runs.append(SeedRun(c, given))
+            starts = {r.start for r in self.runs}
+            if len(starts) > 1:
+                raise UserError("resume: the seeds' run directories are at different iterations "
+                                f"({', '.join(f'{r.cfg.out}: {r.start}' for r in self.runs)}); resume them one by one")
+            scene = None
+            for r in self.runs:
+                scene = load_task_scene(r.cfg)
+            self.scene_hash = getattr(scene, "content_hash", None)
+            if cfg.seeds:
+                check_memory(self.runs[0].cfg, scene.dof, copies=len(self.runs))
+            for r in self.runs:
+                r.claim(self.scene_hash)
+            self.task: Task = build_task(self.runs[0].cfg, scene, differentiable=differentiable, copies=len(self.runs))
+        except BaseException:
+            self.close(failed=True)
+            raise
+
+    @property
+    def cfg(self) -> TaskConfig:
+        return self.runs[0].cfg
+
+    @property
+    def start(self) -> int:
+        return self.runs[0].start
+
+    @property
+    def ckpt(self) -> dict | None:
+        return self.runs[0].ckpt
+
+    @property
+    def gen(self) -> torch.Generator:
+        return self.runs[0].gen
+
+    # -- set-up and resume -------------------------------------------------------------------------
+    def seed(self, i: int) -> torch.Generator:
+        """Seed everything for seed ``i`` (call right before building that seed's networks, so its
+        random draws are those of a single-seed run); returns its generator."""
+        run = self.runs[i]
+        run.gen = seed_everything(run.cfg.seed)
+        return run.gen
+
+    def seeded(self, i: int) -> None:
+        """Mark the end of seed ``i``'s set-up: its share of torch's global RNG state is saved."""
+        self.runs[i].global_rng = torch.get_rng_state()
+
+    def restore(self, i: int = 0) -> dict | None:
+        """Seed ``i``'s checkpoint to load the method's states from (RNG restored), or ``None``."""
+        run = self.runs[i]
+        if run.ckpt is not None:
+            restore_rng(run.gen, run.ckpt)
+            run.global_rng = torch.get_rng_state()
+        return run.ckpt
 
     # -- the loop ----------------------------------------------------------------------------------
-    def checkpoint(self, iteration: int, state: dict, history: list[dict]) -> None:
+    def _checkpoint(self, run: SeedRun, iteration: int, state: dict) -> None:
         scene = self.task.scene
-        self.rundir.save_checkpoint({
-            "method": self.cfg.method, "scene": scene.name, "scene_path": str(self.cfg.scene),
-            "scene_hash": self.scene_hash, "dof": scene.dof, "config": self.cfg.to_dict(),
-            "iteration": iteration, **rng_state(self.gen), **state,
-            "metrics": _plain(history[-1]) if history else {},
+        torch_rng = run.global_rng if run.global_rng is not None else torch.get_rng_state()
+        run.rundir.save_checkpoint({
+            "method": run.cfg.method, "scene": scene.name, "scene_path": str(run.cfg.scene),
+            "scene_hash": self.scene_hash, "dof": scene.dof, "config": run.cfg.to_dict(),
+            "iteration": iteration, "rng_state": run.gen.get_state(), "torch_rng_state": torch_rng, **state,
+            "metrics": _plain(run.history[-1]) if run.history else {},
         })
-        self.last_checkpoint = iteration
+        run.last_checkpoint = iteration
 
-    def run(self, step: Callable[[int], tuple[dict, Any]], state: Callable[[], dict], *,
+    def run(self, step: Callable[[int], tuple[list[dict], Any]], state: Callable[[int], dict], *,
             callbacks: list[Callback] | None = None, progress: bool = True, record: bool = True,
             describe: Callable[[dict], str] = lambda row: f"task {row['task_loss']:.4f}") -> TrainResult:
-        """Iterate ``step`` from the resume point to ``cfg.iterations``; returns the metrics."""
-        cfg, rd, task = self.cfg, self.rundir, self.task
+        """Iterate ``step`` from the resume point to the last iteration.
+
+        ``step(it)`` returns one metrics row per seed and the iteration's result (trajectories over
+        all worlds); ``state(i)`` seed ``i``'s checkpoint content. Returns seed 0's result; with several
+        seeds, ``result.seeds`` holds every seed's.
+        """
+        cfg, task = self.cfg, self.task
         threads = torch.get_num_threads()
         if cfg.cpu_threads is not None:
             set_threads(cfg.cpu_threads)
-        self.last_checkpoint = self.ckpt["iteration"] if self.ckpt is not None else None
         callbacks = list(callbacks or [])
-        recorder = metrics_file = bar = None
-        history: list[dict] = []
+        bar = None
         try:
-            history = rd.read_metrics(upto=self.start)
-            rd.save_config(cfg.to_dict())
-            if record:
-                from .recording import TrainingRecorder
+            for i, r in enumerate(self.runs):
+                r.history = r.rundir.read_metrics(upto=self.start)
+                r.rundir.save_config(r.cfg.to_dict())
+                if record:
+                    from .recording import TrainingRecorder
 
-                rd.merge_recording()  # a segment left by a killed process
-                recorder = TrainingRecorder(rd.segment_path(), task.sim, task.goals, history,
-                                            record_every=cfg.record_every, last_iteration=cfg.iterations - 1,
-                                            method=cfg.method, recording_id=rd.marker().get("run_id"))
-                callbacks.append(recorder)
-            metrics_file = rd.open_metrics(history)
+                    r.rundir.merge_recording()  # a segment left by a killed process
+                    r.recorder = TrainingRecorder(
+                        r.rundir.segment_path(), task.sim, task.goals, r.history, record_every=cfg.record_every,
+                        last_iteration=cfg.iterations - 1, method=cfg.method,
+                        recording_id=r.rundir.marker().get("run_id"), world_offset=i * task.Wc)
+                r.metrics_file = r.rundir.open_metrics(r.history)
             bar = progress_bar(cfg.iterations, self.start, enabled=progress)
             for it in range(self.start, cfg.iterations):
                 t0 = time.perf_counter()
                 try:
-                    row, result = step(it)
+                    rows, result = step(it)
                 except DivergenceError as e:
                     err = DivergenceError(f"iteration {it}: {e} -- stopped; {self._kept()}", world=e.world, step=e.step)
-                    err.checkpoint = self.last_checkpoint
+                    err.checkpoint = self.runs[0].last_checkpoint
                     raise err from None
-                row = {"iteration": it, **row, "seconds": time.perf_counter() - t0}
-                history.append(row)
-                metrics_file.write(_json_line(row))
-                metrics_file.flush()
-                _fault_point("metrics-row")
-                info = IterationInfo(it, row, result, task.goal_index)
-                for cb in callbacks:
-                    cb(info)
-                bar.set_description_str(f"{describe(row)} {row['seconds']:.2f}s/it", refresh=False)
+                seconds = time.perf_counter() - t0
+                checkpoint_now = (it + 1) % cfg.checkpoint_every == 0 or it + 1 == cfg.iterations
+                for i, (r, row) in enumerate(zip(self.runs, rows)):
+                    row = {"iteration": it, **row, "seconds": seconds}
+                    r.history.append(row)
+                    r.metrics_file.write(_json_line(row))
+                    r.metrics_file.flush()
+                    _fault_point("metrics-row")
+                    info = IterationInfo(it, row, result, task.goal_index_of(i))
+                    for cb in ([r.recorder] if r.recorder is not None else []) + (callbacks if i == 0 else []):
+                        cb(info)
+                    if checkpoint_now:
+                        if r.recorder is not None:  # on disk before the checkpoint: a crash loses nothing it covers
+                            r.recorder.flush()
+                        self._checkpoint(r, it, state(i))
+                bar.set_description_str(f"{describe(rows[0])} {seconds:.2f}s/it", refresh=False)
                 bar.update(1)
-                if (it + 1) % cfg.checkpoint_every == 0 or it + 1 == cfg.iterations:
-                    if recorder is not None:  # on disk before the checkpoint: a crash loses nothing it covers
-                        recorder.flush()
-                    self.checkpoint(it, state(), history)
         except KeyboardInterrupt as e:
             if isinstance(e, Interrupted):
                 raise
-            raise Interrupted(f"interrupted; {self._kept()}", self.last_checkpoint) from None
+            raise Interrupted(f"interrupted; {self._kept()}", self.runs[0].last_checkpoint) from None
         finally:
             if bar is not None:
                 bar.close()
-            if metrics_file is not None:
-                metrics_file.close()
-            if recorder is not None:
-                recorder.close()
-                rd.merge_recording()
+            for r in self.runs:
+                if r.metrics_file is not None:
+                    r.metrics_file.close()
+                if r.recorder is not None:
+                    r.recorder.close()
+                    r.rundir.merge_recording()
             torch.set_num_threads(threads)
-        return TrainResult(rd.path, history, None, cfg)
+        results = [TrainResult(r.rundir.path, r.history, None, r.cfg) for r in self.runs]
+        results[0].seeds = results
+        return results[0]
 
     def _kept(self) -> str:
-        if self.last_checkpoint is None:
-            return f"no checkpoint was written yet in {self.rundir.path}"
-        return f"the checkpoint of iteration {self.last_checkpoint} in {self.rundir.path} is kept"
+        return "; ".join(r.kept() for r in self.runs)
 
     def __enter__(self) -> "Session":
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
-        # a new run that failed before its first iteration leaves nothing behind
-        self.close(failed=exc_type is not None and not (self.rundir.path / "metrics.jsonl").exists())
+        self.close(failed=exc_type is not None)
 
     def close(self, failed: bool = False) -> None:
-        if failed and self.ckpt is None:
-            self.rundir.abandon()
-        else:
-            self.rundir.unlock()
+        for r in self.runs:
+            if r.rundir is None:
+                continue
+            # a new run that failed before its first iteration leaves nothing behind
+            if failed and r.ckpt is None and not (r.rundir.path / "metrics.jsonl").exists():
+                r.rundir.abandon()
+            else:
+                r.rundir.unlock()
 
 
 def grad_norm(module: torch.nn.Module) -> float:

@@ -150,16 +150,84 @@ class Critic(nn.Module):
         self.register_buffer("max_torque", norm.max_torque.clone())
         self.qd_scale = norm.qd_scale
 
-    def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
-        """All ``(..., dof)`` -> ``(...)``."""
+    def features(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """The normalised input ``(..., n_in)`` of the input layout."""
         if self.inputs == "relative":
-            x = torch.cat([(q - goal) / self.q_half_range, qd / self.qd_scale, tau / self.max_torque], dim=-1)
-            return self.net(x).squeeze(-1)
-        x = torch.cat([
+            return torch.cat([(q - goal) / self.q_half_range, qd / self.qd_scale, tau / self.max_torque], dim=-1)
+        return torch.cat([
             (q - self.q_centre) / self.q_half_range,
             qd / self.qd_scale,
             tau / self.max_torque,
             (goal - self.q_centre) / self.q_half_range,
             (q - goal) / self.q_half_range,
         ], dim=-1)
-        return self.net(x).squeeze(-1)
+
+    def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """All ``(..., dof)`` -> ``(...)``."""
+        return self.net(self.features(q, qd, tau, goal)).squeeze(-1)
+
+
+class StackedCritic(nn.Module):
+    """``S`` critics of one architecture (one per seed) evaluated as one module.
+
+    The worlds axis (``-2`` of every input) is seed-major: worlds ``s*W .. (s+1)*W - 1`` belong to critic
+    ``s``. Each layer is one batched matmul over the seeds, so ``S`` critics cost about one critic's
+    overhead; their parameters are stacked ``(S, ...)`` tensors, and an optimiser over them that acts
+    elementwise (Adam) is exactly ``S`` independent optimisers. :meth:`critic_state` /
+    :meth:`from_critics` convert to and from ordinary :class:`Critic` state dicts.
+    """
+
+    _LAYERS = (0, 2, 4)  # indices of the Linear layers in Critic.net
+
+    def __init__(self, critics: list[Critic]):
+        super().__init__()
+        first = critics[0]
+        self.template = [first]  # a list: not a registered submodule (its parameters are not ours)
+        self.seeds = len(critics)
+        self.weights = nn.ParameterList()
+        self.biases = nn.ParameterList()
+        for i in self._LAYERS:
+            self.weights.append(nn.Parameter(torch.stack([c.net[i].weight.detach() for c in critics]).clone()))
+            self.biases.append(nn.Parameter(torch.stack([c.net[i].bias.detach() for c in critics]).clone()))
+
+    def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """All ``(..., S*W, dof)`` -> ``(..., S*W)``."""
+        x = self.template[0].features(q, qd, tau, goal)  # (..., S*W, n_in)
+        lead, sw, n_in = x.shape[:-2], x.shape[-2], x.shape[-1]
+        S = self.seeds
+        x = x.reshape(-1, S, sw // S, n_in).permute(1, 0, 2, 3).reshape(S, -1, n_in)  # (S, M, n_in)
+        for k, (w, b) in enumerate(zip(self.weights, self.biases)):
+            x = torch.baddbmm(b.unsqueeze(1), x, w.transpose(1, 2))
+            if k < len(self.weights) - 1:
+                x = torch.nn.functional.elu(x)
+        x = x.reshape(S, -1, sw // S).permute(1, 0, 2).reshape(*lead, sw)
+        return x
+
+    def critic_state(self, s: int) -> dict:
+        """Critic ``s`` as an ordinary :class:`Critic` state dict."""
+        state = {k: v.clone() for k, v in self.template[0].state_dict().items()}
+        for i, w, b in zip(self._LAYERS, self.weights, self.biases):
+            state[f"net.{i}.weight"] = w[s].detach().clone()
+            state[f"net.{i}.bias"] = b[s].detach().clone()
+        return state
+
+    def load_critic_state(self, s: int, state: dict) -> None:
+        with torch.no_grad():
+            for i, w, b in zip(self._LAYERS, self.weights, self.biases):
+                w[s].copy_(state[f"net.{i}.weight"])
+                b[s].copy_(state[f"net.{i}.bias"])
+
+    def critic(self, s: int) -> Critic:
+        c = self.template[0]
+        out = Critic(c.dof, Normalizer(c.q_centre, c.q_half_range, c.qd_scale, c.max_torque),
+                     hidden=c.net[0].out_features, inputs=c.inputs).to(c.q_centre.device)
+        out.load_state_dict(self.critic_state(s))
+        return out
+
+    def params_of(self, s: int) -> list[torch.Tensor]:
+        """Critic ``s``'s slices in :meth:`Critic.parameters` order (w1, b1, w2, b2, w3, b3)."""
+        return [t for w, b in zip(self.weights, self.biases) for t in (w[s], b[s])]
+
+    def ordered(self) -> list[nn.Parameter]:
+        """The stacked parameters in :meth:`Critic.parameters` order."""
+        return [t for w, b in zip(self.weights, self.biases) for t in (w, b)]

@@ -16,7 +16,8 @@ from .simulator import Simulator
 
 @dataclass
 class OuterResult:
-    loss: torch.Tensor  # scalar, differentiable w.r.t. the critic
+    loss: torch.Tensor  # scalar, differentiable w.r.t. the critic: the mean of ``losses``
+    losses: torch.Tensor  # (W,) per-world task loss, differentiable w.r.t. the critic
     per_world: torch.Tensor  # (W,) task loss of the updated policies (detached)
     before: Trajectory  # rollout of the initial policies (inner loop data)
     after: Trajectory  # rollout of the updated policies through the model (detached)
@@ -34,6 +35,7 @@ def meta_loss(critic, policy, params: PolicyParams, sim: Simulator,
     per_world = task_loss(after, goal, running_weight, velocity_weight)
     return OuterResult(
         loss=per_world.mean(),
+        losses=per_world,
         per_world=per_world.detach(),
         before=trajs[0],
         after=Trajectory(after.q.detach(), after.qd.detach(), after.tau.detach()),

@@ -143,9 +143,10 @@ class TrainingRecorder:
     """
 
     def __init__(self, path, sim, goals, history=(), record_every: int = 50, last_iteration: int | None = None,
-                 method: str = "ours", recording_id: str | None = None):
+                 method: str = "ours", recording_id: str | None = None, world_offset: int = 0):
         self.sim, self.goals = sim, goals
         self.record_every, self.last_iteration = record_every, last_iteration
+        self.world_offset = world_offset  # this run's first world in ``sim`` (runs of several seeds share one)
         G = goals.shape[0]
         blueprint = rrb.Blueprint(
             rrb.Horizontal(
@@ -184,7 +185,7 @@ class TrainingRecorder:
         if params is not None:
             from .networks import flat_params
 
-            flat = flat_params(params)[0].detach().cpu().numpy()
+            flat = flat_params(params)[self.world_offset].detach().cpu().numpy()
             self.rec.scalar("train/policy/norm", float(np.linalg.norm(flat)))
             for j in range(min(4, flat.size)):
                 self.rec.scalar(f"train/policy/theta{j}", float(flat[j]))

@@ -38,7 +38,8 @@ GENERIC_DEFAULTS: dict[str, Any] = dict(horizon=50, dt=0.01, substeps=1, qd_scal
                                         gravity=STANDARD_GRAVITY)
 DEVICES = ("auto", "cpu", "cuda")
 # Fields that say where/how a run executes, not what it computes: they may change on --resume.
-RUNTIME_FIELDS = ("out", "device", "resume", "cpu_threads", "checkpoint_every", "record_every", "iterations")
+RUNTIME_FIELDS = ("out", "device", "resume", "cpu_threads", "checkpoint_every", "record_every", "iterations",
+                  "seeds")
 
 
 def spec(default, help: str, *, gt=None, ge=None, le=None, lt=None, cap=None, choices=None):
@@ -128,6 +129,7 @@ class TaskConfig(SerializableConfig):
     link_length: float | None = spec(None, "set the end-effector link length during training (m)", gt=0, cap=100)
     link_scale: float = spec(1.0, "scale the end-effector link length during training", gt=0, cap=100)
     seed: int = spec(0, "random seed (fixes everything on CPU)", ge=0, le=MAX_SEED)
+    seeds: list[int] | None = spec(None, "train these seeds at once in one process and one simulator (comma-separated, e.g. 0,1,2,3,4); each seed gets its own run directory OUT/seed<k> with exactly the results of a single-seed run", ge=0, le=MAX_SEED)
     device: str = spec("auto", "cpu, cuda or auto (cuda when present)")
     cpu_threads: int | None = spec(None, "torch CPU threads while training (0 = torch's default; default: $WARP_CRITIC_TORCH_THREADS or 1: small networks run fastest on one)")
     out: str | None = spec(None, "run directory (default runs/<scene>-<method>)")
@@ -242,11 +244,11 @@ def estimate_memory(worlds: int, dof: int, horizon: int, substeps: int, graph_st
     return int(worlds * per_world + 200 * 2**20)
 
 
-def check_memory(cfg: TaskConfig, dof: int, graph_steps: int = 1) -> None:
+def check_memory(cfg: TaskConfig, dof: int, graph_steps: int = 1, copies: int = 1) -> None:
     """Refuse settings whose memory estimate cannot fit, with the estimate, before allocating."""
     if not all(isinstance(v, int) for v in (cfg.horizon, cfg.substeps)):
         return
-    goals = len(cfg.goals) if cfg.goals else 1
+    goals = (len(cfg.goals) if cfg.goals else 1) * copies
     need = estimate_memory(goals * cfg.worlds_per_goal, dof, cfg.horizon, cfg.substeps,
                            max(graph_steps, getattr(cfg, "inner_steps", 1) + 1))
     have = available_memory()
@@ -265,7 +267,8 @@ def check_memory(cfg: TaskConfig, dof: int, graph_steps: int = 1) -> None:
 
 @dataclass
 class Task:
-    """``W = G x K`` worlds (goal-major) of one scene, with their goals and normaliser."""
+    """``S`` copies (one per seed) of ``G x K`` worlds of one scene, seed-major then goal-major, with
+    their goals and normaliser. ``W = S x Wc`` worlds in all, ``Wc = G x K`` per copy."""
 
     cfg: TaskConfig
     scene: Scene
@@ -276,6 +279,7 @@ class Task:
     goal: torch.Tensor  # (W, dof) each world's goal
     norm: Normalizer
     home: torch.Tensor  # (W, dof) the home pose
+    S: int = 1  # copies (seeds)
 
     @property
     def G(self) -> int:
@@ -290,21 +294,37 @@ class Task:
         return self.goal.shape[0]
 
     @property
+    def Wc(self) -> int:
+        return self.W // self.S
+
+    @property
     def device(self) -> torch.device:
         return self.sim.torch_device
 
-    def start_states(self, gen: torch.Generator) -> torch.Tensor:
-        """``(W, dof)`` initial joint positions: home, plus ``N(0, start_std^2)`` inside 95% of the
-        limits for all but the first ``home_starts`` worlds of each goal."""
+    def copy(self, i: int) -> slice:
+        """The worlds of copy (seed) ``i``."""
+        return slice(i * self.Wc, (i + 1) * self.Wc)
+
+    def goal_index_of(self, i: int) -> torch.Tensor:
+        """``(W,)``: the goal of each world of copy ``i``, -1 for the other copies' worlds."""
+        out = torch.full_like(self.goal_index, -1)
+        out[self.copy(i)] = self.goal_index[self.copy(i)]
+        return out
+
+    def start_states(self, gen: torch.Generator, i: int = 0) -> torch.Tensor:
+        """``(Wc, dof)`` initial joint positions of copy ``i``: home, plus ``N(0, start_std^2)`` inside
+        95% of the limits for all but the first ``home_starts`` worlds of each goal."""
+        home, slot = self.home[self.copy(i)], self.slot[self.copy(i)]
         if not self.cfg.start_std:
-            return self.home
-        away = (self.slot >= self.cfg.home_starts).float().unsqueeze(1)
-        noise = torch.randn(self.W, self.scene.dof, generator=gen).to(self.device) * self.cfg.start_std * away
-        return torch.clamp(self.home + noise, 0.95 * self.sim.q_lower, 0.95 * self.sim.q_upper)
+            return home
+        away = (slot >= self.cfg.home_starts).float().unsqueeze(1)
+        noise = torch.randn(self.Wc, self.scene.dof, generator=gen).to(self.device) * self.cfg.start_std * away
+        return torch.clamp(home + noise, 0.95 * self.sim.q_lower, 0.95 * self.sim.q_upper)
 
     def per_goal(self, per_world: torch.Tensor) -> torch.Tensor:
-        """``(W,) -> (G,)`` mean over each goal's worlds."""
-        return torch.zeros(self.G, device=per_world.device).index_add_(0, self.goal_index, per_world) / self.K
+        """``(Wc,) -> (G,)`` mean over each goal's worlds (one copy's worlds)."""
+        idx = self.goal_index[:per_world.shape[0]]
+        return torch.zeros(self.G, device=per_world.device).index_add_(0, idx, per_world) / self.K
 
 
 def load_task_scene(cfg: TaskConfig) -> Scene:
@@ -316,22 +336,22 @@ def load_task_scene(cfg: TaskConfig) -> Scene:
     return scene
 
 
-def build_task(cfg: TaskConfig, scene: Scene, *, differentiable: bool) -> Task:
-    """The simulator with ``G x K`` worlds (all with the config's dynamics variant)."""
+def build_task(cfg: TaskConfig, scene: Scene, *, differentiable: bool, copies: int = 1) -> Task:
+    """The simulator with ``copies x G x K`` worlds (all with the config's dynamics variant)."""
     from .simulator import Simulator
 
     variant = Variant(ee_mass=cfg.ee_mass, link_length=cfg.link_length, link_scale=cfg.link_scale)
     goals = goals_tensor(cfg.goals, scene)
     G, K = goals.shape[0], cfg.worlds_per_goal
-    sim = Simulator(scene, [variant] * (G * K), dt=cfg.dt, substeps=cfg.substeps, device=cfg.device,
+    sim = Simulator(scene, [variant] * (copies * G * K), dt=cfg.dt, substeps=cfg.substeps, device=cfg.device,
                     differentiable=differentiable, gravity=cfg.gravity)
     dev = sim.torch_device
-    goal_index = torch.arange(G, device=dev).repeat_interleave(K)
-    slot = torch.arange(K, device=dev).repeat(G)
+    goal_index = torch.arange(G, device=dev).repeat_interleave(K).repeat(copies)
+    slot = torch.arange(K, device=dev).repeat(G * copies)
     norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale)
     home = torch.as_tensor(getattr(scene, "home", [0.0] * scene.dof), dtype=torch.float32, device=dev)
     return Task(cfg=cfg, scene=scene, goals=goals, sim=sim, goal_index=goal_index, slot=slot,
-                goal=goals.to(dev)[goal_index], norm=norm, home=home.expand(G * K, -1).clone())
+                goal=goals.to(dev)[goal_index], norm=norm, home=home.expand(copies * G * K, -1).clone(), S=copies)
 
 
 def config_json(cfg: TaskConfig) -> str:

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import torch
 
 from .errors import DivergenceError, FieldError
-from .loop import Callback, Session, TrainResult, grad_norm
-from .networks import CRITIC_INPUTS, POLICY_INIT_SCHEMES, Critic, MLPPolicy, detach_params
+from .loop import Callback, Session, TrainResult
+from .networks import CRITIC_INPUTS, POLICY_INIT_SCHEMES, Critic, MLPPolicy, StackedCritic, detach_params
 from .outer import meta_loss
 from .task import TaskConfig, spec
 
@@ -63,26 +63,38 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
                record: bool = True, given: set[str] | None = None) -> TrainResult:
     """Run (or resume) meta-training; returns the run directory, metrics and critic.
 
-    ``callbacks`` get an :class:`~warp_critic.loop.IterationInfo` after every iteration; ``given``
+    With ``cfg.seeds`` the seeds train at once: their worlds share one simulator, their critics are
+    one :class:`~warp_critic.networks.StackedCritic` under one Adam (elementwise, so exactly one Adam
+    per critic), and each seed's gradient is clipped on its own; every seed writes the run directory
+    a single-seed run would (``result.seeds``). ``callbacks`` get an
+    :class:`~warp_critic.loop.IterationInfo` (of the first seed) after every iteration; ``given``
     names the fields the user set (for the resume rule; see :class:`~warp_critic.loop.Session`).
     """
     with Session(cfg, differentiable=True, given=given) as session:
-        cfg, task, gen = session.cfg, session.task, session.gen
-        critic = Critic(task.scene.dof, task.norm, hidden=cfg.critic_hidden, inputs=cfg.critic_input).to(task.device)
-        opt = torch.optim.Adam(critic.parameters(), lr=cfg.lr)
+        cfg, task = session.cfg, session.task
+        S, dev = task.S, task.device
         policy = MLPPolicy(task.norm)
-        params = policy.init(task.W, generator=gen, device=task.device)
+        gens, critics, params = [], [], []
+        for i in range(S):  # each seed's draws in the order of a single-seed run
+            gens.append(session.seed(i))
+            critics.append(Critic(task.scene.dof, task.norm, hidden=cfg.critic_hidden, inputs=cfg.critic_input).to(dev))
+            params.append(policy.init(task.Wc, generator=gens[-1], device=dev))
+            session.seeded(i)
+        critic = StackedCritic(critics)
+        opt = torch.optim.Adam(critic.ordered(), lr=cfg.lr)
+        for i in range(S):
+            ckpt = session.restore(i)
+            if ckpt is not None:
+                critic.load_critic_state(i, ckpt["critic_state"])
+                load_optimizer_slice(opt, critic, i, ckpt["optimizer_state"])
+                params[i] = {k: v.to(dev) for k, v in ckpt["policy_params"].items()}
+        params = _cat(params)
         q0, qd0 = task.home, torch.zeros_like(task.home)
-        ckpt = session.restore()
-        if ckpt is not None:
-            critic.load_state_dict(ckpt["critic_state"])
-            opt.load_state_dict(ckpt["optimizer_state"])
-            params = {k: v.to(task.device) for k, v in ckpt["policy_params"].items()}
 
         def step(it: int):
             nonlocal params, q0
             if cfg.policy_init == "fresh":  # Algorithm 2: new random policies every iteration ...
-                fresh = policy.init(task.W, generator=gen, device=task.device)
+                fresh = _cat([policy.init(task.Wc, generator=g, device=dev) for g in gens])
                 if cfg.policy_lifetime == 1:
                     params = fresh
                 else:  # ... or, staggered, in the worlds whose policy has reached its lifetime
@@ -90,33 +102,97 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
                     params = {k: torch.where(reset.view(-1, *[1] * (v.dim() - 1)), fresh[k], v)
                               for k, v in params.items()}
             if cfg.start_std:
-                q0 = task.start_states(gen)
+                q0 = torch.cat([task.start_states(g, i) for i, g in enumerate(gens)])
             res = meta_loss(critic, policy, detach_params(params), task.sim, q0, qd0, task.goal,
                             horizon=cfg.horizon, alpha=cfg.alpha, inner_steps=cfg.inner_steps,
                             running_weight=cfg.running_weight, velocity_weight=cfg.velocity_weight)
+            loss = res.losses.view(S, -1).mean(1)  # (S,) each seed's task loss
             opt.zero_grad(set_to_none=True)
-            res.loss.backward()
-            norm = grad_norm(critic)
-            if not (math.isfinite(res.loss.item()) and math.isfinite(norm)):
-                raise DivergenceError("non-finite task loss or critic gradient")
+            loss.sum().backward()  # seeds share no parameter: each gets its own gradient
+            norms = [slice_norm(critic, i) for i in range(S)]
+            bad = [cfg.seeds[i] if cfg.seeds else cfg.seed for i in range(S)
+                   if not (math.isfinite(loss[i].item()) and math.isfinite(norms[i]))]
+            if bad:
+                raise DivergenceError(f"non-finite task loss or critic gradient (seed {', '.join(map(str, bad))})")
             if cfg.clip_grad:
-                torch.nn.utils.clip_grad_norm_(critic.parameters(), cfg.clip_grad)
+                for i in range(S):
+                    clip_slice_(critic, i, cfg.clip_grad)
             for group in opt.param_groups:
                 group["lr"] = cfg.lr_at(it)
             opt.step()
             if cfg.policy_init == "persistent" or cfg.policy_lifetime > 1:  # lifetime > 1 implies fresh
                 params = res.params_new
             before = ((res.before.q[-1] - task.goal) ** 2).sum(-1)
-            row = {"task_loss": res.per_world.mean().item(), "task_loss_before": before.mean().item(),
-                   "task_loss_per_goal": task.per_goal(res.per_world).tolist(), "grad_norm": norm}
-            return row, res
+            rows = []
+            for i in range(S):
+                sl = task.copy(i)
+                rows.append({"task_loss": res.per_world[sl].mean().item(),
+                             "task_loss_before": before[sl].mean().item(),
+                             "task_loss_per_goal": task.per_goal(res.per_world[sl]).tolist(),
+                             "grad_norm": norms[i]})
+            return rows, res
 
-        def state() -> dict:
-            return {"critic_state": critic.state_dict(), "critic_hidden": cfg.critic_hidden,
-                    "critic_input": cfg.critic_input, "optimizer_state": opt.state_dict(),
-                    "policy_params": {k: v.cpu() for k, v in params.items()}}
+        def state(i: int) -> dict:
+            sl = task.copy(i)
+            return {"critic_state": critic.critic_state(i), "critic_hidden": cfg.critic_hidden,
+                    "critic_input": cfg.critic_input, "optimizer_state": optimizer_slice(opt, critic, i),
+                    "policy_params": {k: v[sl].cpu() for k, v in params.items()}}
 
         result = session.run(step, state, callbacks=callbacks, progress=progress, record=record,
                              describe=lambda r: f"task {r['task_loss']:.4f} (before {r['task_loss_before']:.3f})")
-    result.model = critic
+    for i, r in enumerate(result.seeds):
+        r.model = critic.critic(i)
     return result
+
+
+# ------------------------------------------------------------------------------------------------
+# one seed's slice of the stacked critic: gradient norm, clipping, optimiser state
+# ------------------------------------------------------------------------------------------------
+
+def _cat(per_seed: list[dict]) -> dict:
+    return {k: torch.cat([p[k] for p in per_seed]) for k in per_seed[0]} if len(per_seed) > 1 else per_seed[0]
+
+
+def slice_norm(critic: StackedCritic, i: int) -> float:
+    """The gradient norm of critic ``i`` (as :func:`warp_critic.loop.grad_norm` of that critic)."""
+    total = 0.0
+    for p in critic.ordered():
+        if p.grad is not None:
+            total += float(p.grad[i].detach().pow(2).sum())
+    return math.sqrt(total)
+
+
+def clip_slice_(critic: StackedCritic, i: int, max_norm: float) -> None:
+    """``torch.nn.utils.clip_grad_norm_`` on critic ``i``'s gradient alone."""
+    grads = [p.grad[i] for p in critic.ordered() if p.grad is not None]
+    total = torch.linalg.vector_norm(torch.stack([torch.linalg.vector_norm(g) for g in grads]))
+    coef = torch.clamp(max_norm / (total + 1e-6), max=1.0)
+    for g in grads:
+        g.mul_(coef)
+
+
+def optimizer_slice(opt: torch.optim.Optimizer, critic: StackedCritic, i: int) -> dict:
+    """Critic ``i``'s Adam state as the state dict of an Adam over one :class:`Critic`."""
+    full = opt.state_dict()
+    state = {k: {name: (v[i].clone() if torch.is_tensor(v) and v.dim() > 0 else v) for name, v in st.items()}
+             for k, st in full["state"].items()}
+    return {"state": state, "param_groups": full["param_groups"]}
+
+
+def load_optimizer_slice(opt: torch.optim.Optimizer, critic: StackedCritic, i: int, single: dict) -> None:
+    """Inverse of :func:`optimizer_slice`: put one critic's Adam state into slice ``i``."""
+    params = critic.ordered()
+    for k, st in single["state"].items():
+        p = params[int(k)]
+        mine = opt.state[p]
+        for name, v in st.items():
+            if torch.is_tensor(v) and v.dim() > 0:
+                if name not in mine:
+                    mine[name] = torch.zeros_like(p)
+                mine[name][i].copy_(v)
+            else:
+                mine[name] = v.clone() if torch.is_tensor(v) else v
+    for group, saved in zip(opt.param_groups, single["param_groups"]):
+        for key, value in saved.items():
+            if key != "params":
+                group[key] = value

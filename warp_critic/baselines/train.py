@@ -177,74 +177,102 @@ def train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks: 
 
     ``make_agent(cfg, dof, norm, device)`` returns an agent with ``actor``, ``q``,
     ``update(buffer, gen, train_actor) -> dict`` (one gradient update), ``state_dict()`` and
-    ``load_state_dict()``.
+    ``load_state_dict()``. With ``cfg.seeds`` the seeds' episodes run in one simulator (one agent,
+    replay buffer and noise process per seed, each drawing from its own seed's generator), and each
+    seed writes the run directory a single-seed run would.
     """
     with Session(cfg, differentiable=False, given=given) as session:
-        cfg, task, gen = session.cfg, session.task, session.gen
-        sim, norm, goal = task.sim, task.norm, task.goal
-        agent = make_agent(cfg, task.scene.dof, norm, task.device)
-        buffer = ReplayBuffer(min(cfg.buffer_size, cfg.iterations * task.W * cfg.horizon), task.scene.dof, task.device)
-        noise = ExplorationNoise(cfg.noise, cfg.noise_std, cfg.ou_theta, (task.W, task.scene.dof), gen, task.device)
+        cfg, task = session.cfg, session.task
+        S, sim, norm, goal, dof, dev = task.S, task.sim, task.norm, task.goal, task.scene.dof, task.device
+        gens, agents, buffers, noises = [], [], [], []
+        for i in range(S):  # each seed's draws in the order of a single-seed run
+            gens.append(session.seed(i))
+            agents.append(make_agent(cfg, dof, norm, dev))
+            buffers.append(ReplayBuffer(min(cfg.buffer_size, cfg.iterations * task.Wc * cfg.horizon), dof, dev))
+            noises.append(ExplorationNoise(cfg.noise, cfg.noise_std, cfg.ou_theta, (task.Wc, dof), gens[-1], dev))
+            session.seeded(i)
+        alphas = [cfg.alpha] * S
+        for i in range(S):
+            ckpt = session.restore(i)
+            if ckpt is not None:
+                agents[i].load_state_dict(ckpt["agent_state"])
+                buffers[i].load_state_dict(ckpt["buffer"])
+                alphas[i] = ckpt["selected_alpha"] if cfg.alpha is None else cfg.alpha
         q0, qd0 = task.home, torch.zeros_like(task.home)
-        alpha = cfg.alpha
-        ckpt = session.restore()
-        if ckpt is not None:
-            agent.load_state_dict(ckpt["agent_state"])
-            buffer.load_state_dict(ckpt["buffer"])
-            alpha = ckpt["selected_alpha"] if cfg.alpha is None else cfg.alpha
         n_updates = cfg.n_updates()
+        # the alpha search runs one seed's worlds at a time (as in a single-seed run)
+        eval_sim = sim if S == 1 else Simulator(task.scene, sim.variants[:task.Wc], dt=cfg.dt, substeps=cfg.substeps,
+                                                device=cfg.device, differentiable=False, gravity=cfg.gravity)
 
-        def select_alpha() -> tuple[float, float, dict]:
-            alphas = [cfg.alpha] if cfg.alpha is not None else list(ALPHA_GRID)
-            errs = fresh_policy_errors(agent.q, norm, sim, goal, cfg.horizon, cfg.inner_steps, alphas, cfg.seed + 1,
-                                       q0=task.home)
-            best = min(range(len(alphas)), key=lambda i: errs[i])
-            return alphas[best], errs[best], {f"{a:.3g}": e for a, e in zip(alphas, errs)}
+        def select_alpha(i: int) -> tuple[float, float, dict]:
+            grid = [cfg.alpha] if cfg.alpha is not None else list(ALPHA_GRID)
+            sl = task.copy(i)
+            errs = fresh_policy_errors(agents[i].q, norm, eval_sim, goal[sl], cfg.horizon, cfg.inner_steps, grid,
+                                       session.runs[i].cfg.seed + 1, q0=task.home[sl])
+            best = min(range(len(grid)), key=lambda k: errs[k])
+            return grid[best], errs[best], {f"{a:.3g}": e for a, e in zip(grid, errs)}
+
+        def per_seed(fn):
+            """A rollout policy over all worlds from one function per seed ``fn(i, q, qd, goal)``."""
+            if S == 1:
+                return lambda q, qd: fn(0, q, qd, goal)
+            return lambda q, qd: torch.cat([fn(i, q[task.copy(i)], qd[task.copy(i)], goal[task.copy(i)])
+                                            for i in range(S)])
 
         def step(it: int):
-            nonlocal alpha, q0
+            nonlocal q0
             if cfg.start_std:
-                q0 = task.start_states(gen)
+                q0 = torch.cat([task.start_states(g, i) for i, g in enumerate(gens)])
             # 1. one episode in every world with exploration noise (forward-only simulator)
-            noise.reset()
-            actor = agent.actor
+            for n in noises:
+                n.reset()
             warmup = it < cfg.warmup_iterations
 
-            def explore(q, qd):
+            def explore(i, q, qd, g):
                 if warmup:  # uniform in [-max_torque, max_torque]
-                    u = torch.rand(q.shape, generator=gen).to(q.device) * 2 - 1
+                    u = torch.rand(q.shape, generator=gens[i]).to(q.device) * 2 - 1
                     return u * norm.max_torque
-                tau = actor(q, qd, goal) + noise.sample() * norm.max_torque
+                tau = agents[i].actor(q, qd, g) + noises[i].sample() * norm.max_torque
                 return torch.maximum(torch.minimum(tau, norm.max_torque), -norm.max_torque)
 
             with torch.no_grad():
-                explore_traj = rollout(sim, explore, q0, qd0, cfg.horizon)
+                explore_traj = rollout(sim, per_seed(explore), q0, qd0, cfg.horizon)
             r, done = rewards(explore_traj, goal, cfg.reward, cfg.reward_scale)
-            buffer.add_trajectory(explore_traj, goal, r, done)
-            # 2. gradient updates from the replay buffer
-            stats: dict[str, float] = {}
-            if buffer.size >= cfg.batch_size:
-                for _ in range(n_updates):
-                    for k, v in agent.update(buffer, gen, train_actor=not warmup).items():
-                        stats[k] = stats.get(k, 0.0) + v / n_updates
-            if not all(math.isfinite(v) for v in stats.values()):
-                raise DivergenceError("non-finite loss: " + ", ".join(f"{k} {v}" for k, v in stats.items()))
-            # 3. noise-free evaluation of the actor
+            rows = []
+            for i in range(S):
+                sl = task.copy(i)
+                part = Trajectory(explore_traj.q[:, sl], explore_traj.qd[:, sl], explore_traj.tau[:, sl])
+                buffers[i].add_trajectory(part, goal[sl], r[:, sl], done[:, sl])
+                # 2. gradient updates from the replay buffer
+                stats: dict[str, float] = {}
+                if buffers[i].size >= cfg.batch_size:
+                    for _ in range(n_updates):
+                        for k, v in agents[i].update(buffers[i], gens[i], train_actor=not warmup).items():
+                            stats[k] = stats.get(k, 0.0) + v / n_updates
+                if not all(math.isfinite(v) for v in stats.values()):
+                    raise DivergenceError("non-finite loss: " + ", ".join(f"{k} {v}" for k, v in stats.items()))
+                rows.append(stats)
+            # 3. noise-free evaluation of the actors
             with torch.no_grad():
-                eval_traj = rollout(sim, lambda q, qd: agent.actor(q, qd, goal), q0, qd0, cfg.horizon)
+                eval_traj = rollout(sim, per_seed(lambda i, q, qd, g: agents[i].actor(q, qd, g)), q0, qd0, cfg.horizon)
             per_world = final_error(eval_traj.q[-1], goal)
-            row = {"task_loss": per_world.mean().item(), "task_loss_per_goal": task.per_goal(per_world).tolist(),
-                   "task_loss_explore": final_error(explore_traj.q[-1], goal).mean().item(),
-                   "return_explore": r.sum(0).mean().item(), "buffer_size": buffer.size, **stats}
-            if (it + 1) % cfg.checkpoint_every == 0 or it + 1 == cfg.iterations:
-                alpha, fresh_loss, search = select_alpha()
-                row.update({"alpha": alpha, "fresh_policy_loss": fresh_loss, "alpha_search": search})
-            return row, BaselineStepResult(explore_traj, eval_traj)
+            explore_err = final_error(explore_traj.q[-1], goal)
+            for i, stats in enumerate(rows):
+                sl = task.copy(i)
+                row = {"task_loss": per_world[sl].mean().item(), "task_loss_per_goal": task.per_goal(per_world[sl]).tolist(),
+                       "task_loss_explore": explore_err[sl].mean().item(), "return_explore": r[:, sl].sum(0).mean().item(),
+                       "buffer_size": buffers[i].size, **stats}
+                if (it + 1) % cfg.checkpoint_every == 0 or it + 1 == cfg.iterations:
+                    alphas[i], fresh_loss, search = select_alpha(i)
+                    row.update({"alpha": alphas[i], "fresh_policy_loss": fresh_loss, "alpha_search": search})
+                rows[i] = row
+            return rows, BaselineStepResult(explore_traj, eval_traj)
 
-        def state() -> dict:
+        def state(i: int) -> dict:
+            a = agents[i]
             return {"critic_hidden": cfg.critic_hidden, "actor_hidden": cfg.actor_hidden,
-                    "q_state": agent.q.state_dict(), "actor_state": agent.actor.state_dict(),
-                    "agent_state": agent.state_dict(), "buffer": buffer.state_dict(), "selected_alpha": alpha}
+                    "q_state": a.q.state_dict(), "actor_state": a.actor.state_dict(),
+                    "agent_state": a.state_dict(), "buffer": buffers[i].state_dict(), "selected_alpha": alphas[i]}
 
         def describe(row: dict) -> str:
             extra = f" | fresh policies {row['fresh_policy_loss']:.4f} (alpha {row['alpha']:.2g})" \
@@ -252,5 +280,6 @@ def train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks: 
             return f"task {row['task_loss']:.4f} (explore {row['task_loss_explore']:.3f}){extra}"
 
         result = session.run(step, state, callbacks=callbacks, progress=progress, record=record, describe=describe)
-    result.model = agent
+    for i, res in enumerate(result.seeds):
+        res.model = agents[i]
     return result
