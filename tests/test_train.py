@@ -162,7 +162,7 @@ def test_divergence_stops_with_iteration_and_keeps_last_good_checkpoint(tmp_path
         res = real(*a, **k)
         calls["n"] += 1
         if calls["n"] == 3:
-            res.loss = res.loss * float("nan")
+            res.loss, res.losses = res.loss * float("nan"), res.losses * float("nan")
         return res
 
     monkeypatch.setattr(train, "meta_loss", sometimes_nan)
