@@ -19,10 +19,13 @@ from .errors import FieldError, UserError
 
 
 class Parser(argparse.ArgumentParser):
-    """argparse, but errors are a single line and exit code 2."""
+    """argparse, but errors are a single line ``warp-critic: error: [COMMAND: ]...`` and exit code 2
+    (the same start as every other user error, whichever subcommand's parser found it)."""
 
     def error(self, message: str) -> typing.NoReturn:  # noqa: D401
-        self.exit(2, f"{self.prog}: error: {' '.join(message.split())}\n")
+        root, *command = self.prog.split()
+        where = f"{' '.join(command)}: " if command else ""
+        self.exit(2, f"{root}: error: {where}{' '.join(message.split())}\n")
 
 
 def _number(kind):
@@ -104,8 +107,12 @@ def parse_goals(spec: str | list | None, name: str = "goals") -> list[list[float
     """Goals from an inline string ``'a,b;c,d'`` or a file (JSON list of lists, or one goal per line)."""
     if spec is None or isinstance(spec, list):
         return spec
+    if not spec.strip():
+        raise FieldError(name, "no goals given (expected inline '0.1,0.2;0.3,0.4' or a .json/.txt file)")
     path = Path(spec)
     if path.suffix in (".json", ".txt", ".csv") or path.exists():
+        if path.is_dir():
+            raise FieldError(name, f"{spec}: is a directory, not a goals file")
         if not path.is_file():
             raise FieldError(name, f"{spec}: file not found")
         try:
@@ -118,7 +125,7 @@ def parse_goals(spec: str | list | None, name: str = "goals") -> list[list[float
             else:
                 goals = [[float(x) for x in line.replace(",", " ").split()] for line in text.splitlines()
                          if line.strip() and not line.lstrip().startswith("#")]
-        except ValueError as e:
+        except (ValueError, RecursionError) as e:
             raise FieldError(name, f"{spec}: cannot parse goals ({' '.join(str(e).split())[:120]})") from None
         where = f"{spec}: "
     else:
@@ -131,11 +138,16 @@ def parse_goals(spec: str | list | None, name: str = "goals") -> list[list[float
         raise FieldError(name, f"{where}no goals given (expected a list of goals, each a list of numbers)")
     if any(isinstance(x, (bool, list, dict, str)) or not isinstance(x, (int, float)) for g in goals for x in g):
         raise FieldError(name, f"{where}every goal value must be a number")
-    goals = [[float(x) for x in g] for g in goals]
+    try:
+        goals = [[float(x) for x in g] for g in goals]
+    except OverflowError:
+        raise FieldError(name, f"{where}goal values must be finite numbers (got an integer too large for a float)") from None
     if len({len(g) for g in goals}) != 1:
         raise FieldError(name, f"{where}goals of different lengths {sorted({len(g) for g in goals})}")
-    if not all(math.isfinite(x) for g in goals for x in g):
-        raise FieldError(name, f"{where}goal values must be finite numbers")
+    bad = next(((i, j, x) for i, g in enumerate(goals) for j, x in enumerate(g) if not math.isfinite(x)), None)
+    if bad is not None:
+        i, j, x = bad
+        raise FieldError(name, f"{where}goal values must be finite numbers (goal {i} joint {j} is {x!r})")
     return goals
 
 
