@@ -1,0 +1,159 @@
+"""``reproduce``: the quick end-to-end run, resume, --only, changed settings, bad input, and the
+batched evaluator against ``meta-test`` (CPU; the quick run is shared by the module's tests)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from warp_critic.reproduce.__main__ import main as reproduce_main
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+SECTIONS = ("## Stages", "## Section 4.1", "## Section 4.2", "## Figure 3", "### reacher", "### kuka",
+            "## Figures 4-6", "## Tables 1-3", "### Table 1", "### Table 2", "### Table 3", "## Figures")
+FIGURES = ("fig1_landscape.png", "fig2_exploration.png", "fig3_metatrain_reacher.png", "fig3_metatrain_kuka.png",
+           "fig4_reacher_goals.png", "fig5_reacher_mass.png", "fig6_reacher_length.png")
+
+
+def _stage_mtimes(out: Path) -> dict[str, float]:
+    return {p.parent.name: p.stat().st_mtime_ns for p in out.glob("*/stage.json")}
+
+
+@pytest.fixture(scope="module")
+def quick(tmp_path_factory):
+    out = tmp_path_factory.mktemp("reproduce") / "paper"
+    t = time.perf_counter()
+    rc = reproduce_main(["--quick", "--out", str(out), "--device", "cpu"])
+    return out, rc, time.perf_counter() - t
+
+
+def test_quick_end_to_end(quick):
+    out, rc, seconds = quick
+    assert rc == 0
+    assert seconds < 180, f"the quick reproduce took {seconds:.0f} s"
+    report = (out / "REPORT.md").read_text()
+    for section in SECTIONS:
+        assert section in report, section
+    assert "not run" not in report.lower()
+    for name in FIGURES:
+        data = (out / "figures" / name).read_bytes()
+        assert data.startswith(PNG_MAGIC), name
+        assert f"figures/{name}" in report
+    results = json.loads((out / "results.json").read_text())
+    # every table cell traces back to an existing stage file and existing run checkpoints
+    assert len(results["tables"]) == 3 * 3 * 3  # quick: 3 tables x 3 columns x 3 methods
+    for cell in results["tables"]:
+        stage = out / cell["file"]
+        assert stage.is_file()
+        data = json.loads(stage.read_text())
+        match = [c for c in data["result"]["cells"] if c["table"] == cell["table"] and c["value"] == cell["value"]
+                 and c["method"] == cell["method"]]
+        assert len(match) == 1 and match[0]["mse_mean"] == cell["mse_mean"]
+        assert len(cell["runs"]) == 2  # quick: 2 seeds
+        for run in cell["runs"]:
+            assert (out / run).is_file(), run
+        assert f"{cell['mse_mean']:.3g}({cell['mse_std']:.3g})" in report
+    for entry in results["figures"]:
+        assert (out / entry["file"]).is_file()
+    verify = subprocess.run([sys.executable, "-m", "rerun_cli", "rrd", "verify", str(out / "report.rrd")],
+                            capture_output=True, text=True)
+    assert verify.returncode == 0, verify.stderr
+
+
+def test_second_call_skips_every_stage(quick, capsys):
+    out, rc, _ = quick
+    assert rc == 0
+    before = _stage_mtimes(out)
+    assert len(before) == 10  # toy, landscape, 6 metatrain, maps, tables
+    t = time.perf_counter()
+    capsys.readouterr()
+    assert reproduce_main(["--quick", "--out", str(out), "--device", "cpu"]) == 0
+    seconds = time.perf_counter() - t
+    err = capsys.readouterr().err
+    assert _stage_mtimes(out) == before
+    assert err.count("complete, skipped") >= 10
+    assert seconds < 20, f"the resumed call took {seconds:.1f} s"
+    assert "| complete, skipped |" in (out / "REPORT.md").read_text()
+
+
+def test_only_toy_and_changed_setting(tmp_path, capsys):
+    out = tmp_path / "r"
+    assert reproduce_main(["--quick", "--only", "toy", "--out", str(out), "--device", "cpu"]) == 0
+    dirs = sorted(p.name for p in out.iterdir() if p.is_dir() and p.name != "figures")
+    assert len(dirs) == 1 and dirs[0].startswith("toy-")
+    old = out / dirs[0] / "stage.json"
+    mtime = old.stat().st_mtime_ns
+    report = (out / "REPORT.md").read_text()
+    assert "Not run (stage `tables`)" in report and "| theta" not in report.split("## Section 4.2")[1]
+    assert reproduce_main(["--quick", "--only", "toy", "--out", str(out), "--device", "cpu",
+                           "--set", "toy.iters=60"]) == 0
+    dirs2 = sorted(p.name for p in out.iterdir() if p.is_dir() and p.name != "figures")
+    assert len(dirs2) == 2 and dirs[0] in dirs2
+    assert old.stat().st_mtime_ns == mtime
+    new = json.loads((out / [d for d in dirs2 if d != dirs[0]][0] / "stage.json").read_text())
+    assert new["settings"]["iters"] == 60
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--only", "toy,bogus"], "unknown stage"),
+    (["--seeds", "0"], "--seeds"),
+    (["--seeds", "-3"], "--seeds"),
+    (["--set", "toy.nope=1"], "unknown key"),
+    (["--set", "metatrain.kuka.ours.nope=1"], "unknown ours setting"),
+    (["--device", "tpu"], "--device"),
+])
+def test_bad_input(tmp_path, capsys, argv, words):
+    out = tmp_path / "o"
+    rc = reproduce_main(["--quick", "--out", str(out), *argv])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert err.count("\n") == 1 and err.startswith("warp-critic: error:") and words in err
+    assert not out.exists()
+
+
+def test_bad_out(tmp_path, capsys):
+    f = tmp_path / "file"
+    f.write_text("keep me")
+    assert reproduce_main(["--quick", "--out", str(f)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a file" in err and f.read_text() == "keep me"
+    d = tmp_path / "theirs"
+    d.mkdir()
+    (d / "notes.txt").write_text("keep me")
+    assert reproduce_main(["--quick", "--out", str(d)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not a reproduce output" in err
+    assert sorted(p.name for p in d.iterdir()) == ["notes.txt"]
+    with pytest.raises(SystemExit) as e:
+        reproduce_main(["--seeds", "x"])
+    assert e.value.code == 2
+
+
+def test_batched_evaluator_matches_meta_test(quick, tmp_path):
+    """One job of the batched evaluator (here next to other runs and variants) = meta-test on that run."""
+    import torch
+
+    from warp_critic.metatest import TestConfig, meta_test
+    from warp_critic.reproduce.evaluate import Job, evaluate
+    from warp_critic.scene import Variant
+
+    out, rc, _ = quick
+    runs = {m: sorted((next(out.glob(f"metatrain-reacher-{m}-*")) / "run").glob("seed*")) for m in ("ours", "ddpg")}
+    goals = torch.tensor([[0.3, -0.2], [-1.0, 0.8], [1.5, 0.1]])
+    jobs = [Job("ours0", str(runs["ours"][0]), goals, Variant()),
+            Job("ddpg1", str(runs["ddpg"][1]), goals, Variant(ee_mass=2.0)),
+            Job("ours1", str(runs["ours"][1]), goals[:2], Variant(link_length=1.4))]
+    r = evaluate(jobs, inits=2, steps=3, seed=7, device="cpu", progress=False)
+    for job, err in zip(jobs, r["errors"]):
+        v = job.variant
+        tc = TestConfig(run_dir=job.run_dir, goals=job.goals.tolist(), inits=2, policy_steps=3, seed=7,
+                        device="cpu", ee_mass=v.ee_mass, link_length=v.link_length,
+                        out=str(tmp_path / f"{job.key}.json"))
+        ref = np.asarray(meta_test(tc, progress=None)["final_error_all"])
+        np.testing.assert_allclose(err, ref, rtol=1e-4, atol=1e-6)

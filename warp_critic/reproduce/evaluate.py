@@ -1,0 +1,212 @@
+"""Batched meta-test (Algorithm 3) of many run directories, goals and dynamics variants in ONE model.
+
+:func:`evaluate` takes jobs -- a run directory (any method, any seed), its goals and a dynamics
+:class:`~warp_critic.scene.Variant` -- and lays ALL their ``goals x inits`` worlds side by side in one
+gradient-free :class:`~warp_critic.simulator.Simulator` with a variant per world (split into batches
+of whole jobs only above ``max_worlds``). Each world's fresh policy descends its own run's critic
+(``metatest.build_test_critic``: ours, or ``-Q`` of a baseline) with its own run's learning rate, for
+the same number of policy updates, horizon and initial state (rest at zero, as ``meta-test``) for every
+job. Every job with ``G`` goals starts from the same ``G x inits`` policy initialisations
+(``policy.init`` from ``torch.Generator().manual_seed(seed)``, exactly as ``meta-test`` draws them for
+explicit goals), so the methods, seeds and variants see identical goals and inits.
+
+Per world this is exactly :func:`warp_critic.metatest.meta_test` (tests compare the two): the worlds are
+independent, each critic sees only its own worlds, and the per-world learning rate multiplies each
+world's gradient.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from ..errors import UserError
+from ..scene import Variant
+
+#: Task fields every run of one evaluation must share (they define the dynamics and the policy's scaling).
+SHARED_FIELDS = ("dt", "substeps", "gravity", "max_torque", "qd_scale")
+
+
+@dataclass
+class Job:
+    key: Any  # the caller's label, e.g. ("table1", 0, "ours", 3)
+    run_dir: str
+    goals: torch.Tensor  # (G, dof) rad
+    variant: Variant
+
+    @property
+    def G(self) -> int:
+        return int(self.goals.shape[0])
+
+
+class MultiCritic(torch.nn.Module):
+    """Several critics over consecutive world slices: ``L(q, qd, tau, g)`` on ``(..., W, dof)`` inputs."""
+
+    def __init__(self, segments: list[tuple[torch.nn.Module, int, int]]):
+        super().__init__()
+        self.critics = torch.nn.ModuleList([c for c, _, _ in segments])
+        self.bounds = [(a, b) for _, a, b in segments]
+
+    def forward(self, q, qd, tau, g):
+        outs = [c(q[..., a:b, :], qd[..., a:b, :], tau[..., a:b, :], g[..., a:b, :])
+                for c, (a, b) in zip(self.critics, self.bounds)]
+        return torch.cat(outs, dim=-1)
+
+
+class PerWorldRate:
+    """A learning rate per world: ``rate * grad`` scales each world's (leading-dim) gradient."""
+
+    def __init__(self, rates: torch.Tensor):
+        self.rates = rates
+
+    def __mul__(self, grad: torch.Tensor) -> torch.Tensor:
+        return self.rates.view(-1, *[1] * (grad.dim() - 1)) * grad
+
+    __rmul__ = __mul__
+
+
+@dataclass
+class _Run:
+    ckpt: dict
+    cfg: Any  # TaskConfig
+    critic: torch.nn.Module | None = None
+    alpha: float | None = None
+    steps: int | None = None
+
+
+def load_runs(run_dirs) -> dict[str, _Run]:
+    from ..rundir import RunDir
+    from ..task import TaskConfig
+
+    runs = {}
+    for rd in dict.fromkeys(str(r) for r in run_dirs):
+        ckpt = RunDir.open(rd).load_checkpoint(require=("config", "dof", "scene", "method"))
+        runs[rd] = _Run(ckpt, TaskConfig.from_dict(ckpt["config"]))
+    first = next(iter(runs.values()))
+    for rd, r in runs.items():
+        if r.ckpt.get("scene_hash") != first.ckpt.get("scene_hash") or r.ckpt["dof"] != first.ckpt["dof"]:
+            raise UserError(f"{rd}: trained on another scene than {next(iter(runs))}; evaluate one scene at a time")
+        for f in SHARED_FIELDS:
+            if getattr(r.cfg, f) != getattr(first.cfg, f):
+                raise UserError(f"{rd}: {f} {getattr(r.cfg, f)!r} differs from {getattr(first.cfg, f)!r} of the other runs")
+    return runs
+
+
+def default_steps(run_dir: str) -> int:
+    """The number of policy updates the run's own meta-test would take (ours: inner steps x lifetime)."""
+    runs = load_runs([run_dir])
+    cfg = runs[str(run_dir)].ckpt["config"]
+    if runs[str(run_dir)].ckpt.get("method", "ours") == "ours":
+        return int(cfg.get("inner_steps", 1)) * int(cfg.get("policy_lifetime", 1))
+    return int(cfg.get("inner_steps", 1))
+
+
+def batches(jobs: list[Job], inits: int, max_worlds: int) -> list[list[int]]:
+    """Job indices grouped into batches of at most ``max_worlds`` worlds (whole jobs; a bigger job alone)."""
+    out, cur, n = [], [], 0
+    for i, j in enumerate(jobs):
+        w = j.G * inits
+        if cur and n + w > max_worlds:
+            out.append(cur)
+            cur, n = [], 0
+        cur.append(i)
+        n += w
+    if cur:
+        out.append(cur)
+    return out
+
+
+def evaluate(jobs: list[Job], *, inits: int, steps: int, seed: int = 1, device: str = "auto",
+             horizon: int | None = None, max_worlds: int = 4096, progress: bool = True) -> dict:
+    """Meta-test every job; returns ``{"errors": [(G, inits) final ||q_T-g||^2 per job], "before": [...],
+    "dof", "horizon", "steps", "alphas": {run_dir: alpha}, "worlds", "batches"}``."""
+    from ..inner import inner_update, policy_fn
+    from ..loop import progress_bar
+    from ..losses import final_error
+    from ..metatest import build_test_critic
+    from ..networks import MLPPolicy, Normalizer
+    from ..rollout import rollout
+    from ..scene import load_scene
+    from ..simulator import STANDARD_GRAVITY, Simulator
+    from ..task import max_torque_tensor
+
+    if not jobs:
+        raise UserError("nothing to evaluate")
+    runs = load_runs([j.run_dir for j in jobs])
+    first = next(iter(runs.values()))
+    cfg0 = first.cfg
+    scene = load_scene(cfg0.scene)
+    if getattr(scene, "content_hash", None) not in (None, first.ckpt.get("scene_hash")) and first.ckpt.get("scene_hash"):
+        raise UserError(f"{cfg0.scene}: the scene file has changed since the runs were trained")
+    if horizon is None:
+        hs = {r.cfg.horizon for r in runs.values()}
+        if len(hs) > 1:
+            raise UserError(f"the runs were trained with different horizons {sorted(hs)}; give one")
+        horizon = hs.pop()
+    gravity = cfg0.gravity if cfg0.gravity is not None else STANDARD_GRAVITY
+    groups = batches(jobs, inits, max_worlds)
+    errors: list[np.ndarray | None] = [None] * len(jobs)
+    before: list[np.ndarray | None] = [None] * len(jobs)
+    inits_cache: dict[int, dict] = {}
+    bar = progress_bar(len(groups), enabled=progress, desc="meta-test batches")
+    try:
+        for group in groups:
+            variants = [jobs[i].variant for i in group for _ in range(jobs[i].G * inits)]
+            sim = Simulator(scene, variants, dt=cfg0.dt, substeps=cfg0.substeps, device=device,
+                            differentiable=False, gravity=gravity)
+            dev = sim.torch_device
+            norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg0.max_torque, scene, dev),
+                                          cfg0.qd_scale)
+            policy = MLPPolicy(norm)
+            segments, rates, goals, params = [], [], [], []
+            start = 0
+            for i in group:
+                job, run = jobs[i], runs[str(jobs[i].run_dir)]
+                if run.critic is None or next(run.critic.parameters()).device != dev:
+                    critic, defaults = build_test_critic(run.ckpt, norm)
+                    run.critic = critic.to(dev).requires_grad_(False)
+                    run.alpha = defaults.get("alpha")
+                    if not (isinstance(run.alpha, (int, float)) and run.alpha > 0):
+                        raise UserError(f"{job.run_dir}: the run stores no usable policy learning rate")
+                n = job.G * inits
+                segments.append((run.critic, start, start + n))
+                rates.append(torch.full((n,), float(run.alpha)))
+                goals.append(job.goals.to(torch.float32).repeat_interleave(inits, dim=0))
+                if job.G not in inits_cache:
+                    gen = torch.Generator().manual_seed(int(seed))
+                    inits_cache[job.G] = policy.init(n, generator=gen, device="cpu")
+                params.append(inits_cache[job.G])
+                start += n
+            goal = torch.cat(goals).to(dev)
+            p = {k: torch.cat([x[k] for x in params]).to(dev).requires_grad_(True) for k in params[0]}
+            q0, qd0 = sim.zeros(), sim.zeros()
+            critic = MultiCritic(segments)
+            untrained = rollout(sim, policy_fn(policy, p), q0, qd0, horizon)
+            err0 = final_error(untrained.q[-1], goal).detach().cpu().numpy()
+            p, _ = inner_update(critic, policy, p, sim, q0, qd0, goal, horizon=horizon,
+                                alpha=PerWorldRate(torch.cat(rates).to(dev)), steps=steps, create_graph=False)
+            after = rollout(sim, policy_fn(policy, p), q0, qd0, horizon)
+            err = final_error(after.q[-1], goal).detach().cpu().numpy()
+            start = 0
+            for i in group:
+                n = jobs[i].G * inits
+                errors[i] = err[start:start + n].reshape(jobs[i].G, inits).astype(np.float64)
+                before[i] = err0[start:start + n].reshape(jobs[i].G, inits).astype(np.float64)
+                start += n
+            bar.update(1)
+    finally:
+        bar.close()
+    return {"errors": errors, "before": before, "dof": scene.dof, "horizon": horizon, "steps": steps,
+            "alphas": {rd: r.alpha for rd, r in runs.items()}, "worlds": sum(j.G * inits for j in jobs),
+            "batches": len(groups)}
+
+
+def relpath(p, base: Path) -> str:
+    try:
+        return str(Path(p).resolve().relative_to(Path(base).resolve()))
+    except ValueError:
+        return str(p)

@@ -1,0 +1,130 @@
+"""The settings of every reproduce stage: the paper's (default) and the tiny ``--quick`` ones.
+
+Everything a stage computes depends only on its settings here (plus the settings of the stages it
+reads, whose hashes enter its own), so :func:`stage_hash` of them names the stage's directory. Values
+are plain JSON (numbers, strings, lists, dicts). ``--set STAGE.KEY=VALUE`` overrides one value
+(:func:`apply_overrides`), e.g. ``--set toy.iters=50`` or ``--set metatrain.kuka.ours.iterations=10``.
+
+Paper settings (non-quick):
+
+* ``toy``: the analysis defaults (``warp-critic analyze toy``): s0 = -6, g = 0, 500 iterations.
+* ``landscape``: :class:`~warp_critic.analysis.landscape_run.LandscapeConfig` defaults (Figures 1, 2).
+* ``metatrain``: ours with the presets ``reacher`` and ``kuka-table1`` (:mod:`warp_critic.presets`);
+  DDPG and Meta-Critic with their published defaults (presets ``ddpg`` / ``meta-critic``) on the SAME
+  task: the training-distribution fields of ours' preset (``start_std``, ``home_starts``) and ours'
+  number of policy updates at meta-test (``inner_steps``, which also sizes the baselines' alpha
+  search) -- so that the three methods meet the same goals, starts and number of updates.
+* ``tables``: KUKA Tables 1-3: 10 goals x 5 inits per cell and seed; Table 1 samples per-joint
+  ``N(g, std^2)`` around training goals 0 and 1; Tables 2-3 use 10 goals drawn the same way at
+  ``dynamics_goal_std`` (0.1: the paper does not say which goals it used there).
+* ``maps``: reacher Figures 4-6: a goal grid over the joint space, an end-effector mass sweep and an
+  end-effector link-length sweep (our :class:`~warp_critic.scene.Variant` changes only the end-effector
+  link, link 2 of the reacher; link 1 stays as trained).
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+from typing import Any
+
+from ..errors import UserError
+from ..presets import preset
+
+STAGES = ("toy", "landscape", "metatrain", "maps", "tables")
+SCENES = ("reacher", "kuka")
+METHODS = ("ours", "ddpg", "meta-critic")
+METHOD_LABELS = {"ours": "L_critic (ours)", "ddpg": "DDPG", "meta-critic": "Meta-Critic"}
+#: TaskConfig fields of ours' presets that describe the TASK (training distribution), shared with the baselines.
+TASK_FIELDS = ("start_std", "home_starts")
+
+
+def _metatrain(quick: bool, seeds: list[int]) -> dict:
+    out: dict[str, Any] = {}
+    for scene, name in (("reacher", "reacher"), ("kuka", "kuka-table1")):
+        ours = preset(name)
+        task = {k: ours[k] for k in TASK_FIELDS if k in ours}
+        per = {"ours": ours,
+               "ddpg": {**preset("ddpg"), **task, "inner_steps": ours.get("inner_steps", 1)},
+               "meta-critic": {**preset("meta-critic"), **task, "inner_steps": ours.get("inner_steps", 1)}}
+        for m in METHODS:
+            per[m].pop("method", None)
+            per[m]["record_every"] = 50
+            if quick:  # plumbing only: a handful of iterations on short rollouts with small networks
+                per[m].update(iterations=6, horizon=10, worlds_per_goal=2, critic_hidden=32,
+                              checkpoint_every=3, record_every=3)
+                if m != "ours":  # and one alpha search (at the last checkpoint) instead of two
+                    per[m].update(updates_per_iteration=4, warmup_iterations=1, batch_size=16, actor_hidden=16,
+                                  checkpoint_every=6)
+        out[scene] = per
+    out["seeds"] = seeds
+    return out
+
+
+def default_seeds(quick: bool) -> int:
+    """Seeds when ``--seeds`` is not given: the paper's 5, or 2 with ``--quick``."""
+    return 2 if quick else 5
+
+
+def default_settings(quick: bool, seeds: int) -> dict[str, dict]:
+    """The settings of every stage for ``--quick`` or the paper, with seeds ``0 .. seeds-1``."""
+    seed_list = list(range(seeds))
+    s: dict[str, dict] = {
+        "toy": {"s0": -6.0, "goal": 0.0, "iters": 500, "theta0": 0.1, "alpha": 0.5, "plain_lr": 0.05, "grid": 400},
+        "landscape": {"iterations": 300, "grid": 21, "range": 5.0, "seed": 0, "horizon": 20, "dt": 0.05,
+                      "substeps": 1, "alpha": 1.0, "lr": 1e-3, "inits_per_state": 4, "goal": [1.0, 1.0],
+                      "test_goals": [[-1.5, 0.5], [0.5, -1.5]], "init_states": [[0.0, 0.0], [-0.5, 0.5]],
+                      "sup_alpha": 0.05, "sup_fit_steps": 10, "sup_reward": "terminal", "tolerance": 0.5,
+                      "ours_goal_input": "absolute"},
+        "metatrain": _metatrain(quick, seed_list),
+        "tables": {"stds": [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0],
+                   "masses": [float(m) for m in range(10)],
+                   "lengths": [0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0],
+                   "goal_noise": "per-joint", "around": [0, 1], "num_goals": 10, "inits": 5,
+                   "dynamics_goal_std": 0.1, "seed": 1, "max_worlds": 4096},
+        "maps": {"grid": 15, "limit_fraction": 0.95, "masses": [0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0],
+                 "lengths": [0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0], "inits": 5, "seed": 1, "max_worlds": 4096},
+    }
+    if quick:
+        s["toy"].update(iters=100, grid=60)
+        s["landscape"].update(iterations=12, grid=7, inits_per_state=2, sup_fit_steps=2)
+        s["tables"].update(stds=[0.1, 0.5, 1.0], masses=[0.0, 4.0, 9.0], lengths=[0.2, 1.0, 2.0], num_goals=3, inits=2)
+        s["maps"].update(grid=4, masses=[0.0, 2.0, 4.0], lengths=[0.5, 1.0, 1.5], inits=2)
+    return s
+
+
+def _parse_value(text: str):
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text  # a bare string, e.g. per-joint
+
+
+def apply_overrides(settings: dict, overrides: list[str] | None) -> dict:
+    """``STAGE.KEY[.KEY...]=VALUE`` (VALUE as JSON, else a string) for each override; a path that does not
+    exist in ``settings`` is a :class:`UserError` naming the known keys."""
+    settings = copy.deepcopy(settings)
+    for item in overrides or []:
+        path, sep, raw = str(item).partition("=")
+        keys = [k for k in path.strip().split(".") if k]
+        if not sep or len(keys) < 2:
+            raise UserError(f"--set {item!r}: expected STAGE.KEY=VALUE, e.g. toy.iters=50")
+        node = settings
+        for i, k in enumerate(keys[:-1]):
+            if not isinstance(node, dict) or k not in node:
+                known = ", ".join(sorted(node)) if isinstance(node, dict) else "nothing"
+                raise UserError(f"--set {item!r}: unknown key {'.'.join(keys[:i + 1])!r} (known: {known})")
+            node = node[k]
+        last = keys[-1]
+        if not isinstance(node, dict) or (last not in node and len(keys) < 4):
+            known = ", ".join(sorted(node)) if isinstance(node, dict) else "nothing"
+            raise UserError(f"--set {item!r}: unknown key {path!r} (known: {known})")
+        node[last] = _parse_value(raw.strip())
+    return settings
+
+
+def stage_hash(*parts) -> str:
+    """A short, stable hash of JSON-able ``parts`` (the settings a stage depends on)."""
+    text = json.dumps(parts, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:10]

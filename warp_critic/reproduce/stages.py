@@ -1,0 +1,128 @@
+"""The stage runner: one sub-directory per stage keyed by the hash of its settings, ``stage.json`` last.
+
+A stage directory ``OUT/<name>-<hash>`` is complete when it holds ``stage.json`` (written atomically,
+after everything else): a complete stage is skipped. An incomplete one is re-entered: training stages
+resume their run directories (``resume=True``), the others recompute their files. A changed setting
+changes the hash, so only the stages that depend on it run again, into new directories; old
+directories are never touched.
+
+The output folder carries :data:`MARKER`; a non-empty folder without it is refused (it is not ours).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from ..errors import UserError
+from ..rundir import atomic_write_text
+
+MARKER = ".warp-critic-reproduce"
+STAGE_FILE = "stage.json"
+STAGE_KIND = "warp-critic/reproduce-stage-v1"
+
+
+def prepare_out(out: Path) -> Path:
+    """Check ``out`` (before any work) and mark it as a reproduce output; returns it."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"--out {out}: is a file, not a directory")
+    if out.is_dir() and any(out.iterdir()) and not (out / MARKER).is_file():
+        raise UserError(f"--out {out}: is not empty and not a reproduce output (no {MARKER}); not writing into it")
+    probe = out
+    while not probe.exists():
+        probe = probe.parent
+    if not probe.is_dir():
+        raise UserError(f"--out {out}: {probe} is a file, not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"--out {out}: cannot create ({e.strerror or e})") from None
+    if not (out / MARKER).is_file():
+        atomic_write_text(out / MARKER, json.dumps({"kind": "warp-critic/reproduce-output-v1"}) + "\n")
+    return out
+
+
+def read_stage(d: Path) -> dict | None:
+    """The ``stage.json`` of a complete stage directory, or ``None``."""
+    try:
+        data = json.loads((Path(d) / STAGE_FILE).read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+    return data if isinstance(data, dict) and data.get("kind") == STAGE_KIND else None
+
+
+@dataclass
+class StageRecord:
+    """What the report needs to know about one stage (sub-stage) of this call."""
+
+    group: str  # toy, landscape, metatrain, maps, tables
+    name: str  # e.g. metatrain-kuka-ours
+    dir: Path
+    data: dict | None = None  # stage.json
+    ran: bool = False  # ran (or resumed) in this call; False: skipped as complete
+    seconds_this_call: float = 0.0
+
+
+@dataclass
+class Runner:
+    """Runs stages in ``out``; ``log`` gets one line per stage (stderr by default)."""
+
+    out: Path
+    total: int  # number of selected stage groups
+    log: Callable[[str], None] = field(default=lambda s: (sys.stderr.write(s + "\n"), sys.stderr.flush()))
+    records: dict[str, StageRecord] = field(default_factory=dict)
+    t0: float = field(default_factory=time.perf_counter)
+    index: int = 0  # current group number (1-based)
+
+    def begin_group(self, group: str) -> None:
+        self.index += 1
+        self.status(group)
+
+    def status(self, what: str) -> None:
+        minutes = (time.perf_counter() - self.t0) / 60
+        self.log(f"reproduce: stage {self.index}/{self.total} {what}, {minutes:.1f} min elapsed")
+
+    def stage_dir(self, name: str, h: str) -> Path:
+        return self.out / f"{name}-{h}"
+
+    def run(self, group: str, name: str, h: str, settings: Any, fn: Callable[[Path], dict],
+            depends: dict[str, str] | None = None) -> StageRecord:
+        """Run ``fn(stage_dir) -> result`` unless the stage is complete; write ``stage.json`` last."""
+        d = self.stage_dir(name, h)
+        data = read_stage(d)
+        if data is not None:
+            self.log(f"reproduce: {name}: complete, skipped ({d.name})")
+            rec = StageRecord(group, name, d, data, ran=False)
+        else:
+            self.status(f"{group}: {name}")
+            d.mkdir(parents=True, exist_ok=True)
+            t = time.perf_counter()
+            result = fn(d)
+            seconds = time.perf_counter() - t
+            data = {"kind": STAGE_KIND, "stage": name, "group": group, "hash": h, "settings": settings,
+                    "depends": depends or {}, "seconds": seconds,
+                    "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "result": result}
+            atomic_write_text(d / STAGE_FILE, json.dumps(data, indent=1, default=_jsonable) + "\n")
+            data = read_stage(d)
+            rec = StageRecord(group, name, d, data, ran=True, seconds_this_call=seconds)
+        self.records[name] = rec
+        return rec
+
+
+def _jsonable(x):
+    import numpy as np
+
+    if isinstance(x, Path):
+        return str(x)
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, tuple):
+        return list(x)
+    raise TypeError(f"not JSON serialisable: {type(x).__name__}")
