@@ -15,7 +15,7 @@ import sys
 
 from . import __version__
 from .errors import DivergenceError, UserError
-from .flags import Parser, add_dataclass_arguments, dataclass_from_args, user_message
+from .flags import Parser, add_dataclass_arguments, dataclass_from_args, flag_of, user_message
 
 EXIT_USER_ERROR = 2
 EXIT_DIVERGED = 1
@@ -128,13 +128,16 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USER_ERROR
     previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
     try:
-        from .loop import Interrupted
+        from .loop import Interrupted, ResumeMismatch
         from .rundir import RunExistsError
         from .runtime import init
 
         try:
             init()
             return int(args.func(args) or 0)
+        except ResumeMismatch as e:
+            sys.stderr.write(f"warp-critic: error: {e.render(flag_of)}\n")
+            return EXIT_USER_ERROR
         except RunExistsError as e:
             sys.stderr.write(f"warp-critic: error: {e} (continue it with --resume, or choose another --out)\n")
             return EXIT_USER_ERROR

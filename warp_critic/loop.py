@@ -16,6 +16,7 @@ for all methods:
 
 from __future__ import annotations
 
+import contextlib
 import math
 import sys
 import time
@@ -79,14 +80,28 @@ def config_differences(saved: TaskConfig, requested: TaskConfig, given: set[str]
             continue
         old = getattr(saved, f.name, None)
         if value != old and not (isinstance(value, (int, float)) and isinstance(old, (int, float)) and float(value) == float(old)):
-            diffs.append(f"{f.name} {old!r} -> {value!r}")
+            diffs.append((f.name, old, value))
     return diffs
+
+
+class ResumeMismatch(UserError):
+    """A resume asked for settings that differ from the run's; ``diffs``: ``(field, saved, requested)``."""
+
+    def __init__(self, run_dir, diffs: list[tuple[str, Any, Any]], name=lambda field: field):
+        self.run_dir, self.diffs = run_dir, diffs
+        super().__init__(self.render(name))
+
+    def render(self, name) -> str:
+        listed = "; ".join(f"{name(f)} {old!r} -> {new!r}" for f, old, new in self.diffs)
+        return (f"resume: run directory {self.run_dir} was trained with other settings ({listed}); "
+                f"its saved settings hold on resume")
 
 
 class SeedRun:
     """One seed's share of a session: its config, run directory, checkpoint, generator and files."""
 
-    def __init__(self, cfg: TaskConfig, given: set[str] | None):
+    def __init__(self, cfg: TaskConfig, given: set[str] | None, require: tuple[str, ...] = ()):
+        self.require = ("config", "iteration", "method", "rng_state", "torch_rng_state") + tuple(require)
         self.ckpt: dict | None = None
         self.rundir: RunDir | None = None
         self.cfg = self._resume_config(cfg, given) if cfg.resume else cfg
@@ -118,7 +133,7 @@ class SeedRun:
         if requested.out is None:
             requested.out = requested.default_out()
         self.rundir = RunDir.open(requested.out)
-        ckpt = self.rundir.load_checkpoint(require=("config", "iteration", "method"))
+        ckpt = self.rundir.load_checkpoint(require=self.require)
         if ckpt["method"] != requested.method:
             raise UserError(f"run directory {requested.out}: holds a {ckpt['method']} run, not {requested.method}")
         try:
@@ -128,8 +143,7 @@ class SeedRun:
             raise UserError(f"run directory {requested.out}: its checkpoint holds an unusable config ({e})") from None
         diffs = config_differences(saved, requested, given)
         if diffs:
-            raise UserError(f"resume: run directory {requested.out} was trained with other settings "
-                            f"({'; '.join(diffs)}); its saved settings hold on resume")
+            raise ResumeMismatch(requested.out, diffs)
         done = ckpt["iteration"] + 1
         iterations = requested.iterations if (given is None or "iterations" in given) else saved.iterations
         if iterations < done:
@@ -165,12 +179,14 @@ class Session:
     """One run of one method, for one seed or several seeds sharing one simulator (see the module
     docstring). With ``S`` seeds the task holds ``S`` copies of the ``G x K`` worlds, seed-major."""
 
-    def __init__(self, cfg: TaskConfig, *, differentiable: bool, given: set[str] | None = None):
+    def __init__(self, cfg: TaskConfig, *, differentiable: bool, given: set[str] | None = None,
+                 require: tuple[str, ...] = ()):
+        """``require``: the checkpoint entries the method reads on resume (checked up front)."""
         check_fields(cfg)
         self.runs: list[SeedRun] = []
         try:
             for c in seed_configs(cfg):
-                self.runs.append(SeedRun(c, given))
+                self.runs.append(SeedRun(c, given, require))
             starts = {r.start for r in self.runs}
             if len(starts) > 1:
                 raise UserError("resume: the seeds' run directories are at different iterations "
@@ -215,6 +231,16 @@ class Session:
     def seeded(self, i: int) -> None:
         """Mark the end of seed ``i``'s set-up: its share of torch's global RNG state is saved."""
         self.runs[i].global_rng = torch.get_rng_state()
+
+    @contextlib.contextmanager
+    def loading(self, i: int = 0):
+        """Around loading seed ``i``'s checkpoint states into the method's objects: a checkpoint whose
+        entries do not fit them is a one-line error, not a traceback."""
+        try:
+            yield
+        except (KeyError, RuntimeError, ValueError, TypeError, IndexError, AttributeError) as e:
+            raise UserError(f"{self.runs[i].rundir.checkpoint_path}: its states do not fit this {self.cfg.method} "
+                            f"run ({type(e).__name__}: {' '.join(str(e).split())[:160]})") from None
 
     def restore(self, i: int = 0) -> dict | None:
         """Seed ``i``'s checkpoint to load the method's states from (RNG restored), or ``None``."""

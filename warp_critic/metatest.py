@@ -35,7 +35,8 @@ from .rundir import RunDir, check_output_file, write_result
 from .runtime import seed_everything
 from .scene import Variant, load_scene
 from .simulator import STANDARD_GRAVITY, Simulator
-from .task import SerializableConfig, TaskConfig, check_fields, goals_tensor, max_torque_tensor, spec
+from .task import (SerializableConfig, TaskConfig, available_memory, check_fields, estimate_memory, goals_tensor,
+                   max_torque_tensor, spec)
 
 RESULT_KIND = "warp-critic/metatest-v1"
 
@@ -188,6 +189,10 @@ def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
         goals = sample_goals(train_goals, tc.num_goals, tc.goal_std, tc.around, lo, hi, gen, tc.goal_noise)
     G, K = goals.shape[0], tc.inits
     W = G * K
+    need, have = estimate_memory(W, scene.dof, horizon, cfg.substeps), available_memory()
+    if need > 0.8 * have:
+        raise FieldError("inits", f"{G} goals x {K} inits = {W} worlds, horizon {horizon} need about "
+                                  f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB available")
     variant = Variant(ee_mass=tc.ee_mass, link_length=tc.link_length, link_scale=tc.link_scale)
     # differentiable=False: the model has no gradient buffers, a taped rollout is impossible.
     sim = Simulator(scene, [variant] * W, dt=cfg.dt, substeps=cfg.substeps, device=tc.device,

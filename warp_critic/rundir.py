@@ -118,13 +118,22 @@ def atomic_torch_save(obj, path: Path) -> None:
 
 def _writable_dir(path: Path, what: str) -> None:
     """``path`` exists as a directory we can write into, or can be created."""
-    probe = path
-    while not probe.exists():
+    probe = Path(path)
+    while not probe.exists() and probe != probe.parent:
         probe = probe.parent
     if not probe.is_dir():
         raise UserError(f"{what} {path}: {probe} is a file, not a directory")
     if not os.access(probe, os.W_OK | os.X_OK):
         raise UserError(f"{what} {path}: {probe} is not writable")
+
+
+def check_output_dir(path: str | Path, what: str = "output") -> Path:
+    """An output folder that is a folder (or can be made one) we can write into; checked before any work."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise UserError(f"{what} {path}: exists and is not a folder")
+    _writable_dir(path, what)
+    return path
 
 
 def check_output_file(path: str | Path, what: str = "output") -> Path:
@@ -171,7 +180,7 @@ class RunDir:
     def __init__(self, path: str | Path):
         self.path = Path(path)
         self._locked = False
-        self._created = False
+        self._created: list[Path] = []
 
     # -- claiming ---------------------------------------------------------------------------------
     @classmethod
@@ -186,7 +195,11 @@ class RunDir:
                 raise RunExistsError(f"run directory {p}: already holds a run")
             raise UserError(f"run directory {p}: is not empty and not a warp-critic run; not writing into it")
         _writable_dir(p, "run directory")
-        rd._created = not p.exists()
+        rd._created = []  # the folders this run made, deepest first (removed again if it fails early)
+        probe = p
+        while not probe.exists():
+            rd._created.append(probe)
+            probe = probe.parent
         try:
             p.mkdir(parents=True, exist_ok=True)
         except OSError as e:
@@ -226,13 +239,13 @@ class RunDir:
     def abandon(self) -> None:
         """Undo :meth:`create` after an early failure: remove what it made if nothing else was written."""
         self.unlock()
-        if not self._created:
-            with contextlib.suppress(OSError):
-                (self.path / MARKER).unlink()
-            return
         with contextlib.suppress(OSError):
             (self.path / MARKER).unlink()
-            self.path.rmdir()  # only succeeds when empty
+        for folder in self._created:
+            try:
+                folder.rmdir()  # only succeeds when empty
+            except OSError:
+                break
 
     # -- locking ----------------------------------------------------------------------------------
     def lock(self) -> None:
@@ -358,8 +371,9 @@ def load_checkpoint_file(path: str | Path, require: Iterable[str] = ()) -> dict:
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # corrupt, not a torch file, or objects that need code to load
-        reason = "it holds objects that need code to load (refused)" if "weights_only" in str(e) or \
-            "Unsupported global" in str(e) else f"not a readable checkpoint ({type(e).__name__})"
+        text = str(e).lower()
+        reason = "it holds objects that need code to load (refused)" if "unsupported global" in text \
+            else f"not a readable checkpoint ({type(e).__name__})"
         raise UserError(f"{path}: {reason}") from None
     if not isinstance(ckpt, dict) or ckpt.get("kind") != CHECKPOINT_KIND:
         raise UserError(f"{path}: not a warp-critic checkpoint")

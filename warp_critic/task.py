@@ -94,7 +94,7 @@ def _check_value(name: str, x, meta) -> None:
     if not isinstance(x, (int, float)) or not math.isfinite(x):
         raise FieldError(name, f"must be a finite number (got {x!r})")
     if "cap" in meta and x > meta["cap"]:
-        raise FieldError(name, f"must be <= {meta['cap']:g} (got {x!r}; larger values cannot be meant)")
+        raise FieldError(name, f"must be <= {meta['cap']} (got {x!r}; larger values cannot be meant)")
     lo = ("gt", meta["gt"]) if "gt" in meta else ("ge", meta["ge"]) if "ge" in meta else None
     hi = ("lt", meta["lt"]) if "lt" in meta else ("le", meta["le"]) if "le" in meta else None
     ok_lo = lo is None or (x > lo[1] if lo[0] == "gt" else x >= lo[1])
@@ -102,11 +102,11 @@ def _check_value(name: str, x, meta) -> None:
     if ok_lo and ok_hi:
         return
     if lo and hi:
-        raise FieldError(name, f"must be in {'(' if lo[0] == 'gt' else '['}{lo[1]:g}, {hi[1]:g}"
+        raise FieldError(name, f"must be in {'(' if lo[0] == 'gt' else '['}{lo[1]}, {hi[1]}"
                                f"{')' if hi[0] == 'lt' else ']'} (got {x!r})")
     key, bound = lo if lo else hi
     word = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}[key]
-    raise FieldError(name, f"must be {word} {bound:g} (got {x!r})")
+    raise FieldError(name, f"must be {word} {bound} (got {x!r})")
 
 
 @dataclass

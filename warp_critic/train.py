@@ -31,7 +31,7 @@ class TrainConfig(TaskConfig):
     policy_init: str = spec("fresh", "fresh: new random policies every iteration (paper); fixed: the same initial policies every iteration; persistent: continue from the updated policies", choices=POLICY_INIT_SCHEMES)
     policy_lifetime: int = spec(1, "with policy-init fresh: outer iterations a policy lives before a fresh random one replaces it; 1 = new policies every iteration (paper). N > 1 staggers the worlds so policies of every age 0..N-1 are trained on at once: the critic learns to keep improving a policy, and meta-test takes N x inner-steps steps", gt=0, cap=10**6)
     critic_input: str = spec("full", "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant)", choices=CRITIC_INPUTS)
-    critic_hidden: int = spec(400, "critic hidden units (2 ELU layers)", gt=0, cap=65536)
+    critic_hidden: int = spec(400, "critic hidden units (2 ELU layers)", gt=0, cap=8192)
     running_weight: float = spec(0.0, "weight of the running term mean_t ||q_t-g||^2 added to the task loss", ge=0)
     velocity_weight: float = spec(0.0, "weight (s^2) of the final-velocity term ||qd_T||^2 added to the task loss", ge=0)
     clip_grad: float = spec(10.0, "clip the critic's gradient norm (0 = off)", ge=0)
@@ -70,7 +70,8 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
     :class:`~warp_critic.loop.IterationInfo` (of the first seed) after every iteration; ``given``
     names the fields the user set (for the resume rule; see :class:`~warp_critic.loop.Session`).
     """
-    with Session(cfg, differentiable=True, given=given) as session:
+    with Session(cfg, differentiable=True, given=given,
+                 require=("critic_state", "optimizer_state", "policy_params")) as session:
         cfg, task = session.cfg, session.task
         S, dev = task.S, task.device
         policy = MLPPolicy(task.norm)
@@ -85,9 +86,10 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
         for i in range(S):
             ckpt = session.restore(i)
             if ckpt is not None:
-                critic.load_critic_state(i, ckpt["critic_state"])
-                load_optimizer_slice(opt, critic, i, ckpt["optimizer_state"])
-                params[i] = {k: v.to(dev) for k, v in ckpt["policy_params"].items()}
+                with session.loading(i):
+                    critic.load_critic_state(i, ckpt["critic_state"])
+                    load_optimizer_slice(opt, critic, i, ckpt["optimizer_state"])
+                    params[i] = {k: ckpt["policy_params"][k].to(dev).reshape(v.shape) for k, v in params[i].items()}
         params = _cat(params)
         q0, qd0 = task.home, torch.zeros_like(task.home)
 

@@ -46,11 +46,14 @@ def integer(field: str, value, lo: int, hi: int | None = None) -> int:
 
 
 def out_dir(field: str, path) -> Path:
-    """An output folder that is not an existing file."""
-    p = Path(path)
-    if p.exists() and not p.is_dir():
-        raise FieldError(field, f"{p} exists and is not a folder")
-    return p
+    """An output folder that is a folder (or can be made one) we can write into."""
+    from ..errors import UserError
+    from ..rundir import check_output_dir
+
+    try:
+        return check_output_dir(path)
+    except UserError as e:
+        raise FieldError(field, str(e).removeprefix("output ")) from None
 
 
 def available_memory(device: str = "cpu") -> int | None:

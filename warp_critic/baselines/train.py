@@ -100,12 +100,12 @@ class BaselineConfig(TaskConfig):
     ou_theta: float = spec(0.15, "OU mean reversion per control step, in [0, 1]", ge=0, le=1)
     reward: str = spec("dense", "dense: r_t = -||q_{t+1}-g||^2 every step; sparse: only -||q_T-g||^2 at the end", choices=REWARD_KINDS)
     reward_scale: float = spec(1.0, "multiply the reward by this", gt=0)
-    actor_hidden: int = spec(64, "actor hidden units (2 tanh layers)", gt=0, cap=65536)
-    critic_hidden: int = spec(400, "Q hidden units (2 ELU layers)", gt=0, cap=65536)
+    actor_hidden: int = spec(64, "actor hidden units (2 tanh layers)", gt=0, cap=8192)
+    critic_hidden: int = spec(400, "Q hidden units (2 ELU layers)", gt=0, cap=8192)
     # -- Meta-Critic -----------------------------------------------------------------------------
     aux_lr: float = spec(1e-3, "meta-critic only: learning rate of the auxiliary loss h_omega (Adam)", gt=0, cap=1e3)
     aux_weight_decay: float = spec(1e-4, "meta-critic only: weight decay of h_omega", ge=0)
-    aux_hidden: int = spec(100, "meta-critic only: h_omega hidden units (2 ReLU layers)", gt=0, cap=65536)
+    aux_hidden: int = spec(100, "meta-critic only: h_omega hidden units (2 ReLU layers)", gt=0, cap=8192)
     aux_weight: float = spec(1.0, "meta-critic only: weight of the auxiliary loss in the actor update", ge=0)
     virtual_lr: float | None = spec(None, "meta-critic only: SGD step of the virtual actor updates (default: the actor lr)", gt=0, cap=1e3)
     # -- meta-test defaults stored in the checkpoint ---------------------------------------------
@@ -181,7 +181,8 @@ def train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks: 
     replay buffer and noise process per seed, each drawing from its own seed's generator), and each
     seed writes the run directory a single-seed run would.
     """
-    with Session(cfg, differentiable=False, given=given) as session:
+    with Session(cfg, differentiable=False, given=given,
+                 require=("agent_state", "buffer", "selected_alpha")) as session:
         cfg, task = session.cfg, session.task
         S, sim, norm, goal, dof, dev = task.S, task.sim, task.norm, task.goal, task.scene.dof, task.device
         gens, agents, buffers, noises = [], [], [], []
@@ -195,9 +196,10 @@ def train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks: 
         for i in range(S):
             ckpt = session.restore(i)
             if ckpt is not None:
-                agents[i].load_state_dict(ckpt["agent_state"])
-                buffers[i].load_state_dict(ckpt["buffer"])
-                alphas[i] = ckpt["selected_alpha"] if cfg.alpha is None else cfg.alpha
+                with session.loading(i):
+                    agents[i].load_state_dict(ckpt["agent_state"])
+                    buffers[i].load_state_dict(ckpt["buffer"])
+                    alphas[i] = float(ckpt["selected_alpha"]) if cfg.alpha is None else cfg.alpha
         q0, qd0 = task.home, torch.zeros_like(task.home)
         n_updates = cfg.n_updates()
         # the alpha search runs one seed's worlds at a time (as in a single-seed run)
