@@ -35,7 +35,7 @@ def categorise(stats: pstats.Stats) -> dict[str, float]:
             groups["warp launch overhead"] += tottime
         elif "newton/" in filename:
             groups["newton python"] += tottime
-        elif name == "run_backward" or "torch/autograd" in filename:
+        elif "run_backward" in name or "torch/autograd" in filename:
             groups["torch backward engine"] += tottime
         elif filename == "~" and ("torch" in name or "method" in name):
             groups["torch ops"] += tottime
