@@ -157,3 +157,31 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
                         out=str(tmp_path / f"{job.key}.json"))
         ref = np.asarray(meta_test(tc, progress=None)["final_error_all"])
         np.testing.assert_allclose(err, ref, rtol=1e-4, atol=1e-6)
+
+
+def test_interrupted_metatrain_resumes(tmp_path, capsys):
+    """A sub-stage without stage.json (killed mid-training) resumes its run directories to the end;
+    seed directories without a checkpoint (killed before the first one) are started afresh."""
+    from warp_critic.reproduce.pipeline import ReproduceConfig, plan
+    from warp_critic.reproduce.stages import prepare_out
+    from warp_critic.reproduce.training import run_metatrain_stage
+
+    out = prepare_out(tmp_path / "r")
+    settings = ReproduceConfig(out=out, quick=True, seeds=2).validate()
+    st = plan(settings)["metatrain-reacher-ours"]
+    d = out / f"metatrain-reacher-ours-{st['hash']}"
+    values = dict(settings["metatrain"]["reacher"]["ours"], iterations=3)
+    run_metatrain_stage(d, "reacher", "ours", values, [0, 1], "cpu", progress=False)  # "killed" after 3 iterations
+    lines = (d / "run" / "seed0" / "metrics.jsonl").read_text().splitlines()
+    assert len(lines) == 3 and not (d / "stage.json").exists()
+    other = plan(settings)["metatrain-reacher-ddpg"]
+    stray = out / f"metatrain-reacher-ddpg-{other['hash']}" / "run" / "seed0"
+    stray.mkdir(parents=True)
+    (stray / ".warp-critic-run").write_text("{}")  # claimed, but no checkpoint was ever written
+    assert reproduce_main(["--quick", "--only", "metatrain", "--out", str(out), "--device", "cpu"]) == 0
+    data = json.loads((d / "stage.json").read_text())
+    rows = [json.loads(x) for x in (d / "run" / "seed0" / "metrics.jsonl").read_text().splitlines()]
+    assert [r["iteration"] for r in rows] == list(range(6))
+    assert rows[:3] == [json.loads(x) for x in lines]  # the first three iterations were kept, not retrained
+    assert data["result"]["seeds"]["0"]["iteration"] == list(range(6))
+    assert (stray / "checkpoint.pt").is_file()
