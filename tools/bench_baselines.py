@@ -25,57 +25,34 @@ existing run directories without training. The results are also written as JSON 
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
-import typing
 from pathlib import Path
+
+from warp_critic.flags import ToolParser, comma_list, user_message  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PROG = "bench_baselines"
 
 
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> typing.NoReturn:
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
-        sys.exit(2)
-
-
-def _list(kind):
-    def parse(text: str) -> list:
-        try:
-            return [kind(x.strip()) for x in text.split(",") if x.strip()]
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected comma-separated {kind.__name__} values, got {text!r}") from None
-    return parse
-
-
-def _user_error(e) -> str:
-    from warp_critic.errors import FieldError
-
-    if isinstance(e, FieldError):
-        return f"--{e.field.replace('_', '-')}: {e.problem}"
-    return str(e)
-
-
 def parse_args(argv=None):
-    p = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
-    p.add_argument("--scenes", type=_list(str), default=["reacher", "kuka"], help="comma-separated scene names under scenes/")
-    p.add_argument("--methods", type=_list(str), default=["ddpg", "meta-critic"], help="comma-separated: ddpg, meta-critic")
+    p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    p.add_argument("--scenes", type=comma_list(str), default=["reacher", "kuka"], help="comma-separated scene names under scenes/")
+    p.add_argument("--methods", type=comma_list(str), default=["ddpg", "meta-critic"], help="comma-separated: ddpg, meta-critic")
     p.add_argument("--iterations", type=int, default=None, help="training iterations (default: the preset's, 300)")
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--stds", type=_list(float), default=[0.1, 0.3, 0.4], help="meta-test goal stds (rad), e.g. 0.1,0.4")
+    p.add_argument("--stds", type=comma_list(float), default=[0.1, 0.3, 0.4], help="meta-test goal stds (rad), e.g. 0.1,0.4")
     p.add_argument("--goal-noise", default="per-joint",
                    help="how goals are sampled around the training goals: per-joint or distance (see warp_critic.metatest.sample_goals)")
     p.add_argument("--num-goals", type=int, default=10)
     p.add_argument("--inits", type=int, default=5)
-    p.add_argument("--around", type=_list(int), default=[0, 1],
+    p.add_argument("--around", type=comma_list(int), default=[0, 1],
                    help="training goals to sample around, e.g. 0,1 (the paper: two of the four); '' = all")
     p.add_argument("--device", default="auto")
     p.add_argument("--out-root", type=Path, default=None, help="where the run directories go (default runs/bench, "
                                                                "runs/bench-quick with --quick)")
-    p.add_argument("--extra", type=_list(str), default=[], help="other run directories to meta-test (e.g. ours), comma-separated")
+    p.add_argument("--extra", type=comma_list(str), default=[], help="other run directories to meta-test (e.g. ours), comma-separated")
     p.add_argument("--reuse", action="store_true", help="meta-test existing run directories, do not train")
     p.add_argument("--quick", action="store_true", help="smoke test: 20 iterations, 3 goals x 2 inits")
     args = p.parse_args(argv)
@@ -149,7 +126,7 @@ def main(argv=None) -> int:
         runtime.init()
         rows = run(args)
     except UserError as e:
-        print(f"{PROG}: error: {_user_error(e)}", file=sys.stderr)
+        print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
         return 2
     stds = args.stds
     (args.out_root / "bench_baselines.json").write_text(json.dumps(rows, indent=2))

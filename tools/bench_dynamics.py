@@ -13,15 +13,17 @@ Usage: ``python tools/bench_dynamics.py [--worlds 1,64,512] [--horizon 100] [--d
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
-import typing
 from pathlib import Path
 
 import torch
 
 PROG = "bench_dynamics"
+
+
+from warp_critic.flags import ToolParser, comma_list  # noqa: E402
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -91,26 +93,9 @@ def bench_drm(worlds: int, horizon: int, dt: float) -> float:
     loss.backward()
     return worlds * horizon / (time.perf_counter() - t0)
 
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> typing.NoReturn:
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
-        sys.exit(2)
-
-
-def _int_list(text: str) -> list[int]:
-    try:
-        values = [int(x.strip()) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
-    if not values or min(values) < 1:
-        raise argparse.ArgumentTypeError(f"expected world counts >= 1, got {text!r}")
-    return values
-
-
 def main(argv: list[str] | None = None) -> int:
-    p = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
-    p.add_argument("--worlds", type=_int_list, default=[1, 64, 512], help="world counts, e.g. 1,64,512")
+    p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    p.add_argument("--worlds", type=comma_list(int), default=[1, 64, 512], help="world counts, e.g. 1,64,512")
     p.add_argument("--horizon", type=int, default=100, help="physics steps per rollout")
     p.add_argument("--dt", type=float, default=0.0025, help="time step (s)")
     p.add_argument("--device", default="cpu", help="cpu or cuda for Newton (the paper's model runs on CPU)")

@@ -21,40 +21,18 @@ resumed, a finished one is only meta-tested).
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
-import typing
 from pathlib import Path
+
+from warp_critic.flags import ToolParser, comma_list, user_message  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PROG = "bench_metatrain"
+
+
 # scene -> the preset (warp_critic.presets) its numbers are reported with
 SCENE_PRESETS = {"reacher": "reacher", "kuka": "kuka-table1"}
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> typing.NoReturn:
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
-        sys.exit(2)
-
-
-def _list(kind):
-    def parse(text: str) -> list:
-        try:
-            return [kind(x.strip()) for x in text.split(",") if x.strip()]
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected comma-separated {kind.__name__} values, got {text!r}") from None
-    return parse
-
-
-def _user_error(e) -> str:
-    from warp_critic.errors import FieldError
-
-    if isinstance(e, FieldError):
-        return f"--{e.field.replace('_', '-')}: {e.problem}"
-    return str(e)
-
 
 def run_dir(runs: Path, name: str, seed: int, quick: bool) -> Path:
     return runs / (f"bench-{name}{'-quick' if quick else ''}" + (f"-seed{seed}" if seed else ""))
@@ -86,10 +64,10 @@ def train_scene(name: str, seed: int, iterations: int | None, device: str, quick
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
-    p.add_argument("--scenes", type=_list(str), default=["reacher", "kuka"],
+    p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    p.add_argument("--scenes", type=comma_list(str), default=["reacher", "kuka"],
                    help=f"comma-separated, of {', '.join(SCENE_PRESETS)}")
-    p.add_argument("--seeds", type=_list(int), default=[0], help="meta-train seeds, pooled at meta-test, e.g. 0,1,2")
+    p.add_argument("--seeds", type=comma_list(int), default=[0], help="meta-train seeds, pooled at meta-test, e.g. 0,1,2")
     p.add_argument("--iterations", type=int, default=None, help="override the preset's iterations")
     p.add_argument("--device", default="auto")
     p.add_argument("--quick", action="store_true", help="tiny smoke version")
@@ -122,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
             lines += format_table(table, paper="ours" if name == "kuka" else None)
     except UserError as e:
         print("\n".join(lines))
-        print(f"{PROG}: error: {_user_error(e)}", file=sys.stderr)
+        print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
         return 2
     print("\n".join(lines))
     return 0

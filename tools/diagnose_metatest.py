@@ -18,35 +18,14 @@ Usage::
 
 from __future__ import annotations
 
-import argparse
 import sys
-import typing
 
 import numpy as np
 import torch
 
+from warp_critic.flags import ToolParser, comma_list, user_message  # noqa: E402
+
 PROG = "diagnose_metatest"
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> typing.NoReturn:
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
-        sys.exit(2)
-
-
-def _int_list(text: str) -> list[int]:
-    try:
-        return [int(x.strip()) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers, got {text!r}") from None
-
-
-def _user_error(e) -> str:
-    from warp_critic.errors import FieldError
-
-    if isinstance(e, FieldError):
-        return f"--{e.field.replace('_', '-')}: {e.problem}"
-    return str(e)
 
 
 def _training_goals(run_dir: str) -> int | None:
@@ -65,11 +44,11 @@ def _training_goals(run_dir: str) -> int | None:
 
 
 def main(argv=None) -> int:
-    p = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
+    p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
     p.add_argument("run_dir")
     p.add_argument("--goal-std", type=float, default=0.1, help="0 = the training goals themselves")
     p.add_argument("--goal-noise", default="per-joint", choices=["per-joint", "distance"])
-    p.add_argument("--around", type=_int_list, default=[0, 1],
+    p.add_argument("--around", type=comma_list(int), default=[0, 1],
                    help="training goals to use / sample around, e.g. 0,1 ('' = all)")
     p.add_argument("--num-goals", type=int, default=10)
     p.add_argument("--inits", type=int, default=5)
@@ -98,7 +77,7 @@ def main(argv=None) -> int:
                                        goal_noise=args.goal_noise, around=around, inits=args.inits,
                                        policy_steps=args.steps, seed=args.seed, device="cpu"))
     except UserError as e:
-        print(f"{PROG}: error: {_user_error(e)}", file=sys.stderr)
+        print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
         return 2
     scene, goals, goal, sim, norm, critic = m.scene, m.goals, m.goal, m.sim, m.norm, m.critic
     params, q0, qd0, steps, alpha, horizon = m.params, m.q0, m.qd0, m.steps, m.alpha, m.horizon

@@ -20,47 +20,23 @@ method's run directory (ours, DDPG, Meta-Critic).
 
 from __future__ import annotations
 
-import argparse
 import json
 import sys
-import typing
 from pathlib import Path
 
+from warp_critic.flags import ToolParser, comma_list, user_message  # noqa: E402
+
 PROG = "paper_table"
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> typing.NoReturn:
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
-        sys.exit(2)
-
-
-def _list(kind):
-    def parse(text: str) -> list:
-        try:
-            return [kind(x.strip()) for x in text.split(",") if x.strip()]
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected comma-separated {kind.__name__} values, got {text!r}") from None
-    return parse
-
-
-def _user_error(e) -> str:
-    """One line for a UserError; a FieldError names the flag of its field."""
-    from warp_critic.errors import FieldError
-
-    if isinstance(e, FieldError):
-        flag = "RUN_DIR" if e.field == "run_dirs" else "--" + e.field.replace("_", "-")
-        return f"{flag}: {e.problem}"
-    return str(e)
+RENAME = {"run_dirs": "RUN_DIR"}
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = _Parser(prog=PROG, description=__doc__.split("\n\n")[0])
+    p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
     p.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run directories (one per meta-train seed)")
-    p.add_argument("--stds", type=_list(float), default=[0.1, 0.4], help="goal stds (rad), e.g. 0.1,0.4; the paper: 0.1 .. 1.0")
-    p.add_argument("--goal-noise", type=_list(str), default=["per-joint", "distance"], dest="goal_noise",
+    p.add_argument("--stds", type=comma_list(float), default=[0.1, 0.4], help="goal stds (rad), e.g. 0.1,0.4; the paper: 0.1 .. 1.0")
+    p.add_argument("--goal-noise", type=comma_list(str), default=["per-joint", "distance"], dest="goal_noise",
                    help="readings of 'at a distance of N(0, std)': per-joint and/or distance (see warp_critic.metatest.sample_goals)")
-    p.add_argument("--around", type=_list(int), default=[0, 1],
+    p.add_argument("--around", type=comma_list(int), default=[0, 1],
                    help="training goals to sample around, e.g. 0,1 (the paper: two of the four); '' = all")
     p.add_argument("--num-goals", type=int, default=10)
     p.add_argument("--inits", type=int, default=5, help="fresh policy initialisations per goal")
@@ -80,7 +56,7 @@ def main(argv: list[str] | None = None) -> int:
         runtime.init()
         result = run_protocol(pc)
     except UserError as e:
-        print(f"{PROG}: error: {_user_error(e)}", file=sys.stderr)
+        print(f"{PROG}: error: {user_message(e, rename=RENAME)}", file=sys.stderr)
         return 2
     print(f"{len(pc.run_dirs)} run(s) x {pc.num_goals} goals x {pc.inits} inits per cell, "
           f"around training goals {result.around or 'all'}; {result.seconds:.0f} s")

@@ -112,6 +112,12 @@ def build_parser() -> argparse.ArgumentParser:
     al = an_sub.add_parser("landscape", help="2-D point mass: Q_true, Q_sup and L_critic landscapes")
     landscape.add_arguments(al)
     al.set_defaults(func=landscape.run_from_args)
+
+    from .reproduce import cli as reproduce_cli
+
+    rp = sub.add_parser("reproduce", help=reproduce_cli.HELP, description=reproduce_cli.DESCRIPTION)
+    reproduce_cli.add_arguments(rp)
+    rp.set_defaults(func=reproduce_cli.run_from_args)
     return p
 
 

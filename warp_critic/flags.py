@@ -28,6 +28,24 @@ class Parser(argparse.ArgumentParser):
         self.exit(2, f"{root}: error: {where}{' '.join(message.split())}\n")
 
 
+class ToolParser(argparse.ArgumentParser):
+    """argparse for the scripts in ``tools/``: ``PROG: error: ...`` on one line, exit code 2."""
+
+    def error(self, message: str) -> typing.NoReturn:  # noqa: D401
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())}\n")
+
+
+def comma_list(kind):
+    """An argparse type: comma-separated values of ``kind`` (``int``, ``float`` or ``str``); ``''`` is
+    the empty list (a tool's "all")."""
+    one = str if kind is str else _number(kind)
+
+    def parse(text: str) -> list:
+        return [one(x.strip()) for x in text.split(",") if x.strip()]
+
+    return parse
+
+
 def _number(kind):
     def parse(text: str):
         try:
@@ -151,9 +169,10 @@ def parse_goals(spec: str | list | None, name: str = "goals") -> list[list[float
     return goals
 
 
-def user_message(e: UserError, positional: tuple[str, ...] = ()) -> str:
-    """The one-line message for the CLI: a field error names the flag (or the positional argument)."""
+def user_message(e: UserError, positional: tuple[str, ...] = (), rename: dict[str, str] | None = None) -> str:
+    """The one-line message for the CLI: a field error names the flag (or the positional argument;
+    ``rename`` maps a field to what the user typed instead)."""
     if isinstance(e, FieldError):
-        who = e.field if e.field in positional else flag_of(e.field)
+        who = (rename or {}).get(e.field) or (e.field if e.field in positional else flag_of(e.field))
         return f"{who} {e.problem}" if e.problem.startswith(("must", "needs", "may")) else f"{who}: {e.problem}"
     return str(e)
