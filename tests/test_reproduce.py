@@ -12,7 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from warp_critic.reproduce.__main__ import main as reproduce_main
+from warp_critic.cli import main as cli_main
+
+
+def reproduce_main(argv):
+    return cli_main(["reproduce", *argv])
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 SECTIONS = ("## Stages", "## Section 4.1", "## Section 4.2", "## Figure 3", "### reacher", "### kuka",

@@ -11,7 +11,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import UserError
+from ..errors import FieldError, UserError
 from .settings import METHODS, SCENES, STAGES, apply_overrides, default_settings, stage_hash
 from .stages import Runner, prepare_out
 
@@ -30,12 +30,12 @@ class ReproduceConfig:
     def validate(self) -> dict:
         """Check everything before any work; returns the settings. Raises a one-line :class:`UserError`."""
         if isinstance(self.seeds, bool) or not isinstance(self.seeds, int) or self.seeds < 1:
-            raise UserError(f"--seeds: must be an integer >= 1 (got {self.seeds!r})")
+            raise FieldError("seeds", f"must be an integer >= 1 (got {self.seeds!r})")
         if self.seeds > 1000:
-            raise UserError(f"--seeds: must be <= 1000 (got {self.seeds})")
+            raise FieldError("seeds", f"must be <= 1000 (got {self.seeds})")
         for s in self.only or []:
             if s not in STAGES:
-                raise UserError(f"--only: unknown stage {s!r} (stages: {', '.join(STAGES)})")
+                raise FieldError("only", f"unknown stage {s!r} (stages: {', '.join(STAGES)})")
         if self.only is not None and not self.only:
             raise UserError(f"--only: give one or more of {', '.join(STAGES)}")
         if self.device not in ("auto", "cpu", "cuda") and not str(self.device).startswith("cuda:"):

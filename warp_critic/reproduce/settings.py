@@ -29,7 +29,7 @@ import hashlib
 import json
 from typing import Any
 
-from ..errors import UserError
+from ..errors import FieldError, UserError
 from ..presets import preset
 
 STAGES = ("toy", "landscape", "metatrain", "maps", "tables")
@@ -109,17 +109,17 @@ def apply_overrides(settings: dict, overrides: list[str] | None) -> dict:
         path, sep, raw = str(item).partition("=")
         keys = [k for k in path.strip().split(".") if k]
         if not sep or len(keys) < 2:
-            raise UserError(f"--set {item!r}: expected STAGE.KEY=VALUE, e.g. toy.iters=50")
+            raise FieldError("set", f"{item!r}: expected STAGE.KEY=VALUE, e.g. toy.iters=50")
         node = settings
         for i, k in enumerate(keys[:-1]):
             if not isinstance(node, dict) or k not in node:
                 known = ", ".join(sorted(node)) if isinstance(node, dict) else "nothing"
-                raise UserError(f"--set {item!r}: unknown key {'.'.join(keys[:i + 1])!r} (known: {known})")
+                raise FieldError("set", f"{item!r}: unknown key {'.'.join(keys[:i + 1])!r} (known: {known})")
             node = node[k]
         last = keys[-1]
         if not isinstance(node, dict) or (last not in node and len(keys) < 4):
             known = ", ".join(sorted(node)) if isinstance(node, dict) else "nothing"
-            raise UserError(f"--set {item!r}: unknown key {path!r} (known: {known})")
+            raise FieldError("set", f"{item!r}: unknown key {path!r} (known: {known})")
         node[last] = _parse_value(raw.strip())
     return settings
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from ..errors import UserError
+from ..errors import FieldError, UserError
 from ..rundir import atomic_write_text
 
 MARKER = ".warp-critic-reproduce"
@@ -30,18 +30,18 @@ def prepare_out(out: Path) -> Path:
     """Check ``out`` (before any work) and mark it as a reproduce output; returns it."""
     out = Path(out)
     if out.exists() and not out.is_dir():
-        raise UserError(f"--out {out}: is a file, not a directory")
+        raise FieldError("out", f"{out}: is a file, not a directory")
     if out.is_dir() and any(out.iterdir()) and not (out / MARKER).is_file():
-        raise UserError(f"--out {out}: is not empty and not a reproduce output (no {MARKER}); not writing into it")
+        raise FieldError("out", f"{out}: is not empty and not a reproduce output (no {MARKER}); not writing into it")
     probe = out
     while not probe.exists():
         probe = probe.parent
     if not probe.is_dir():
-        raise UserError(f"--out {out}: {probe} is a file, not a directory")
+        raise FieldError("out", f"{out}: {probe} is a file, not a directory")
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise UserError(f"--out {out}: cannot create ({e.strerror or e})") from None
+        raise FieldError("out", f"{out}: cannot create ({e.strerror or e})") from None
     if not (out / MARKER).is_file():
         atomic_write_text(out / MARKER, json.dumps({"kind": "warp-critic/reproduce-output-v1"}) + "\n")
     return out
