@@ -45,9 +45,8 @@ import torch
 from hypothesis import HealthCheck, event, given, settings, strategies as st
 
 from warp_critic.cli import main
+from conftest import REACHER
 
-ROOT = Path(__file__).resolve().parents[1]
-REACHER = str(ROOT / "scenes" / "reacher.usda")
 TINY = ["--iterations", "1", "--horizon", "3", "--worlds-per-goal", "1", "--device", "cpu"]
 MT = ["meta-train", "{R}", *TINY]  # a new tiny meta-train run (add --out)
 DDPG = ["baseline", "ddpg", "{R}", *TINY]

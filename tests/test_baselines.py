@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 import torch
-import warp as wp
 
 from warp_critic.baselines import networks as baseline_networks
 from warp_critic.baselines.replay import ReplayBuffer, rewards
@@ -25,11 +24,9 @@ from warp_critic.networks import Normalizer
 from warp_critic.recording import read_entity_paths
 from warp_critic.rollout import Trajectory
 from warp_critic.rundir import CHECKPOINT_KIND
+from conftest import REACHER
 
-wp.config.quiet = True
 
-ROOT = Path(__file__).resolve().parents[1]
-REACHER = str(ROOT / "scenes" / "reacher.usda")
 TRAIN = {"ddpg": train_ddpg, "meta-critic": train_meta_critic}
 # tiny settings for the CLI / resume tests (no learning expected)
 TINY = ["--goals", "0.5,0.3", "--worlds-per-goal", "2", "--horizon", "5", "--device", "cpu",

@@ -16,8 +16,8 @@ from warp_critic.networks import Normalizer, init_policy, policy_action
 from warp_critic.rollout import rollout
 from warp_critic.scene import Variant, load_scene
 from warp_critic.simulator import Simulator
+from conftest import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def drm_robot(name: str):

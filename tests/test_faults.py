@@ -20,9 +20,8 @@ import pytest
 import torch
 
 from warp_critic.recording import read_entity_paths
+from conftest import REACHER
 
-ROOT = Path(__file__).resolve().parents[1]
-REACHER = str(ROOT / "scenes" / "reacher.usda")
 TINY = ["--goals", "0.5,0.3;-0.4,0.2", "--worlds-per-goal", "2", "--horizon", "5", "--device", "cpu",
         "--checkpoint-every", "1", "--record-every", "1"]
 ITERATIONS = 6

@@ -11,12 +11,11 @@ the real proof and must be re-run before the pins here and in ``pyproject.toml``
 from __future__ import annotations
 
 import inspect
-from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import ROOT
 
-ROOT = Path(__file__).resolve().parents[1]
 TESTED = {"newton": "1.8.0", "warp-lang": "1.19.0"}
 ADVICE = ("bridge.py depends on Newton internals; re-run tests/test_bridge.py's exactness tests and update "
           "the pins (tests/test_newton_internals.py, pyproject.toml)")

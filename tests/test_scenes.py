@@ -21,11 +21,9 @@ import warp as wp
 import newton
 from warp_critic.errors import SceneError, UserError
 from warp_critic.scene import Variant, load_scene
+from conftest import ROOT, SCENES
 
-wp.config.quiet = True
 
-ROOT = Path(__file__).resolve().parents[1]
-SCENES = ROOT / "scenes"
 DT = 1e-2  # s; any dt gives the same qdd (see the module docstring)
 
 

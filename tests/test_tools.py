@@ -12,9 +12,8 @@ import numpy as np
 import pytest
 
 from warp_critic.errors import FieldError, UserError
+from conftest import ROOT, REACHER
 
-ROOT = Path(__file__).resolve().parents[1]
-REACHER = str(ROOT / "scenes" / "reacher.usda")
 PAPER = Path("/work/shared/paper/model_based_meta_learning_of_critics.tex")
 
 

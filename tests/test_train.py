@@ -16,10 +16,8 @@ from warp_critic.rundir import load_checkpoint
 from warp_critic.train import TrainConfig
 from warp_critic.metatest import TestConfig, meta_test
 from warp_critic.recording import read_entity_paths
+from conftest import KUKA, REACHER
 
-ROOT = Path(__file__).resolve().parents[1]
-REACHER = str(ROOT / "scenes" / "reacher.usda")
-KUKA = str(ROOT / "scenes" / "kuka.usda")
 TINY = ["--goals", "0.5,0.3;-0.4,0.2", "--worlds-per-goal", "2", "--horizon", "6", "--device", "cpu"]
 
 
@@ -201,7 +199,7 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, fragment):
     assert not (tmp_path / "run" / "checkpoint.pt").exists()
 
 
-def test_meta_test_bad_run_dirs(tmp_path, capsys):
+def test_meta_test_bad_run_dirs(tmp_path, capsys, finished_run, copy_of):
     empty = tmp_path / "empty"
     empty.mkdir()
     assert main(["meta-test", str(empty)]) == 2
@@ -209,8 +207,7 @@ def test_meta_test_bad_run_dirs(tmp_path, capsys):
     assert main(["meta-test", str(tmp_path / "nothing")]) == 2
     assert "not found" in capsys.readouterr().err
 
-    out = tmp_path / "run"
-    train.meta_train(tiny_cfg(out, iterations=1), progress=False)
+    out = copy_of(finished_run)
     ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
     ckpt["config"]["scene"] = KUKA  # a checkpoint from another scene
     torch.save(ckpt, out / "checkpoint.pt")

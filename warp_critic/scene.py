@@ -85,7 +85,18 @@ from warp_critic.errors import FieldError, SceneError, UserError
 if TYPE_CHECKING:
     import newton
 
-__all__ = ["Variant", "Scene", "load_scene"]
+__all__ = ["Variant", "Scene", "load_scene", "scenes_dir"]
+
+
+def scenes_dir() -> Path:
+    """The scenes shipped with warp-critic (``reacher.usda``, ``kuka.usda``, ``point_mass.usda``):
+    the package data ``warp_critic/scenes`` of an installed wheel, else the checkout's ``scenes/``."""
+    checkout = Path(__file__).resolve().parents[1] / "scenes"
+    if checkout.is_dir():
+        return checkout
+    from importlib.resources import files
+
+    return Path(str(files("warp_critic.scenes")))
 
 EFFORT_ATTR = "warp_critic:effortLimit"
 EE_ATTR = "warp_critic:endEffectorBody"

@@ -5,14 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import warp_critic
-
-
-def scenes_dir() -> Path:
-    """The repository's ``scenes/`` folder, found from the installed package (works from any cwd)."""
-    return Path(warp_critic.__file__).resolve().parents[1] / "scenes"
+from ..scene import scenes_dir
 
 
 def scene_path(name: str) -> Path:
-    """``scenes/<name>`` of the repository, e.g. ``scene_path("point_mass.usda")``."""
+    """A scene shipped with warp-critic, e.g. ``scene_path("point_mass.usda")`` (works from any cwd)."""
     return scenes_dir() / name
