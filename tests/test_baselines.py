@@ -72,13 +72,13 @@ def test_baseline_learns_and_its_q_runs_through_meta_test(tmp_path, method):
     assert ckpt["kind"] == CHECKPOINT_KIND and ckpt["method"] == method and ckpt["scene"] == "reacher"
     assert ckpt["iteration"] == 39 and ckpt["dof"] == 2 and ckpt["metrics"]["iteration"] == 39
     tc = TaskConfig.from_dict(ckpt["config"])
-    assert tc.horizon == 30 and ckpt["config"]["inner_steps"] == 1 and len(tc.goals) == 4
+    assert tc.horizon == 30 and ckpt["config"]["inner_steps"] == 3 and len(tc.goals) == 4  # the scene's, as ours
 
     # the meta-test critic is -Q(s - g, a)
     norm = Normalizer.from_limits(torch.tensor([-2.97, -2.97]), torch.tensor([2.97, 2.97]),
                                   torch.tensor(tc.max_torque), tc.qd_scale)
     loss_fn, defaults = build_test_critic(ckpt, norm)
-    assert defaults["alpha"] > 0 and defaults["steps"] == 1
+    assert defaults["alpha"] > 0 and defaults["steps"] == 3
     assert defaults["alpha"] == ckpt["metrics"]["alpha"]  # selected by the fresh-policy grid search
     q, qd, tau = torch.randn(5, 2), torch.randn(5, 2), torch.randn(5, 2)
     g = torch.tensor([[1.0, 0.5]]).expand(5, 2)

@@ -50,7 +50,7 @@ def train_scene(name: str, seed: int, iterations: int | None, device: str, quick
                       resume=(out / "checkpoint.pt").exists(), **settings)
     if quick:
         cfg.horizon, cfg.worlds_per_goal = 10, 1
-        cfg.home_starts = min(cfg.home_starts, cfg.worlds_per_goal)
+        cfg.home_starts = min(cfg.home_starts or 0, cfg.worlds_per_goal)
     t0 = time.perf_counter()
     res = meta_train(cfg, progress=True)
     total = time.perf_counter() - t0

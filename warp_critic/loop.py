@@ -145,7 +145,8 @@ class SeedRun:
         if diffs:
             raise ResumeMismatch(requested.out, diffs)
         done = ckpt["iteration"] + 1
-        iterations = requested.iterations if (given is None or "iterations" in given) else saved.iterations
+        asked = given is None or "iterations" in given
+        iterations = requested.iterations if asked and requested.iterations is not None else saved.iterations
         if iterations < done:
             raise FieldError("iterations", f"may only grow on resume: the run in {requested.out} has "
                                            f"{done} iterations done (got {iterations})")

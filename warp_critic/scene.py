@@ -32,7 +32,15 @@ attribute                     type       ``defaults`` key    rule
 ``warp_critic:gravity``       double     ``gravity``         gravity along -z (m/s^2), finite
 ``warp_critic:homePose``      double[]   (``Scene.home``)    dof joint positions inside the limits; zeros
                                                              when not authored
+``warp_critic:iterations``    int        ``iterations``      outer iterations of meta-training, > 0
+``warp_critic:innerSteps``    int        ``inner_steps``     inner critic-gradient steps, > 0
+``warp_critic:criticInput``   string     ``critic_input``    ``full`` or ``relative``
+``warp_critic:startStd``      double     ``start_std``       std of random training start states (rad), >= 0
+``warp_critic:homeStarts``    int        ``home_starts``     worlds per goal kept at home, >= 0
 ============================  =========  ==================  ====================================================
+
+The last five are the training schedule this project reports for the robot: with them, a method's
+defaults on a scene are the reported configuration.
 
 Every value must be finite; a bad one raises :class:`~warp_critic.errors.SceneError` naming the file
 and the attribute. :attr:`Scene.content_hash` identifies the content (see :func:`content_hash`).
@@ -113,7 +121,13 @@ DEFAULT_ATTRS: dict[str, tuple[str, str]] = {
     "warp_critic:alpha": ("alpha", "positive"),
     "warp_critic:lr": ("lr", "positive"),
     "warp_critic:gravity": ("gravity", "finite"),
+    "warp_critic:iterations": ("iterations", "count"),
+    "warp_critic:innerSteps": ("inner_steps", "count"),
+    "warp_critic:criticInput": ("critic_input", "critic_input"),
+    "warp_critic:startStd": ("start_std", "nonnegative"),
+    "warp_critic:homeStarts": ("home_starts", "natural"),
 }
+CRITIC_INPUT_CHOICES = ("full", "relative")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -554,18 +568,25 @@ def _read_defaults(path: Path, root, q_lower: np.ndarray, q_upper: np.ndarray,
                     raise fail(attr, f"must be > 0 (got {values})")
                 defaults[key] = values
             continue
+        if kind == "critic_input":
+            if raw not in CRITIC_INPUT_CHOICES:
+                raise fail(attr, f"must be one of {', '.join(CRITIC_INPUT_CHOICES)} (got {raw!r})")
+            defaults[key] = str(raw)
+            continue
         value = _number(raw)
         if value is None:
             raise fail(attr, f"must be a number (got {raw!r})")
         if not math.isfinite(value):
             raise fail(attr, f"must be finite (got {value})")
-        if kind == "count":
-            if value <= 0 or not value.is_integer():
-                raise fail(attr, f"must be a positive integer (got {raw!r})")
+        if kind in ("count", "natural"):
+            if value < (1 if kind == "count" else 0) or not value.is_integer():
+                raise fail(attr, f"must be a {'positive' if kind == 'count' else 'non-negative'} integer (got {raw!r})")
             defaults[key] = int(value)
         else:
             if kind == "positive" and value <= 0.0:
                 raise fail(attr, f"must be > 0 (got {value})")
+            if kind == "nonnegative" and value < 0.0:
+                raise fail(attr, f"must be >= 0 (got {value})")
             defaults[key] = value
 
     home = np.zeros(dof)
@@ -590,12 +611,16 @@ def content_hash(path: Path, stage) -> str:
     the "Generated from Composed Stage of root layer <path>" note that :meth:`Usd.Stage.Flatten`
     would add, and with asset paths under the scene's own folder (which flattening makes absolute)
     written back relative to it (``@/abs/dir/x.png@`` -> ``@./x.png@``). So a renamed or moved
-    copy (or the .usdc of the same stage) hashes the same, and any change of an authored value --
-    a mass, a limit, a default -- changes the hash. The text format is the installed USD's:
-    compare hashes made with the same USD version.
+    copy (or the .usdc of the same stage) hashes the same, and any change of what the simulation
+    reads -- a mass, a limit, the home pose -- changes the hash. The training-default attributes
+    (:data:`DEFAULT_ATTRS`) are left out: a run resolves them into its own config, so a changed
+    default does not change any run. The text format is the installed USD's: compare hashes made
+    with the same USD version.
     """
     text = stage.Flatten(addSourceFileComment=False).ExportToString()
     text = text.replace(f"@{path.parent.as_posix()}/", "@./")
+    names = tuple(f" {attr} " for attr in DEFAULT_ATTRS) + tuple(f" {attr}=" for attr in DEFAULT_ATTRS)
+    text = "\n".join(line for line in text.splitlines() if not any(n in line for n in names))
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 

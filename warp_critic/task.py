@@ -35,7 +35,8 @@ from .simulator import STANDARD_GRAVITY
 
 # Used for a field that neither the user nor the scene sets.
 GENERIC_DEFAULTS: dict[str, Any] = dict(horizon=50, dt=0.01, substeps=1, qd_scale=5.0, alpha=1e-3, lr=3e-3,
-                                        gravity=STANDARD_GRAVITY)
+                                        gravity=STANDARD_GRAVITY, start_std=0.0, home_starts=0, iterations=300,
+                                        inner_steps=1, critic_input="full")
 DEVICES = ("auto", "cpu", "cuda")
 # Fields that say where/how a run executes, not what it computes: they may change on --resume.
 RUNTIME_FIELDS = ("out", "device", "resume", "cpu_threads", "checkpoint_every", "record_every", "iterations",
@@ -120,8 +121,8 @@ class TaskConfig(SerializableConfig):
     dt: float | None = spec(None, "physics time step (s)", gt=0, cap=1.0)
     substeps: int | None = spec(None, "physics steps per control step", gt=0, cap=10**4)
     worlds_per_goal: int = spec(4, "policy initialisations per goal (parallel worlds)", gt=0)
-    start_std: float = spec(0.0, "std (rad) of random initial joint positions around the home pose, drawn per world and iteration (0 = always start at home, as at meta-test)", ge=0, cap=100)
-    home_starts: int = spec(0, "with a start std: this many of each goal's worlds still start at the home pose (as at meta-test) every iteration", ge=0)
+    start_std: float | None = spec(None, "std (rad) of random initial joint positions around the home pose, drawn per world and iteration (0 = always start at home, as at meta-test); default: the scene's, else 0", ge=0, cap=100)
+    home_starts: int | None = spec(None, "with a start std: this many of each goal's worlds still start at the home pose (as at meta-test) every iteration; default: the scene's, else 0", ge=0)
     max_torque: list[float] | None = spec(None, "per-joint torque bound of the policy (N·m), comma-separated or one value", gt=0)
     qd_scale: float | None = spec(None, "velocity normalisation (rad/s)", gt=0)
     gravity: float | None = spec(None, "gravity along -z (m/s^2); 0 = a perfectly gravity-compensated robot (the iiwa's torque mode, the kuka default)", ge=0, cap=1000)
@@ -139,7 +140,8 @@ class TaskConfig(SerializableConfig):
 
     method = "task"  # overridden by each method's config
     # fields a scene's content may set (a method adds its own, e.g. ours the inner/outer learning rates)
-    scene_fields = ("goals", "horizon", "dt", "substeps", "max_torque", "qd_scale", "gravity")
+    scene_fields = ("goals", "horizon", "dt", "substeps", "max_torque", "qd_scale", "gravity", "start_std",
+                    "home_starts")
 
     # -- defaults and checks -------------------------------------------------------------------
     def default_out(self) -> str:

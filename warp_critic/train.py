@@ -24,20 +24,21 @@ from .task import TaskConfig, spec
 class TrainConfig(TaskConfig):
     """Model-based meta-training of the critic (Algorithm 2). ``None`` = the scene's default."""
 
+    iterations: int | None = spec(None, "outer iterations (critic updates); default: the scene's (the reported runs), else 300", gt=0, cap=10**8)
     alpha: float | None = spec(None, "inner learning rate (policy update with the critic)", gt=0, cap=1e6)
     lr: float | None = spec(None, "outer learning rate (Adam on the critic)", gt=0, cap=1e3)
     lr_schedule: str = spec("cosine", "outer learning-rate schedule: constant, or cosine decay to 10%% over the iterations", choices=("constant", "cosine"))
-    inner_steps: int = spec(1, "inner critic-gradient steps per outer iteration", gt=0)
+    inner_steps: int | None = spec(None, "inner critic-gradient steps per outer iteration; default: the scene's, else 1 (the paper's Algorithm 2)", gt=0, cap=10**4)
     policy_init: str = spec("fresh", "fresh: new random policies every iteration (paper); fixed: the same initial policies every iteration; persistent: continue from the updated policies", choices=POLICY_INIT_SCHEMES)
     policy_lifetime: int = spec(1, "with policy-init fresh: outer iterations a policy lives before a fresh random one replaces it; 1 = new policies every iteration (paper). N > 1 staggers the worlds so policies of every age 0..N-1 are trained on at once: the critic learns to keep improving a policy, and meta-test takes N x inner-steps steps", gt=0, cap=10**6)
-    critic_input: str = spec("full", "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant)", choices=CRITIC_INPUTS)
+    critic_input: str | None = spec(None, "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant); default: the scene's, else full", choices=CRITIC_INPUTS)
     critic_hidden: int = spec(400, "critic hidden units (2 ELU layers)", gt=0, cap=8192)
     running_weight: float = spec(0.0, "weight of the running term mean_t ||q_t-g||^2 added to the task loss", ge=0)
     velocity_weight: float = spec(0.0, "weight (s^2) of the final-velocity term ||qd_T||^2 added to the task loss", ge=0)
     clip_grad: float = spec(10.0, "clip the critic's gradient norm (0 = off)", ge=0)
 
     method = "ours"
-    scene_fields = TaskConfig.scene_fields + ("alpha", "lr")
+    scene_fields = TaskConfig.scene_fields + ("alpha", "lr", "iterations", "inner_steps", "critic_input")
 
     def default_out(self) -> str:
         return f"runs/{self.scene_stem()}-meta"

@@ -110,7 +110,9 @@ class BaselineConfig(TaskConfig):
     virtual_lr: float | None = spec(None, "meta-critic only: SGD step of the virtual actor updates (default: the actor lr)", gt=0, cap=1e3)
     # -- meta-test defaults stored in the checkpoint ---------------------------------------------
     alpha: float | None = spec(None, "policy learning rate meta-test uses with -Q (default: grid search on the training goals at every checkpoint)", gt=0, cap=1e6)
-    inner_steps: int = spec(1, "meta-test's default number of fresh-policy updates with -Q (as meta-train's inner steps)", gt=0, cap=10**4)
+    inner_steps: int | None = spec(None, "meta-test's default number of fresh-policy updates with -Q (default: the scene's, as meta-train's inner steps, else 1)", gt=0, cap=10**4)
+
+    scene_fields = TaskConfig.scene_fields + ("inner_steps",)
 
     def default_out(self) -> str:
         from pathlib import Path
