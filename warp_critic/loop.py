@@ -336,6 +336,15 @@ class Session:
         return results[0]
 
     def _kept(self) -> str:
+        if len(self.runs) == 1:
+            return self.runs[0].kept()
+        where = self.runs[0].rundir.path.parent
+        done = {r.last_checkpoint for r in self.runs}
+        if done == {None}:
+            return f"no checkpoint was written yet in the {len(self.runs)} seed run directories under {where}"
+        if len(done) == 1:
+            return (f"the checkpoints of iteration {done.pop()} in the {len(self.runs)} seed run directories "
+                    f"under {where} are kept")
         return "; ".join(r.kept() for r in self.runs)
 
     def __enter__(self) -> "Session":
