@@ -131,3 +131,110 @@ def test_default_scene_is_found_from_any_directory(tmp_path, monkeypatch, capsys
                  "--inits-per-state", "1", "--sup-fit-steps", "1"])
     assert code == 0, capsys.readouterr().err
     assert (tmp_path / "o" / "landscape.npz").is_file()
+
+
+# ---------------------------------------------------------------------------------------------------
+# the training-task distribution: --train-goals, --goal-std, --start-std (docs/landscape.md,
+# "Generalisation to unseen goals")
+# ---------------------------------------------------------------------------------------------------
+def test_sample_tasks_paper_setting_is_fixed_and_draws_nothing():
+    import torch
+
+    from warp_critic.analysis.landscape_training import sample_tasks, varied_tasks
+
+    cfg = LandscapeConfig()
+    assert not varied_tasks(cfg) and cfg.train_goals == () and cfg.goal_std == 0 and cfg.start_std == 0
+    q0 = torch.tensor([[0.0, 0.0], [0.0, 0.0], [-0.5, 0.5], [-0.5, 0.5]])
+    goal = torch.tensor([[1.0, 1.0]])
+    gen = torch.Generator().manual_seed(3)
+    state = gen.get_state()
+    q, g = sample_tasks(cfg, q0, goal, gen)
+    assert torch.equal(q, q0) and torch.equal(g, goal.expand(4, -1))
+    assert torch.equal(gen.get_state(), state)  # the paper's runs keep their random stream
+
+
+def test_sample_tasks_draws_goals_and_starts_per_world():
+    import torch
+
+    from warp_critic.analysis.landscape_training import sample_tasks, varied_tasks
+
+    q0 = torch.zeros(4000, 2)
+    goal = torch.tensor([[1.0, 1.0]])
+    gen = torch.Generator().manual_seed(0)
+    cfg = LandscapeConfig(start_std=0.5)
+    assert varied_tasks(cfg)
+    q, g = sample_tasks(cfg, q0, goal, gen)
+    assert torch.equal(g, goal.expand(4000, -1))
+    assert abs(float(q.mean())) < 0.03 and abs(float(q.std()) - 0.5) < 0.03
+    q2, _ = sample_tasks(cfg, q0, goal, gen)
+    assert not torch.equal(q, q2)  # anew every iteration
+    cfg = LandscapeConfig(train_goals=((-1.0, 1.0), (1.0, -1.0)))
+    q, g = sample_tasks(cfg, q0, goal, gen)
+    assert torch.equal(q, q0)
+    pool = {(1.0, 1.0), (-1.0, 1.0), (1.0, -1.0)}
+    drawn = {tuple(map(float, r)) for r in g}
+    assert drawn == pool  # every goal of {goal} + train_goals is drawn, nothing else
+    cfg = LandscapeConfig(goal_std=1.0)
+    _, g = sample_tasks(cfg, q0, goal, gen)
+    assert abs(float(g.mean()) - 1.0) < 0.05 and abs(float(g.std()) - 1.0) < 0.05
+
+
+def test_task_distribution_flags_run(tmp_path, capsys):
+    from warp_critic.cli import main
+
+    code = main(["analyze", "landscape", "--out", str(tmp_path / "o"), "--iterations", "2", "--grid", "3",
+                 "--horizon", "3", "--inits-per-state", "1", "--sup-fit-steps", "1", "--ours-goal-input", "relative",
+                 "--train-goals=-1,1;1,-1", "--goal-std", "0.2", "--start-std", "0.5"])
+    assert code == 0, capsys.readouterr().err
+    z = np.load(tmp_path / "o" / "landscape.npz")
+    assert np.isfinite(z["grads"]).all() and z["trace_new"].shape == (2, 2, 2)
+
+
+def test_task_distribution_flags_reach_the_config():
+    import argparse
+
+    from warp_critic.analysis.landscape import add_arguments, config_from_args
+
+    parser = argparse.ArgumentParser()
+    add_arguments(parser)
+    cfg = config_from_args(parser.parse_args([]))
+    assert (cfg.train_goals, cfg.goal_std, cfg.start_std) == ((), 0.0, 0.0)  # the paper's setting by default
+    cfg = config_from_args(parser.parse_args(["--train-goals=-1,1;0.5,2", "--goal-std", "0.3",
+                                              "--start-std", "1"]))
+    assert (cfg.train_goals, cfg.goal_std, cfg.start_std) == (((-1.0, 1.0), (0.5, 2.0)), 0.3, 1.0)
+
+
+@pytest.mark.parametrize("argv,flag", [
+    (["--goal-std", "-0.1"], "--goal-std"),
+    (["--start-std", "nan"], "--start-std"),
+    (["--train-goals", "a,b"], "--train-goals"),
+    (["--train-goals=1,2;3"], "--train-goals"),
+])
+def test_task_distribution_flag_errors(argv, flag, capsys, tmp_path):
+    from warp_critic.cli import main
+
+    code = main(["analyze", "landscape", "--out", str(tmp_path / "x"), *argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and flag in err[0] and "error" in err[0]
+    assert not (tmp_path / "x").exists()
+
+
+def test_reproduce_stage_runs_the_paper_setting_and_the_generalising_one(tmp_path):
+    from warp_critic.reproduce.analyses import GENERALISING_DIR, landscape_configs
+    from warp_critic.reproduce.settings import default_settings
+
+    s = default_settings(quick=False, seeds=1)["landscape"]
+    paper, gen = landscape_configs(tmp_path, s, "cpu")
+    d = LandscapeConfig()
+    skip = {"out", "quiet", "scene"}
+    for f in d.__dataclass_fields__:
+        if f not in skip:
+            assert getattr(paper, f) == getattr(d, f), f  # the paper's setting = the analysis defaults
+    assert paper.out == tmp_path and gen.out == tmp_path / GENERALISING_DIR
+    assert gen.ours_goal_input == "relative" and gen.start_std > 0  # the closest setting that generalises
+    changed = {f for f in d.__dataclass_fields__ if f not in skip and getattr(gen, f) != getattr(paper, f)}
+    assert changed == {"ours_goal_input", "start_std"}
+    q = default_settings(quick=True, seeds=1)["landscape"]
+    qp, qg = landscape_configs(tmp_path, q, "cpu")
+    assert qp.iterations == qg.iterations <= 12 and qp.grid == qg.grid <= 7  # --quick stays tiny

@@ -56,6 +56,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     A("--ours-goal-input", type=str, default=d.ours_goal_input, choices=GOAL_INPUTS,
       help="how L_critic sees the goal: absolute M(s, a, g) (the paper's) or relative M(s - g, a), "
            "like Q_sup (default absolute)")
+    A("--train-goals", type=str, default="", metavar="X,Y;X,Y",
+      help="extra training goals in m, ';'-separated: every iteration each training world draws its goal from "
+           "--goal and these (default none: the paper's one goal)")
+    A("--goal-std", type=float, default=d.goal_std, metavar="M",
+      help=f"every iteration each training world's goal gets N(0, M^2) noise per axis, in m (>= 0; default "
+           f"{d.goal_std:g}: the paper's fixed goal)")
+    A("--start-std", type=float, default=d.start_std, metavar="M",
+      help=f"every iteration each training world's initial position gets N(0, M^2) noise per axis, in m (>= 0; "
+           f"default {d.start_std:g}: the paper's fixed --init-states); the landscapes still start at the first "
+           f"--init-states")
     A("--tolerance", type=float, default=d.tolerance, metavar="N",
       help=f"success radius around theta* for the descent check, in N (> 0; default {d.tolerance})")
 
@@ -91,7 +101,8 @@ def config_from_args(args: argparse.Namespace) -> LandscapeConfig:
             goal=_pair("goal", args.goal), test_goals=_pairs("test_goals", args.test_goals),
             init_states=_pairs("init_states", args.init_states), sup_alpha=args.sup_alpha,
             sup_fit_steps=args.sup_fit_steps, sup_reward=args.sup_reward, tolerance=args.tolerance,
-            ours_goal_input=args.ours_goal_input)
+            ours_goal_input=args.ours_goal_input, train_goals=_pairs("train_goals", args.train_goals),
+            goal_std=args.goal_std, start_std=args.start_std)
         return cfg.validate()
 
 

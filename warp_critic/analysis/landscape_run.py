@@ -50,6 +50,11 @@ class LandscapeConfig:
     sup_reward: str = "terminal"
     tolerance: float = 0.5
     ours_goal_input: str = "absolute"
+    # the training-task distribution (docs/landscape.md, "Generalisation to unseen goals"); the defaults
+    # are the paper's one goal from the fixed initial states
+    train_goals: tuple = ()  # extra training goals; each world draws one of {goal} + train_goals per iteration
+    goal_std: float = 0.0  # Gaussian noise added to each world's training goal per iteration (m)
+    start_std: float = 0.0  # Gaussian noise added to each world's initial position per iteration (m)
     qd_scale: float = 2.0
     scene: Path = field(default_factory=default_scene)
     quiet: bool = False
@@ -66,7 +71,10 @@ class LandscapeConfig:
         check_seed(self.seed)
         for name in ("range", "dt", "alpha", "lr", "sup_alpha", "tolerance", "qd_scale"):
             checks.number(name, getattr(self, name), positive=True)
-        for name, pairs in (("goal", [self.goal]), ("test_goals", self.test_goals), ("init_states", self.init_states)):
+        for name in ("goal_std", "start_std"):
+            checks.number(name, getattr(self, name), lo=0.0)
+        for name, pairs in (("goal", [self.goal]), ("test_goals", self.test_goals), ("init_states", self.init_states),
+                            ("train_goals", self.train_goals)):
             for p in pairs:
                 if len(p) != 2:
                     raise FieldError(name, f"expects X,Y pairs, got {p!r}")

@@ -37,13 +37,41 @@ def _random_forces(W: int, cfg, gen: torch.Generator, device) -> torch.Tensor:
     return ((torch.rand(W, 2, generator=gen) * 2 - 1) * cfg.range).to(device)
 
 
+def sample_tasks(cfg, q0: torch.Tensor, goal: torch.Tensor, gen: torch.Generator):
+    """The training task of every world for one iteration: ``(q0 (W, 2), goals (W, 2))``.
+
+    The paper's setting (defaults: ``train_goals = ()``, ``goal_std = start_std = 0``) returns the fixed
+    initial states ``q0`` and the one goal ``goal (1, 2)`` for every world, without drawing random numbers.
+    Otherwise each world draws, independently every iteration, its goal uniformly from
+    ``{goal} + train_goals`` plus ``goal_std * N(0, I)`` and its initial state ``q0 + start_std * N(0, I)``
+    (at rest). Background: ``docs/landscape.md``, "Generalisation to unseen goals".
+    """
+    W, dev = q0.shape[0], q0.device
+    goals = goal.expand(W, -1)
+    if cfg.train_goals:
+        pool = torch.tensor([tuple(cfg.goal), *cfg.train_goals], dtype=q0.dtype)
+        goals = pool[torch.randint(len(pool), (W,), generator=gen)].to(dev)
+    if cfg.goal_std > 0:
+        goals = goals + (cfg.goal_std * torch.randn(W, 2, generator=gen)).to(dev)
+    if cfg.start_std > 0:
+        q0 = q0 + (cfg.start_std * torch.randn(W, 2, generator=gen)).to(dev)
+    return q0, goals
+
+
+def varied_tasks(cfg) -> bool:
+    """Whether the training goals or initial states are drawn anew every iteration (not the paper's)."""
+    return bool(cfg.train_goals) or cfg.goal_std > 0 or cfg.start_std > 0
+
+
 def _progress(cfg, it: int) -> bool:
     return not cfg.quiet and (it % 50 == 0 or it == cfg.iterations - 1)
 
 
 def train_ours(cfg, sim, q0, goal, gen, log=print):
     """Algorithm 2 on one goal from the initial states ``q0 (W, 2)``: every iteration fresh
-    ``theta ~ U[-R, R]^2``, one inner step, Adam on the task loss of ``theta_new``.
+    ``theta ~ U[-R, R]^2``, one inner step, Adam on the task loss of ``theta_new``. With
+    ``train_goals`` / ``goal_std`` / ``start_std`` each world's goal and initial state are drawn anew every
+    iteration (:func:`sample_tasks`).
 
     Returns ``(critic, theta_before (K, W, 2), theta_new (K, W, 2), task losses (K,))``.
     """
@@ -52,11 +80,11 @@ def train_ours(cfg, sim, q0, goal, gen, log=print):
     opt = torch.optim.Adam(net.parameters(), lr=cfg.lr)
     W = q0.shape[0]
     qd0 = torch.zeros_like(q0)
-    goals = goal.expand(W, -1)
     trace_before, trace_new, losses = [], [], []
     for it in range(cfg.iterations):
         theta = _random_forces(W, cfg, gen, q0.device).requires_grad_(True)
-        res = meta_loss(critic, constant_force, {"theta": theta}, sim, q0, qd0, goals,
+        q0_it, goals = sample_tasks(cfg, q0, goal, gen)
+        res = meta_loss(critic, constant_force, {"theta": theta}, sim, q0_it, qd0, goals,
                         horizon=cfg.horizon, alpha=cfg.alpha, inner_steps=1)
         if not torch.isfinite(res.loss):
             raise DivergenceError(f"meta-training diverged at iteration {it} (lower --alpha or --lr)")
@@ -87,7 +115,9 @@ def train_sup(cfg, sim, q0, goal, gen, log=print):
     Adam steps on the TD error of minibatches (target network = ``Q_sup`` at the start of the iteration,
     ``gamma = 1``), then ``theta <- clip(theta - sup_alpha * grad_theta sum_t Q_sup(s_t - g, theta), -R, R)``
     with the rollout's states as data. The policy is a constant force, so the next action ``a'`` of a
-    stored transition is its own action.
+    stored transition is its own action. With ``train_goals`` / ``goal_std`` / ``start_std`` every iteration
+    rolls each persistent policy out from a freshly drawn initial state towards a freshly drawn goal
+    (:func:`sample_tasks`, the same distribution as ours).
 
     Returns ``(Q_sup, theta after each iteration (K, W, 2), TD losses (K,))``.
     """
@@ -97,13 +127,13 @@ def train_sup(cfg, sim, q0, goal, gen, log=print):
     W = q0.shape[0]
     dev = q0.device
     qd0 = torch.zeros_like(q0)
-    goals = goal.expand(W, -1)
     theta = _random_forces(W, cfg, gen, dev)
     buf = ReplayBuffer(cfg.iterations * cfg.horizon * W, q0.shape[1], dev)  # keeps every transition
     thetas, td_losses = [], []
     for it in range(cfg.iterations):
         params = {"theta": theta}
-        tr = rollout(sim, policy_fn(constant_force, params), q0, qd0, cfg.horizon, differentiable=False)
+        q0_it, goals = sample_tasks(cfg, q0, goal, gen)
+        tr = rollout(sim, policy_fn(constant_force, params), q0_it, qd0, cfg.horizon, differentiable=False)
         cost, done = sup_costs(tr, goals, cfg.sup_reward)
         buf.add_trajectory(tr, goals, cost, done)
         target_net.load_state_dict(net.state_dict())
