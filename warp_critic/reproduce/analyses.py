@@ -28,20 +28,52 @@ def run_toy_stage(d: Path, s: dict) -> dict:
     }
 
 
-def run_landscape_stage(d: Path, s: dict, device: str) -> dict:
-    from ..analysis.landscape_run import LandscapeConfig, run_landscape
+#: The landscape stage's sub-folder of the closest setting that generalises to unseen goals.
+GENERALISING_DIR = "generalising"
+
+
+def landscape_configs(d: Path, s: dict, device: str):
+    """The validated ``(paper, generalising)`` :class:`~warp_critic.analysis.landscape_run.LandscapeConfig` of
+    the landscape stage settings ``s``: the paper's setting (every key but ``generalising``) written to ``d``,
+    and the same with the ``generalising`` overrides (the closest setting whose critic generalises to unseen
+    goals, ``docs/landscape.md``) written to ``d / "generalising"``."""
+    from ..analysis.landscape_run import LandscapeConfig
     from ..simulator import resolve_device
 
     kw = dict(s)
-    kw["goal"] = tuple(kw["goal"])
-    kw["test_goals"] = tuple(tuple(g) for g in kw["test_goals"])
-    kw["init_states"] = tuple(tuple(g) for g in kw["init_states"])
-    cfg = LandscapeConfig(out=d, device=resolve_device(device), quiet=True, **kw)
-    with contextlib.redirect_stdout(io.StringIO()):
-        r = run_landscape(cfg)
+    over = dict(kw.pop("generalising", None) or {})
+    dev = resolve_device(device)
+
+    def config(values: dict, out: Path):
+        v = dict(values)
+        for key in ("test_goals", "init_states", "train_goals"):
+            if key in v:
+                v[key] = tuple(tuple(g) for g in v[key])
+        v["goal"] = tuple(v["goal"])
+        return LandscapeConfig(out=out, device=dev, quiet=True, **v).validate()
+
+    return config(kw, d), config({**kw, **over}, d / GENERALISING_DIR)
+
+
+def _landscape_result(r: dict, prefix: str = "") -> dict:
     return {
         "goals": r["goals"].tolist(), "goal_names": list(r["goal_names"]), "optima": r["optima"].tolist(),
         "fractions": r["fractions"], "ours_loss_last": float(r["ours_loss"][-1]), "sup_loss_last": float(r["sup_loss"][-1]),
-        "files": {"landscape": "landscape.png", "exploration": "exploration.png", "rrd": "landscape.rrd",
-                  "arrays": "landscape.npz"},
+        "files": {"landscape": f"{prefix}landscape.png", "exploration": f"{prefix}exploration.png",
+                  "rrd": f"{prefix}landscape.rrd", "arrays": f"{prefix}landscape.npz"},
     }
+
+
+def run_landscape_stage(d: Path, s: dict, device: str) -> dict:
+    """Both landscape runs of the stage (:func:`landscape_configs`); the paper's results at the top level,
+    the generalising setting's under ``generalising`` (with its ``overrides``)."""
+    from ..analysis.landscape_run import run_landscape
+
+    paper, gen = landscape_configs(d, s, device)  # both checked before any work
+    with contextlib.redirect_stdout(io.StringIO()):
+        r = run_landscape(paper)
+        rg = run_landscape(gen)
+    out = _landscape_result(r)
+    out["generalising"] = {**_landscape_result(rg, f"{GENERALISING_DIR}/"),
+                           "overrides": dict(s.get("generalising") or {})}
+    return out
