@@ -104,6 +104,14 @@ def atomic_write_text(path: Path, text: str) -> None:
         raise UserError(f"{path}: cannot write ({e.strerror or e})") from None
 
 
+def atomic_write_bytes(path: Path, data: bytes) -> None:
+    try:
+        with _atomic(path) as tmp:
+            tmp.write_bytes(data)
+    except OSError as e:
+        raise UserError(f"{path}: cannot write ({e.strerror or e})") from None
+
+
 def atomic_torch_save(obj, path: Path) -> None:
     try:
         with _atomic(path) as tmp:

@@ -36,6 +36,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
            "meta-training they read (skipped when complete)")
     A("--quick", action="store_true", help="tiny settings for every stage (a plumbing check in a few minutes, not the paper)")
     A("--device", type=str, default="auto", metavar="DEV", help="cpu, cuda or auto (default auto)")
+    A("--jobs", type=_int, default=None, metavar="N",
+      help="run independent stages in N local processes (default: one after the other, in this process)")
+    A("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+      help="run each stage as a Ray task: no ADDRESS starts a local cluster, 'auto' joins the running one, "
+           "HOST:PORT the head at that address (pip install -e '.[ray]'); results come back to --out")
     A("--set", dest="overrides", action="append", default=[], metavar="STAGE.KEY=VALUE",
       help="override one stage setting (repeatable), e.g. toy.iters=50 or metatrain.kuka.ours.iterations=100")
 
@@ -62,6 +67,10 @@ def command_line(args: argparse.Namespace) -> str:
     if args.quick:
         parts.append("--quick")
     parts += ["--device", args.device]
+    if getattr(args, "jobs", None) is not None:
+        parts += ["--jobs", str(args.jobs)]
+    if getattr(args, "ray", None) is not None:
+        parts += ["--ray"] + ([] if args.ray == "local" else [args.ray])
     for o in args.overrides or []:
         parts += ["--set", o]
     return shlex.join(parts)
@@ -81,10 +90,18 @@ def run_from_args(args: argparse.Namespace) -> int:
     from ..runtime import init
     from .pipeline import reproduce
 
+    from ..simulator import resolve_device
+    from .executors import make_executor
+
     rc = config_from_args(args)
     rc.validate()  # one-line UserError before any work
+    if getattr(args, "jobs", None) is not None and args.jobs < 1:
+        from ..errors import FieldError
+
+        raise FieldError("jobs", f"must be >= 1 (got {args.jobs})")
     init()
-    result = reproduce(rc)
+    executor = make_executor(getattr(args, "jobs", None), getattr(args, "ray", None), resolve_device(rc.device))
+    result = reproduce(rc, executor)
     print(f"report: {result['report']}")
     print(f"recording: rerun {Path(result['out']) / 'report.rrd'}")
     return 0

@@ -81,57 +81,90 @@ def plan(settings: dict) -> dict[str, dict]:
     return p
 
 
-def reproduce(rc: ReproduceConfig) -> dict:
-    """Run the stages of ``rc`` and write the report; returns ``{"report": path, "records": ...}``."""
+# the function each stage group runs, by import path (so that any executor can run it anywhere)
+STAGE_FUNCTIONS = {"toy": "warp_critic.reproduce.analyses:run_toy_stage",
+                   "landscape": "warp_critic.reproduce.analyses:run_landscape_stage",
+                   "metatrain": "warp_critic.reproduce.training:run_metatrain_stage",
+                   "maps": "warp_critic.reproduce.generalize:run_maps_stage",
+                   "tables": "warp_critic.reproduce.generalize:run_tables_stage"}
+
+
+def needed(rc: ReproduceConfig, stages: dict) -> list[list[str]]:
+    """The stages this call needs, in two waves: what depends on nothing, then maps / tables (which
+    read the meta-training of their robot, run or found complete first even when not selected)."""
+    selected = rc.selected()
+    first, second = [], []
+    for group in selected:
+        if group in ("toy", "landscape"):
+            first.append(group)
+        elif group == "metatrain":
+            first += [n for n, st in stages.items() if st["group"] == "metatrain"]
+        else:
+            first += [n for n in stages[group]["depends"]]
+            second.append(group)
+    return [list(dict.fromkeys(first)), second]
+
+
+def stages_method(name: str) -> str:
+    """The method of a ``metatrain-<robot>-<method>`` stage name."""
+    return next(m for m in METHODS if name.endswith(f"-{m}"))
+
+
+def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, out: Path):
+    from .executors import Unit
+    from .training import run_dirs
+
+    group, dir_name = st["group"], f"{name}-{st['hash']}"
+    if group == "toy":
+        kwargs = {"s": settings["toy"]}
+    elif group == "landscape":
+        kwargs = {"s": settings["landscape"], "device": device}
+    elif group == "metatrain":
+        kwargs = {"scene": st["scene"], "method": st["method"], "values": settings["metatrain"][st["scene"]][st["method"]],
+                  "seeds": settings["metatrain"]["seeds"], "device": device, "progress": progress}
+    else:  # maps / tables read the complete meta-training directories of their robot
+        from .stages import read_stage
+
+        runs = {}
+        for dep, dep_dir in st["depends"].items():  # metatrain-<robot>-<method> -> its directory
+            runs[stages_method(dep)] = [str(p.relative_to(out)) for p in run_dirs(out / dep_dir, read_stage(out / dep_dir))]
+        kwargs = {"s": settings[group], "runs": runs, "device": device, "progress": progress}
+    return Unit(name=name, dir_name=dir_name, fn=STAGE_FUNCTIONS[group], kwargs=kwargs,
+                reads=tuple(st["depends"].values()))
+
+
+def reproduce(rc: ReproduceConfig, executor=None) -> dict:
+    """Run the stages of ``rc`` (with ``executor``; default: in this process) and write the report.
+
+    Returns ``{"report": path, "records": ..., "out": ..., "plan": ...}``.
+    """
+    from .executors import InProcess
+
     settings = rc.validate()
     out = prepare_out(Path(rc.out))
     from ..simulator import resolve_device
 
     device = resolve_device(rc.device)
-    selected = rc.selected()
-    runner = Runner(out, total=len(selected))
+    executor = executor or InProcess()
+    runner = Runner(out)
     t0 = time.perf_counter()
     stages = plan(settings)
-    seeds = settings["metatrain"]["seeds"]
 
-    def run(name: str, fn):
-        st = stages[name]
-        return runner.run(st["group"], name, st["hash"], st["settings"], fn, depends=st["depends"])
+    def done(unit, result, seconds):
+        st = stages[unit.name]
+        runner.finish(st["group"], unit.name, st["hash"], st["settings"], result, seconds, depends=st["depends"])
 
-    def metatrain(scene: str) -> dict[str, list[Path]]:
-        from .training import run_dirs, run_metatrain_stage
-
-        dirs = {}
-        for m in METHODS:
-            values = settings["metatrain"][scene][m]
-            rec = run(f"metatrain-{scene}-{m}", lambda d, scene=scene, m=m, values=values: run_metatrain_stage(
-                d, scene, m, values, seeds, device, progress=rc.progress))
-            dirs[m] = run_dirs(rec.dir, rec.data)
-        return dirs
-
-    for group in selected:
-        runner.begin_group(group)
-        if group == "toy":
-            from .analyses import run_toy_stage
-
-            run("toy", lambda d: run_toy_stage(d, settings["toy"]))
-        elif group == "landscape":
-            from .analyses import run_landscape_stage
-
-            run("landscape", lambda d: run_landscape_stage(d, settings["landscape"], device))
-        elif group == "metatrain":
-            for scene in SCENES:
-                metatrain(scene)
-        elif group == "maps":
-            from .generalize import run_maps_stage
-
-            runs = metatrain("reacher")
-            run("maps", lambda d: run_maps_stage(d, settings["maps"], runs, device, progress=rc.progress))
-        elif group == "tables":
-            from .generalize import run_tables_stage
-
-            runs = metatrain("kuka")
-            run("tables", lambda d: run_tables_stage(d, settings["tables"], runs, device, progress=rc.progress))
+    waves = needed(rc, stages)
+    runner.total = sum(1 for wave in waves for n in wave if runner.stage_dir(n, stages[n]["hash"]).joinpath(
+        "stage.json").exists() is False)
+    runner.log(f"reproduce: {runner.total} stage(s) to run ({executor.name}); complete ones are skipped")
+    try:
+        for wave in waves:
+            units = [make_unit(n, stages[n], settings, device, rc.progress, out) for n in wave
+                     if runner.complete(stages[n]["group"], n, stages[n]["hash"]) is None]
+            executor.run(units, out, done, runner.log)
+    finally:
+        executor.close()
     runner.log(f"reproduce: writing the report, {(time.perf_counter() - t0) / 60:.1f} min elapsed")
     from .report import write_report
 

@@ -70,47 +70,43 @@ class StageRecord:
 
 @dataclass
 class Runner:
-    """Runs stages in ``out``; ``log`` gets one line per stage (stderr by default)."""
+    """Records the stages of one call in ``out``; ``log`` gets one line per stage (stderr by default)."""
 
     out: Path
-    total: int  # number of selected stage groups
+    total: int = 0  # stages to run in this call (set once the complete ones are known)
     log: Callable[[str], None] = field(default=lambda s: (sys.stderr.write(s + "\n"), sys.stderr.flush()))
     records: dict[str, StageRecord] = field(default_factory=dict)
     t0: float = field(default_factory=time.perf_counter)
-    index: int = 0  # current group number (1-based)
-
-    def begin_group(self, group: str) -> None:
-        self.index += 1
-        self.status(group)
-
-    def status(self, what: str) -> None:
-        minutes = (time.perf_counter() - self.t0) / 60
-        self.log(f"reproduce: stage {self.index}/{self.total} {what}, {minutes:.1f} min elapsed")
+    done: int = 0  # stages that ran to completion in this call
 
     def stage_dir(self, name: str, h: str) -> Path:
         return self.out / f"{name}-{h}"
 
-    def run(self, group: str, name: str, h: str, settings: Any, fn: Callable[[Path], dict],
-            depends: dict[str, str] | None = None) -> StageRecord:
-        """Run ``fn(stage_dir) -> result`` unless the stage is complete; write ``stage.json`` last."""
+    def complete(self, group: str, name: str, h: str) -> StageRecord | None:
+        """The record of a stage already complete in ``out`` (skipped), or ``None``."""
         d = self.stage_dir(name, h)
         data = read_stage(d)
-        if data is not None:
-            self.log(f"reproduce: {name}: complete, skipped ({d.name})")
-            rec = StageRecord(group, name, d, data, ran=False)
-        else:
-            self.status(f"{group}: {name}")
-            d.mkdir(parents=True, exist_ok=True)
-            t = time.perf_counter()
-            result = fn(d)
-            seconds = time.perf_counter() - t
-            data = {"kind": STAGE_KIND, "stage": name, "group": group, "hash": h, "settings": settings,
-                    "depends": depends or {}, "seconds": seconds,
-                    "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "result": result}
-            atomic_write_text(d / STAGE_FILE, json.dumps(data, indent=1, default=_jsonable) + "\n")
-            data = read_stage(d)
-            rec = StageRecord(group, name, d, data, ran=True, seconds_this_call=seconds)
+        if data is None:
+            return None
+        self.log(f"reproduce: {name}: complete, skipped ({d.name})")
+        rec = StageRecord(group, name, d, data, ran=False)
         self.records[name] = rec
+        return rec
+
+    def finish(self, group: str, name: str, h: str, settings: Any, result: dict, seconds: float,
+               depends: dict[str, str] | None = None) -> StageRecord:
+        """Record a stage that ran: ``stage.json`` is written last, atomically (then it is complete)."""
+        d = self.stage_dir(name, h)
+        data = {"kind": STAGE_KIND, "stage": name, "group": group, "hash": h, "settings": settings,
+                "depends": depends or {}, "seconds": seconds,
+                "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "result": result}
+        atomic_write_text(d / STAGE_FILE, json.dumps(data, indent=1, default=_jsonable) + "\n")
+        rec = StageRecord(group, name, d, read_stage(d), ran=True, seconds_this_call=seconds)
+        self.records[name] = rec
+        self.done += 1
+        minutes = (time.perf_counter() - self.t0) / 60
+        self.log(f"reproduce: {name} done in {seconds / 60:.1f} min ({self.done} of {self.total} stages of this "
+                 f"call, {minutes:.1f} min elapsed)")
         return rec
 
 

@@ -1,0 +1,96 @@
+"""``reproduce``'s executors: local processes and a local Ray cluster give the in-process numbers,
+and a worker killed mid-task costs only its own unit (it is run again)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from warp_critic.cli import main
+
+VOLATILE = ("seconds", "wall", "finished", "written", "command", "seconds_this_call")
+
+
+def numbers(out: Path) -> dict:
+    """``results.json`` without wall times and the command line: every number the report shows."""
+    def strip(x):
+        if isinstance(x, dict):
+            return {k: strip(v) for k, v in x.items() if k not in VOLATILE}
+        if isinstance(x, list):
+            return [strip(v) for v in x]
+        return x
+
+    return strip(json.loads((out / "results.json").read_text()))
+
+
+def cli(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "warp_critic.cli", *args], capture_output=True, text=True,
+                          timeout=600, env={**os.environ, **(env or {})})
+
+
+@pytest.fixture(scope="module")
+def in_process(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("inproc") / "out"
+    assert main(["reproduce", "--quick", "--out", str(out), "--device", "cpu"]) == 0
+    return out
+
+
+@pytest.fixture(scope="module")
+def on_ray(tmp_path_factory) -> tuple[Path, Path, subprocess.CompletedProcess]:
+    """A local 2-CPU Ray cluster started by reproduce itself; the first try of one meta-training unit
+    kills its worker process (SIGKILL), as a lost node or an OOM kill would."""
+    pytest.importorskip("ray")
+    tmp = tmp_path_factory.mktemp("ray")
+    out, marker = tmp / "out", tmp / "killed"
+    p = cli("reproduce", "--quick", "--out", str(out), "--device", "cpu", "--ray",
+            env={"WARP_CRITIC_UNIT_FAULT": f"metatrain-reacher-ours:{marker}", "RAY_DISABLE_USAGE_STATS": "1"})
+    return out, marker, p
+
+
+def test_ray_reproduce_gives_the_in_process_numbers(in_process, on_ray):
+    out, _, p = on_ray
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert "submitted to Ray" in p.stderr
+    assert numbers(out) == numbers(in_process)
+    assert (out / "REPORT.md").read_text().count("|") > 50
+
+
+def test_a_killed_ray_worker_costs_only_its_unit(in_process, on_ray):
+    out, marker, p = on_ray
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert marker.exists() and int(marker.read_text()) != os.getpid()  # the first try died in a worker
+    stage = next(out.glob("metatrain-reacher-ours-*"))
+    assert (stage / "stage.json").exists()
+    ours = json.loads((stage / "stage.json").read_text())["result"]
+    ref = json.loads(next(in_process.glob("metatrain-reacher-ours-*")).joinpath("stage.json").read_text())["result"]
+    assert {k: v["task_loss"] for k, v in ours["seeds"].items()} == {k: v["task_loss"] for k, v in ref["seeds"].items()}
+
+
+def test_local_processes_rerun_a_unit_whose_process_died(tmp_path, in_process):
+    out, marker = tmp_path / "out", tmp_path / "killed"
+    p = cli("reproduce", "--quick", "--only", "toy,landscape", "--out", str(out), "--device", "cpu", "--jobs", "2",
+            env={"WARP_CRITIC_UNIT_FAULT": f"toy:{marker}"})
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert marker.exists() and "a worker process died; running it again" in p.stderr
+    toy = json.loads(next(out.glob("toy-*")).joinpath("stage.json").read_text())["result"]
+    ref = json.loads(next(in_process.glob("toy-*")).joinpath("stage.json").read_text())["result"]
+    assert toy == ref
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["--ray", "127.0.0.1:1"], ("--ray", "127.0.0.1:1")),
+    (["--ray", "nowhere"], ("--ray", "HOST:PORT")),
+    (["--jobs", "0"], ("--jobs",)),
+    (["--jobs", "2", "--ray"], ("--jobs", "--ray")),
+])
+def test_bad_executor_flags_are_one_line_and_start_nothing(tmp_path, capsys, argv, words):
+    out = tmp_path / "out"
+    assert main(["reproduce", "--quick", "--out", str(out), *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("warp-critic: error:") and all(w in err[0] for w in words), err
+    assert not out.exists()
