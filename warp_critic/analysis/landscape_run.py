@@ -122,6 +122,9 @@ def run_landscape(cfg: LandscapeConfig) -> dict:
     q0 = torch.tensor(np.repeat(init_states, cfg.inits_per_state, axis=0), dtype=torch.float32, device=dev)
     goal = torch.tensor(cfg.goal, dtype=torch.float32, device=dev)[None]
 
+    if cfg.train_goals or cfg.goal_std > 0 or cfg.start_std > 0:
+        log(f"training tasks drawn every iteration: goals {[tuple(cfg.goal), *cfg.train_goals]} + N(0, "
+            f"{cfg.goal_std:g}^2), initial states {[tuple(q) for q in cfg.init_states]} + N(0, {cfg.start_std:g}^2)")
     log(f"meta-training L_critic (ours): {cfg.iterations} iterations, {W} worlds")
     critic, trace_before, trace_new, ours_loss = train_ours(cfg, train_sim, q0, goal, gen, log)
     log(f"training Q_sup (Algorithm 1): {cfg.iterations} iterations, {W} worlds")
