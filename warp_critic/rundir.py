@@ -96,28 +96,25 @@ def _atomic(path: Path):
         raise
 
 
-def atomic_write_text(path: Path, text: str) -> None:
+def _write_atomically(path: Path, write) -> None:
+    """``write(tmp)`` fills a temporary file that then replaces ``path``; a failure is one line."""
     try:
         with _atomic(path) as tmp:
-            tmp.write_text(text)
+            write(tmp)
     except OSError as e:
         raise UserError(f"{path}: cannot write ({e.strerror or e})") from None
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    _write_atomically(path, lambda tmp: tmp.write_text(text))
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
-    try:
-        with _atomic(path) as tmp:
-            tmp.write_bytes(data)
-    except OSError as e:
-        raise UserError(f"{path}: cannot write ({e.strerror or e})") from None
+    _write_atomically(path, lambda tmp: tmp.write_bytes(data))
 
 
 def atomic_torch_save(obj, path: Path) -> None:
-    try:
-        with _atomic(path) as tmp:
-            torch.save(obj, tmp)
-    except OSError as e:
-        raise UserError(f"{path}: cannot write ({e.strerror or e})") from None
+    _write_atomically(path, lambda tmp: torch.save(obj, tmp))
 
 
 # ------------------------------------------------------------------------------------------------
