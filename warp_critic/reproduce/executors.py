@@ -125,6 +125,18 @@ class LocalProcesses:
                                    initializer=_process_init)
 
     def run(self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None]) -> None:
+        try:
+            self._run(units, root, done, log)
+        except BaseException:
+            # a unit failed for good, or Ctrl-C / SIGTERM: stop the other units' processes too (each
+            # resumes from its checkpoints next time) instead of waiting for them to finish
+            import multiprocessing
+
+            for child in multiprocessing.active_children():
+                child.terminate()
+            raise
+
+    def _run(self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None]) -> None:
         tries = {u.name: 0 for u in units}
         pending = list(units)
         while pending:
@@ -145,6 +157,9 @@ class LocalProcesses:
                         broken = True
                         pending.append(u)
                         continue
+                    except BaseException:
+                        pool.shutdown(wait=False, cancel_futures=True)
+                        raise
                     done(u, result, seconds)
             pool.shutdown(wait=True, cancel_futures=True)
             if broken:
