@@ -25,6 +25,7 @@ import importlib
 import os
 import signal
 import socket
+import sys
 import tempfile
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -96,6 +97,15 @@ class InProcess:
 
 
 def _process_init() -> None:
+    """A worker process: die with the driver (Linux: even when the driver is SIGKILLed), then start as
+    the CLI starts."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+        except OSError:
+            pass
     from ..runtime import init
 
     init()
@@ -117,6 +127,10 @@ class LocalProcesses:
         if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
             raise FieldError("jobs", f"must be an integer >= 1 (got {jobs!r})")
         self.jobs, self.retries = jobs, retries
+        self._pool_now: ProcessPoolExecutor | None = None
+        # stopping workers mid-unit (Ctrl-C) leaves the pool's queue semaphores to the tracker process,
+        # which would warn about them on its own stderr: that is expected here, not a leak
+        os.environ.setdefault("PYTHONWARNINGS", "ignore::UserWarning:multiprocessing.resource_tracker")
 
     def _pool(self) -> ProcessPoolExecutor:
         import multiprocessing
@@ -134,13 +148,15 @@ class LocalProcesses:
 
             for child in multiprocessing.active_children():
                 child.terminate()
+            if self._pool_now is not None:
+                self._pool_now.shutdown(wait=True, cancel_futures=True)
             raise
 
     def _run(self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None]) -> None:
         tries = {u.name: 0 for u in units}
         pending = list(units)
         while pending:
-            pool = self._pool()
+            pool = self._pool_now = self._pool()
             futures = {}
             for u in pending:
                 log(f"reproduce: {u.name}: submitted to a local process ({u.dir_name})")
