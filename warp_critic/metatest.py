@@ -19,7 +19,7 @@ Two aggregations of the final error are reported, for every goal and init:
 from __future__ import annotations
 
 import importlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -33,10 +33,10 @@ from .networks import Critic, MLPPolicy, Normalizer
 from .rollout import rollout
 from .rundir import RunDir, check_output_file, write_result
 from .runtime import seed_everything
-from .scene import Variant, load_scene
+from .scene import load_scene
 from .simulator import STANDARD_GRAVITY, Simulator
-from .task import (SerializableConfig, TaskConfig, available_memory, check_fields, estimate_memory, goals_tensor,
-                   max_torque_tensor, spec)
+from .task import (SerializableConfig, TaskConfig, available_memory, build_task, check_fields, estimate_memory,
+                   goals_tensor, spec)
 
 RESULT_KIND = "warp-critic/metatest-v1"
 
@@ -193,12 +193,13 @@ def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
     if need > 0.8 * have:
         raise FieldError("inits", f"{G} goals x {K} inits = {W} worlds, horizon {horizon} need about "
                                   f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB available")
-    variant = Variant(ee_mass=tc.ee_mass, link_length=tc.link_length, link_scale=tc.link_scale)
-    # differentiable=False: the model has no gradient buffers, a taped rollout is impossible.
-    sim = Simulator(scene, [variant] * W, dt=cfg.dt, substeps=cfg.substeps, device=tc.device,
-                    differentiable=False, gravity=cfg.gravity if cfg.gravity is not None else STANDARD_GRAVITY)
-    dev = sim.torch_device
-    norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale)
+    # the run's task with the test's goals, inits and dynamics variant, as training laid it out; built
+    # without gradient buffers (differentiable=False): a taped rollout through it is impossible
+    test_task = replace(cfg, goals=goals.tolist(), worlds_per_goal=K, ee_mass=tc.ee_mass, link_length=tc.link_length,
+                        link_scale=tc.link_scale, device=tc.device, horizon=horizon,
+                        gravity=cfg.gravity if cfg.gravity is not None else STANDARD_GRAVITY)
+    task = build_task(test_task, scene, differentiable=False)
+    sim, norm, dev, goal = task.sim, task.norm, task.device, task.goal
     critic, defaults = build_test_critic(ckpt, norm)
     critic = critic.to(dev)
     for p in critic.parameters():
@@ -207,9 +208,7 @@ def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
     steps = tc.policy_steps if tc.policy_steps is not None else defaults.get("steps", 1)
     if not (isinstance(alpha, (int, float)) and alpha > 0):
         raise UserError(f"{tc.run_dir}: the run stores no usable policy learning rate (alpha {alpha!r}); give one")
-    goal_index = torch.arange(G, device=dev).repeat_interleave(K)
-    goal = goals.to(dev)[goal_index]
-    q0, qd0 = sim.zeros(), sim.zeros()
+    q0, qd0 = task.home, torch.zeros_like(task.home)
     policy = MLPPolicy(norm)
     params = {k: v.requires_grad_(True) for k, v in policy.init(W, generator=gen, device=dev).items()}
     return MetaTestSetup(ckpt=ckpt, cfg=cfg, scene=scene, goals=goals, goal=goal, sim=sim, norm=norm,
