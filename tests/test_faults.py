@@ -92,12 +92,18 @@ def test_sigkill_at_several_points_resumes_to_the_same_metrics_and_a_complete_re
             assert any(e.startswith(f"/rollout/{label}/it{it}/goal1/body") for e in entities), (label, it)
 
 
-def test_sigterm_stops_like_ctrl_c_and_closes_the_recording(tmp_path):
-    run = tmp_path / "run"
+def start_long_run(run: Path, until: str) -> subprocess.Popen:
+    """A meta-train that runs (almost) forever, once ``run/until`` exists."""
     p = cli("meta-train", REACHER, *TINY, "--iterations", "100000", "--out", str(run), wait=False)
     deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and not (run / "checkpoint.pt").exists():
-        time.sleep(0.2)
+    while time.monotonic() < deadline and not (run / until).exists():
+        time.sleep(0.1)
+    return p
+
+
+def test_sigterm_stops_like_ctrl_c_and_closes_the_recording(tmp_path):
+    run = tmp_path / "run"
+    p = start_long_run(run, "checkpoint.pt")
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=120)
     lines = [x for x in err.splitlines() if not x.startswith("[")]
@@ -109,10 +115,7 @@ def test_sigterm_stops_like_ctrl_c_and_closes_the_recording(tmp_path):
 
 def test_a_second_run_into_a_locked_directory_is_refused_at_once(tmp_path):
     run = tmp_path / "run"
-    first = cli("meta-train", REACHER, *TINY, "--iterations", "100000", "--out", str(run), wait=False)
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and not (run / "metrics.jsonl").exists():
-        time.sleep(0.1)
+    first = start_long_run(run, "metrics.jsonl")
     assert (run / ".lock").exists()
     for argv in (["meta-train", REACHER, "--iterations", "8", "--out", str(run), "--resume"],
                  ["meta-train", REACHER, *TINY, "--iterations", "8", "--out", str(run)]):

@@ -61,10 +61,11 @@ def _number(kind):
 
 
 def _number_list(kind):
-    one = _number(kind)
+    """:func:`comma_list` of numbers that must not be empty (a config field's list)."""
+    values_of = comma_list(kind)
 
     def parse(text: str):
-        values = [one(x.strip()) for x in text.split(",") if x.strip()]
+        values = values_of(text)
         if not values:
             raise argparse.ArgumentTypeError(f"expected comma-separated {kind.__name__}s, got {text!r}")
         return values

@@ -1,8 +1,8 @@
 """The one training harness every method runs through (ours, DDPG, Meta-Critic).
 
-A method builds its networks and writes one function, ``step(iteration) -> (metrics row, result)``,
-plus ``state() -> dict`` for its checkpoint; :class:`Session` does everything around it, the same way
-for all methods:
+A method builds its networks and writes one function, ``step(iteration) -> (one metrics row per seed,
+result)``, plus ``state(seed index) -> dict`` for its checkpoints; :class:`Session` does everything
+around it, the same way for all methods:
 
 1. **start**: check the config, claim (or, on resume, open) the run directory and lock it, apply the
    resume rule (the run's saved config is the truth: only ``iterations`` may grow, any other
@@ -17,7 +17,6 @@ for all methods:
 from __future__ import annotations
 
 import contextlib
-import math
 import sys
 import time
 from dataclasses import dataclass, field, fields, replace
@@ -62,7 +61,7 @@ class TrainResult:
 Callback = Callable[[IterationInfo], None]
 
 
-def config_differences(saved: TaskConfig, requested: TaskConfig, given: set[str] | None) -> list[str]:
+def config_differences(saved: TaskConfig, requested: TaskConfig, given: set[str] | None) -> list[tuple[str, Any, Any]]:
     """Settings of ``requested`` that contradict the saved run (runtime fields excepted).
 
     ``given``: the fields the user set explicitly (the CLI knows); ``None`` = every field that differs
@@ -213,14 +212,6 @@ class Session:
     def start(self) -> int:
         return self.runs[0].start
 
-    @property
-    def ckpt(self) -> dict | None:
-        return self.runs[0].ckpt
-
-    @property
-    def gen(self) -> torch.Generator:
-        return self.runs[0].gen
-
     # -- set-up and resume -------------------------------------------------------------------------
     def seed(self, i: int) -> torch.Generator:
         """Seed everything for seed ``i`` (call right before building that seed's networks, so its
@@ -362,14 +353,6 @@ class Session:
                 r.rundir.abandon()
             else:
                 r.rundir.unlock()
-
-
-def grad_norm(module: torch.nn.Module) -> float:
-    total = 0.0
-    for p in module.parameters():
-        if p.grad is not None:
-            total += float(p.grad.detach().pow(2).sum())
-    return math.sqrt(total)
 
 
 def _plain(row: dict) -> dict:

@@ -224,10 +224,6 @@ class StackedCritic(nn.Module):
         out.load_state_dict(self.critic_state(s))
         return out
 
-    def params_of(self, s: int) -> list[torch.Tensor]:
-        """Critic ``s``'s slices in :meth:`Critic.parameters` order (w1, b1, w2, b2, w3, b3)."""
-        return [t for w, b in zip(self.weights, self.biases) for t in (w[s], b[s])]
-
     def ordered(self) -> list[nn.Parameter]:
         """The stacked parameters in :meth:`Critic.parameters` order."""
         return [t for w, b in zip(self.weights, self.biases) for t in (w, b)]

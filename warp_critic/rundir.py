@@ -301,9 +301,6 @@ class RunDir:
     def checkpoint_path(self) -> Path:
         return self.path / "checkpoint.pt"
 
-    def has_checkpoint(self) -> bool:
-        return self.checkpoint_path.is_file()
-
     def save_checkpoint(self, ckpt: dict) -> None:
         atomic_torch_save({"kind": CHECKPOINT_KIND, **ckpt}, self.checkpoint_path)
 

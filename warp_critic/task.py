@@ -17,7 +17,6 @@ one :class:`~warp_critic.simulator.Simulator` and draws the training start state
 from __future__ import annotations
 
 import copy
-import json
 import math
 import os
 import typing
@@ -354,7 +353,3 @@ def build_task(cfg: TaskConfig, scene: Scene, *, differentiable: bool, copies: i
     home = torch.as_tensor(getattr(scene, "home", [0.0] * scene.dof), dtype=torch.float32, device=dev)
     return Task(cfg=cfg, scene=scene, goals=goals, sim=sim, goal_index=goal_index, slot=slot,
                 goal=goals.to(dev)[goal_index], norm=norm, home=home.expand(copies * G * K, -1).clone(), S=copies)
-
-
-def config_json(cfg: TaskConfig) -> str:
-    return json.dumps(cfg.to_dict(), indent=2)

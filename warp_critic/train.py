@@ -9,6 +9,7 @@ recording, checkpoints) is the shared harness :class:`warp_critic.loop.Session`.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from dataclasses import dataclass
 
 import torch
@@ -41,12 +42,7 @@ class TrainConfig(TaskConfig):
     scene_fields = TaskConfig.scene_fields + ("alpha", "lr", "iterations", "inner_steps", "critic_input")
 
     def default_out(self) -> str:
-        return f"runs/{self.scene_stem()}-meta"
-
-    def scene_stem(self) -> str:
-        from pathlib import Path
-
-        return Path(self.scene).stem
+        return f"runs/{Path(self.scene).stem}-meta"
 
     def check(self, scene=None) -> None:
         super().check(scene)
@@ -157,7 +153,7 @@ def _cat(per_seed: list[dict]) -> dict:
 
 
 def slice_norm(critic: StackedCritic, i: int) -> float:
-    """The gradient norm of critic ``i`` (as :func:`warp_critic.loop.grad_norm` of that critic)."""
+    """The gradient norm of critic ``i``: ``sqrt(sum of its squared gradients)``."""
     total = 0.0
     for p in critic.ordered():
         if p.grad is not None:

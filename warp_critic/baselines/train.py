@@ -114,11 +114,6 @@ class BaselineConfig(TaskConfig):
 
     scene_fields = TaskConfig.scene_fields + ("inner_steps",)
 
-    def default_out(self) -> str:
-        from pathlib import Path
-
-        return f"runs/{Path(self.scene).stem}-{self.method}"
-
     def n_updates(self) -> int:
         return self.updates_per_iteration if self.updates_per_iteration is not None else self.horizon
 

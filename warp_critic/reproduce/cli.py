@@ -95,10 +95,6 @@ def run_from_args(args: argparse.Namespace) -> int:
 
     rc = config_from_args(args)
     rc.validate()  # one-line UserError before any work
-    if getattr(args, "jobs", None) is not None and args.jobs < 1:
-        from ..errors import FieldError
-
-        raise FieldError("jobs", f"must be >= 1 (got {args.jobs})")
     init()
     executor = make_executor(getattr(args, "jobs", None), getattr(args, "ray", None), resolve_device(rc.device))
     result = reproduce(rc, executor)

@@ -111,11 +111,16 @@ def _process_init() -> None:
     init()
 
 
-def _process_unit(unit: Unit, root: str, kwargs_progress: bool) -> tuple[dict, float]:
+def _quiet(unit: Unit) -> Unit:
+    """The unit without progress bars (a worker's stderr is no terminal; the driver logs each unit)."""
+    if "progress" not in unit.kwargs:
+        return unit
+    return Unit(unit.name, unit.dir_name, unit.fn, {**unit.kwargs, "progress": False}, unit.reads)
+
+
+def _process_unit(unit: Unit, root: str) -> tuple[dict, float]:
     t = time.perf_counter()
-    if "progress" in unit.kwargs:
-        unit = Unit(unit.name, unit.dir_name, unit.fn, {**unit.kwargs, "progress": kwargs_progress}, unit.reads)
-    return call_unit(unit, Path(root)), time.perf_counter() - t
+    return call_unit(_quiet(unit), Path(root)), time.perf_counter() - t
 
 
 class LocalProcesses:
@@ -160,7 +165,7 @@ class LocalProcesses:
             futures = {}
             for u in pending:
                 log(f"reproduce: {u.name}: submitted to a local process ({u.dir_name})")
-                futures[pool.submit(_process_unit, u, str(root), False)] = u
+                futures[pool.submit(_process_unit, u, str(root))] = u
             pending = []
             broken = False
             while futures:
@@ -224,9 +229,7 @@ def _ray_unit(unit: Unit, inputs: dict[str, bytes], env: dict[str, str]) -> tupl
             (root / rel).parent.mkdir(parents=True, exist_ok=True)
             (root / rel).write_bytes(data)
         t = time.perf_counter()
-        if "progress" in unit.kwargs:
-            unit = Unit(unit.name, unit.dir_name, unit.fn, {**unit.kwargs, "progress": False}, unit.reads)
-        result = call_unit(unit, root)
+        result = call_unit(_quiet(unit), root)
         seconds = time.perf_counter() - t
         return _read_tree(root / unit.dir_name), result, seconds
 
@@ -311,9 +314,8 @@ def make_executor(jobs: int | None, ray: str | None, device: str):
     if ray is not None:
         return RayExecutor(None if ray == "local" else ray, device)
     if jobs is not None:
-        if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
-            raise FieldError("jobs", f"must be an integer >= 1 (got {jobs!r})")
-        return LocalProcesses(jobs) if jobs > 1 else InProcess()
+        local = LocalProcesses(jobs)  # checks jobs
+        return local if jobs > 1 else InProcess()
     return InProcess()
 
 

@@ -31,7 +31,7 @@ import hashlib
 import json
 from typing import Any
 
-from ..errors import FieldError, UserError
+from ..errors import FieldError
 from ..presets import preset
 
 STAGES = ("toy", "landscape", "metatrain", "maps", "tables")

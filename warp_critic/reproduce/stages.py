@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from ..errors import FieldError, UserError
-from ..rundir import atomic_write_text
+from ..rundir import atomic_write_text, check_output_dir
 
 MARKER = ".warp-critic-reproduce"
 STAGE_FILE = "stage.json"
@@ -33,11 +33,10 @@ def prepare_out(out: Path) -> Path:
         raise FieldError("out", f"{out}: is a file, not a directory")
     if out.is_dir() and any(out.iterdir()) and not (out / MARKER).is_file():
         raise FieldError("out", f"{out}: is not empty and not a reproduce output (no {MARKER}); not writing into it")
-    probe = out
-    while not probe.exists():
-        probe = probe.parent
-    if not probe.is_dir():
-        raise FieldError("out", f"{out}: {probe} is a file, not a directory")
+    try:
+        check_output_dir(out, "")
+    except UserError as e:
+        raise FieldError("out", str(e).strip()) from None
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
