@@ -118,6 +118,7 @@ def world(tmp_path, base, monkeypatch):
     (t / "empty.usda").write_bytes(b"")
     monkeypatch.chdir(t)  # default output locations (runs/...) land here too
     monkeypatch.delenv("WARP_CRITIC_TORCH_THREADS", raising=False)
+    monkeypatch.delenv("WARP_CRITIC_GRAPHS", raising=False)
     return SimpleNamespace(t=t, run=t / "run", ddpg=t / "ddpg", user=user, new=t / "new_out", goals=goals,
                            marker=t / "code-ran")
 
@@ -375,6 +376,8 @@ CASES = [
         says=("WARP_CRITIC_TORCH_THREADS", value)) for value in ("abc", "0", "-2", "100000", "1.5")],
     C("c03", "threads-env-meta-test", TEST, env={"WARP_CRITIC_TORCH_THREADS": "abc"},
       says=("WARP_CRITIC_TORCH_THREADS",)),
+    *[C("c03", f"graphs-env-{value}", NEW(*MT), env={"WARP_CRITIC_GRAPHS": value},
+        says=("WARP_CRITIC_GRAPHS", value)) for value in ("yes", "2", "-1")],
     C("c03", "empty-goals", NEW(*MT, "--goals="), says=("--goals", "no goals")),
     C("c03", "goals-only-separators", NEW(*MT, "--goals", ";;"), says=("--goals", "no goals")),
     C("c03", "goals-a-directory", NEW(*MT, "--goals", "{t}/goals"), says=("--goals", "directory")),

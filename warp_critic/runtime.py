@@ -16,6 +16,7 @@ import torch
 from .errors import FieldError, UserError
 
 THREADS_ENV = "WARP_CRITIC_TORCH_THREADS"
+GRAPHS_ENV = "WARP_CRITIC_GRAPHS"
 MAX_SEED = 2**32 - 1  # numpy's legacy seeding takes 32 bits; torch takes 64: the common range
 
 
@@ -66,6 +67,18 @@ def threads_from_env() -> int:
         raise UserError(f"${THREADS_ENV}={text!r}: {e.problem}") from None
 
 
+def graphs_from_env() -> bool:
+    """``$WARP_CRITIC_GRAPHS`` (default ``1``): replay captured Warp graphs in the simulator.
+
+    ``0`` issues every Warp launch from Python: the same numbers bit for bit, slower; for debugging
+    and for measuring the replay side by side (``tools/bench_speed.py``).
+    """
+    text = os.environ.get(GRAPHS_ENV, "1").strip()
+    if text not in ("0", "1"):
+        raise UserError(f"${GRAPHS_ENV}={text!r}: expected 0 or 1")
+    return text == "1"
+
+
 def set_threads(n: int) -> None:
     """Set torch's intra-op thread count (``0`` keeps torch's default)."""
     if check_threads(n):
@@ -79,6 +92,7 @@ def init(threads: int | None = None, quiet: bool = True) -> None:
     oversubscription stalls (measured 25x slower steps with 2 threads on a busy 2-core machine).
     """
     set_threads(threads_from_env() if threads is None else threads)
+    graphs_from_env()  # a bad value is reported at start, not at the first simulator
     init_warp(quiet)
 
 

@@ -12,6 +12,7 @@ import numpy as np
 import torch
 import warp as wp
 
+from . import runtime
 from .bridge import NewtonBridge
 from .errors import FieldError
 from .scene import Scene, Variant
@@ -47,10 +48,14 @@ class Simulator:
         differentiable: build the model with gradients (needed for model-based meta-training).
         gravity: magnitude of gravity along -z (m/s^2). ``0`` is exactly a perfectly gravity-compensated
             robot (``tau_applied = tau + g(q)``), as the iiwa's torque interface provides.
+        graphs: replay captured Warp graphs after each step's first run (bitwise the same results,
+            a fraction of the Python overhead; see :mod:`warp_critic.bridge`); ``None`` reads
+            ``$WARP_CRITIC_GRAPHS`` (default on).
     """
 
     def __init__(self, scene: Scene, variants: Sequence[Variant], *, dt: float, substeps: int = 1,
-                 device: str = "cpu", differentiable: bool = True, gravity: float = STANDARD_GRAVITY):
+                 device: str = "cpu", differentiable: bool = True, gravity: float = STANDARD_GRAVITY,
+                 graphs: bool | None = None):
         if dt <= 0:
             raise FieldError("dt", f"must be > 0 (got {dt})")
         if substeps < 1:
@@ -70,7 +75,8 @@ class Simulator:
             raise FieldError("gravity", f"must be >= 0 (got {gravity})")
         self.gravity = float(gravity)
         self.model.set_gravity((0.0, 0.0, -self.gravity))
-        self.bridge = NewtonBridge(self.model, self.worlds, self.dof, self.dt, self.substeps)
+        self.bridge = NewtonBridge(self.model, self.worlds, self.dof, self.dt, self.substeps,
+                                   graphs=runtime.graphs_from_env() if graphs is None else graphs)
         self.torch_device = self.bridge.torch_device
         tdev = self.torch_device
         self.q_lower = torch.as_tensor(np.asarray(scene.q_lower), dtype=torch.float32, device=tdev)
