@@ -237,14 +237,20 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
            f"- versions: python {ver['python']}, warp {ver['warp']}, newton {ver['newton']}, torch {ver['torch']} "
            f"({ver['platform']})",
            f"- written {time.strftime('%Y-%m-%d %H:%M:%S')}; this call took {wall:.1f} s", "",
-           "## Stages", "", "| stage | directory | this call | wall time when computed (s) |", "|---|---|---|---|"]
+           "## Stages", "",
+           "Wall time: of the call that completed the stage (a stage resumed over several calls counts only the "
+           "last). Training time: the sum of the stage's iteration times over all calls (the seeds of a "
+           "meta-training run batched, so it is the whole stage's).", "",
+           "| stage | directory | this call | wall time (s) | training time, all calls (s) |", "|---|---|---|---|---|"]
     for name, st in plan.items():
         r = recs.get(name)
         if r is None:
-            md.append(f"| {name} | `{name}-{st['hash']}` | not run | — |")
+            md.append(f"| {name} | `{name}-{st['hash']}` | not run | — | — |")
             continue
         status = "ran" if r.ran else "complete, skipped"
-        md.append(f"| {name} | `{r.dir.name}` | {status} | {r.data['seconds']:.1f} |")
+        seeds = r.data["result"].get("seeds") if r.group == "metatrain" else None
+        train = f"{next(iter(seeds.values()))['seconds']:.1f}" if seeds else "—"
+        md.append(f"| {name} | `{r.dir.name}` | {status} | {r.data['seconds']:.1f} | {train} |")
         results["stages"][name] = {"dir": r.dir.name, "file": f"{r.dir.name}/{STAGE_FILE}", "seconds": r.data["seconds"],
                                    "ran_this_call": r.ran}
     md.append("")
