@@ -178,10 +178,15 @@ def table_markdown(table: str, res: dict, source: str) -> tuple[list[str], list[
         row = [f"{paper[m][v][0]:g}({paper[m][v][1]:g})" if v in paper[m] else "—" for v in values]
         lines.append(f"| {PAPER_ROW[m]} | " + " | ".join(row) + " |")
     out_cells, summary = [], []
+    # the same goals and initial policies for every method: the error before any update, for scale
+    untrained = [cells[(ci, METHODS[0])].get("untrained_mse_mean") for ci in range(len(values))]
+    if all(u is not None for u in untrained):
+        lines.append("| this run: untrained policies (no update) | " + " | ".join(_fmt(u) for u in untrained) + " |")
     for m in METHODS:
-        row, hits, comparable = [], 0, 0
+        row, hits, comparable, better = [], 0, 0, 0
         for ci, v in enumerate(values):
             c = cells[(ci, m)]
+            better += untrained[ci] is not None and c["mse_mean"] < untrained[ci]
             ref = paper[m].get(v)
             ok = ref is not None and c["mse_mean"] <= ref[0]
             comparable += ref is not None
@@ -190,11 +195,14 @@ def table_markdown(table: str, res: dict, source: str) -> tuple[list[str], list[
             out_cells.append({"table": table, "column": label, "value": v, "method": m, "mse_mean": c["mse_mean"],
                               "mse_std": c["mse_std"], "mse_per_seed": c["mse_per_seed"], "n": c["n"],
                               "paper": list(ref) if ref else None, "at_or_below_paper": ok if ref else None,
+                              "untrained_mse_mean": untrained[ci],
                               "file": source, "runs": [r + "/checkpoint.pt" for r in c["runs"]]})
         lines.append(f"| this run: {METHOD_LABELS[m]} | " + " | ".join(row) + " |")
         line = f"{METHOD_LABELS[m]}: at or below the paper's value in {hits} of {comparable} comparable columns"
         if hits < comparable:
             line += f"; it does NOT reach the paper's value in the other {comparable - hits}"
+        if all(u is not None for u in untrained):
+            line += f"; below the untrained policies' error in {better} of {len(values)}"
         summary.append(line)
     return lines, out_cells, summary
 
