@@ -94,3 +94,30 @@ def test_bad_executor_flags_are_one_line_and_start_nothing(tmp_path, capsys, arg
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("warp-critic: error:") and all(w in err[0] for w in words), err
     assert not out.exists()
+
+
+def test_stopping_a_jobs_driver_stops_its_workers_cleanly(tmp_path, in_process):
+    """SIGTERM to ``reproduce --jobs 2`` mid-meta-training: one line, exit 130, every worker's run closed
+    (no lock left behind for the next call to take over, recordings that verify)."""
+    import signal
+    import time
+
+    out = tmp_path / "out"
+    args = ["reproduce", "--quick", "--only", "metatrain", "--out", str(out), "--device", "cpu", "--jobs", "2",
+            "--set", "metatrain.reacher.ours.iterations=100000", "--set", "metatrain.reacher.ddpg.iterations=100000"]
+    p = subprocess.Popen([sys.executable, "-m", "warp_critic.cli", *args], stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 300
+    # both long units are past their first checkpoint (quick: every 3 iterations)
+    while time.time() < deadline and len(list(out.glob("metatrain-reacher-*/run/seed*/checkpoint.pt"))) < 4:
+        assert p.poll() is None, p.communicate()
+        time.sleep(0.5)
+    p.send_signal(signal.SIGTERM)
+    _, err = p.communicate(timeout=120)
+    assert p.returncode == 130, err
+    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("warp-critic: interrupted"), err
+    assert not list(out.rglob(".lock")), "a worker left its run locked"
+    for rec in out.glob("metatrain-reacher-*/run/seed*/recording.rrd"):
+        v = subprocess.run([sys.executable, "-m", "rerun_cli", "rrd", "verify", str(rec)], capture_output=True,
+                           text=True, timeout=120)
+        assert v.returncode == 0, v.stderr

@@ -96,9 +96,23 @@ class InProcess:
         pass
 
 
+_IN_UNIT = False  # a worker process: is a unit running (set around it by _process_unit)?
+
+
+def _worker_stop(signum, frame) -> None:
+    """SIGTERM in a worker (the driver stopping, or dying: PDEATHSIG). Mid-unit it stops the unit the way
+    Ctrl-C stops a CLI run: the run's ``finally`` blocks close its recording and release its lock, so the
+    next call resumes without a stale lock. An idle worker just exits."""
+    if _IN_UNIT:
+        raise KeyboardInterrupt
+    os._exit(128 + signum)
+
+
 def _process_init() -> None:
-    """A worker process: die with the driver (Linux: even when the driver is SIGKILLed), then start as
+    """A worker process: stop with the driver (Linux: even when the driver is SIGKILLed), then start as
     the CLI starts."""
+    signal.signal(signal.SIGTERM, _worker_stop)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a terminal's Ctrl-C reaches the driver, which stops us
     if sys.platform.startswith("linux"):
         import ctypes
 
@@ -119,8 +133,13 @@ def _quiet(unit: Unit) -> Unit:
 
 
 def _process_unit(unit: Unit, root: str) -> tuple[dict, float]:
+    global _IN_UNIT
     t = time.perf_counter()
-    return call_unit(_quiet(unit), Path(root)), time.perf_counter() - t
+    _IN_UNIT = True
+    try:
+        return call_unit(_quiet(unit), Path(root)), time.perf_counter() - t
+    finally:
+        _IN_UNIT = False
 
 
 class LocalProcesses:
