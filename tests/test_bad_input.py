@@ -527,6 +527,9 @@ CASES = [
     C("c12", "meta-test-goal-std-0", [*TEST, "--goal-std", "0", "--out", "{t}/x.json"], code=0),
     C("c12", "meta-test-goals-file", [*TEST, "--goals", "{t}/goals/good.txt", "--out", "{t}/x.json"], code=0),
     C("c12", "meta-train-gravity-0", NEW(*MT, "--gravity", "0", "--start-std", "0"), code=0),
+    # a long inline goal list is not a file name (the OS refuses names over 255 bytes)
+    C("c12", "meta-test-long-inline-goals", [*TEST, "--goals=" + ";".join(["-0.25,0.125"] * 40), "--out", "{t}/x.json"],
+      code=0, check=result_written("x.json")),
 
     # the analyses (being refactored elsewhere)
     C("ana", "toy-s0-nan", NEW("analyze", "toy", "--s0", "nan"), says=("--s0", "nan")),

@@ -122,6 +122,14 @@ def dataclass_from_args(cls, args: argparse.Namespace, **overrides):
     return cls(**values), given
 
 
+def _is_existing_path(path: Path) -> bool:
+    """``path.exists()``, False for a string the OS cannot take as a name (e.g. a long inline goal list)."""
+    try:
+        return path.exists()
+    except (OSError, ValueError):
+        return False
+
+
 def parse_goals(spec: str | list | None, name: str = "goals") -> list[list[float]] | None:
     """Goals from an inline string ``'a,b;c,d'`` or a file (JSON list of lists, or one goal per line)."""
     if spec is None or isinstance(spec, list):
@@ -129,7 +137,7 @@ def parse_goals(spec: str | list | None, name: str = "goals") -> list[list[float
     if not spec.strip():
         raise FieldError(name, "no goals given (expected inline '0.1,0.2;0.3,0.4' or a .json/.txt file)")
     path = Path(spec)
-    if path.suffix in (".json", ".txt", ".csv") or path.exists():
+    if path.suffix in (".json", ".txt", ".csv") or _is_existing_path(path):
         if path.is_dir():
             raise FieldError(name, f"{spec}: is a directory, not a goals file")
         if not path.is_file():
