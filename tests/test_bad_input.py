@@ -47,6 +47,7 @@ from hypothesis import HealthCheck, event, given, settings, strategies as st
 from warp_critic.cli import main
 from conftest import REACHER
 
+LONG = "a" * 300  # a file name the OS refuses (ENAMETOOLONG)
 TINY = ["--iterations", "1", "--horizon", "3", "--worlds-per-goal", "1", "--device", "cpu"]
 MT = ["meta-train", "{R}", *TINY]  # a new tiny meta-train run (add --out)
 DDPG = ["baseline", "ddpg", "{R}", *TINY]
@@ -414,6 +415,14 @@ CASES = [
       marks=pytest.mark.skipif(IS_ROOT, reason="root ignores permissions")),
     C("c04", "meta-test-read-only-out", [*TEST, "--out", "{t}/ro/x.json"], setup=read_only_dir, says=("ro",),
       marks=pytest.mark.skipif(IS_ROOT, reason="root ignores permissions")),
+
+    # paths the system refuses: a name over 255 bytes
+    C("c04", "meta-train-out-name-too-long", [*MT, "--out", "{t}/" + LONG], says=("too long",)),
+    C("c04", "meta-train-scene-name-too-long", ["meta-train", "{t}/" + LONG + ".usda", *TINY], says=("too long",)),
+    C("c04", "meta-train-goals-name-too-long", NEW(*MT, "--goals", "{t}/" + LONG + ".json"), says=("too long",)),
+    C("c04", "meta-test-run-name-too-long", ["meta-test", "{t}/" + LONG, "--device", "cpu"], says=("too long",)),
+    C("c04", "reproduce-out-name-too-long", ["reproduce", "--quick", "--out", "{t}/" + LONG], says=("too long",)),
+    C("c04", "toy-out-name-too-long", ["analyze", "toy", "--out", "{t}/" + LONG], says=("too long",)),
 
     # 5. files that are not ours are never overwritten, files of ours only by their own kind
     C("c05", "meta-test-out-checkpoint", [*TEST, "--out", "{run}/checkpoint.pt"], says=("checkpoint.pt",)),

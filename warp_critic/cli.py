@@ -161,6 +161,12 @@ def main(argv: list[str] | None = None) -> int:
         except KeyboardInterrupt:
             sys.stderr.write("warp-critic: interrupted\n")
             return EXIT_INTERRUPTED
+        except OSError as e:
+            if e.filename is None:
+                raise
+            # a path the system refuses (too long, a loop of links, a full disk, ...): name it, one line
+            sys.stderr.write(f"warp-critic: error: {e.filename}: {e.strerror or e}\n")
+            return EXIT_USER_ERROR
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
