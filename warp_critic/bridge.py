@@ -68,16 +68,16 @@ class _Replay:
     the freshly captured graph is launched right away.
     """
 
-    __slots__ = ("device", "direct", "captured", "enabled", "graph", "calls")
+    __slots__ = ("device", "direct", "captured", "enabled", "graph", "ran")
 
     def __init__(self, device, direct, captured=None, enabled: bool = True):
         self.device, self.direct, self.captured = device, direct, captured or direct
-        self.enabled, self.graph, self.calls = enabled, None, 0
+        self.enabled, self.graph, self.ran = enabled, None, False
 
     def __call__(self) -> None:
         if self.graph is None:
-            if not self.enabled or self.calls == 0:
-                self.calls += 1
+            if not (self.enabled and self.ran):
+                self.ran = True
                 self.direct()
                 return
             # the direct call loaded every kernel this graph launches
