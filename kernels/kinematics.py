@@ -1,6 +1,6 @@
 """End-effector tip positions for many worlds in one launch.
 
-Launched by :meth:`warp_critic.simulator.Simulator.tip_positions` after Newton's forward kinematics.
+Launched by :meth:`warp_critic.physics.simulator.Simulator.tip_positions` after Newton's forward kinematics.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Shared test set-up.
 
-* The test process starts the way the CLI starts a command (:func:`warp_critic.runtime.init`: Warp
+* The test process starts the way the CLI starts a command (:func:`warp_critic.core.runtime.init`: Warp
   started quietly, one torch thread), so library-level tests see what users see.
 * The scenes' paths, for every test module (``from conftest import REACHER``).
 * ``finished_run``: one tiny finished meta-train run directory, made once per session; tests that
@@ -22,7 +22,7 @@ POINT_MASS = str(SCENES / "point_mass.usda")
 
 
 def pytest_configure(config):
-    from warp_critic import runtime
+    from warp_critic.core import runtime
 
     runtime.init()
 
@@ -30,7 +30,7 @@ def pytest_configure(config):
 @pytest.fixture(scope="session")
 def finished_run(tmp_path_factory) -> Path:
     """A finished 2-iteration reacher meta-train run (2 goals x 2 worlds, horizon 5). Do not modify."""
-    from warp_critic.train import TrainConfig, meta_train
+    from warp_critic.methods.ours import TrainConfig, meta_train
 
     out = tmp_path_factory.mktemp("finished") / "run"
     meta_train(TrainConfig(scene=REACHER, goals=[[0.5, 0.3], [-0.4, 0.2]], worlds_per_goal=2, horizon=5,

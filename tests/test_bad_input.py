@@ -1,6 +1,6 @@
 """Bad input through the real command line: one line, exit code 2, no traceback, nothing of the user's touched.
 
-Every case runs ``warp_critic.cli.main`` in a fresh temporary directory that already holds a finished tiny
+Every case runs ``warp_critic.cli.main.main`` in a fresh temporary directory that already holds a finished tiny
 run (``run/``, with its own ``metatest.json``), a finished tiny DDPG run (``ddpg/``), a folder of someone
 else's files that happen to be named like ours (``user/config.json``, ``user/metrics.jsonl``,
 ``user/recording.rrd``), a user's ``user_file.json`` and ``notes.txt``, a plain file ``afile``, scene copies
@@ -44,7 +44,7 @@ import pytest
 import torch
 from hypothesis import HealthCheck, event, given, settings, strategies as st
 
-from warp_critic.cli import main
+from warp_critic.cli.main import main
 from conftest import REACHER
 
 LONG = "a" * 300  # a file name the OS refuses (ENAMETOOLONG)
@@ -65,11 +65,11 @@ HAS_CUDA = torch.cuda.is_available()
 
 @pytest.fixture(scope="module")
 def base(tmp_path_factory):
-    from warp_critic.baselines.ddpg import train_ddpg
-    from warp_critic.baselines.train import BaselineConfig
-    from warp_critic.metatest import TestConfig, meta_test
-    from warp_critic.runtime import init
-    from warp_critic.train import TrainConfig, meta_train
+    from warp_critic.methods.ddpg import train_ddpg
+    from warp_critic.methods.baseline import BaselineConfig
+    from warp_critic.evaluation.metatest import TestConfig, meta_test
+    from warp_critic.core.runtime import init
+    from warp_critic.methods.ours import TrainConfig, meta_train
 
     init()
     d = tmp_path_factory.mktemp("base")
@@ -672,9 +672,9 @@ TEST_NUMBERS = ["goal_std", "alpha", "ee_mass", "link_length", "link_scale", "in
 @settings(max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
 @given(name=st.sampled_from(TRAIN_NUMBERS), text=NUMBER_TEXT)
 def test_meta_train_numbers_property(name, text):
-    from warp_critic import train
-    from warp_critic.loop import TrainResult
-    from warp_critic.task import load_task_scene
+    from warp_critic.methods import ours as train
+    from warp_critic.running.loop import TrainResult
+    from warp_critic.running.task import load_task_scene
 
     def checks_only(cfg, given=None, **kw):  # everything meta_train checks before it builds the worlds
         load_task_scene(cfg)
@@ -690,9 +690,9 @@ def test_meta_train_numbers_property(name, text):
 @settings(max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
 @given(name=st.sampled_from(TEST_NUMBERS), text=NUMBER_TEXT)
 def test_meta_test_numbers_property(name, text, base):
-    from warp_critic import metatest
-    from warp_critic.rundir import check_output_file
-    from warp_critic.task import check_fields
+    from warp_critic.evaluation import metatest
+    from warp_critic.running.rundir import check_output_file
+    from warp_critic.running.task import check_fields
 
     def checks_only(tc, **kw):  # meta-test's checks before it loads the run
         out = check_output_file(Path(tc.out), "out")

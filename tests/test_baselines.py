@@ -10,20 +10,20 @@ from pathlib import Path
 import pytest
 import torch
 
-from warp_critic.baselines import networks as baseline_networks
-from warp_critic.baselines.replay import ReplayBuffer, rewards
-from warp_critic.baselines.train import BaselineConfig
-from warp_critic.baselines.ddpg import train_ddpg
-from warp_critic.baselines.meta_critic import train_meta_critic
-from warp_critic.cli import main
-from warp_critic.errors import UserError
-from warp_critic.scene import load_scene
-from warp_critic.task import TaskConfig
-from warp_critic.metatest import TestConfig, build_test_critic, meta_test
-from warp_critic.networks import Normalizer
-from warp_critic.recording import read_entity_paths
-from warp_critic.rollout import Trajectory
-from warp_critic.rundir import CHECKPOINT_KIND
+from warp_critic.methods import q_networks as baseline_networks
+from warp_critic.methods.replay import ReplayBuffer, rewards
+from warp_critic.methods.baseline import BaselineConfig
+from warp_critic.methods.ddpg import train_ddpg
+from warp_critic.methods.meta_critic import train_meta_critic
+from warp_critic.cli.main import main
+from warp_critic.core.errors import UserError
+from warp_critic.physics.scene import load_scene
+from warp_critic.running.task import TaskConfig
+from warp_critic.evaluation.metatest import TestConfig, build_test_critic, meta_test
+from warp_critic.learning.networks import Normalizer
+from warp_critic.running.recording import read_entity_paths
+from warp_critic.learning.rollout import Trajectory
+from warp_critic.running.rundir import CHECKPOINT_KIND
 from conftest import REACHER
 
 

@@ -11,11 +11,11 @@ from pathlib import Path
 import pytest
 import torch
 
-from warp_critic.errors import DivergenceError
-from warp_critic.networks import Normalizer, init_policy, policy_action
-from warp_critic.rollout import rollout
-from warp_critic.scene import Variant, load_scene
-from warp_critic.simulator import Simulator
+from warp_critic.core.errors import DivergenceError
+from warp_critic.learning.networks import Normalizer, init_policy, policy_action
+from warp_critic.learning.rollout import rollout
+from warp_critic.physics.scene import Variant, load_scene
+from warp_critic.physics.simulator import Simulator
 from conftest import ROOT
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from warp_critic.cli import main
+from warp_critic.cli.main import main
 
 VOLATILE = ("seconds", "wall", "finished", "written", "command", "seconds_this_call")
 
@@ -29,7 +29,7 @@ def numbers(out: Path) -> dict:
 
 
 def cli(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "warp_critic.cli", *args], capture_output=True, text=True,
+    return subprocess.run([sys.executable, "-m", "warp_critic.cli.main", *args], capture_output=True, text=True,
                           timeout=600, env={**os.environ, **(env or {})})
 
 
@@ -105,7 +105,7 @@ def test_stopping_a_jobs_driver_stops_its_workers_cleanly(tmp_path, in_process):
     out = tmp_path / "out"
     args = ["reproduce", "--quick", "--only", "metatrain", "--out", str(out), "--device", "cpu", "--jobs", "2",
             "--set", "metatrain.reacher.ours.iterations=100000", "--set", "metatrain.reacher.ddpg.iterations=100000"]
-    p = subprocess.Popen([sys.executable, "-m", "warp_critic.cli", *args], stdout=subprocess.PIPE,
+    p = subprocess.Popen([sys.executable, "-m", "warp_critic.cli.main", *args], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 300
     # both long units are past their first checkpoint (quick: every 3 iterations)

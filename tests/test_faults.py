@@ -1,9 +1,9 @@
 """Faults: a run killed at any point resumes to the same numbers; two runs never share a directory;
 a crafted checkpoint never runs its code.
 
-The runs here are real ``warp-critic`` processes (``python -m warp_critic.cli``), killed with SIGKILL
+The runs here are real ``warp-critic`` processes (``python -m warp_critic.cli.main``), killed with SIGKILL
 (what a crash, an OOM kill or a lost node does) at exact points chosen through ``$WARP_CRITIC_FAULT``
-(see :func:`warp_critic.rundir._fault_point`), or stopped with SIGTERM.
+(see :func:`warp_critic.running.rundir._fault_point`), or stopped with SIGTERM.
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from warp_critic.recording import read_entity_paths
+from warp_critic.running.recording import read_entity_paths
 from conftest import REACHER
 
 TINY = ["--goals", "0.5,0.3;-0.4,0.2", "--worlds-per-goal", "2", "--horizon", "5", "--device", "cpu",
@@ -32,7 +32,7 @@ def cli(*args: str, fault: str | None = None, wait: bool = True, **kw):
     env.pop("WARP_CRITIC_FAULT", None)
     if fault:
         env["WARP_CRITIC_FAULT"] = fault
-    cmd = [sys.executable, "-m", "warp_critic.cli", *args]
+    cmd = [sys.executable, "-m", "warp_critic.cli.main", *args]
     if not wait:
         return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
     return subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300, **kw)
@@ -136,8 +136,8 @@ def test_a_second_run_into_a_locked_directory_is_refused_at_once(tmp_path):
 
 
 def test_lock_is_refused_within_a_second_in_process(tmp_path):
-    from warp_critic.errors import UserError
-    from warp_critic.rundir import RunDir
+    from warp_critic.core.errors import UserError
+    from warp_critic.running.rundir import RunDir
 
     rd = RunDir.create(tmp_path / "run", "ours")
     t0 = time.monotonic()

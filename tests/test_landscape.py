@@ -6,17 +6,17 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from warp_critic.analysis.landscape_fields import METHODS, descent_fraction
-from warp_critic.analysis.landscape_problem import AXIS_MASS, analytic_gain, analytic_optimum
-from warp_critic.analysis.landscape_run import LandscapeConfig, run_landscape
-from warp_critic.recording import read_entity_paths
+from warp_critic.analysis.landscape.fields import METHODS, descent_fraction
+from warp_critic.analysis.landscape.problem import AXIS_MASS, analytic_gain, analytic_optimum
+from warp_critic.analysis.landscape.run import LandscapeConfig, run_landscape
+from warp_critic.running.recording import read_entity_paths
 
 GOAL, TEST_GOALS, INITS = (1.0, 1.0), ((-1.5, 0.5), (0.5, -1.5)), ((0.0, 0.0), (-0.5, 0.5))
 
 
 @pytest.fixture(scope="module")
 def result(tmp_path_factory):
-    from warp_critic import runtime
+    from warp_critic.core import runtime
 
     runtime.init()  # one torch thread, Warp started quietly: what the CLI does
     out = tmp_path_factory.mktemp("landscape")
@@ -105,7 +105,7 @@ def test_outputs(result):
     (["--iterations", "1000000000000"], "--iterations"),
 ])
 def test_cli_errors_name_the_flag(argv, flag, capsys, tmp_path):
-    from warp_critic.cli import main
+    from warp_critic.cli.main import main
 
     code = main(["analyze", "landscape", "--out", str(tmp_path / "x"), *argv])
     err = capsys.readouterr().err.strip().splitlines()
@@ -115,7 +115,7 @@ def test_cli_errors_name_the_flag(argv, flag, capsys, tmp_path):
 
 
 def test_huge_grid_is_refused_with_its_memory_estimate(capsys, tmp_path):
-    from warp_critic.cli import main
+    from warp_critic.cli.main import main
 
     assert main(["analyze", "landscape", "--out", str(tmp_path / "x"), "--grid", "100000"]) == 2
     (err,) = capsys.readouterr().err.strip().splitlines()
@@ -123,7 +123,7 @@ def test_huge_grid_is_refused_with_its_memory_estimate(capsys, tmp_path):
 
 
 def test_default_scene_is_found_from_any_directory(tmp_path, monkeypatch, capsys):
-    from warp_critic.cli import main
+    from warp_critic.cli.main import main
 
     monkeypatch.chdir(tmp_path)  # no scenes/ here: the scene comes from the installed package
     assert LandscapeConfig().scene.is_file()
@@ -140,7 +140,7 @@ def test_default_scene_is_found_from_any_directory(tmp_path, monkeypatch, capsys
 def test_sample_tasks_paper_setting_is_fixed_and_draws_nothing():
     import torch
 
-    from warp_critic.analysis.landscape_training import sample_tasks, varied_tasks
+    from warp_critic.analysis.landscape.training import sample_tasks, varied_tasks
 
     cfg = LandscapeConfig()
     assert not varied_tasks(cfg) and cfg.train_goals == () and cfg.goal_std == 0 and cfg.start_std == 0
@@ -156,7 +156,7 @@ def test_sample_tasks_paper_setting_is_fixed_and_draws_nothing():
 def test_sample_tasks_draws_goals_and_starts_per_world():
     import torch
 
-    from warp_critic.analysis.landscape_training import sample_tasks, varied_tasks
+    from warp_critic.analysis.landscape.training import sample_tasks, varied_tasks
 
     q0 = torch.zeros(4000, 2)
     goal = torch.tensor([[1.0, 1.0]])
@@ -180,7 +180,7 @@ def test_sample_tasks_draws_goals_and_starts_per_world():
 
 
 def test_task_distribution_flags_run(tmp_path, capsys):
-    from warp_critic.cli import main
+    from warp_critic.cli.main import main
 
     code = main(["analyze", "landscape", "--out", str(tmp_path / "o"), "--iterations", "2", "--grid", "3",
                  "--horizon", "3", "--inits-per-state", "1", "--sup-fit-steps", "1", "--ours-goal-input", "relative",
@@ -193,7 +193,7 @@ def test_task_distribution_flags_run(tmp_path, capsys):
 def test_task_distribution_flags_reach_the_config():
     import argparse
 
-    from warp_critic.analysis.landscape import add_arguments, config_from_args
+    from warp_critic.analysis.landscape.command import add_arguments, config_from_args
 
     parser = argparse.ArgumentParser()
     add_arguments(parser)
@@ -211,7 +211,7 @@ def test_task_distribution_flags_reach_the_config():
     (["--train-goals=1,2;3"], "--train-goals"),
 ])
 def test_task_distribution_flag_errors(argv, flag, capsys, tmp_path):
-    from warp_critic.cli import main
+    from warp_critic.cli.main import main
 
     code = main(["analyze", "landscape", "--out", str(tmp_path / "x"), *argv])
     err = capsys.readouterr().err.strip().splitlines()

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 import torch
 
-from warp_critic.losses import task_loss
-from warp_critic.networks import Critic, Normalizer
-from warp_critic.rollout import Trajectory
+from warp_critic.learning.losses import task_loss
+from warp_critic.learning.networks import Critic, Normalizer
+from warp_critic.learning.rollout import Trajectory
 
 
 def _norm(dof=3):
@@ -51,8 +51,8 @@ def test_task_loss_terms():
 
 
 def test_goal_noise_readings_of_the_papers_protocol():
-    from warp_critic.errors import UserError
-    from warp_critic.metatest import sample_goals
+    from warp_critic.core.errors import UserError
+    from warp_critic.evaluation.metatest import sample_goals
 
     centres = torch.zeros(2, 7)
     lo, hi = -3 * torch.ones(7), 3 * torch.ones(7)

@@ -1,4 +1,4 @@
-"""Pins of the Newton / Warp internals that ``warp_critic/bridge.py`` depends on.
+"""Pins of the Newton / Warp internals that ``warp_critic/physics/bridge.py`` depends on.
 
 The bridge's exact reverse mode swaps a private copy of ``SolverFeatherstone``'s mass-matrix scratch
 (``M, J, P, H, L`` and, with tile GEMM, the grouped views ``_J_by_size``, ``_M_by_size``,
@@ -31,9 +31,9 @@ def pin(ok: bool, what: str) -> None:
 
 @pytest.fixture(scope="module")
 def sim():
-    from warp_critic import runtime
-    from warp_critic.scene import Variant, load_scene
-    from warp_critic.simulator import Simulator
+    from warp_critic.core import runtime
+    from warp_critic.physics.scene import Variant, load_scene
+    from warp_critic.physics.simulator import Simulator
 
     runtime.init_warp()
     scene = load_scene(ROOT / "scenes" / "reacher.usda")

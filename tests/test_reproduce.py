@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from warp_critic.cli import main as cli_main
+from warp_critic.cli.main import main as cli_main
 
 
 def reproduce_main(argv):
@@ -143,9 +143,9 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
     """One job of the batched evaluator (here next to other runs and variants) = meta-test on that run."""
     import torch
 
-    from warp_critic.metatest import TestConfig, meta_test
+    from warp_critic.evaluation.metatest import TestConfig, meta_test
     from warp_critic.reproduce.evaluate import Job, evaluate
-    from warp_critic.scene import Variant
+    from warp_critic.physics.scene import Variant
 
     out, rc, _ = quick
     runs = {m: sorted((next(out.glob(f"metatrain-reacher-{m}-*")) / "run").glob("seed*")) for m in ("ours", "ddpg")}
@@ -168,7 +168,7 @@ def test_interrupted_metatrain_resumes(tmp_path, capsys):
     seed directories without a checkpoint (killed before the first one) are started afresh."""
     from warp_critic.reproduce.pipeline import ReproduceConfig, plan
     from warp_critic.reproduce.stages import prepare_out
-    from warp_critic.reproduce.training import run_metatrain_stage
+    from warp_critic.reproduce.metatrain import run_metatrain_stage
 
     out = prepare_out(tmp_path / "r")
     settings = ReproduceConfig(out=out, quick=True, seeds=2).validate()

@@ -19,8 +19,8 @@ import torch
 import warp as wp
 
 import newton
-from warp_critic.errors import SceneError, UserError
-from warp_critic.scene import Variant, load_scene
+from warp_critic.core.errors import SceneError, UserError
+from warp_critic.physics.scene import Variant, load_scene
 from conftest import ROOT, SCENES
 
 
@@ -421,7 +421,7 @@ def test_bad_variants_raise_user_error_naming_the_field(variant, flag):
 
 @pytest.mark.parametrize("case", ["missing", "text", "urdf", "no_articulation", "spherical", "negative_mass"])
 def test_bad_scene_files_on_the_command_line_exit_2_with_one_line(case, tmp_path, capsys):
-    from warp_critic.cli import main
+    from warp_critic.cli.main import main
 
     make, _ = BAD_SCENES[case]
     path = make(tmp_path)

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from warp_critic.errors import FieldError, UserError
+from warp_critic.core.errors import FieldError, UserError
 from conftest import ROOT, REACHER
 
 PAPER = Path("/work/shared/paper/model_based_meta_learning_of_critics.tex")
@@ -25,7 +25,7 @@ def load_tool(name: str):
 
 
 def tiny_cfg(out: Path, **kw):
-    from warp_critic.train import TrainConfig
+    from warp_critic.methods.ours import TrainConfig
 
     cfg = TrainConfig(scene=REACHER, goals=[[0.5, 0.3], [-0.4, 0.2]], worlds_per_goal=2, horizon=6,
                       iterations=3, device="cpu", out=str(out), checkpoint_every=1, record_every=2)
@@ -35,7 +35,7 @@ def tiny_cfg(out: Path, **kw):
 
 
 def meta_train(cfg):
-    from warp_critic.train import meta_train as train
+    from warp_critic.methods.ours import meta_train as train
 
     return train(cfg, progress=False)
 
@@ -65,7 +65,7 @@ def test_diagnose_tool_runs_on_a_run_directory(tmp_path, capsys):
 
 
 def test_paper_table_tool_pools_seeds_and_reports_the_mean_over_joints(tmp_path, capsys):
-    from warp_critic.metatest import TestConfig, meta_test
+    from warp_critic.evaluation.metatest import TestConfig, meta_test
 
     tool = load_tool("paper_table")
     runs = [tmp_path / "s0", tmp_path / "s1"]
@@ -91,7 +91,7 @@ def test_paper_table_tool_pools_seeds_and_reports_the_mean_over_joints(tmp_path,
     assert "run directory not found" in capsys.readouterr().err
 
     # the saved table formats again through the package, as printed, with the paper's row (std 0.1, 0.3)
-    from warp_critic.protocol import ProtocolResult, format_table
+    from warp_critic.evaluation.protocol import ProtocolResult, format_table
 
     again = "\n".join(format_table(ProtocolResult.from_dict(table)))
     assert again in text and "| paper (Table 1) | MSE | 0.02(0.02) | 0.05(0.04) |" in again
@@ -108,7 +108,7 @@ def test_benchmark_quick_version_trains_two_seeds_and_prints_the_pooled_table(tm
     seeds = [saved_config(tmp_path / d)["seed"] for d in ("bench-reacher-quick", "bench-reacher-quick-seed3")]
     assert seeds == [0, 3]
     # the preset's settings reached the runs (config field names)
-    from warp_critic.presets import preset
+    from warp_critic.evaluation.presets import preset
 
     for key, value in preset("reacher").items():
         if key != "iterations":
@@ -187,7 +187,7 @@ def test_bench_baselines_trains_then_only_meta_tests_a_complete_run(tmp_path, ca
 
 
 # ------------------------------------------------------------------------------------------------
-# warp_critic.protocol
+# warp_critic.evaluation.protocol
 # ------------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("field, value", [
@@ -196,7 +196,7 @@ def test_bench_baselines_trains_then_only_meta_tests_a_complete_run(tmp_path, ca
     ("around", [-1]), ("around", "0,1"), ("num_goals", 0), ("inits", 1.5), ("seed", -1),
 ])
 def test_protocol_refuses_bad_settings_by_field_name_before_any_work(tmp_path, field, value):
-    from warp_critic.protocol import ProtocolConfig, run_protocol
+    from warp_critic.evaluation.protocol import ProtocolConfig, run_protocol
 
     pc = ProtocolConfig(run_dirs=[str(tmp_path / "missing")], **{field: value})
     with pytest.raises(FieldError) as e:
@@ -205,7 +205,7 @@ def test_protocol_refuses_bad_settings_by_field_name_before_any_work(tmp_path, f
 
 
 def test_protocol_refuses_bad_run_directories_before_any_work(tmp_path):
-    from warp_critic.protocol import ProtocolConfig, run_protocol, validate
+    from warp_critic.evaluation.protocol import ProtocolConfig, run_protocol, validate
 
     with pytest.raises(FieldError) as e:
         validate(ProtocolConfig(run_dirs=[]))
@@ -218,7 +218,7 @@ def test_protocol_refuses_bad_run_directories_before_any_work(tmp_path):
 
 
 def test_protocol_pools_runs_and_checks_training_goal_indices(tmp_path):
-    from warp_critic.protocol import ProtocolConfig, ProtocolResult, format_table, run_protocol
+    from warp_critic.evaluation.protocol import ProtocolConfig, ProtocolResult, format_table, run_protocol
 
     runs = [tmp_path / "a", tmp_path / "b"]
     for seed, out in enumerate(runs):
@@ -261,7 +261,7 @@ def _tex_table(label: str) -> tuple[list[float], dict[str, list[tuple[float, flo
 @pytest.mark.skipif(not PAPER.is_file(), reason="the paper's LaTeX source is not on this machine")
 @pytest.mark.parametrize("label", ["table:gen_tasks_kuka", "table:gen_kuka_mass", "table:gen_kuka_link"])
 def test_paper_tables_are_the_papers_latex_tables(label):
-    from warp_critic.protocol import PAPER_METHODS, PAPER_TABLES
+    from warp_critic.evaluation.protocol import PAPER_METHODS, PAPER_TABLES
 
     columns, rows = _tex_table(label)
     _, table = PAPER_TABLES[label]
@@ -272,15 +272,15 @@ def test_paper_tables_are_the_papers_latex_tables(label):
 
 
 def test_paper_table1_has_the_ten_stds():
-    from warp_critic.protocol import PAPER_TABLE1, TABLE1_STDS
+    from warp_critic.evaluation.protocol import PAPER_TABLE1, TABLE1_STDS
 
     assert TABLE1_STDS == (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
     assert PAPER_TABLE1["ours"][0.1][0] == 0.02 and PAPER_TABLE1["ours"][0.4][0] == 0.07  # README, RESULTS.md
 
 
 def test_protocol_readings_are_meta_tests():
-    from warp_critic.metatest import TestConfig, meta_test  # noqa: F401  (the names the protocol uses)
-    from warp_critic.protocol import GOAL_NOISE, ProtocolConfig, check_settings
+    from warp_critic.evaluation.metatest import TestConfig, meta_test  # noqa: F401  (the names the protocol uses)
+    from warp_critic.evaluation.protocol import GOAL_NOISE, ProtocolConfig, check_settings
 
     check_settings(ProtocolConfig(goal_noise=list(GOAL_NOISE)))
     assert GOAL_NOISE == ("per-joint", "distance")
@@ -288,14 +288,14 @@ def test_protocol_readings_are_meta_tests():
 
 
 # ------------------------------------------------------------------------------------------------
-# warp_critic.presets
+# warp_critic.evaluation.presets
 # ------------------------------------------------------------------------------------------------
 
 def test_presets_are_the_reported_settings_keyed_by_config_fields():
-    from warp_critic.baselines.ddpg import BaselineConfig
-    from warp_critic.presets import DESCRIPTIONS, EVALUATIONS, PRESETS, SCENES, evaluation, preset
-    from warp_critic.protocol import ProtocolConfig, check_settings
-    from warp_critic.train import TrainConfig
+    from warp_critic.methods.ddpg import BaselineConfig
+    from warp_critic.evaluation.presets import DESCRIPTIONS, EVALUATIONS, PRESETS, SCENES, evaluation, preset
+    from warp_critic.evaluation.protocol import ProtocolConfig, check_settings
+    from warp_critic.methods.ours import TrainConfig
 
     assert preset("kuka-table1") == {"critic_input": "relative", "start_std": 0.4, "home_starts": 2,
                                      "iterations": 3000, "inner_steps": 3, "alpha": 3e-4, "lr": 3e-3}
@@ -317,7 +317,7 @@ def test_presets_are_the_reported_settings_keyed_by_config_fields():
 
 
 def test_unknown_preset_lists_the_known_ones():
-    from warp_critic.presets import PRESETS, evaluation, preset
+    from warp_critic.evaluation.presets import PRESETS, evaluation, preset
 
     for lookup in (preset, evaluation):
         with pytest.raises(FieldError) as e:

@@ -7,16 +7,16 @@ import argparse
 import numpy as np
 import pytest
 
-from warp_critic.analysis import toy
-from warp_critic.analysis.toy_closed_forms import (closed_form, closed_form_critic_params, fixed_points,
+from warp_critic.analysis.toy import command as toy
+from warp_critic.analysis.toy.closed_forms import (closed_form, closed_form_critic_params, fixed_points,
                                                    paper_meta_critic_theta)
-from warp_critic.analysis.toy_curves import curves, default_thetas
-from warp_critic.analysis.toy_loops import init_sweep, run_meta_critic, run_ours, run_supervised
-from warp_critic.analysis.toy_problem import METHODS
-from warp_critic.analysis.toy_report import run_toy
-from warp_critic.analysis.toy_roots import stationary_points
-from warp_critic.errors import UserError
-from warp_critic.recording import read_entity_paths
+from warp_critic.analysis.toy.curves import curves, default_thetas
+from warp_critic.analysis.toy.loops import init_sweep, run_meta_critic, run_ours, run_supervised
+from warp_critic.analysis.toy.problem import METHODS
+from warp_critic.analysis.toy.report import run_toy
+from warp_critic.analysis.toy.roots import stationary_points
+from warp_critic.core.errors import UserError
+from warp_critic.running.recording import read_entity_paths
 
 PAIRS = [(-6.0, 0.0), (1.0, 3.0), (2.0, -2.0), (0.5, 4.0)]
 INITS = [0.1, -1.3, 2.7]
@@ -231,7 +231,7 @@ def test_cli(tmp_path, monkeypatch):
     (["--grid", "1000000000000000"], "--grid", "memory"),
 ])
 def test_cli_rejects_absurd_values_on_one_line(argv, flag, words, tmp_path, capsys):
-    from warp_critic.cli import main
+    from warp_critic.cli.main import main
 
     out = tmp_path / "o"
     code = main(["analyze", "toy", "--out", str(out), *argv])
@@ -242,7 +242,7 @@ def test_cli_rejects_absurd_values_on_one_line(argv, flag, words, tmp_path, caps
 
 
 def test_run_toy_validates_its_settings(tmp_path):
-    from warp_critic.errors import FieldError
+    from warp_critic.core.errors import FieldError
 
     with pytest.raises(FieldError) as err:
         run_toy(tmp_path / "o", 1e300, 0.0)

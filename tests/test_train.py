@@ -9,13 +9,14 @@ import numpy as np
 import pytest
 import torch
 
-from warp_critic import bridge, train
-from warp_critic.cli import main
-from warp_critic.errors import UserError
-from warp_critic.rundir import load_checkpoint
-from warp_critic.train import TrainConfig
-from warp_critic.metatest import TestConfig, meta_test
-from warp_critic.recording import read_entity_paths
+from warp_critic.physics import bridge
+from warp_critic.methods import ours as train
+from warp_critic.cli.main import main
+from warp_critic.core.errors import UserError
+from warp_critic.running.rundir import load_checkpoint
+from warp_critic.methods.ours import TrainConfig
+from warp_critic.evaluation.metatest import TestConfig, meta_test
+from warp_critic.running.recording import read_entity_paths
 from conftest import KUKA, REACHER
 
 TINY = ["--goals", "0.5,0.3;-0.4,0.2", "--worlds-per-goal", "2", "--horizon", "6", "--device", "cpu"]
@@ -82,10 +83,10 @@ def test_interrupted_run_resumes_exactly_on_cpu(tmp_path, extra):
 
 def test_outer_gradient_reaches_the_critic_through_model_and_inner_update(tmp_path):
     """The critic gradient is second order: it exists only through theta_new(phi) and the model."""
-    from warp_critic.networks import Critic, MLPPolicy, Normalizer, init_policy
-    from warp_critic.outer import meta_loss
-    from warp_critic.scene import Variant, load_scene
-    from warp_critic.simulator import Simulator
+    from warp_critic.learning.networks import Critic, MLPPolicy, Normalizer, init_policy
+    from warp_critic.learning.outer import meta_loss
+    from warp_critic.physics.scene import Variant, load_scene
+    from warp_critic.physics.simulator import Simulator
 
     scene = load_scene(REACHER)
     sim = Simulator(scene, [Variant()] * 2, dt=0.01, substeps=2, device="cpu")

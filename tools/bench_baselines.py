@@ -2,7 +2,7 @@
 """Benchmark the baselines the way the paper's section 5 does (not run in CI).
 
 For each scene (reacher, kuka) and method (ddpg, meta-critic): train with the reported settings
-(presets ``ddpg`` / ``meta-critic`` of :mod:`warp_critic.presets`: the published hyperparameters,
+(presets ``ddpg`` / ``meta-critic`` of :mod:`warp_critic.evaluation.presets`: the published hyperparameters,
 300 iterations, the scene's goals/horizon/dt) into ``OUT_ROOT/<scene>-<method>``, then meta-test the
 learned Q on new goals sampled around the training goals at std 0.1 / 0.3 / 0.4 (10 goals, 5 fresh
 policy initialisations each, meta-test's default number of policy updates) and print a table of the
@@ -30,7 +30,7 @@ import sys
 import time
 from pathlib import Path
 
-from warp_critic.flags import ToolParser, comma_list, user_message  # noqa: E402
+from warp_critic.cli.flags import ToolParser, comma_list, user_message  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PROG = "bench_baselines"
@@ -44,7 +44,7 @@ def parse_args(argv=None):
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--stds", type=comma_list(float), default=[0.1, 0.3, 0.4], help="meta-test goal stds (rad), e.g. 0.1,0.4")
     p.add_argument("--goal-noise", default="per-joint",
-                   help="how goals are sampled around the training goals: per-joint or distance (see warp_critic.metatest.sample_goals)")
+                   help="how goals are sampled around the training goals: per-joint or distance (see warp_critic.evaluation.metatest.sample_goals)")
     p.add_argument("--num-goals", type=int, default=10)
     p.add_argument("--inits", type=int, default=5)
     p.add_argument("--around", type=comma_list(int), default=[0, 1],
@@ -84,7 +84,7 @@ def _checkpoint(run_dir: Path) -> dict:
     """``RUN_DIR/checkpoint.pt`` as a dict, or a one-line UserError."""
     import torch
 
-    from warp_critic.errors import UserError
+    from warp_critic.core.errors import UserError
 
     path = Path(run_dir) / "checkpoint.pt"
     if not Path(run_dir).is_dir():
@@ -103,7 +103,7 @@ def _checkpoint(run_dir: Path) -> dict:
 def plan_run(run_dir: Path, method: str, iterations: int) -> str:
     """``train``, ``resume`` or ``complete`` for ``run_dir``; a directory that is not such a run of
     ``method`` raises UserError: runs are never deleted or overwritten."""
-    from warp_critic.errors import UserError
+    from warp_critic.core.errors import UserError
 
     if not run_dir.exists() or (run_dir.is_dir() and not any(run_dir.iterdir())):
         return "train"
@@ -119,8 +119,8 @@ def plan_run(run_dir: Path, method: str, iterations: int) -> str:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    from warp_critic import runtime
-    from warp_critic.errors import UserError
+    from warp_critic.core import runtime
+    from warp_critic.core.errors import UserError
 
     try:
         runtime.init()
@@ -136,12 +136,12 @@ def main(argv=None) -> int:
 
 
 def run(args) -> list[dict]:
-    from warp_critic.baselines.ddpg import BaselineConfig, train_ddpg
-    from warp_critic.baselines.meta_critic import train_meta_critic
-    from warp_critic.errors import FieldError
-    from warp_critic.metatest import TestConfig, meta_test
-    from warp_critic.presets import preset
-    from warp_critic.protocol import ProtocolConfig, check_settings
+    from warp_critic.methods.ddpg import BaselineConfig, train_ddpg
+    from warp_critic.methods.meta_critic import train_meta_critic
+    from warp_critic.core.errors import FieldError
+    from warp_critic.evaluation.metatest import TestConfig, meta_test
+    from warp_critic.evaluation.presets import preset
+    from warp_critic.evaluation.protocol import ProtocolConfig, check_settings
 
     train = {"ddpg": train_ddpg, "meta-critic": train_meta_critic}
     # every setting is checked before any training

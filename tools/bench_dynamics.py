@@ -22,14 +22,14 @@ import torch
 PROG = "bench_dynamics"
 
 
-from warp_critic.flags import ToolParser, comma_list  # noqa: E402
+from warp_critic.cli.flags import ToolParser, comma_list  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def bench_newton(worlds: int, horizon: int, dt: float, device: str, repeats: int = 2) -> tuple[float, float]:
-    from warp_critic.scene import Variant, load_scene
-    from warp_critic.simulator import Simulator
+    from warp_critic.physics.scene import Variant, load_scene
+    from warp_critic.physics.simulator import Simulator
 
     scene = load_scene(ROOT / "scenes" / "kuka.usda")
     sim = Simulator(scene, [Variant()] * worlds, dt=dt, substeps=1, device=device, differentiable=True)
@@ -105,8 +105,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--device", default="cpu", help="cpu or cuda for Newton (the paper's model runs on CPU)")
     p.add_argument("--no-reference", action="store_true", help="skip the paper's model (e.g. for 4096 worlds on GPU)")
     args = p.parse_args(argv)
-    from warp_critic import runtime
-    from warp_critic.errors import UserError
+    from warp_critic.core import runtime
+    from warp_critic.core.errors import UserError
 
     # torch's default thread count: the paper's model (torch autograd) is the reference here
     runtime.init(threads=0)

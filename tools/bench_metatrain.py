@@ -1,7 +1,7 @@
 """Benchmark: meta-train the critic and meta-test it with the paper's protocol; prints the figures.
 
-A thin script over :mod:`warp_critic.presets` (the settings of the reported runs) and
-:mod:`warp_critic.protocol` (the meta-test protocol, pooled over seeds):
+A thin script over :mod:`warp_critic.evaluation.presets` (the settings of the reported runs) and
+:mod:`warp_critic.evaluation.protocol` (the meta-test protocol, pooled over seeds):
 
 * reacher (preset ``reacher``): 4 training goals; meta-train error; meta-test on 10 unseen goals
   (std 0.3 around the training goals), 5 fresh policy initialisations each. Targets: <= 0.01 rad^2 /
@@ -10,7 +10,7 @@ A thin script over :mod:`warp_critic.presets` (the settings of the reported runs
   around two of the four training goals, 5 fresh inits, pooled over the meta-train ``--seeds``; the
   paper used 5). Paper: 0.02 and 0.07 -- its "mean squared error", the MSE rows (mean over the
   joints); the summed error ``||q_T - g||^2`` is 7x that. Both readings of the paper's goal sampling
-  are printed (see :func:`warp_critic.metatest.sample_goals`).
+  are printed (see :func:`warp_critic.evaluation.metatest.sample_goals`).
 
 Wall time per outer iteration and in total is printed for every run.
 
@@ -25,13 +25,13 @@ import sys
 import time
 from pathlib import Path
 
-from warp_critic.flags import ToolParser, comma_list, user_message  # noqa: E402
+from warp_critic.cli.flags import ToolParser, comma_list, user_message  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PROG = "bench_metatrain"
 
 
-# scene -> the preset (warp_critic.presets) its numbers are reported with
+# scene -> the preset (warp_critic.evaluation.presets) its numbers are reported with
 SCENE_PRESETS = {"reacher": "reacher", "kuka": "kuka-table1"}
 
 def run_dir(runs: Path, name: str, seed: int, quick: bool) -> Path:
@@ -39,8 +39,8 @@ def run_dir(runs: Path, name: str, seed: int, quick: bool) -> Path:
 
 
 def train_scene(name: str, seed: int, iterations: int | None, device: str, quick: bool, runs: Path) -> str:
-    from warp_critic.presets import preset
-    from warp_critic.train import TrainConfig, meta_train
+    from warp_critic.evaluation.presets import preset
+    from warp_critic.methods.ours import TrainConfig, meta_train
 
     out = run_dir(runs, name, seed, quick)
     settings = preset(SCENE_PRESETS[name])
@@ -79,10 +79,10 @@ def main(argv: list[str] | None = None) -> int:
     if not args.seeds:
         p.error("--seeds: give one or more seeds, e.g. 0,1,2")
 
-    from warp_critic import runtime
-    from warp_critic.errors import UserError
-    from warp_critic.presets import evaluation
-    from warp_critic.protocol import ProtocolConfig, format_table, run_protocol
+    from warp_critic.core import runtime
+    from warp_critic.core.errors import UserError
+    from warp_critic.evaluation.presets import evaluation
+    from warp_critic.evaluation.protocol import ProtocolConfig, format_table, run_protocol
 
     lines = []
     try:

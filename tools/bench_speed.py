@@ -23,7 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from warp_critic import runtime
+from warp_critic.core import runtime
 
 ROOT = Path(__file__).resolve().parents[1]
 WARMUP = 2  # iterations not timed
@@ -51,7 +51,7 @@ def categorise(stats: pstats.Stats) -> dict[str, float]:
 
 def run(scene: str, preset: dict, seeds: list[int], iterations: int, device: str, graphs: bool, profile: bool):
     """Meta-train ``iterations`` outer iterations; returns (s/iteration after the first, wall s, breakdown)."""
-    from warp_critic.train import TrainConfig, meta_train
+    from warp_critic.methods.ours import TrainConfig, meta_train
 
     os.environ[runtime.GRAPHS_ENV] = "1" if graphs else "0"
     with tempfile.TemporaryDirectory(prefix="bench-speed-") as tmp:
@@ -76,7 +76,7 @@ def run(scene: str, preset: dict, seeds: list[int], iterations: int, device: str
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--scene", default=str(ROOT / "scenes" / "kuka.usda"))
-    p.add_argument("--preset", default="kuka-table1", help="training settings (warp_critic.presets)")
+    p.add_argument("--preset", default="kuka-table1", help="training settings (warp_critic.evaluation.presets)")
     p.add_argument("--iterations", type=int, default=8,
                    help=f"iterations per run (the first {WARMUP} are not timed)")
     p.add_argument("--seeds", default="0,1,2,3,4", help="seeds batched in the second run, comma-separated")
@@ -85,8 +85,8 @@ def main(argv: list[str] | None = None) -> int:
                    help="also profile each configuration (extra runs) and print where the time goes")
     args = p.parse_args(argv)
 
-    from warp_critic.errors import UserError
-    from warp_critic.presets import preset
+    from warp_critic.core.errors import UserError
+    from warp_critic.evaluation.presets import preset
 
     try:
         seeds = [int(x) for x in args.seeds.split(",") if x.strip()]

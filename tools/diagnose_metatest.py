@@ -24,7 +24,7 @@ import sys
 import numpy as np
 import torch
 
-from warp_critic.flags import ToolParser, comma_list, parse_goals, user_message  # noqa: E402
+from warp_critic.cli.flags import ToolParser, comma_list, parse_goals, user_message  # noqa: E402
 
 PROG = "diagnose_metatest"
 
@@ -34,7 +34,7 @@ def _training_goals(run_dir: str) -> int | None:
     import json
     from pathlib import Path
 
-    from warp_critic.errors import UserError
+    from warp_critic.core.errors import UserError
 
     if not Path(run_dir).is_dir():
         raise UserError(f"{run_dir}: run directory not found")
@@ -62,14 +62,14 @@ def main(argv=None) -> int:
     p.add_argument("--reach-iterations", type=int, default=150)
     args = p.parse_args(argv)
 
-    from warp_critic import runtime
-    from warp_critic.errors import UserError
-    from warp_critic.inner import inner_update, policy_fn
-    from warp_critic.networks import MLPPolicy
-    from warp_critic.metatest import TestConfig, setup_meta_test
-    from warp_critic.rollout import rollout
-    from warp_critic.scene import Variant
-    from warp_critic.simulator import Simulator
+    from warp_critic.core import runtime
+    from warp_critic.core.errors import UserError
+    from warp_critic.learning.inner import inner_update, policy_fn
+    from warp_critic.learning.networks import MLPPolicy
+    from warp_critic.evaluation.metatest import TestConfig, setup_meta_test
+    from warp_critic.learning.rollout import rollout
+    from warp_critic.physics.scene import Variant
+    from warp_critic.physics.simulator import Simulator
 
     around = args.around or None
     try:

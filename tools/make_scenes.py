@@ -30,7 +30,7 @@ Conventions of the written USD (all SI: metres, kilograms, seconds; ``upAxis = Z
   ``warp_critic:endEffectorBody`` (string, the end-effector link's prim name) and
   ``warp_critic:tipOffset`` (float3, m, in that link's frame) on the articulation root.
 * Training defaults of the scene (:class:`Defaults`), also custom attributes of the articulation
-  root, so that they travel with the file's content, not its name (``warp_critic.scene`` reads them
+  root, so that they travel with the file's content, not its name (``warp_critic.physics.scene`` reads them
   into ``Scene.defaults`` / ``Scene.home``). Real numbers are DOUBLES so that they read back as the
   exact Python floats of the table (a float32 would turn 0.0025 into 0.0024999999441206455):
 
@@ -57,7 +57,7 @@ Conventions of the written USD (all SI: metres, kilograms, seconds; ``upAxis = Z
   ====================================  =========  ==============================================
 
   The optional ones hold the settings of the runs this project reports for the robot (the paper's
-  setting as reproduced; ``warp_critic.presets``), so that ``warp-critic meta-train scenes/kuka.usda``
+  setting as reproduced; ``warp_critic.evaluation.presets``), so that ``warp-critic meta-train scenes/kuka.usda``
   on its defaults is the reported configuration.
 * Visual geometry (capsules/spheres/cylinders) has NO ``CollisionAPI``: newton loads it as
   zero-density visual shapes, so it never changes the authored mass properties.

@@ -1,6 +1,6 @@
 """The paper's Table 1 protocol over several meta-trained critics (seeds); prints the table.
 
-A thin script over :mod:`warp_critic.protocol`: for every goal std and goal-noise reading, each run
+A thin script over :mod:`warp_critic.evaluation.protocol`: for every goal std and goal-noise reading, each run
 directory's critic trains ``--inits`` fresh policies (model-free) for ``--num-goals`` new goals
 sampled around training goals ``--around``; the errors of all runs are pooled, as in the paper ("the
 mean squared error between last state and goal over 10 new goals, 5 seeds and 5 new policy
@@ -24,7 +24,7 @@ import json
 import sys
 from pathlib import Path
 
-from warp_critic.flags import ToolParser, comma_list, user_message  # noqa: E402
+from warp_critic.cli.flags import ToolParser, comma_list, user_message  # noqa: E402
 
 PROG = "paper_table"
 RENAME = {"run_dirs": "RUN_DIR"}
@@ -35,7 +35,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run directories (one per meta-train seed)")
     p.add_argument("--stds", type=comma_list(float), default=[0.1, 0.4], help="goal stds (rad), e.g. 0.1,0.4; the paper: 0.1 .. 1.0")
     p.add_argument("--goal-noise", type=comma_list(str), default=["per-joint", "distance"], dest="goal_noise",
-                   help="readings of 'at a distance of N(0, std)': per-joint and/or distance (see warp_critic.metatest.sample_goals)")
+                   help="readings of 'at a distance of N(0, std)': per-joint and/or distance (see warp_critic.evaluation.metatest.sample_goals)")
     p.add_argument("--around", type=comma_list(int), default=[0, 1],
                    help="training goals to sample around, e.g. 0,1 (the paper: two of the four); '' = all")
     p.add_argument("--num-goals", type=int, default=10)
@@ -45,9 +45,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", default=None, help="write the table as JSON here")
     args = p.parse_args(argv)
 
-    from warp_critic import runtime
-    from warp_critic.errors import UserError
-    from warp_critic.protocol import ProtocolConfig, format_table, run_protocol
+    from warp_critic.core import runtime
+    from warp_critic.core.errors import UserError
+    from warp_critic.evaluation.protocol import ProtocolConfig, format_table, run_protocol
 
     pc = ProtocolConfig(run_dirs=args.run_dirs, stds=args.stds, goal_noise=args.goal_noise,
                         around=args.around or None, num_goals=args.num_goals, inits=args.inits, seed=args.seed,

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..scene import scenes_dir
+from warp_critic.physics.scene import scenes_dir
 
 
 def scene_path(name: str) -> Path:

@@ -1,7 +1,7 @@
 """Range checks of the analyses' settings, run before any work.
 
-Each check raises :class:`~warp_critic.errors.FieldError` naming the setting; :func:`flag_errors`
-turns that into a one-line :class:`~warp_critic.errors.UserError` naming the command-line flag.
+Each check raises :class:`~warp_critic.core.errors.FieldError` naming the setting; :func:`flag_errors`
+turns that into a one-line :class:`~warp_critic.core.errors.UserError` naming the command-line flag.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import os
 from contextlib import contextmanager
 from pathlib import Path
 
-from warp_critic.errors import FieldError, UserError
+from warp_critic.core.errors import FieldError, UserError
 
 
 def number(field: str, value, *, lo: float | None = None, hi: float | None = None,
@@ -47,8 +47,8 @@ def integer(field: str, value, lo: int, hi: int | None = None) -> int:
 
 def out_dir(field: str, path) -> Path:
     """An output folder that is a folder (or can be made one) we can write into."""
-    from ..errors import UserError
-    from ..rundir import check_output_dir
+    from warp_critic.core.errors import UserError
+    from warp_critic.running.rundir import check_output_dir
 
     try:
         return check_output_dir(path)

@@ -1,7 +1,7 @@
 """Stages ``toy`` (section 4.1 / Appendix A) and ``landscape`` (section 4.2, Figures 1 and 2).
 
-Both call the analysis library (:func:`warp_critic.analysis.toy_report.run_toy`,
-:func:`warp_critic.analysis.landscape_run.run_landscape`) with the stage directory as output folder and
+Both call the analysis library (:func:`warp_critic.analysis.toy.report.run_toy`,
+:func:`warp_critic.analysis.landscape.run.run_landscape`) with the stage directory as output folder and
 return the numbers the report shows; file names in the results are relative to the stage directory.
 """
 
@@ -13,8 +13,8 @@ from pathlib import Path
 
 
 def run_toy_stage(d: Path, s: dict) -> dict:
-    from ..analysis.toy_curves import default_thetas
-    from ..analysis.toy_report import run_toy
+    from warp_critic.analysis.toy.curves import default_thetas
+    from warp_critic.analysis.toy.report import run_toy
 
     r = run_toy(d, float(s["s0"]), float(s["goal"]), iters=int(s["iters"]), theta0=float(s["theta0"]),
                 alpha=float(s["alpha"]), plain_lr=float(s["plain_lr"]),
@@ -33,12 +33,12 @@ GENERALISING_DIR = "generalising"
 
 
 def landscape_configs(d: Path, s: dict, device: str):
-    """The validated ``(paper, generalising)`` :class:`~warp_critic.analysis.landscape_run.LandscapeConfig` of
+    """The validated ``(paper, generalising)`` :class:`~warp_critic.analysis.landscape.run.LandscapeConfig` of
     the landscape stage settings ``s``: the paper's setting (every key but ``generalising``) written to ``d``,
     and the same with the ``generalising`` overrides (the closest setting whose critic generalises to unseen
     goals, ``docs/landscape.md``) written to ``d / "generalising"``."""
-    from ..analysis.landscape_run import LandscapeConfig
-    from ..simulator import resolve_device
+    from warp_critic.analysis.landscape.run import LandscapeConfig
+    from warp_critic.physics.simulator import resolve_device
 
     kw = dict(s)
     over = dict(kw.pop("generalising", None) or {})
@@ -67,7 +67,7 @@ def _landscape_result(r: dict, prefix: str = "") -> dict:
 def run_landscape_stage(d: Path, s: dict, device: str) -> dict:
     """Both landscape runs of the stage (:func:`landscape_configs`); the paper's results at the top level,
     the generalising setting's under ``generalising`` (with its ``overrides``)."""
-    from ..analysis.landscape_run import run_landscape
+    from warp_critic.analysis.landscape.run import run_landscape
 
     paper, gen = landscape_configs(d, s, device)  # both checked before any work
     with contextlib.redirect_stdout(io.StringIO()):

@@ -1,8 +1,8 @@
 """Batched meta-test (Algorithm 3) of many run directories, goals and dynamics variants in ONE model.
 
 :func:`evaluate` takes jobs -- a run directory (any method, any seed), its goals and a dynamics
-:class:`~warp_critic.scene.Variant` -- and lays ALL their ``goals x inits`` worlds side by side in one
-gradient-free :class:`~warp_critic.simulator.Simulator` with a variant per world (split into batches
+:class:`~warp_critic.physics.scene.Variant` -- and lays ALL their ``goals x inits`` worlds side by side in one
+gradient-free :class:`~warp_critic.physics.simulator.Simulator` with a variant per world (split into batches
 of whole jobs only above ``max_worlds``). Each world's fresh policy descends its own run's critic
 (``metatest.build_test_critic``: ours, or ``-Q`` of a baseline) with its own run's learning rate, for
 the same number of policy updates, horizon and initial state (rest at zero, as ``meta-test``) for every
@@ -10,7 +10,7 @@ job. Every job with ``G`` goals starts from the same ``G x inits`` policy initia
 (``policy.init`` from ``torch.Generator().manual_seed(seed)``, exactly as ``meta-test`` draws them for
 explicit goals), so the methods, seeds and variants see identical goals and inits.
 
-Per world this is exactly :func:`warp_critic.metatest.meta_test` (tests compare the two): the worlds are
+Per world this is exactly :func:`warp_critic.evaluation.metatest.meta_test` (tests compare the two): the worlds are
 independent, each critic sees only its own worlds, and the per-world learning rate multiplies each
 world's gradient.
 """
@@ -24,8 +24,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..errors import UserError
-from ..scene import Variant
+from warp_critic.core.errors import UserError
+from warp_critic.physics.scene import Variant
 
 #: Task fields every run of one evaluation must share (they define the dynamics and the policy's scaling).
 SHARED_FIELDS = ("dt", "substeps", "gravity", "max_torque", "qd_scale")
@@ -79,8 +79,8 @@ class _Run:
 
 
 def load_runs(run_dirs) -> dict[str, _Run]:
-    from ..rundir import RunDir
-    from ..task import TaskConfig
+    from warp_critic.running.rundir import RunDir
+    from warp_critic.running.task import TaskConfig
 
     runs = {}
     for rd in dict.fromkeys(str(r) for r in run_dirs):
@@ -124,15 +124,15 @@ def evaluate(jobs: list[Job], *, inits: int, steps: int, seed: int = 1, device: 
              horizon: int | None = None, max_worlds: int = 4096, progress: bool = True) -> dict:
     """Meta-test every job; returns ``{"errors": [(G, inits) final ||q_T-g||^2 per job], "before": [...],
     "dof", "horizon", "steps", "alphas": {run_dir: alpha}, "worlds", "batches"}``."""
-    from ..inner import inner_update, policy_fn
-    from ..loop import progress_bar
-    from ..losses import final_error
-    from ..metatest import build_test_critic
-    from ..networks import MLPPolicy, Normalizer
-    from ..rollout import rollout
-    from ..scene import load_scene
-    from ..simulator import STANDARD_GRAVITY, Simulator
-    from ..task import max_torque_tensor
+    from warp_critic.learning.inner import inner_update, policy_fn
+    from warp_critic.running.loop import progress_bar
+    from warp_critic.learning.losses import final_error
+    from warp_critic.evaluation.metatest import build_test_critic
+    from warp_critic.learning.networks import MLPPolicy, Normalizer
+    from warp_critic.learning.rollout import rollout
+    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
+    from warp_critic.running.task import max_torque_tensor
 
     if not jobs:
         raise UserError("nothing to evaluate")

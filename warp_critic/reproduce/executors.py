@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-from ..errors import FieldError, UserError
+from warp_critic.core.errors import FieldError, UserError
 
 UNIT_FAULT_ENV = "WARP_CRITIC_UNIT_FAULT"  # tests: "<unit name>:<marker file>" kills its first try
 
@@ -120,7 +120,7 @@ def _process_init() -> None:
             ctypes.CDLL("libc.so.6", use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
         except OSError:
             pass
-    from ..runtime import init
+    from warp_critic.core.runtime import init
 
     init()
 
@@ -228,7 +228,7 @@ def _read_tree(folder: Path) -> dict[str, bytes]:
 
 
 def _write_tree(root: Path, files: dict[str, bytes]) -> None:
-    from ..rundir import atomic_write_bytes
+    from warp_critic.running.rundir import atomic_write_bytes
 
     for rel, data in files.items():
         path = root / rel
@@ -239,7 +239,7 @@ def _write_tree(root: Path, files: dict[str, bytes]) -> None:
 def _ray_unit(unit: Unit, inputs: dict[str, bytes], env: dict[str, str]) -> tuple[dict[str, bytes], dict, float]:
     """A Ray task: run ``unit`` in a private folder holding ``inputs``; return its stage directory's files."""
     os.environ.update(env)
-    from ..runtime import init
+    from warp_critic.core.runtime import init
 
     init()
     with tempfile.TemporaryDirectory(prefix="warp-critic-unit-") as tmp:

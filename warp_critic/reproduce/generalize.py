@@ -5,7 +5,7 @@ and 5 new policy initialization"): every cell pools ``seeds x goals x inits`` fi
 method, as ``mean_j (q_T,j - g_j)^2`` (MSE over the joints); ``mean(std)`` over the pooled policies.
 
 * Table 1: per column ``std``, ``num_goals`` goals ``N(g, std^2 I)`` per joint around training goals
-  ``around`` (cycled), clipped into 98% of the limits (:func:`warp_critic.metatest.sample_goals`).
+  ``around`` (cycled), clipped into 98% of the limits (:func:`warp_critic.evaluation.metatest.sample_goals`).
 * Table 2: end-effector mass: ``Variant(ee_mass=m)`` ADDS ``m`` kg at the tip of link 7 (0 = as
   trained); the paper's column is the end-effector mass itself ("training mass is at mass=3.12").
 * Table 3: end-effector link length: ``Variant(link_length=L)`` SETS the tip distance of link 7 to
@@ -15,7 +15,7 @@ method, as ``mean_j (q_T,j - g_j)^2`` (MSE over the joints); ``mean(std)`` over 
 Maps (reacher, 2 joints): (a) a ``grid x grid`` goal grid over ``limit_fraction`` of the joint
 limits, MSE per goal over ``seeds x inits``; (b) end-effector (link 2) masses added at the tip and
 (c) link-2 lengths, each for the four training goals. Link 1 cannot be changed by our
-:class:`~warp_critic.scene.Variant` (it changes the end-effector link only).
+:class:`~warp_critic.physics.scene.Variant` (it changes the end-effector link only).
 """
 
 from __future__ import annotations
@@ -25,14 +25,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..scene import Variant
-from .evaluate import Job, default_steps, evaluate, relpath
-from .settings import METHODS
+from warp_critic.physics.scene import Variant
+from warp_critic.reproduce.evaluate import Job, default_steps, evaluate, relpath
+from warp_critic.reproduce.settings import METHODS
 
 
 def _train_goals_and_limits(run_dir: str):
-    from ..rundir import RunDir
-    from ..scene import load_scene
+    from warp_critic.running.rundir import RunDir
+    from warp_critic.physics.scene import load_scene
 
     ckpt = RunDir.open(run_dir).load_checkpoint(require=("config",))
     scene = load_scene(ckpt["config"]["scene"])
@@ -43,7 +43,7 @@ def _train_goals_and_limits(run_dir: str):
 
 
 def _sample(train_goals, lo, hi, num, std, around, noise, seed):
-    from ..metatest import sample_goals
+    from warp_critic.evaluation.metatest import sample_goals
 
     gen = torch.Generator().manual_seed(int(seed))
     return sample_goals(train_goals, int(num), float(std), list(around) if around else None, lo, hi, gen, noise)

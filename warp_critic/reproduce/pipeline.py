@@ -11,9 +11,9 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..errors import FieldError, UserError
-from .settings import METHODS, SCENES, STAGES, apply_overrides, default_settings, stage_hash
-from .stages import Runner, prepare_out
+from warp_critic.core.errors import FieldError, UserError
+from warp_critic.reproduce.settings import METHODS, SCENES, STAGES, apply_overrides, default_settings, stage_hash
+from warp_critic.reproduce.stages import Runner, prepare_out
 
 
 @dataclass
@@ -41,7 +41,7 @@ class ReproduceConfig:
         if self.device not in ("auto", "cpu", "cuda") and not str(self.device).startswith("cuda:"):
             raise UserError(f"--device: must be cpu, cuda or auto (got {self.device!r})")
         settings = apply_overrides(default_settings(self.quick, self.seeds), self.overrides)
-        from .training import check_fields_known
+        from warp_critic.reproduce.metatrain import check_fields_known
 
         for scene in SCENES:
             for m in METHODS:
@@ -53,8 +53,8 @@ class ReproduceConfig:
 
 
 def scene_hashes() -> dict[str, str]:
-    from ..scene import load_scene
-    from .training import scene_file
+    from warp_critic.physics.scene import load_scene
+    from warp_critic.reproduce.metatrain import scene_file
 
     return {s: load_scene(scene_file(s)).content_hash for s in SCENES}
 
@@ -84,7 +84,7 @@ def plan(settings: dict) -> dict[str, dict]:
 # the function each stage group runs, by import path (so that any executor can run it anywhere)
 STAGE_FUNCTIONS = {"toy": "warp_critic.reproduce.analyses:run_toy_stage",
                    "landscape": "warp_critic.reproduce.analyses:run_landscape_stage",
-                   "metatrain": "warp_critic.reproduce.training:run_metatrain_stage",
+                   "metatrain": "warp_critic.reproduce.metatrain:run_metatrain_stage",
                    "maps": "warp_critic.reproduce.generalize:run_maps_stage",
                    "tables": "warp_critic.reproduce.generalize:run_tables_stage"}
 
@@ -111,8 +111,8 @@ def stages_method(name: str) -> str:
 
 
 def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, out: Path):
-    from .executors import Unit
-    from .training import run_dirs
+    from warp_critic.reproduce.executors import Unit
+    from warp_critic.reproduce.metatrain import run_dirs
 
     group, dir_name = st["group"], f"{name}-{st['hash']}"
     if group == "toy":
@@ -123,7 +123,7 @@ def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, 
         kwargs = {"scene": st["scene"], "method": st["method"], "values": settings["metatrain"][st["scene"]][st["method"]],
                   "seeds": settings["metatrain"]["seeds"], "device": device, "progress": progress}
     else:  # maps / tables read the complete meta-training directories of their robot
-        from .stages import read_stage
+        from warp_critic.reproduce.stages import read_stage
 
         runs = {}
         for dep, dep_dir in st["depends"].items():  # metatrain-<robot>-<method> -> its directory
@@ -138,11 +138,11 @@ def reproduce(rc: ReproduceConfig, executor=None) -> dict:
 
     Returns ``{"report": path, "records": ..., "out": ..., "plan": ...}``.
     """
-    from .executors import InProcess
+    from warp_critic.reproduce.executors import InProcess
 
     settings = rc.validate()
     out = prepare_out(Path(rc.out))
-    from ..simulator import resolve_device
+    from warp_critic.physics.simulator import resolve_device
 
     device = resolve_device(rc.device)
     executor = executor or InProcess()
@@ -166,7 +166,7 @@ def reproduce(rc: ReproduceConfig, executor=None) -> dict:
     finally:
         executor.close()
     runner.log(f"reproduce: writing the report, {(time.perf_counter() - t0) / 60:.1f} min elapsed")
-    from .report import write_report
+    from warp_critic.reproduce.report import write_report
 
     report = write_report(out, stages, runner.records, config=rc, device=device, wall=time.perf_counter() - t0)
     runner.log(f"reproduce: done in {(time.perf_counter() - t0):.1f} s; report {report}")
@@ -174,7 +174,7 @@ def reproduce(rc: ReproduceConfig, executor=None) -> dict:
 
 
 def load_point_mass_hash() -> str:
-    from ..analysis.landscape_problem import default_scene
-    from ..scene import load_scene
+    from warp_critic.analysis.landscape.problem import default_scene
+    from warp_critic.physics.scene import load_scene
 
     return load_scene(default_scene()).content_hash

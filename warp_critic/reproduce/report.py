@@ -1,7 +1,7 @@
 """``REPORT.md``, ``results.json``, ``figures/*.png`` and ``report.rrd`` from the stage files.
 
 Every number comes from a stage's ``stage.json`` (or a file it names); nothing is typed in. The
-paper's values come from :data:`warp_critic.protocol.PAPER_TABLE1` / ``2`` / ``3``. The report covers
+paper's values come from :data:`warp_critic.evaluation.protocol.PAPER_TABLE1` / ``2`` / ``3``. The report covers
 every stage of the current settings that is complete, whether it ran in this call or earlier.
 """
 
@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..protocol import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE3
-from ..rundir import atomic_write_text
-from .settings import METHOD_LABELS, METHODS, SCENES, STAGES
-from .stages import STAGE_FILE, StageRecord, read_stage
+from warp_critic.evaluation.protocol import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE3
+from warp_critic.running.rundir import atomic_write_text
+from warp_critic.reproduce.settings import METHOD_LABELS, METHODS, SCENES, STAGES
+from warp_critic.reproduce.stages import STAGE_FILE, StageRecord, read_stage
 
 COLORS = {"ours": "tab:blue", "ddpg": "tab:orange", "meta-critic": "tab:green"}
 PAPER_TABLES = {"table1": ("std", PAPER_TABLE1, "Table 1 (new goals, `table:gen_tasks_kuka`)"),
@@ -383,7 +383,7 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
                + ", ".join(f"{METHOD_LABELS[m]} {_fmt(v)}" for m, v in gm.items()) + ".", "",
                "Dynamics: our `Variant` changes only the end-effector link (link 2 of the reacher): its tip mass and "
                "its length. The paper's Figures 5 and 6 are 2-D grids over links 1 AND 2; link 1 would need a per-world "
-               "mass/length change of a non-end-effector link in `Scene.build_model` (warp_critic/scene.py), which the "
+               "mass/length change of a non-end-effector link in `Scene.build_model` (warp_critic/physics/scene.py), which the "
                "library does not offer, so Figures 5 and 6 here are 1-D sweeps over link 2 at the four training goals.", ""]
         for kind, unit in (("mass", "added kg"), ("length", "m")):
             md += [f"| {kind} ({unit}) | " + " | ".join(f"{c['value']:g}" for c in M[kind]["ours"]) + " |",
@@ -450,7 +450,7 @@ def write_recording(path: Path, text: str, figures: list[tuple[str, Path, str]])
     import rerun.blueprint as rrb
     from matplotlib.image import imread
 
-    from ..recording import Recorder
+    from warp_critic.running.recording import Recorder
 
     names = [f"figures/{Path(p).stem}" for _, p, _ in figures]
     views = [rrb.Spatial2DView(origin=n, name=t) for n, (t, _, _) in zip(names, figures)]

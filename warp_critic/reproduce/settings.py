@@ -8,10 +8,10 @@ are plain JSON (numbers, strings, lists, dicts). ``--set STAGE.KEY=VALUE`` overr
 Paper settings (non-quick):
 
 * ``toy``: the analysis defaults (``warp-critic analyze toy``): s0 = -6, g = 0, 500 iterations.
-* ``landscape``: :class:`~warp_critic.analysis.landscape_run.LandscapeConfig` defaults (Figures 1, 2), and
+* ``landscape``: :class:`~warp_critic.analysis.landscape.run.LandscapeConfig` defaults (Figures 1, 2), and
   the same with the ``generalising`` values (relative goal input, random initial states: the closest
   setting whose critic generalises to unseen goals, ``docs/landscape.md``).
-* ``metatrain``: ours with the presets ``reacher`` and ``kuka-table1`` (:mod:`warp_critic.presets`);
+* ``metatrain``: ours with the presets ``reacher`` and ``kuka-table1`` (:mod:`warp_critic.evaluation.presets`);
   DDPG and Meta-Critic with their published defaults (presets ``ddpg`` / ``meta-critic``) on the SAME
   task: the training-distribution fields of ours' preset (``start_std``, ``home_starts``) and ours'
   number of policy updates at meta-test (``inner_steps``, which also sizes the baselines' alpha
@@ -20,7 +20,7 @@ Paper settings (non-quick):
   ``N(g, std^2)`` around training goals 0 and 1; Tables 2-3 use 10 goals drawn the same way at
   ``dynamics_goal_std`` (0.1: the paper does not say which goals it used there).
 * ``maps``: reacher Figures 4-6: a goal grid over the joint space, an end-effector mass sweep and an
-  end-effector link-length sweep (our :class:`~warp_critic.scene.Variant` changes only the end-effector
+  end-effector link-length sweep (our :class:`~warp_critic.physics.scene.Variant` changes only the end-effector
   link, link 2 of the reacher; link 1 stays as trained).
 """
 
@@ -31,8 +31,8 @@ import hashlib
 import json
 from typing import Any
 
-from ..errors import FieldError
-from ..presets import preset
+from warp_critic.core.errors import FieldError
+from warp_critic.evaluation.presets import preset
 
 STAGES = ("toy", "landscape", "metatrain", "maps", "tables")
 SCENES = ("reacher", "kuka")

@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from ..errors import FieldError, UserError
-from ..rundir import atomic_write_text, check_output_dir
+from warp_critic.core.errors import FieldError, UserError
+from warp_critic.running.rundir import atomic_write_text, check_output_dir
 
 MARKER = ".warp-critic-reproduce"
 STAGE_FILE = "stage.json"

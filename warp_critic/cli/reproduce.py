@@ -1,0 +1,103 @@
+"""``warp-critic reproduce``: flags and their checks; the work is :func:`warp_critic.reproduce.pipeline.reproduce`.
+
+Register in ``warp_critic/cli/main.py``'s ``build_parser``::
+
+    from warp_critic.cli import reproduce as reproduce_cli
+    rp = sub.add_parser("reproduce", help="...", description="...")
+    reproduce_cli.add_arguments(rp)
+    rp.set_defaults(func=reproduce_cli.run_from_args)
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+from pathlib import Path
+
+from warp_critic.reproduce.settings import STAGES
+
+__all__ = ["add_arguments", "run_from_args", "config_from_args"]
+
+HELP = "run the paper's experiments end to end and write REPORT.md, figures and report.rrd"
+DESCRIPTION = ("Run the paper's experiments (toy, landscape, meta-training, reacher maps, KUKA tables) and write "
+               "REPORT.md, results.json, PNG figures and report.rrd into --out. Each stage works in its own "
+               "sub-directory keyed by a hash of its settings: complete stages are skipped, interrupted ones resume.")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the flags of ``warp-critic reproduce`` to ``parser``."""
+    A = parser.add_argument
+    A("--out", type=Path, default=Path("runs/paper"), metavar="DIR",
+      help="output folder (new, empty, or an earlier reproduce output; default runs/paper)")
+    A("--seeds", type=_int, default=None, metavar="N",
+      help="meta-train seeds 0..N-1 for every method (>= 1; default 5, with --quick 2)")
+    A("--only", type=str, default=None, metavar="STAGE,...",
+      help=f"run only these stages (comma-separated: {', '.join(STAGES)}); maps and tables also run the "
+           "meta-training they read (skipped when complete)")
+    A("--quick", action="store_true", help="tiny settings for every stage (a plumbing check in a few minutes, not the paper)")
+    A("--device", type=str, default="auto", metavar="DEV", help="cpu, cuda or auto (default auto)")
+    A("--jobs", type=_int, default=None, metavar="N",
+      help="run independent stages in N local processes (default: one after the other, in this process)")
+    A("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
+      help="run each stage as a Ray task: no ADDRESS starts a local cluster, 'auto' joins the running one, "
+           "HOST:PORT the head at that address (pip install -e '.[ray]'); results come back to --out")
+    A("--set", dest="overrides", action="append", default=[], metavar="STAGE.KEY=VALUE",
+      help="override one stage setting (repeatable), e.g. toy.iters=50 or metatrain.kuka.ours.iterations=100")
+
+
+def _int(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid int value: {text!r}") from None
+
+
+def _only(text: str | None) -> list[str] | None:
+    if text is None:
+        return None
+    return [s.strip() for s in str(text).split(",") if s.strip()]
+
+
+def command_line(args: argparse.Namespace) -> str:
+    parts = ["warp-critic", "reproduce", "--out", str(args.out)]
+    if args.seeds is not None:
+        parts += ["--seeds", str(args.seeds)]
+    if args.only:
+        parts += ["--only", args.only]
+    if args.quick:
+        parts.append("--quick")
+    parts += ["--device", args.device]
+    if getattr(args, "jobs", None) is not None:
+        parts += ["--jobs", str(args.jobs)]
+    if getattr(args, "ray", None) is not None:
+        parts += ["--ray"] + ([] if args.ray == "local" else [args.ray])
+    for o in args.overrides or []:
+        parts += ["--set", o]
+    return shlex.join(parts)
+
+
+def config_from_args(args: argparse.Namespace):
+    from warp_critic.reproduce.pipeline import ReproduceConfig
+    from warp_critic.reproduce.settings import default_seeds
+
+    seeds = args.seeds if args.seeds is not None else default_seeds(bool(args.quick))
+    return ReproduceConfig(out=Path(args.out), seeds=seeds, only=_only(args.only), quick=bool(args.quick),
+                           device=args.device, overrides=list(args.overrides or []), command=command_line(args))
+
+
+def run_from_args(args: argparse.Namespace) -> int:
+    """Validate the flags, run the stages, write the report; returns the exit code (0)."""
+    from warp_critic.core.runtime import init
+    from warp_critic.reproduce.pipeline import reproduce
+
+    from warp_critic.physics.simulator import resolve_device
+    from warp_critic.reproduce.executors import make_executor
+
+    rc = config_from_args(args)
+    rc.validate()  # one-line UserError before any work
+    init()
+    executor = make_executor(getattr(args, "jobs", None), getattr(args, "ray", None), resolve_device(rc.device))
+    result = reproduce(rc, executor)
+    print(f"report: {result['report']}")
+    print(f"recording: rerun {Path(result['out']) / 'report.rrd'}")
+    return 0

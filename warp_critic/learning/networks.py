@@ -1,0 +1,229 @@
+"""Networks: batched per-world policies (pure functions of their parameters) and the critic.
+
+Policy (paper, section 5): MLP ``s -> a`` with two hidden layers of 64 units and tanh. Every world
+has its own parameters; they are stored stacked with a leading world dimension ``W`` so that one
+batched matmul evaluates all policies, and an inner update is ``theta - alpha * grad`` on plain
+tensors (no module, no in-place mutation).
+
+Critic ``L_critic(s, a, g)``: MLP with two hidden layers of 400 units and ELU, one scalar output.
+Two input layouts (``CRITIC_INPUTS``, normalised as below):
+
+* ``full``: ``[q, qd, a, g, q - g]`` -- everything; the goal-relative position ``q - g`` is a fixed
+  feature of ``(s, g)`` that adds no information but makes goal generalisation easier to learn;
+* ``relative``: ``[q - g, qd, a]`` -- the state seen from the goal. The critic is then equivariant
+  to shifting the goal and the state together, so it cannot memorise the few training goals and
+  has to describe how to move towards *a* goal. It suits robots whose dynamics change little with
+  ``q`` over the goal region, e.g. a gravity-compensated arm. On its own it generalises on the KUKA
+  about as well as ``full``; with random start states (``--start-std``), which it reads as goal
+  offsets, it reaches the paper's Table 1 (RESULTS.md has the measurements).
+
+Input normalisation (documented, fixed from the scene, not learned):
+  * joint positions and goals: ``(q - centre) / half_range`` of the joint limits,
+  * joint velocities: ``qd / qd_scale`` (``qd_scale`` a flag, rad/s),
+  * actions: ``tau / max_torque``.
+Policy output shaping: ``tau = max_torque * tanh(out)``, so torque limits always hold.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+PolicyParams = dict[str, torch.Tensor]
+
+POLICY_INIT_SCHEMES = ("fresh", "fixed", "persistent")
+CRITIC_INPUTS = ("full", "relative")
+
+
+@dataclass(frozen=True)
+class Normalizer:
+    """Fixed affine input scales (all ``(dof,)`` tensors)."""
+
+    q_centre: torch.Tensor
+    q_half_range: torch.Tensor
+    qd_scale: float
+    max_torque: torch.Tensor
+
+    @staticmethod
+    def from_limits(q_lower: torch.Tensor, q_upper: torch.Tensor, max_torque: torch.Tensor,
+                    qd_scale: float) -> "Normalizer":
+        return Normalizer((q_upper + q_lower) / 2, (q_upper - q_lower) / 2, float(qd_scale), max_torque)
+
+    def q(self, q: torch.Tensor) -> torch.Tensor:
+        return (q - self.q_centre) / self.q_half_range
+
+    def state(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        return torch.cat([self.q(q), qd / self.qd_scale], dim=-1)
+
+    def action(self, tau: torch.Tensor) -> torch.Tensor:
+        return tau / self.max_torque
+
+
+# ------------------------------------------------------------------------------------------------
+# policy: W independent MLPs evaluated in one batched call
+# ------------------------------------------------------------------------------------------------
+
+def init_policy(worlds: int, obs_dim: int, act_dim: int, *, hidden: int = 64, generator=None,
+                device="cpu", out_scale: float = 0.1) -> PolicyParams:
+    """PyTorch-default (Kaiming-uniform) initialisation for ``W`` policies.
+
+    The last layer is scaled by ``out_scale`` so fresh policies start with small torques.
+    Returns tensors ``w1 (W,h,obs) b1 (W,h) w2 (W,h,h) b2 (W,h) w3 (W,act,h) b3 (W,act)``.
+    """
+    def layer(n_out, n_in, scale=1.0):
+        bound = 1.0 / math.sqrt(n_in)
+        w = (torch.rand(worlds, n_out, n_in, generator=generator) * 2 - 1) * bound * scale
+        b = (torch.rand(worlds, n_out, generator=generator) * 2 - 1) * bound * scale
+        return w.to(device), b.to(device)
+
+    w1, b1 = layer(hidden, obs_dim)
+    w2, b2 = layer(hidden, hidden)
+    w3, b3 = layer(act_dim, hidden, out_scale)
+    return {"w1": w1, "b1": b1, "w2": w2, "b2": b2, "w3": w3, "b3": b3}
+
+
+def policy_forward(params: PolicyParams, obs: torch.Tensor) -> torch.Tensor:
+    """``obs (W, obs_dim)`` or ``(T, W, obs_dim)`` -> pre-shaping output ``(..., W, act_dim)``."""
+    h = torch.tanh(torch.einsum("wij,...wj->...wi", params["w1"], obs) + params["b1"])
+    h = torch.tanh(torch.einsum("wij,...wj->...wi", params["w2"], h) + params["b2"])
+    return torch.einsum("wij,...wj->...wi", params["w3"], h) + params["b3"]
+
+
+def policy_action(params: PolicyParams, norm: Normalizer, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+    """Joint torques ``(..., W, dof)`` within ``+-max_torque``."""
+    return norm.max_torque * torch.tanh(policy_forward(params, norm.state(q, qd)))
+
+
+class MLPPolicy:
+    """The paper's policy family as a function ``(params, q, qd) -> tau``: per-world MLPs over the
+    normalised state, ``max_torque * tanh`` output. :mod:`warp_critic.learning.inner` takes any such function
+    (the point-mass landscape uses a constant-force policy ``(params, q, qd) -> theta``)."""
+
+    def __init__(self, norm: Normalizer, hidden: int = 64):
+        self.norm, self.hidden = norm, hidden
+
+    def __call__(self, params: PolicyParams, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+        return policy_action(params, self.norm, q, qd)
+
+    def init(self, worlds: int, *, generator=None, device="cpu") -> PolicyParams:
+        """Fresh parameters for ``worlds`` policies (see :func:`init_policy`)."""
+        dof = self.norm.max_torque.shape[0]
+        return init_policy(worlds, 2 * dof, dof, hidden=self.hidden, generator=generator, device=device)
+
+
+def detach_params(params: PolicyParams, requires_grad: bool = True) -> PolicyParams:
+    return {k: v.detach().clone().requires_grad_(requires_grad) for k, v in params.items()}
+
+
+def flat_params(params: PolicyParams) -> torch.Tensor:
+    """``(W, n_params)``: all parameters of each world's policy in one row (for traces)."""
+    return torch.cat([v.reshape(v.shape[0], -1) for v in params.values()], dim=1)
+
+
+# ------------------------------------------------------------------------------------------------
+# critic
+# ------------------------------------------------------------------------------------------------
+
+class Critic(nn.Module):
+    """``L_critic(s, a, g)``: MLP ``[state, action, goal] -> scalar`` (2 x 400, ELU).
+
+    Inputs are normalised with the scene's fixed :class:`Normalizer` (stored as buffers so that a
+    checkpoint is self-contained).
+    """
+
+    def __init__(self, dof: int, norm: Normalizer, hidden: int = 400, inputs: str = "full"):
+        super().__init__()
+        if inputs not in CRITIC_INPUTS:
+            raise ValueError(f"critic inputs must be one of {CRITIC_INPUTS} (got {inputs!r})")
+        self.dof, self.inputs = dof, inputs
+        n_in = 5 * dof if inputs == "full" else 3 * dof
+        self.net = nn.Sequential(
+            nn.Linear(n_in, hidden), nn.ELU(),
+            nn.Linear(hidden, hidden), nn.ELU(),
+            nn.Linear(hidden, 1),
+        )
+        self.register_buffer("q_centre", norm.q_centre.clone())
+        self.register_buffer("q_half_range", norm.q_half_range.clone())
+        self.register_buffer("max_torque", norm.max_torque.clone())
+        self.qd_scale = norm.qd_scale
+
+    def features(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """The normalised input ``(..., n_in)`` of the input layout."""
+        if self.inputs == "relative":
+            return torch.cat([(q - goal) / self.q_half_range, qd / self.qd_scale, tau / self.max_torque], dim=-1)
+        return torch.cat([
+            (q - self.q_centre) / self.q_half_range,
+            qd / self.qd_scale,
+            tau / self.max_torque,
+            (goal - self.q_centre) / self.q_half_range,
+            (q - goal) / self.q_half_range,
+        ], dim=-1)
+
+    def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """All ``(..., dof)`` -> ``(...)``."""
+        return self.net(self.features(q, qd, tau, goal)).squeeze(-1)
+
+
+class StackedCritic(nn.Module):
+    """``S`` critics of one architecture (one per seed) evaluated as one module.
+
+    The worlds axis (``-2`` of every input) is seed-major: worlds ``s*W .. (s+1)*W - 1`` belong to critic
+    ``s``. Each layer is one batched matmul over the seeds, so ``S`` critics cost about one critic's
+    overhead; their parameters are stacked ``(S, ...)`` tensors, and an optimiser over them that acts
+    elementwise (Adam) is exactly ``S`` independent optimisers. :meth:`critic_state` /
+    :meth:`from_critics` convert to and from ordinary :class:`Critic` state dicts.
+    """
+
+    _LAYERS = (0, 2, 4)  # indices of the Linear layers in Critic.net
+
+    def __init__(self, critics: list[Critic]):
+        super().__init__()
+        first = critics[0]
+        self.template = [first]  # a list: not a registered submodule (its parameters are not ours)
+        self.seeds = len(critics)
+        self.weights = nn.ParameterList()
+        self.biases = nn.ParameterList()
+        for i in self._LAYERS:
+            self.weights.append(nn.Parameter(torch.stack([c.net[i].weight.detach() for c in critics]).clone()))
+            self.biases.append(nn.Parameter(torch.stack([c.net[i].bias.detach() for c in critics]).clone()))
+
+    def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """All ``(..., S*W, dof)`` -> ``(..., S*W)``."""
+        x = self.template[0].features(q, qd, tau, goal)  # (..., S*W, n_in)
+        lead, sw, n_in = x.shape[:-2], x.shape[-2], x.shape[-1]
+        S = self.seeds
+        x = x.reshape(-1, S, sw // S, n_in).permute(1, 0, 2, 3).reshape(S, -1, n_in)  # (S, M, n_in)
+        for k, (w, b) in enumerate(zip(self.weights, self.biases)):
+            x = torch.baddbmm(b.unsqueeze(1), x, w.transpose(1, 2))
+            if k < len(self.weights) - 1:
+                x = torch.nn.functional.elu(x)
+        x = x.reshape(S, -1, sw // S).permute(1, 0, 2).reshape(*lead, sw)
+        return x
+
+    def critic_state(self, s: int) -> dict:
+        """Critic ``s`` as an ordinary :class:`Critic` state dict."""
+        state = {k: v.clone() for k, v in self.template[0].state_dict().items()}
+        for i, w, b in zip(self._LAYERS, self.weights, self.biases):
+            state[f"net.{i}.weight"] = w[s].detach().clone()
+            state[f"net.{i}.bias"] = b[s].detach().clone()
+        return state
+
+    def load_critic_state(self, s: int, state: dict) -> None:
+        with torch.no_grad():
+            for i, w, b in zip(self._LAYERS, self.weights, self.biases):
+                w[s].copy_(state[f"net.{i}.weight"])
+                b[s].copy_(state[f"net.{i}.bias"])
+
+    def critic(self, s: int) -> Critic:
+        c = self.template[0]
+        out = Critic(c.dof, Normalizer(c.q_centre, c.q_half_range, c.qd_scale, c.max_torque),
+                     hidden=c.net[0].out_features, inputs=c.inputs).to(c.q_centre.device)
+        out.load_state_dict(self.critic_state(s))
+        return out
+
+    def ordered(self) -> list[nn.Parameter]:
+        """The stacked parameters in :meth:`Critic.parameters` order."""
+        return [t for w, b in zip(self.weights, self.biases) for t in (w, b)]

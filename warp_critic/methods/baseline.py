@@ -1,0 +1,284 @@
+"""The baselines' config and their one training step (DDPG, Meta-Critic); everything around the
+step (run directory, resume, metrics, recording, checkpoints) is the shared harness
+:class:`warp_critic.running.loop.Session`, the same as ours.
+
+Protocol (the paper's section 5, same as our meta-training so that ``warp-critic meta-test RUN_DIR``
+compares like with like):
+
+* the same scenes, training goals, horizon, ``dt``, ``substeps``, ``max_torque``, ``qd_scale`` and
+  gravity and training distribution (start states, home starts, dynamics variant): the shared fields of
+  :class:`~warp_critic.running.task.TaskConfig` (``None`` = the scene's defaults);
+* goal-conditioned as in the paper ("the state becomes ``s - g``"): actor and Q see
+  ``x = [(q - g) / q_half_range, qd / qd_scale]`` (the scene :class:`~warp_critic.learning.networks.Normalizer`
+  scales) and the action ``tau / max_torque``;
+* experience comes from ``W = goals x worlds_per_goal`` Newton worlds stepped in parallel by ONE
+  forward-only :class:`~warp_critic.physics.simulator.Simulator` (``differentiable=False``; no model
+  gradient is ever used by a baseline). Every iteration is one episode per world from
+  the task's start states (as in meta-training), ``horizon`` control steps with exploration noise; the
+  ``W * horizon`` transitions go to the replay buffer, then ``updates_per_iteration`` gradient
+  updates follow (default: ``horizon``, i.e. one update per control step of the batch of worlds),
+  then a noise-free evaluation rollout of the actor gives ``task_loss`` = mean ``||q_T - g||^2``
+  (``task_loss_explore``: the same for the noisy episodes).
+* warm-up (``warmup_iterations``, default 5): the first iterations explore with uniformly random
+  torques in ``+-max_torque`` and update only Q (as Spinning Up's ``start_steps`` / TD3's
+  ``start_timesteps``). Without it the actor follows ``dQ/da`` of a Q fitted to a few episodes near
+  the start state and saturates its torques within a few iterations; ``0`` gives Lillicrap et al.'s
+  original schedule.
+
+Reward (documented choice, field ``reward``):
+
+* ``dense`` (default): ``r_t = -||q_{t+1} - g||^2`` (rad^2) for every step. The episode end is a
+  time limit, not a terminal state (the state carries no time), so the TD target bootstraps at
+  the last step too: ``y = r + gamma Q'(s', mu'(s'))`` everywhere.
+* ``sparse``: ``r_t = 0`` except ``r_{T-1} = -||q_T - g||^2``; the last step is terminal
+  (``done = 1``, no bootstrap) -- the paper's task loss as a reward.
+
+``reward_scale`` multiplies the reward (default 1).
+
+Meta-test (the paper: "we use the critics (q-functions) that were trained during meta-train"):
+:func:`test_critic_from_checkpoint` returns ``L(q, qd, tau, g) = -Q(s - g, a)``, which fresh
+policies DESCEND with ``inner_steps`` plain gradient steps of size ``alpha``. A Q function has no
+natural scale for such a step (our critic learns its scale jointly with ``alpha``), so unless
+``alpha`` is given, ``alpha`` is SELECTED at every checkpoint by a grid search (half-decades
+``1e-6 .. 1``) on the training goals with exactly the meta-test protocol (fresh policies, zero
+initial state, ``inner_steps`` updates, final squared error); the chosen value is stored in the
+checkpoint's ``config`` (``alpha``) and meta-test's ``alpha`` still overrides it. The error of that
+search (``fresh_policy_loss``) is the baseline's analogue of our ``task_loss`` and is logged at
+checkpoint iterations.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import torch
+
+from warp_critic.core.errors import DivergenceError
+from warp_critic.learning.inner import inner_update, policy_fn
+from warp_critic.learning.losses import critic_loss, final_error
+from warp_critic.running.loop import Callback, Session, TrainResult
+from warp_critic.learning.networks import MLPPolicy, Normalizer
+from warp_critic.learning.rollout import Trajectory, rollout
+from warp_critic.physics.simulator import Simulator
+from warp_critic.running.task import TaskConfig, spec
+from warp_critic.methods.q_networks import METHODS, NegQ, QNetwork
+from warp_critic.methods.replay import NOISE_KINDS, REWARD_KINDS, ExplorationNoise, ReplayBuffer, rewards
+
+ALPHA_GRID = tuple(10.0 ** (k / 2) for k in range(-12, 1))  # 1e-6, 3.2e-6, ..., 0.32, 1
+
+
+@dataclass
+class BaselineConfig(TaskConfig):
+    """DDPG / Meta-Critic training. ``None`` = the scene's default (as for meta-train).
+
+    Defaults follow the published DDPG settings (Lillicrap et al. 2015): Adam with actor lr 1e-4 and
+    critic lr 1e-3, gamma 0.99, minibatch 64, replay buffer 1e6, Ornstein-Uhlenbeck exploration
+    noise (theta 0.15, sigma 0.2), final layers initialised in +-3e-3. Two documented deviations:
+    tau = 5e-3 (TD3-era DDPG implementations; 1e-3 lags too far behind in runs of a few thousand
+    updates) and no L2 weight decay on Q by default (``critic_weight_decay`` 1e-2 restores it);
+    plus a 5-iteration random-action warm-up (``warmup_iterations`` 0 disables it).
+    Meta-Critic settings follow Zhou et al. 2020's code: meta-critic lr 1e-3, weight decay 1e-4,
+    2 x 100 hidden units, virtual step size = the actor lr.
+    """
+
+    method: str = spec("ddpg", "ddpg or meta-critic", choices=METHODS)
+    iterations: int = spec(300, "training iterations (one episode in every world, then the gradient updates)", gt=0, cap=10**8)
+    # -- DDPG ------------------------------------------------------------------------------------
+    actor_lr: float = spec(1e-4, "actor learning rate (Adam)", gt=0, cap=1e3)
+    critic_lr: float = spec(1e-3, "Q learning rate (Adam)", gt=0, cap=1e3)
+    critic_weight_decay: float = spec(0.0, "L2 weight decay on Q (Lillicrap et al.: 1e-2)", ge=0)
+    tau: float = spec(5e-3, "soft target update rate, in (0, 1] (Lillicrap et al.: 1e-3)", gt=0, le=1)
+    gamma: float = spec(0.99, "discount factor, in (0, 1]", gt=0, le=1)
+    batch_size: int = spec(64, "minibatch size", gt=0, cap=10**7)
+    buffer_size: int = spec(1_000_000, "replay buffer capacity (transitions)", gt=0, cap=10**9)
+    warmup_iterations: int = spec(5, "first iterations explore with uniformly random torques and train only Q (the actor starts once Q has seen varied actions; 0 = Lillicrap et al.)", ge=0)
+    updates_per_iteration: int | None = spec(None, "gradient updates per iteration (default: the horizon)", gt=0, cap=10**7)
+    noise: str = spec("ou", "exploration noise: ou (Ornstein-Uhlenbeck) or gaussian", choices=NOISE_KINDS)
+    noise_std: float = spec(0.2, "noise scale (OU sigma or Gaussian std) as a fraction of max_torque", ge=0, cap=100)
+    ou_theta: float = spec(0.15, "OU mean reversion per control step, in [0, 1]", ge=0, le=1)
+    reward: str = spec("dense", "dense: r_t = -||q_{t+1}-g||^2 every step; sparse: only -||q_T-g||^2 at the end", choices=REWARD_KINDS)
+    reward_scale: float = spec(1.0, "multiply the reward by this", gt=0)
+    actor_hidden: int = spec(64, "actor hidden units (2 tanh layers)", gt=0, cap=8192)
+    critic_hidden: int = spec(400, "Q hidden units (2 ELU layers)", gt=0, cap=8192)
+    # -- Meta-Critic -----------------------------------------------------------------------------
+    aux_lr: float = spec(1e-3, "meta-critic only: learning rate of the auxiliary loss h_omega (Adam)", gt=0, cap=1e3)
+    aux_weight_decay: float = spec(1e-4, "meta-critic only: weight decay of h_omega", ge=0)
+    aux_hidden: int = spec(100, "meta-critic only: h_omega hidden units (2 ReLU layers)", gt=0, cap=8192)
+    aux_weight: float = spec(1.0, "meta-critic only: weight of the auxiliary loss in the actor update", ge=0)
+    virtual_lr: float | None = spec(None, "meta-critic only: SGD step of the virtual actor updates (default: the actor lr)", gt=0, cap=1e3)
+    # -- meta-test defaults stored in the checkpoint ---------------------------------------------
+    alpha: float | None = spec(None, "policy learning rate meta-test uses with -Q (default: grid search on the training goals at every checkpoint)", gt=0, cap=1e6)
+    inner_steps: int | None = spec(None, "meta-test's default number of fresh-policy updates with -Q (default: the scene's, as meta-train's inner steps, else 1)", gt=0, cap=10**4)
+
+    scene_fields = TaskConfig.scene_fields + ("inner_steps",)
+
+    def n_updates(self) -> int:
+        return self.updates_per_iteration if self.updates_per_iteration is not None else self.horizon
+
+
+# ------------------------------------------------------------------------------------------------
+# alpha for meta-test
+# ------------------------------------------------------------------------------------------------
+
+def fresh_policy_errors(qnet: QNetwork, norm: Normalizer, sim: Simulator, goal: torch.Tensor, horizon: int,
+                        steps: int, alphas, seed: int, q0: torch.Tensor | None = None) -> list[float]:
+    """Meta-test's protocol on the training worlds, for every ``alpha``: fresh policies (the same
+    initialisation for every alpha), ``steps`` descents of ``sum_t -Q``, mean final ``||q_T - g||^2``."""
+    neg_q = NegQ(copy.deepcopy(qnet)).requires_grad_(False)
+    policy = MLPPolicy(norm)
+    q0 = sim.zeros() if q0 is None else q0
+    qd0 = torch.zeros_like(q0)
+    gen = torch.Generator().manual_seed(seed)
+    params = {k: v.requires_grad_(True) for k, v in policy.init(sim.worlds, generator=gen, device=sim.torch_device).items()}
+    errors = []
+    if steps == 1:  # one gradient serves every alpha
+        traj = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
+        loss = critic_loss(neg_q, policy, params, traj, goal).sum()
+        grads = torch.autograd.grad(loss, list(params.values()))
+    for alpha in alphas:
+        try:
+            if steps == 1:
+                new = {k: (v - alpha * g).detach() for (k, v), g in zip(params.items(), grads)}
+            else:
+                new, _ = inner_update(neg_q, policy, params, sim, q0, qd0, goal, horizon=horizon, alpha=alpha,
+                                      steps=steps, create_graph=False)
+            after = rollout(sim, policy_fn(policy, new), q0, qd0, horizon)
+            err = float(final_error(after.q[-1], goal).mean())
+        except DivergenceError:
+            err = math.inf
+        errors.append(err if math.isfinite(err) else math.inf)
+    return errors
+
+
+# ------------------------------------------------------------------------------------------------
+# the step
+# ------------------------------------------------------------------------------------------------
+
+@dataclass
+class BaselineStepResult:
+    """What the recorder reads: the exploration rollout and the noise-free rollout after the updates."""
+
+    before: Trajectory | None
+    after: Trajectory | None
+    params_new: Any = None
+
+
+AgentFactory = Callable[[BaselineConfig, int, Normalizer, Any], Any]
+
+
+def train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks: list[Callback] | None = None,
+                   progress: bool = True, record: bool = True, given: set[str] | None = None) -> TrainResult:
+    """Run (or resume) a baseline; returns the run directory, metrics and agent (``result.model``).
+
+    ``make_agent(cfg, dof, norm, device)`` returns an agent with ``actor``, ``q``,
+    ``update(buffer, gen, train_actor) -> dict`` (one gradient update), ``state_dict()`` and
+    ``load_state_dict()``. With ``cfg.seeds`` the seeds' episodes run in one simulator (one agent,
+    replay buffer and noise process per seed, each drawing from its own seed's generator), and each
+    seed writes the run directory a single-seed run would.
+    """
+    with Session(cfg, differentiable=False, given=given,
+                 require=("agent_state", "buffer", "selected_alpha")) as session:
+        cfg, task = session.cfg, session.task
+        S, sim, norm, goal, dof, dev = task.S, task.sim, task.norm, task.goal, task.scene.dof, task.device
+        gens, agents, buffers, noises = [], [], [], []
+        for i in range(S):  # each seed's draws in the order of a single-seed run
+            gens.append(session.seed(i))
+            agents.append(make_agent(cfg, dof, norm, dev))
+            buffers.append(ReplayBuffer(min(cfg.buffer_size, cfg.iterations * task.Wc * cfg.horizon), dof, dev))
+            noises.append(ExplorationNoise(cfg.noise, cfg.noise_std, cfg.ou_theta, (task.Wc, dof), gens[-1], dev))
+            session.seeded(i)
+        alphas = [cfg.alpha] * S
+        for i in range(S):
+            ckpt = session.restore(i)
+            if ckpt is not None:
+                with session.loading(i):
+                    agents[i].load_state_dict(ckpt["agent_state"])
+                    buffers[i].load_state_dict(ckpt["buffer"])
+                    alphas[i] = float(ckpt["selected_alpha"]) if cfg.alpha is None else cfg.alpha
+        q0, qd0 = task.home, torch.zeros_like(task.home)
+        n_updates = cfg.n_updates()
+        # the alpha search runs one seed's worlds at a time (as in a single-seed run)
+        eval_sim = sim if S == 1 else Simulator(task.scene, sim.variants[:task.Wc], dt=cfg.dt, substeps=cfg.substeps,
+                                                device=cfg.device, differentiable=False, gravity=cfg.gravity)
+
+        def select_alpha(i: int) -> tuple[float, float, dict]:
+            grid = [cfg.alpha] if cfg.alpha is not None else list(ALPHA_GRID)
+            sl = task.copy(i)
+            errs = fresh_policy_errors(agents[i].q, norm, eval_sim, goal[sl], cfg.horizon, cfg.inner_steps, grid,
+                                       session.runs[i].cfg.seed + 1, q0=task.home[sl])
+            best = min(range(len(grid)), key=lambda k: errs[k])
+            return grid[best], errs[best], {f"{a:.3g}": e for a, e in zip(grid, errs)}
+
+        def per_seed(fn):
+            """A rollout policy over all worlds from one function per seed ``fn(i, q, qd, goal)``."""
+            if S == 1:
+                return lambda q, qd: fn(0, q, qd, goal)
+            return lambda q, qd: torch.cat([fn(i, q[task.copy(i)], qd[task.copy(i)], goal[task.copy(i)])
+                                            for i in range(S)])
+
+        def step(it: int):
+            nonlocal q0
+            if cfg.start_std:
+                q0 = torch.cat([task.start_states(g, i) for i, g in enumerate(gens)])
+            # 1. one episode in every world with exploration noise (forward-only simulator)
+            for n in noises:
+                n.reset()
+            warmup = it < cfg.warmup_iterations
+
+            def explore(i, q, qd, g):
+                if warmup:  # uniform in [-max_torque, max_torque]
+                    u = torch.rand(q.shape, generator=gens[i]).to(q.device) * 2 - 1
+                    return u * norm.max_torque
+                tau = agents[i].actor(q, qd, g) + noises[i].sample() * norm.max_torque
+                return torch.maximum(torch.minimum(tau, norm.max_torque), -norm.max_torque)
+
+            with torch.no_grad():
+                explore_traj = rollout(sim, per_seed(explore), q0, qd0, cfg.horizon)
+            r, done = rewards(explore_traj, goal, cfg.reward, cfg.reward_scale)
+            rows = []
+            for i in range(S):
+                sl = task.copy(i)
+                part = Trajectory(explore_traj.q[:, sl], explore_traj.qd[:, sl], explore_traj.tau[:, sl])
+                buffers[i].add_trajectory(part, goal[sl], r[:, sl], done[:, sl])
+                # 2. gradient updates from the replay buffer
+                stats: dict[str, float] = {}
+                if buffers[i].size >= cfg.batch_size:
+                    for _ in range(n_updates):
+                        for k, v in agents[i].update(buffers[i], gens[i], train_actor=not warmup).items():
+                            stats[k] = stats.get(k, 0.0) + v / n_updates
+                if not all(math.isfinite(v) for v in stats.values()):
+                    raise DivergenceError("non-finite loss: " + ", ".join(f"{k} {v}" for k, v in stats.items()))
+                rows.append(stats)
+            # 3. noise-free evaluation of the actors
+            with torch.no_grad():
+                eval_traj = rollout(sim, per_seed(lambda i, q, qd, g: agents[i].actor(q, qd, g)), q0, qd0, cfg.horizon)
+            per_world = final_error(eval_traj.q[-1], goal)
+            explore_err = final_error(explore_traj.q[-1], goal)
+            for i, stats in enumerate(rows):
+                sl = task.copy(i)
+                row = {"task_loss": per_world[sl].mean().item(), "task_loss_per_goal": task.per_goal(per_world[sl]).tolist(),
+                       "task_loss_explore": explore_err[sl].mean().item(), "return_explore": r[:, sl].sum(0).mean().item(),
+                       "buffer_size": buffers[i].size, **stats}
+                if (it + 1) % cfg.checkpoint_every == 0 or it + 1 == cfg.iterations:
+                    alphas[i], fresh_loss, search = select_alpha(i)
+                    row.update({"alpha": alphas[i], "fresh_policy_loss": fresh_loss, "alpha_search": search})
+                rows[i] = row
+            return rows, BaselineStepResult(explore_traj, eval_traj)
+
+        def state(i: int) -> dict:
+            a = agents[i]
+            return {"critic_hidden": cfg.critic_hidden, "actor_hidden": cfg.actor_hidden,
+                    "q_state": a.q.state_dict(), "actor_state": a.actor.state_dict(),
+                    "agent_state": a.state_dict(), "buffer": buffers[i].state_dict(), "selected_alpha": alphas[i]}
+
+        def describe(row: dict) -> str:
+            extra = f" | fresh policies {row['fresh_policy_loss']:.4f} (alpha {row['alpha']:.2g})" \
+                if "fresh_policy_loss" in row else ""
+            return f"task {row['task_loss']:.4f} (explore {row['task_loss_explore']:.3f}){extra}"
+
+        result = session.run(step, state, callbacks=callbacks, progress=progress, record=record, describe=describe)
+    for i, res in enumerate(result.seeds):
+        res.model = agents[i]
+    return result

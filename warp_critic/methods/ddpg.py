@@ -1,0 +1,91 @@
+"""DDPG (Lillicrap et al. 2015): supervised Q learning, the paper's Algorithm 1.
+
+One gradient update from a minibatch ``(s, a, r, s', done)`` of the replay buffer (all states
+goal-conditioned, ``s - g``; see :mod:`warp_critic.methods.baseline`):
+
+* Q: TD regression ``(Q(s, a) - y)^2`` with ``y = r + gamma (1 - done) Q'(s', mu'(s'))`` from the
+  target networks ``Q'``, ``mu'`` (Adam, ``--critic-lr``, optional L2 ``--critic-weight-decay``);
+* actor: deterministic policy gradient, descend ``-mean Q(s, mu(s))`` (Adam, ``--actor-lr``);
+* targets: soft updates ``theta' <- tau theta + (1 - tau) theta'``.
+
+Experience collection, exploration noise, rewards, checkpoints and the training loop are shared
+with Meta-Critic in :mod:`warp_critic.methods.baseline`. The learned Q is what meta-test uses
+(``L = -Q``).
+"""
+
+from __future__ import annotations
+
+import copy
+
+import torch
+
+from warp_critic.learning.losses import td_loss
+from warp_critic.learning.networks import Normalizer
+from warp_critic.running.loop import TrainResult
+from warp_critic.methods.baseline import BaselineConfig, train_baseline
+from warp_critic.methods.q_networks import Actor, QNetwork, soft_update
+from warp_critic.methods.replay import ReplayBuffer
+
+
+class DDPGAgent:
+    """Actor, Q, their target copies and optimisers."""
+
+    def __init__(self, cfg: BaselineConfig, dof: int, norm: Normalizer, device):
+        self.cfg = cfg
+        self.actor = Actor(dof, norm, cfg.actor_hidden).to(device)
+        self.q = QNetwork(dof, norm, cfg.critic_hidden).to(device)
+        self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
+        self.q_target = copy.deepcopy(self.q).requires_grad_(False)
+        self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=cfg.actor_lr)
+        self.q_opt = torch.optim.Adam(self.q.parameters(), lr=cfg.critic_lr, weight_decay=cfg.critic_weight_decay)
+
+    # -- one update -------------------------------------------------------------------------------
+    def critic_step(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
+        cfg = self.cfg
+        with torch.no_grad():
+            a2 = self.actor_target(b["q2"], b["qd2"], b["goal"])
+            q_next = self.q_target(b["q2"], b["qd2"], a2, b["goal"])
+        q = self.q(b["q"], b["qd"], b["tau"], b["goal"])
+        loss = td_loss(q, b["reward"], b["done"], q_next, cfg.gamma)
+        self.q_opt.zero_grad(set_to_none=True)
+        loss.backward()
+        self.q_opt.step()
+        return {"critic_loss": loss.item(), "q_mean": q.mean().item()}
+
+    def actor_step(self, b: dict[str, torch.Tensor], buffer: ReplayBuffer, gen: torch.Generator) -> dict[str, float]:
+        a = self.actor(b["q"], b["qd"], b["goal"])
+        loss = -self.q(b["q"], b["qd"], a, b["goal"]).mean()
+        self.actor_opt.zero_grad(set_to_none=True)
+        loss.backward()  # also fills Q's .grad; cleared by the next critic step (zero_grad)
+        self.actor_opt.step()
+        return {"actor_loss": loss.item()}
+
+    def update(self, buffer: ReplayBuffer, gen: torch.Generator, train_actor: bool = True) -> dict[str, float]:
+        """One minibatch update of Q (and, unless warming up, of the actor), then the targets."""
+        b = buffer.sample(self.cfg.batch_size, gen)
+        stats = self.critic_step(b)
+        if train_actor:
+            stats.update(self.actor_step(b, buffer, gen))
+        soft_update(self.q_target, self.q, self.cfg.tau)
+        soft_update(self.actor_target, self.actor, self.cfg.tau)
+        return stats
+
+    # -- checkpoints ------------------------------------------------------------------------------
+    def state_dict(self) -> dict:
+        return {"actor": self.actor.state_dict(), "q": self.q.state_dict(),
+                "actor_target": self.actor_target.state_dict(), "q_target": self.q_target.state_dict(),
+                "actor_opt": self.actor_opt.state_dict(), "q_opt": self.q_opt.state_dict()}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.actor.load_state_dict(state["actor"])
+        self.q.load_state_dict(state["q"])
+        self.actor_target.load_state_dict(state["actor_target"])
+        self.q_target.load_state_dict(state["q_target"])
+        self.actor_opt.load_state_dict(state["actor_opt"])
+        self.q_opt.load_state_dict(state["q_opt"])
+
+
+def train_ddpg(cfg: BaselineConfig, **kwargs) -> TrainResult:
+    """Train (or resume) DDPG; ``kwargs`` go to :func:`~warp_critic.methods.baseline.train_baseline`."""
+    cfg.method = "ddpg"
+    return train_baseline(cfg, DDPGAgent, **kwargs)

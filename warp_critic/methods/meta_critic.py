@@ -1,0 +1,120 @@
+"""Meta-Critic (Zhou et al., NeurIPS 2020, "Online Meta-Critic Learning for Off-Policy Actor-Critic
+Methods") on top of DDPG.
+
+Variant implemented (documented choice):
+
+* **Auxiliary loss** ``h_omega(s, a)``: an MLP over the goal-conditioned state and the actor's
+  action, ``[(q - g)/q_half_range, qd/qd_scale, mu(s)/max_torque] -> 2 x 100 ReLU -> softplus``
+  (non-negative, as in the authors' code), averaged over the batch. This is the paper's
+  "(s, a)"-input MLP design (``DDPG_MC_sa``) without the actor's hidden features; not the set-based
+  (permutation-invariant over the batch) design.
+* **Meta-objective**: the clipped-difference (``tanh``) variant. Each update, with the actor's
+  parameters ``phi``, a training batch ``d_trn`` and a separate validation batch ``d_val`` from
+  the replay buffer, and SGD virtual steps of size ``eta`` (``--virtual-lr``, default the actor lr):
+
+  .. code-block:: text
+
+      L_main(phi; d)   = -mean_{s in d} Q(s, mu_phi(s))              (main DDPG actor loss)
+      phi_old          = phi - eta grad L_main(phi; d_trn)                          (main only)
+      phi_new(omega)   = phi - eta grad [L_main + w h_omega](phi; d_trn)      (main + auxiliary)
+      L_meta(omega)    = -tanh( L_main(phi_old; d_val) - L_main(phi_new; d_val) )
+      omega <- Adam step on L_meta        (aux_lr, aux_weight_decay)
+
+  i.e. ``omega`` is trained so that adding the auxiliary loss improves the validation objective,
+  measured with the MAIN critic Q. The real actor update is one Adam step on
+  ``L_main + w h_omega`` on ``d_trn`` (``w`` = ``--aux-weight``), with the gradient computed before
+  ``omega``'s update (as in the authors' code).
+
+The Q function is learned exactly as in DDPG (TD regression, target networks, soft updates). At
+meta-test we use the main Q (the paper: "we use the critics (q-functions) that were trained during
+meta-train"): ``L = -Q``; ``h_omega`` is saved in the checkpoint but not used there.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+from torch.func import functional_call
+
+from warp_critic.learning.networks import Normalizer
+from warp_critic.running.loop import TrainResult
+from warp_critic.methods.baseline import BaselineConfig, train_baseline
+from warp_critic.methods.q_networks import _GoalInput
+from warp_critic.methods.replay import ReplayBuffer
+from warp_critic.methods.ddpg import DDPGAgent
+
+
+class AuxiliaryLoss(_GoalInput):
+    """``h_omega(s - g, a) >= 0`` per sample (2 x ``hidden`` ReLU, softplus output)."""
+
+    def __init__(self, dof: int, norm: Normalizer, hidden: int = 100):
+        super().__init__()
+        self._init_norm(norm)
+        self.net = nn.Sequential(nn.Linear(3 * dof, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(),
+                                 nn.Linear(hidden, 1), nn.Softplus())
+
+    def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        x = torch.cat([self.obs(q, qd, goal), tau / self.max_torque], dim=-1)
+        return self.net(x).squeeze(-1)
+
+
+class MetaCriticAgent(DDPGAgent):
+    """DDPG plus the online-learned auxiliary actor loss ``h_omega``."""
+
+    def __init__(self, cfg: BaselineConfig, dof: int, norm: Normalizer, device):
+        super().__init__(cfg, dof, norm, device)
+        self.aux = AuxiliaryLoss(dof, norm, cfg.aux_hidden).to(device)
+        self.aux_opt = torch.optim.Adam(self.aux.parameters(), lr=cfg.aux_lr, weight_decay=cfg.aux_weight_decay)
+        self.eta = cfg.virtual_lr if cfg.virtual_lr is not None else cfg.actor_lr
+
+    def _main_loss(self, params: dict, b: dict[str, torch.Tensor]) -> torch.Tensor:
+        a = functional_call(self.actor, params, (b["q"], b["qd"], b["goal"]))
+        return -self.q(b["q"], b["qd"], a, b["goal"]).mean()
+
+    def actor_step(self, b: dict[str, torch.Tensor], buffer: ReplayBuffer, gen: torch.Generator) -> dict[str, float]:
+        val = buffer.sample(self.cfg.batch_size, gen)  # separate validation batch
+        names = [n for n, _ in self.actor.named_parameters()]
+        phi = dict(self.actor.named_parameters())
+        w = self.cfg.aux_weight
+        # actor losses on the training batch
+        a = self.actor(b["q"], b["qd"], b["goal"])
+        main = -self.q(b["q"], b["qd"], a, b["goal"]).mean()
+        aux = self.aux(b["q"], b["qd"], a, b["goal"]).mean()
+        g_main = torch.autograd.grad(main, list(phi.values()), retain_graph=True)
+        g_aux = torch.autograd.grad(aux, list(phi.values()), create_graph=True)  # a function of omega
+        # virtual steps, evaluated on the validation batch with the main Q
+        phi_old = {n: (p - self.eta * gm).detach() for (n, p), gm in zip(phi.items(), g_main)}
+        phi_new = {n: p.detach() - self.eta * (gm + w * ga) for (n, p), gm, ga in zip(phi.items(), g_main, g_aux)}
+        with torch.no_grad():
+            val_old = self._main_loss(phi_old, val)
+        val_new = self._main_loss(phi_new, val)
+        meta = -torch.tanh(val_old - val_new)
+        g_omega = torch.autograd.grad(meta, list(self.aux.parameters()), allow_unused=True)
+        # real actor step on main + w * auxiliary (gradient taken with the current omega)
+        self.actor_opt.zero_grad(set_to_none=True)
+        for n, gm, ga in zip(names, g_main, g_aux):
+            phi[n].grad = (gm + w * ga).detach()
+        self.actor_opt.step()
+        # meta-critic step
+        self.aux_opt.zero_grad(set_to_none=True)
+        for p, g in zip(self.aux.parameters(), g_omega):
+            p.grad = None if g is None else g.detach()
+        self.aux_opt.step()
+        return {"actor_loss": main.item(), "aux_loss": aux.item(), "meta_loss": meta.item(),
+                "meta_improvement": (val_old - val_new).item()}
+
+    def state_dict(self) -> dict:
+        state = super().state_dict()
+        state.update(aux=self.aux.state_dict(), aux_opt=self.aux_opt.state_dict())
+        return state
+
+    def load_state_dict(self, state: dict) -> None:
+        super().load_state_dict(state)
+        self.aux.load_state_dict(state["aux"])
+        self.aux_opt.load_state_dict(state["aux_opt"])
+
+
+def train_meta_critic(cfg: BaselineConfig, **kwargs) -> TrainResult:
+    """Train (or resume) Meta-Critic; ``kwargs`` go to :func:`~warp_critic.methods.baseline.train_baseline`."""
+    cfg.method = "meta-critic"
+    return train_baseline(cfg, MetaCriticAgent, **kwargs)

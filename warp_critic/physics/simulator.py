@@ -1,0 +1,129 @@
+"""Simulator: a scene's articulation replicated into many Newton worlds, stepped from torch.
+
+One world per (goal, policy initialisation, variant). All worlds share one Newton model and every
+solver launch covers all of them. The torch/warp plumbing lives in :mod:`warp_critic.physics.bridge`.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+import torch
+import warp as wp
+
+from warp_critic.core import runtime
+from warp_critic.physics.bridge import NewtonBridge
+from warp_critic.core.errors import FieldError
+from warp_critic.physics.scene import Scene, Variant
+
+
+STANDARD_GRAVITY = 9.81  # m/s^2, along -z: a scene's gravity when it authors none
+
+
+def resolve_device(device: str) -> str:
+    """``auto`` -> ``cuda`` when Warp and torch both see a GPU, else ``cpu``."""
+    if device not in ("auto", "cpu", "cuda") and not device.startswith("cuda:"):
+        raise FieldError("device", f"must be one of auto, cpu, cuda (got {device!r})")
+    if device == "auto":
+        try:
+            has_cuda = wp.is_cuda_available() and torch.cuda.is_available()
+        except Exception:  # pragma: no cover - broken driver installs
+            has_cuda = False
+        return "cuda" if has_cuda else "cpu"
+    if device.startswith("cuda") and not (wp.is_cuda_available() and torch.cuda.is_available()):
+        raise FieldError("device", f"{device}: no CUDA device is available to both Warp and torch")
+    return device
+
+
+class Simulator:
+    """``W`` worlds of one scene, each with its own dynamics variant.
+
+    Args:
+        scene: the loaded scene.
+        variants: one :class:`Variant` per world (``len(variants) == W``).
+        dt: physics time step (s).
+        substeps: physics steps per control step; the control period is ``dt * substeps``.
+        device: ``cpu``/``cuda``/``auto``.
+        differentiable: build the model with gradients (needed for model-based meta-training).
+        gravity: magnitude of gravity along -z (m/s^2). ``0`` is exactly a perfectly gravity-compensated
+            robot (``tau_applied = tau + g(q)``), as the iiwa's torque interface provides.
+        graphs: replay captured Warp graphs after each step's first run (bitwise the same results,
+            a fraction of the Python overhead; see :mod:`warp_critic.physics.bridge`); ``None`` reads
+            ``$WARP_CRITIC_GRAPHS`` (default on).
+    """
+
+    def __init__(self, scene: Scene, variants: Sequence[Variant], *, dt: float, substeps: int = 1,
+                 device: str = "cpu", differentiable: bool = True, gravity: float = STANDARD_GRAVITY,
+                 graphs: bool | None = None):
+        if dt <= 0:
+            raise FieldError("dt", f"must be > 0 (got {dt})")
+        if substeps < 1:
+            raise FieldError("substeps", f"must be >= 1 (got {substeps})")
+        for v in variants:
+            v.validate()
+        self.scene = scene
+        self.variants = list(variants)
+        self.worlds = len(self.variants)
+        self.dof = scene.dof
+        self.dt, self.substeps = float(dt), int(substeps)
+        self.control_dt = self.dt * self.substeps
+        self.device = resolve_device(device)
+        wp.init()
+        self.model = scene.build_model(self.variants, device=self.device, requires_grad=differentiable)
+        if gravity < 0:
+            raise FieldError("gravity", f"must be >= 0 (got {gravity})")
+        self.gravity = float(gravity)
+        self.model.set_gravity((0.0, 0.0, -self.gravity))
+        self.bridge = NewtonBridge(self.model, self.worlds, self.dof, self.dt, self.substeps,
+                                   graphs=runtime.graphs_from_env() if graphs is None else graphs)
+        self.torch_device = self.bridge.torch_device
+        tdev = self.torch_device
+        self.q_lower = torch.as_tensor(np.asarray(scene.q_lower), dtype=torch.float32, device=tdev)
+        self.q_upper = torch.as_tensor(np.asarray(scene.q_upper), dtype=torch.float32, device=tdev)
+        self.effort_limit = torch.as_tensor(np.asarray(scene.effort_limit), dtype=torch.float32, device=tdev)
+
+    # -- stepping --------------------------------------------------------------------------------
+    def begin_rollout(self) -> None:
+        """Call before each differentiable rollout (reuses the per-step gradient buffers)."""
+        self.bridge.begin_rollout()
+
+    def step(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor):
+        """One control step. ``q, qd, tau``: ``(W, dof)``. Differentiable when inputs need grad."""
+        return self.bridge.step(q, qd, tau)
+
+    def zeros(self) -> torch.Tensor:
+        return torch.zeros(self.worlds, self.dof, device=self.torch_device)
+
+    # -- kinematics for recordings ------------------------------------------------------------------
+    @torch.no_grad()
+    def body_poses(self, q: torch.Tensor) -> np.ndarray:
+        """World poses of all bodies for joint positions ``q`` ``(W, dof)``.
+
+        Returns ``(W, bodies_per_world, 7)``: position (m) and quaternion ``(x, y, z, w)``.
+        """
+        import newton
+
+        state = self.model.state(requires_grad=False)
+        wp.to_torch(state.joint_q).view(self.worlds, self.dof).copy_(q)
+        newton.eval_fk(self.model, state.joint_q, state.joint_qd, state)
+        poses = state.body_q.numpy().reshape(self.worlds, -1, 7)
+        return poses
+
+    @torch.no_grad()
+    def tip_positions(self, q: torch.Tensor) -> np.ndarray:
+        """End-effector tip of every world for joint positions ``q`` ``(W, dof)`` -> ``(W, 3)`` (m)."""
+        import newton
+
+        from warp_critic.kernels.kinematics import tip_positions_kernel
+
+        state = self.model.state(requires_grad=False)
+        wp.to_torch(state.joint_q).view(self.worlds, self.dof).copy_(q)
+        newton.eval_fk(self.model, state.joint_q, state.joint_qd, state)
+        offsets = np.stack([self.scene.tip_offset_of(v) for v in self.variants]).astype(np.float32)
+        tip_offset = wp.array(offsets, dtype=wp.vec3, device=self.model.device)
+        tips = wp.zeros(self.worlds, dtype=wp.vec3, device=self.model.device)
+        wp.launch(tip_positions_kernel, dim=self.worlds,
+                  inputs=[state.body_q, self.model.body_count // self.worlds, self.scene.ee_body, tip_offset],
+                  outputs=[tips], device=self.model.device)
+        return tips.numpy()

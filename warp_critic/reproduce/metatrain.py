@@ -1,0 +1,125 @@
+"""Stage ``metatrain`` (Figure 3): ours, DDPG and Meta-Critic on the reacher and the KUKA, every seed.
+
+One sub-stage per (scene, method), ``metatrain-<scene>-<method>-<hash>``; its seeds train at once
+(``seeds=``, one process and one simulator), each seed in ``run/seed<k>``. An interrupted sub-stage is
+resumed (``resume=True``) from its checkpoints; a finished run is never overwritten.
+
+Training curves: the final squared error ``||q_T - g||^2`` (``task_loss``: ours of the updated
+policies, the baselines of their noise-free actor) against outer iterations and against simulated
+environment steps. What counts as an environment step (one control step of one world):
+
+* ours: every rollout of an iteration through the simulator, ``(inner_steps + 1) x worlds x horizon``
+  (the ``inner_steps`` forward rollouts of the inner loop and the differentiable rollout of the updated
+  policies for the task loss);
+* DDPG / Meta-Critic: the exploration episodes that fill the replay buffer, ``worlds x horizon`` per
+  iteration (their noise-free evaluation rollout and the alpha search at checkpoints only measure and
+  are not counted).
+
+``worlds`` is one seed's worlds, ``goals x worlds_per_goal``.
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import fields
+from pathlib import Path
+
+from warp_critic.core.errors import UserError
+from warp_critic.reproduce.settings import METHODS
+
+STEPS_COUNTED = {
+    "ours": "(inner_steps + 1) x worlds x horizon per iteration: the inner-loop rollouts and the rollout of the updated policies",
+    "ddpg": "worlds x horizon per iteration: the exploration episodes (evaluation rollouts not counted)",
+    "meta-critic": "worlds x horizon per iteration: the exploration episodes (evaluation rollouts not counted)",
+}
+
+
+def config_class(method: str):
+    if method == "ours":
+        from warp_critic.methods.ours import TrainConfig
+
+        return TrainConfig
+    from warp_critic.methods.baseline import BaselineConfig
+
+    return BaselineConfig
+
+
+def check_fields_known(method: str, values: dict, where: str) -> None:
+    names = {f.name for f in fields(config_class(method))}
+    unknown = sorted(set(values) - names)
+    if unknown:
+        raise UserError(f"{where}: unknown {method} setting(s) {', '.join(unknown)}")
+
+
+def scene_file(scene: str) -> Path:
+    from warp_critic.analysis import scene_path
+
+    return scene_path(f"{scene}.usda")
+
+
+def make_config(scene: str, method: str, values: dict, seeds: list[int], out: Path, device: str, resume: bool):
+    cls = config_class(method)
+    kw = dict(values)
+    if method != "ours":
+        kw["method"] = method
+    return cls(scene=str(scene_file(scene)), seeds=list(seeds), out=str(out), device=device, resume=resume, **kw)
+
+
+def _clear_unstarted(run: Path, seeds: list[int]) -> bool:
+    """Remove seed directories of this stage that hold no checkpoint (a run killed before its first
+    checkpoint); returns whether every seed has a checkpoint (resume) -- none may be half-way."""
+    have = [(run / f"seed{s}" / "checkpoint.pt").is_file() for s in seeds]
+    if any(have) and not all(have):
+        missing = [f"seed{s}" for s, h in zip(seeds, have) if not h]
+        raise UserError(f"{run}: {', '.join(missing)} have no checkpoint while other seeds do; "
+                        "remove this stage directory to retrain it")
+    if not any(have):
+        for s in seeds:
+            p = run / f"seed{s}"
+            if p.is_dir():
+                shutil.rmtree(p)
+    return all(have)
+
+
+def run_metatrain_stage(d: Path, scene: str, method: str, values: dict, seeds: list[int], device: str,
+                        progress: bool = True) -> dict:
+    from warp_critic.methods.ddpg import train_ddpg
+    from warp_critic.methods.meta_critic import train_meta_critic
+    from warp_critic.methods.ours import meta_train
+
+    run = d / "run"
+    resume = _clear_unstarted(run, seeds)
+    values = dict(values)
+    record = True
+    cfg = make_config(scene, method, values, seeds, run, device, resume)
+    train = {"ours": meta_train, "ddpg": train_ddpg, "meta-critic": train_meta_critic}[method]
+    result = train(cfg, progress=progress, record=record)
+    per_seed = {}
+    steps_per_it = None
+    for seed, r in zip(seeds, result.seeds):
+        c = r.config
+        worlds = len(c.goals) * c.worlds_per_goal
+        mult = (c.inner_steps + 1) if method == "ours" else 1
+        steps_per_it = mult * worlds * c.horizon
+        rows = r.metrics
+        per_seed[str(seed)] = {
+            "run_dir": str(Path(r.run_dir).relative_to(d)),
+            "iteration": [int(x["iteration"]) for x in rows],
+            "task_loss": [float(x["task_loss"]) for x in rows],
+            "fresh_policy_loss": [[int(x["iteration"]), float(x["fresh_policy_loss"])] for x in rows
+                                  if x.get("fresh_policy_loss") is not None],
+            "seconds": float(sum(x.get("seconds", 0.0) for x in rows)),
+        }
+    first = result.seeds[0].config
+    return {"scene": scene, "method": method, "seeds": per_seed, "env_steps_per_iteration": steps_per_it,
+            "env_steps_counted": STEPS_COUNTED[method], "horizon": first.horizon,
+            "goals": first.goals, "worlds_per_goal": first.worlds_per_goal,
+            "inner_steps": getattr(first, "inner_steps", 1), "iterations": first.iterations}
+
+
+def run_dirs(d: Path, data: dict) -> list[Path]:
+    """The per-seed run directories of a complete metatrain sub-stage, in seed order."""
+    return [d / v["run_dir"] for _, v in sorted(data["result"]["seeds"].items(), key=lambda kv: int(kv[0]))]
+
+
+__all__ = ["METHODS", "run_metatrain_stage", "run_dirs", "make_config", "check_fields_known", "scene_file"]

@@ -1,0 +1,355 @@
+"""The training task every method shares: its config fields, their checks, and the worlds it runs.
+
+:class:`TaskConfig` holds the fields common to meta-training and both baselines (scene, goals,
+horizon, time step, torque bounds, training distribution, run settings). Each method's config
+subclasses it and adds its own hyperparameters, so the three methods train on exactly the same
+task and take the same flags for it.
+
+Defaults that depend on the robot (goals, horizon, ``dt``, torque bounds, ...) are ``None`` here and
+come from the scene's content (:attr:`warp_critic.physics.scene.Scene.defaults`, authored by
+``tools/make_scenes.py``), never from its file name. A scene that does not carry one must be given
+it explicitly (:class:`~warp_critic.core.errors.FieldError` names the field).
+
+:func:`build_task` lays out ``W = G x K`` worlds goal-major (world ``w`` pursues goal ``w // K``) in
+one :class:`~warp_critic.physics.simulator.Simulator` and draws the training start states.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+import os
+import typing
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from warp_critic.core.errors import FieldError
+from warp_critic.learning.networks import Normalizer
+from warp_critic.core.runtime import MAX_SEED, check_threads
+from warp_critic.physics.scene import Scene, Variant, load_scene
+from warp_critic.physics.simulator import STANDARD_GRAVITY
+
+# Used for a field that neither the user nor the scene sets.
+GENERIC_DEFAULTS: dict[str, Any] = dict(horizon=50, dt=0.01, substeps=1, qd_scale=5.0, alpha=1e-3, lr=3e-3,
+                                        gravity=STANDARD_GRAVITY, start_std=0.0, home_starts=0, iterations=300,
+                                        inner_steps=1, critic_input="full")
+DEVICES = ("auto", "cpu", "cuda")
+# Fields that say where/how a run executes, not what it computes: they may change on --resume.
+RUNTIME_FIELDS = ("out", "device", "resume", "cpu_threads", "checkpoint_every", "record_every", "iterations",
+                  "seeds")
+
+
+def spec(default, help: str, *, gt=None, ge=None, le=None, lt=None, cap=None, choices=None):
+    """A dataclass field with its help text and its valid range (checked by :func:`check_fields`).
+
+    ``gt``/``ge``/``lt``/``le``: the range where the value means something; ``cap``: a sanity limit
+    beyond which a value can only be a typo (it would not fit in memory or time).
+    """
+    meta = {"help": help}
+    for key, value in (("gt", gt), ("ge", ge), ("le", le), ("lt", lt), ("cap", cap), ("choices", choices)):
+        if value is not None:
+            meta[key] = value
+    if isinstance(default, list):
+        return field(default_factory=lambda: copy.deepcopy(default), metadata=meta)
+    return field(default=default, metadata=meta)
+
+
+class SerializableConfig:
+    """``to_dict`` / ``from_dict`` (unknown keys ignored) for config dataclasses."""
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict):
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in names})
+
+
+def check_fields(cfg) -> None:
+    """Check every field's type, finiteness and range from its :func:`spec`; raises :class:`FieldError`."""
+    hints = typing.get_type_hints(type(cfg))
+    for f in fields(cfg):
+        value = getattr(cfg, f.name)
+        if value is None:
+            continue
+        hint = hints[f.name]
+        base = next((a for a in typing.get_args(hint) if a is not type(None)), hint) if typing.get_args(hint) else hint
+        if typing.get_origin(base) is list:
+            values = [x for g in value for x in (g if isinstance(g, list) else [g])]
+        else:
+            values = [value]
+        for x in values:
+            _check_value(f.name, x, f.metadata)
+
+
+def _check_value(name: str, x, meta) -> None:
+    if isinstance(x, bool) or isinstance(x, str):
+        if "choices" in meta and x not in meta["choices"]:
+            raise FieldError(name, f"must be one of {', '.join(meta['choices'])} (got {x!r})")
+        return
+    if not isinstance(x, (int, float)) or not math.isfinite(x):
+        raise FieldError(name, f"must be a finite number (got {x!r})")
+    if "cap" in meta and x > meta["cap"]:
+        raise FieldError(name, f"must be <= {meta['cap']} (got {x!r}; larger values cannot be meant)")
+    lo = ("gt", meta["gt"]) if "gt" in meta else ("ge", meta["ge"]) if "ge" in meta else None
+    hi = ("lt", meta["lt"]) if "lt" in meta else ("le", meta["le"]) if "le" in meta else None
+    ok_lo = lo is None or (x > lo[1] if lo[0] == "gt" else x >= lo[1])
+    ok_hi = hi is None or (x < hi[1] if hi[0] == "lt" else x <= hi[1])
+    if ok_lo and ok_hi:
+        return
+    if lo and hi:
+        raise FieldError(name, f"must be in {'(' if lo[0] == 'gt' else '['}{lo[1]}, {hi[1]}"
+                               f"{')' if hi[0] == 'lt' else ']'} (got {x!r})")
+    key, bound = lo if lo else hi
+    word = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}[key]
+    raise FieldError(name, f"must be {word} {bound} (got {x!r})")
+
+
+@dataclass
+class TaskConfig(SerializableConfig):
+    """The task and run settings every method shares. ``None`` = the scene's default."""
+
+    scene: str = spec("scenes/kuka.usda", "USD scene file")
+    goals: list[list[float]] | None = spec(None, "training goals in joint space: inline '0.1,0.2;0.3,0.4' or a .json/.txt file (one goal per line); default: the scene's")
+    iterations: int = spec(300, "outer iterations (critic updates)", gt=0, cap=10**8)
+    horizon: int | None = spec(None, "control steps per rollout", gt=0, cap=10**6)
+    dt: float | None = spec(None, "physics time step (s)", gt=0, cap=1.0)
+    substeps: int | None = spec(None, "physics steps per control step", gt=0, cap=10**4)
+    worlds_per_goal: int = spec(4, "policy initialisations per goal (parallel worlds)", gt=0)
+    start_std: float | None = spec(None, "std (rad) of random initial joint positions around the home pose, drawn per world and iteration (0 = always start at home, as at meta-test); default: the scene's, else 0", ge=0, cap=100)
+    home_starts: int | None = spec(None, "with a start std: this many of each goal's worlds still start at the home pose (as at meta-test) every iteration; default: the scene's, else 0", ge=0)
+    max_torque: list[float] | None = spec(None, "per-joint torque bound of the policy (N·m), comma-separated or one value", gt=0)
+    qd_scale: float | None = spec(None, "velocity normalisation (rad/s)", gt=0)
+    gravity: float | None = spec(None, "gravity along -z (m/s^2); 0 = a perfectly gravity-compensated robot (the iiwa's torque mode, the kuka default)", ge=0, cap=1000)
+    ee_mass: float = spec(0.0, "mass added at the end-effector during training (kg)", ge=0, cap=1e4)
+    link_length: float | None = spec(None, "set the end-effector link length during training (m)", gt=0, cap=100)
+    link_scale: float = spec(1.0, "scale the end-effector link length during training", gt=0, cap=100)
+    seed: int = spec(0, "random seed (fixes everything on CPU)", ge=0, le=MAX_SEED)
+    seeds: list[int] | None = spec(None, "train these seeds at once in one process and one simulator (comma-separated, e.g. 0,1,2,3,4); each seed gets its own run directory OUT/seed<k> with exactly the results of a single-seed run", ge=0, le=MAX_SEED)
+    device: str = spec("auto", "cpu, cuda or auto (cuda when present)")
+    cpu_threads: int | None = spec(None, "torch CPU threads while training (0 = torch's default; default: $WARP_CRITIC_TORCH_THREADS or 1: small networks run fastest on one)")
+    out: str | None = spec(None, "run directory (default runs/<scene>-<method>)")
+    checkpoint_every: int = spec(10, "write a checkpoint every N iterations", gt=0)
+    record_every: int = spec(50, "record rollouts every N iterations", gt=0)
+    resume: bool = spec(False, "continue the run in the run directory from its last checkpoint (the run's saved settings hold; only the iterations may grow)")
+
+    method = "task"  # overridden by each method's config
+    # fields a scene's content may set (a method adds its own, e.g. ours the inner/outer learning rates)
+    scene_fields = ("goals", "horizon", "dt", "substeps", "max_torque", "qd_scale", "gravity", "start_std",
+                    "home_starts")
+
+    # -- defaults and checks -------------------------------------------------------------------
+    def default_out(self) -> str:
+        return f"runs/{Path(self.scene).stem}-{self.method}"
+
+    def fill_defaults(self, scene: Scene) -> "TaskConfig":
+        """Fill ``None`` fields from the scene's content, then the generic defaults."""
+        authored = dict(getattr(scene, "defaults", {}) or {})
+        for name in self.scene_fields:
+            if getattr(self, name) is not None:
+                continue
+            if name in authored:
+                setattr(self, name, copy.deepcopy(authored[name]))
+            elif name in GENERIC_DEFAULTS:
+                setattr(self, name, GENERIC_DEFAULTS[name])
+        if self.goals is None:
+            raise FieldError("goals", f"the scene {scene.path} carries no training goals "
+                                      "(warp_critic:goals); give them explicitly")
+        if self.max_torque is None:  # the joints' own effort limits
+            self.max_torque = [float(x) for x in scene.effort_limit]
+        if self.out is None:
+            self.out = self.default_out()
+        return self
+
+    def check(self, scene: Scene | None = None) -> None:
+        """Check every field (types, finiteness, ranges, cross-field rules); with ``scene``, against it."""
+        check_fields(self)
+        if self.device not in DEVICES and not str(self.device).startswith("cuda:"):
+            raise FieldError("device", f"must be one of {', '.join(DEVICES)} (got {self.device!r})")
+        if self.cpu_threads is not None:
+            check_threads(self.cpu_threads)
+        if self.home_starts > self.worlds_per_goal:
+            raise FieldError("home_starts", f"must be at most worlds_per_goal {self.worlds_per_goal} "
+                                            f"(got {self.home_starts})")
+        if scene is not None:
+            dof = scene.dof
+            if self.max_torque is not None and len(self.max_torque) not in (1, dof):
+                raise FieldError("max_torque", f"needs 1 or {dof} values for {scene.name} (got {len(self.max_torque)})")
+            if self.goals is not None:
+                goals_tensor(self.goals, scene)
+            check_memory(self, dof)
+
+
+# ------------------------------------------------------------------------------------------------
+# goals, torque bounds, memory
+# ------------------------------------------------------------------------------------------------
+
+def goals_tensor(goals, scene: Scene, device="cpu", name: str = "goals") -> torch.Tensor:
+    """Validate goals against the scene (shape, finiteness, joint limits) -> ``(G, dof)`` rad."""
+    try:
+        g = torch.tensor(goals, dtype=torch.float32)
+    except (TypeError, ValueError):
+        raise FieldError(name, "expected a list of goals, each a list of numbers (rows of equal length)") from None
+    if g.ndim != 2 or g.shape[0] == 0 or g.shape[1] != scene.dof:
+        got = list(g.shape)[-1] if g.ndim == 2 else list(g.shape)
+        raise FieldError(name, f"each goal needs {scene.dof} joint values for {scene.name} (got {got})")
+    if not bool(torch.isfinite(g).all()):
+        raise FieldError(name, "goals must be finite numbers")
+    lo = torch.as_tensor(scene.q_lower, dtype=torch.float32)
+    hi = torch.as_tensor(scene.q_upper, dtype=torch.float32)
+    outside = (g < lo) | (g > hi)
+    if bool(outside.any()):
+        i, j = (int(x) for x in torch.nonzero(outside)[0])
+        raise FieldError(name, f"goal {i} joint {j} = {g[i, j]:.3f} is outside the joint limits "
+                               f"[{lo[j]:.3f}, {hi[j]:.3f}] of {scene.name}")
+    return g.to(device)
+
+
+def max_torque_tensor(max_torque: list[float], scene: Scene, device="cpu") -> torch.Tensor:
+    """Per-joint torque bound ``(dof,)``, clipped to the joints' effort limits."""
+    t = torch.tensor(max_torque, dtype=torch.float32)
+    if t.numel() == 1:
+        t = t.expand(scene.dof).clone()
+    if t.numel() != scene.dof:
+        raise FieldError("max_torque", f"needs 1 or {scene.dof} values for {scene.name} (got {t.numel()})")
+    return torch.minimum(t, torch.as_tensor(scene.effort_limit, dtype=torch.float32)).to(device)
+
+
+def available_memory() -> int:
+    """Bytes of memory this process may use (physical memory; the cgroup limit where lower)."""
+    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(path).read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit():
+            total = min(total, int(text))
+    return total
+
+
+def estimate_memory(worlds: int, dof: int, horizon: int, substeps: int, graph_steps: int = 1) -> int:
+    """A coarse upper estimate (bytes) of a run's peak memory.
+
+    Per world and physics step the differentiable model keeps its own state and Featherstone scratch
+    (mass matrix, Jacobians; ~``(6 dof)^2`` floats) for the backward pass; per control step torch keeps
+    the policy activations of every rollout in the graph (``graph_steps`` of them).
+    """
+    per_physics_step = 4 * (6 * dof) ** 2 + 4 * 64 * dof
+    per_control_step = 4 * (3 * 64 + 8 * dof) * 4
+    per_world = horizon * (substeps * per_physics_step + graph_steps * per_control_step)
+    return int(worlds * per_world + 200 * 2**20)
+
+
+def check_memory(cfg: TaskConfig, dof: int, graph_steps: int = 1, copies: int = 1) -> None:
+    """Refuse settings whose memory estimate cannot fit, with the estimate, before allocating."""
+    if not all(isinstance(v, int) for v in (cfg.horizon, cfg.substeps)):
+        return
+    goals = (len(cfg.goals) if cfg.goals else 1) * copies
+    need = estimate_memory(goals * cfg.worlds_per_goal, dof, cfg.horizon, cfg.substeps,
+                           max(graph_steps, getattr(cfg, "inner_steps", 1) + 1))
+    have = available_memory()
+    if need > 0.8 * have:
+        inner = getattr(cfg, "inner_steps", 1)
+        culprit = max((("worlds_per_goal", cfg.worlds_per_goal / 64), ("horizon", cfg.horizon / 1000),
+                       ("substeps", cfg.substeps / 100), ("inner_steps", inner / 100)), key=lambda kv: kv[1])[0]
+        raise FieldError(culprit, f"{goals} goals x {cfg.worlds_per_goal} worlds, horizon {cfg.horizon} x "
+                                            f"{cfg.substeps} substeps, {getattr(cfg, 'inner_steps', 1)} inner steps need about {need / 2**30:.1f} GiB, more than "
+                                            f"80% of the {have / 2**30:.1f} GiB available")
+
+
+# ------------------------------------------------------------------------------------------------
+# the worlds
+# ------------------------------------------------------------------------------------------------
+
+@dataclass
+class Task:
+    """``S`` copies (one per seed) of ``G x K`` worlds of one scene, seed-major then goal-major, with
+    their goals and normaliser. ``W = S x Wc`` worlds in all, ``Wc = G x K`` per copy."""
+
+    cfg: TaskConfig
+    scene: Scene
+    goals: torch.Tensor  # (G, dof) rad, on the CPU
+    sim: Any  # warp_critic.physics.simulator.Simulator
+    goal_index: torch.Tensor  # (W,) goal of each world
+    slot: torch.Tensor  # (W,) index of each world among its goal's worlds
+    goal: torch.Tensor  # (W, dof) each world's goal
+    norm: Normalizer
+    home: torch.Tensor  # (W, dof) the home pose
+    S: int = 1  # copies (seeds)
+
+    @property
+    def G(self) -> int:
+        return self.goals.shape[0]
+
+    @property
+    def K(self) -> int:
+        return self.cfg.worlds_per_goal
+
+    @property
+    def W(self) -> int:
+        return self.goal.shape[0]
+
+    @property
+    def Wc(self) -> int:
+        return self.W // self.S
+
+    @property
+    def device(self) -> torch.device:
+        return self.sim.torch_device
+
+    def copy(self, i: int) -> slice:
+        """The worlds of copy (seed) ``i``."""
+        return slice(i * self.Wc, (i + 1) * self.Wc)
+
+    def goal_index_of(self, i: int) -> torch.Tensor:
+        """``(W,)``: the goal of each world of copy ``i``, -1 for the other copies' worlds."""
+        out = torch.full_like(self.goal_index, -1)
+        out[self.copy(i)] = self.goal_index[self.copy(i)]
+        return out
+
+    def start_states(self, gen: torch.Generator, i: int = 0) -> torch.Tensor:
+        """``(Wc, dof)`` initial joint positions of copy ``i``: home, plus ``N(0, start_std^2)`` inside
+        95% of the limits for all but the first ``home_starts`` worlds of each goal."""
+        home, slot = self.home[self.copy(i)], self.slot[self.copy(i)]
+        if not self.cfg.start_std:
+            return home
+        away = (slot >= self.cfg.home_starts).float().unsqueeze(1)
+        noise = torch.randn(self.Wc, self.scene.dof, generator=gen).to(self.device) * self.cfg.start_std * away
+        return torch.clamp(home + noise, 0.95 * self.sim.q_lower, 0.95 * self.sim.q_upper)
+
+    def per_goal(self, per_world: torch.Tensor) -> torch.Tensor:
+        """``(Wc,) -> (G,)`` mean over each goal's worlds (one copy's worlds)."""
+        idx = self.goal_index[:per_world.shape[0]]
+        return torch.zeros(self.G, device=per_world.device).index_add_(0, idx, per_world) / self.K
+
+
+def load_task_scene(cfg: TaskConfig) -> Scene:
+    """Load the scene, fill the config's defaults from it and check the config; returns the scene."""
+    check_fields(cfg)  # finite numbers before anything is built
+    scene = load_scene(cfg.scene)
+    cfg.fill_defaults(scene)
+    cfg.check(scene)
+    return scene
+
+
+def build_task(cfg: TaskConfig, scene: Scene, *, differentiable: bool, copies: int = 1) -> Task:
+    """The simulator with ``copies x G x K`` worlds (all with the config's dynamics variant)."""
+    from warp_critic.physics.simulator import Simulator
+
+    variant = Variant(ee_mass=cfg.ee_mass, link_length=cfg.link_length, link_scale=cfg.link_scale)
+    goals = goals_tensor(cfg.goals, scene)
+    G, K = goals.shape[0], cfg.worlds_per_goal
+    sim = Simulator(scene, [variant] * (copies * G * K), dt=cfg.dt, substeps=cfg.substeps, device=cfg.device,
+                    differentiable=differentiable, gravity=cfg.gravity)
+    dev = sim.torch_device
+    goal_index = torch.arange(G, device=dev).repeat_interleave(K).repeat(copies)
+    slot = torch.arange(K, device=dev).repeat(G * copies)
+    norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale)
+    home = torch.as_tensor(getattr(scene, "home", [0.0] * scene.dof), dtype=torch.float32, device=dev)
+    return Task(cfg=cfg, scene=scene, goals=goals, sim=sim, goal_index=goal_index, slot=slot,
+                goal=goals.to(dev)[goal_index], norm=norm, home=home.expand(copies * G * K, -1).clone(), S=copies)
