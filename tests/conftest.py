@@ -33,14 +33,26 @@ def finished_run(tmp_path_factory) -> Path:
     from warp_critic.methods.ours import TrainConfig, meta_train
 
     out = tmp_path_factory.mktemp("finished") / "run"
-    meta_train(TrainConfig(scene=REACHER, goals=[[0.5, 0.3], [-0.4, 0.2]], worlds_per_goal=2, horizon=5,
-                           iterations=2, device="cpu", out=str(out), checkpoint_every=1), progress=False)
+    meta_train(
+        TrainConfig(
+            scene=REACHER,
+            goals=[[0.5, 0.3], [-0.4, 0.2]],
+            worlds_per_goal=2,
+            horizon=5,
+            iterations=2,
+            device="cpu",
+            out=str(out),
+            checkpoint_every=1,
+        ),
+        progress=False,
+    )
     return out
 
 
 @pytest.fixture
 def copy_of(tmp_path):
     """``copy_of(run_dir) -> Path``: a private copy of a run directory to modify."""
+
     def make(run: Path) -> Path:
         dest = tmp_path / f"copy-{run.name}"
         shutil.copytree(run, dest)

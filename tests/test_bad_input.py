@@ -34,18 +34,19 @@ import socket
 import subprocess
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
-from typing import Callable
 from unittest import mock
 
 import pytest
 import torch
-from hypothesis import HealthCheck, event, given, settings, strategies as st
+from conftest import REACHER
+from hypothesis import HealthCheck, event, given, settings
+from hypothesis import strategies as st
 
 from warp_critic.cli.main import main
-from conftest import REACHER
 
 LONG = "a" * 300  # a file name the OS refuses (ENAMETOOLONG)
 TINY = ["--iterations", "1", "--horizon", "3", "--worlds-per-goal", "1", "--device", "cpu"]
@@ -54,7 +55,18 @@ DDPG = ["baseline", "ddpg", "{R}", *TINY]
 MC = ["baseline", "meta-critic", "{R}", *TINY]
 TEST = ["meta-test", "{run}", "--device", "cpu", "--num-goals", "1", "--inits", "1"]
 RESUME = ["meta-train", "{R}", "--resume", "--out", "{run}", "--device", "cpu", "--iterations", "3"]
-RESUME_DDPG = ["baseline", "ddpg", "{R}", "--resume", "--out", "{ddpg}", "--device", "cpu", "--iterations", "2"]
+RESUME_DDPG = [
+    "baseline",
+    "ddpg",
+    "{R}",
+    "--resume",
+    "--out",
+    "{ddpg}",
+    "--device",
+    "cpu",
+    "--iterations",
+    "2",
+]
 IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
 HAS_CUDA = torch.cuda.is_available()
 
@@ -63,21 +75,40 @@ HAS_CUDA = torch.cuda.is_available()
 # the finished runs (once per module) and each case's directory
 # ------------------------------------------------------------------------------------------------
 
+
 @pytest.fixture(scope="module")
 def base(tmp_path_factory):
-    from warp_critic.methods.ddpg import train_ddpg
-    from warp_critic.methods.baseline import BaselineConfig
-    from warp_critic.evaluation.metatest import TestConfig, meta_test
     from warp_critic.core.runtime import init
+    from warp_critic.evaluation.metatest import TestConfig, meta_test
+    from warp_critic.methods.baseline import BaselineConfig
+    from warp_critic.methods.ddpg import train_ddpg
     from warp_critic.methods.ours import TrainConfig, meta_train
 
     init()
     d = tmp_path_factory.mktemp("base")
-    meta_train(TrainConfig(scene=REACHER, iterations=2, horizon=3, worlds_per_goal=1, device="cpu",
-                           out=str(d / "run")), progress=False)
+    meta_train(
+        TrainConfig(
+            scene=REACHER,
+            iterations=2,
+            horizon=3,
+            worlds_per_goal=1,
+            device="cpu",
+            out=str(d / "run"),
+        ),
+        progress=False,
+    )
     meta_test(TestConfig(run_dir=str(d / "run"), num_goals=1, inits=1, device="cpu"), progress=None)
-    train_ddpg(BaselineConfig(scene=REACHER, iterations=1, horizon=3, worlds_per_goal=1, device="cpu",
-                              out=str(d / "ddpg")), progress=False)
+    train_ddpg(
+        BaselineConfig(
+            scene=REACHER,
+            iterations=1,
+            horizon=3,
+            worlds_per_goal=1,
+            device="cpu",
+            out=str(d / "ddpg"),
+        ),
+        progress=False,
+    )
     assert (d / "run" / "metatest.json").is_file() and (d / "ddpg" / "checkpoint.pt").is_file()
     return d
 
@@ -98,10 +129,14 @@ def world(tmp_path, base, monkeypatch):
     reacher = Path(REACHER).read_text()
     (t / "myrobot.usda").write_text(reacher)
     assert "warp_critic:goals" in reacher
-    (t / "nogoals.usda").write_text("".join(x for x in reacher.splitlines(keepends=True) if "warp_critic:goals" not in x))
+    (t / "nogoals.usda").write_text(
+        "".join(x for x in reacher.splitlines(keepends=True) if "warp_critic:goals" not in x)
+    )
     assert "float physics:mass = 1\n" in reacher
     (t / "changed").mkdir()
-    (t / "changed" / "reacher.usda").write_text(reacher.replace("float physics:mass = 1\n", "float physics:mass = 1.5\n", 1))
+    (t / "changed" / "reacher.usda").write_text(
+        reacher.replace("float physics:mass = 1\n", "float physics:mass = 1.5\n", 1)
+    )
     goals = t / "goals"
     goals.mkdir()
     (goals / "good.txt").write_text("# two goals\n0.5 0.3\n-0.4, 0.2\n")
@@ -120,8 +155,15 @@ def world(tmp_path, base, monkeypatch):
     monkeypatch.chdir(t)  # default output locations (runs/...) land here too
     monkeypatch.delenv("WARP_CRITIC_TORCH_THREADS", raising=False)
     monkeypatch.delenv("WARP_CRITIC_GRAPHS", raising=False)
-    return SimpleNamespace(t=t, run=t / "run", ddpg=t / "ddpg", user=user, new=t / "new_out", goals=goals,
-                           marker=t / "code-ran")
+    return SimpleNamespace(
+        t=t,
+        run=t / "run",
+        ddpg=t / "ddpg",
+        user=user,
+        new=t / "new_out",
+        goals=goals,
+        marker=t / "code-ran",
+    )
 
 
 def snapshot(root: Path) -> tuple[dict[str, str], set[str]]:
@@ -164,12 +206,14 @@ def run_cli(argv: list[str], limit: float) -> tuple[int, float]:
 # set-ups that change a case's directory before the snapshot
 # ------------------------------------------------------------------------------------------------
 
+
 def drop_key(run: str, key: str):
     def setup(w):
         path = getattr(w, run) / "checkpoint.pt"
         ckpt = torch.load(path, weights_only=False)
         del ckpt[key]
         torch.save(ckpt, path)
+
     return setup
 
 
@@ -186,16 +230,22 @@ class RunsCode:
 def crafted(run: str, full: bool):
     def setup(w):
         path = getattr(w, run) / "checkpoint.pt"
-        ckpt = torch.load(path, weights_only=False) if full else {"kind": "warp-critic/checkpoint-v1"}
+        ckpt = (
+            torch.load(path, weights_only=False) if full else {"kind": "warp-critic/checkpoint-v1"}
+        )
         ckpt["x"] = RunsCode(w.marker)
         torch.save(ckpt, path)
+
     return setup
 
 
 def write_lock(run: str, pid: Callable[[], int], host: Callable[[], str] = socket.gethostname):
     def setup(w):
         w.lock_pid = pid()
-        (getattr(w, run) / ".lock").write_text(json.dumps({"pid": w.lock_pid, "host": host(), "started": 0.0}))
+        (getattr(w, run) / ".lock").write_text(
+            json.dumps({"pid": w.lock_pid, "host": host(), "started": 0.0})
+        )
+
     return setup
 
 
@@ -234,6 +284,7 @@ def list_checkpoint(w):
 def make_dir(name: str):
     def setup(w):
         (w.t / name).mkdir(parents=True)
+
     return setup
 
 
@@ -250,18 +301,24 @@ def copy_result(w):
 # checks after a successful case
 # ------------------------------------------------------------------------------------------------
 
+
 def metrics_rows(path: Path) -> list[dict]:
-    return [json.loads(x) for x in path.read_text().splitlines()]  # every line must be complete JSON
+    return [
+        json.loads(x) for x in path.read_text().splitlines()
+    ]  # every line must be complete JSON
 
 
 def run_written(rel: str, iterations: int, scene: str | None = None):
     def check(w):
         d = w.t / rel
         assert (d / "checkpoint.pt").is_file() and (d / "recording.rrd").is_file()
-        assert [r["iteration"] for r in metrics_rows(d / "metrics.jsonl")] == list(range(iterations))
+        assert [r["iteration"] for r in metrics_rows(d / "metrics.jsonl")] == list(
+            range(iterations)
+        )
         assert not (d / ".lock").exists()
         if scene is not None:
             assert Path(json.loads((d / "config.json").read_text())["scene"]).name == scene
+
     return check
 
 
@@ -269,6 +326,7 @@ def result_written(rel: str, method: str = "ours"):
     def check(w):
         res = json.loads((w.t / rel).read_text())
         assert res["kind"] == "warp-critic/metatest-v1" and res["method"] == method
+
     return check
 
 
@@ -283,6 +341,7 @@ def lock_released(w):
 # ------------------------------------------------------------------------------------------------
 # the table
 # ------------------------------------------------------------------------------------------------
+
 
 @dataclass
 class Case:
@@ -309,32 +368,117 @@ def xfail(reason: str):
     return pytest.mark.xfail(strict=True, reason=reason)
 
 
-FINITE_TRAIN = [("gravity", "nan"), ("start-std", "inf"), ("alpha", "-inf"), ("lr", "nan"), ("ee-mass", "inf"),
-                ("link-length", "nan"), ("link-scale", "-inf"), ("qd-scale", "inf"), ("dt", "nan"), ("dt", "1e999"),
-                ("clip-grad", "NaN"), ("running-weight", "Infinity")]
+FINITE_TRAIN = [
+    ("gravity", "nan"),
+    ("start-std", "inf"),
+    ("alpha", "-inf"),
+    ("lr", "nan"),
+    ("ee-mass", "inf"),
+    ("link-length", "nan"),
+    ("link-scale", "-inf"),
+    ("qd-scale", "inf"),
+    ("dt", "nan"),
+    ("dt", "1e999"),
+    ("clip-grad", "NaN"),
+    ("running-weight", "Infinity"),
+]
 
 CASES = [
     # 1. scene defaults come from the scene's content, not its file name
-    C("c01", "renamed-scene-meta-train", ["meta-train", "{t}/myrobot.usda", *TINY, "--out", "{new}"], code=0,
-      check=run_written("new_out", 1, "myrobot.usda")),
-    C("c01", "renamed-scene-ddpg", ["baseline", "ddpg", "{t}/myrobot.usda", *TINY, "--out", "{new}"], code=0,
-      check=run_written("new_out", 1, "myrobot.usda")),
-    C("c01", "renamed-scene-resumes-run", ["meta-train", "{t}/myrobot.usda", "--resume", "--out", "{run}",
-                                           "--device", "cpu", "--iterations", "3"], code=0, changes=("run/",),
-      check=run_written("run", 3, "myrobot.usda")),
-    C("c01", "no-goals-meta-train", NEW("meta-train", "{t}/nogoals.usda", *TINY), says=("--goals", "nogoals.usda")),
-    C("c01", "no-goals-ddpg", NEW("baseline", "ddpg", "{t}/nogoals.usda", *TINY), says=("--goals",)),
-    C("c01", "no-goals-meta-critic", NEW("baseline", "meta-critic", "{t}/nogoals.usda", *TINY), says=("--goals",)),
-    C("c01", "no-goals-given-inline", ["meta-train", "{t}/nogoals.usda", *TINY, "--goals", "0.5,0.3", "--out", "{new}"],
-      code=0, check=run_written("new_out", 1)),
-    C("c01", "no-goals-given-file", ["meta-train", "{t}/nogoals.usda", *TINY, "--goals", "{t}/goals/good.txt",
-                                     "--out", "{new}"], code=0, check=run_written("new_out", 1)),
-
+    C(
+        "c01",
+        "renamed-scene-meta-train",
+        ["meta-train", "{t}/myrobot.usda", *TINY, "--out", "{new}"],
+        code=0,
+        check=run_written("new_out", 1, "myrobot.usda"),
+    ),
+    C(
+        "c01",
+        "renamed-scene-ddpg",
+        ["baseline", "ddpg", "{t}/myrobot.usda", *TINY, "--out", "{new}"],
+        code=0,
+        check=run_written("new_out", 1, "myrobot.usda"),
+    ),
+    C(
+        "c01",
+        "renamed-scene-resumes-run",
+        [
+            "meta-train",
+            "{t}/myrobot.usda",
+            "--resume",
+            "--out",
+            "{run}",
+            "--device",
+            "cpu",
+            "--iterations",
+            "3",
+        ],
+        code=0,
+        changes=("run/",),
+        check=run_written("run", 3, "myrobot.usda"),
+    ),
+    C(
+        "c01",
+        "no-goals-meta-train",
+        NEW("meta-train", "{t}/nogoals.usda", *TINY),
+        says=("--goals", "nogoals.usda"),
+    ),
+    C(
+        "c01",
+        "no-goals-ddpg",
+        NEW("baseline", "ddpg", "{t}/nogoals.usda", *TINY),
+        says=("--goals",),
+    ),
+    C(
+        "c01",
+        "no-goals-meta-critic",
+        NEW("baseline", "meta-critic", "{t}/nogoals.usda", *TINY),
+        says=("--goals",),
+    ),
+    C(
+        "c01",
+        "no-goals-given-inline",
+        ["meta-train", "{t}/nogoals.usda", *TINY, "--goals", "0.5,0.3", "--out", "{new}"],
+        code=0,
+        check=run_written("new_out", 1),
+    ),
+    C(
+        "c01",
+        "no-goals-given-file",
+        [
+            "meta-train",
+            "{t}/nogoals.usda",
+            *TINY,
+            "--goals",
+            "{t}/goals/good.txt",
+            "--out",
+            "{new}",
+        ],
+        code=0,
+        check=run_written("new_out", 1),
+    ),
     # 2. non-finite numbers in every kind of float flag and in goals files: refused before any work
-    *[C("c02", f"meta-train-{flag}-{value}", NEW(*MT, f"--{flag}={value}"), says=(f"--{flag}", value))
-      for flag, value in FINITE_TRAIN],
-    C("c02", "meta-train-max-torque-list", NEW(*MT, "--max-torque", "20,nan"), says=("--max-torque", "nan")),
-    C("c02", "meta-train-max-torque-one", NEW(*MT, "--max-torque=inf"), says=("--max-torque", "inf")),
+    *[
+        C(
+            "c02",
+            f"meta-train-{flag}-{value}",
+            NEW(*MT, f"--{flag}={value}"),
+            says=(f"--{flag}", value),
+        )
+        for flag, value in FINITE_TRAIN
+    ],
+    C(
+        "c02",
+        "meta-train-max-torque-list",
+        NEW(*MT, "--max-torque", "20,nan"),
+        says=("--max-torque", "nan"),
+    ),
+    C(
+        "c02",
+        "meta-train-max-torque-one",
+        NEW(*MT, "--max-torque=inf"),
+        says=("--max-torque", "inf"),
+    ),
     C("c02", "meta-test-goal-std", [*TEST, "--goal-std", "nan"], says=("--goal-std", "nan")),
     C("c02", "meta-test-alpha", [*TEST, "--alpha", "inf"], says=("--alpha", "inf")),
     C("c02", "meta-test-link-scale", [*TEST, "--link-scale=-inf"], says=("--link-scale", "-inf")),
@@ -342,50 +486,196 @@ CASES = [
     C("c02", "ddpg-tau", NEW(*DDPG, "--tau", "inf"), says=("--tau", "inf")),
     C("c02", "ddpg-actor-lr", NEW(*DDPG, "--actor-lr=-inf"), says=("--actor-lr", "-inf")),
     C("c02", "meta-critic-aux-lr", NEW(*MC, "--aux-lr", "nan"), says=("--aux-lr", "nan")),
-    C("c02", "goals-txt-nan", NEW(*MT, "--goals", "{t}/goals/nan.txt"), says=("--goals", "nan.txt", "nan")),
-    C("c02", "goals-json-nan", NEW(*MT, "--goals", "{t}/goals/nan.json"), says=("--goals", "nan.json", "nan")),
-    C("c02", "goals-json-infinity", NEW(*DDPG, "--goals", "{t}/goals/inf.json"), says=("--goals", "inf.json", "inf")),
-    C("c02", "goals-json-huge-int", NEW(*MT, "--goals", "{t}/goals/huge.json"), says=("--goals", "huge.json")),
+    C(
+        "c02",
+        "goals-txt-nan",
+        NEW(*MT, "--goals", "{t}/goals/nan.txt"),
+        says=("--goals", "nan.txt", "nan"),
+    ),
+    C(
+        "c02",
+        "goals-json-nan",
+        NEW(*MT, "--goals", "{t}/goals/nan.json"),
+        says=("--goals", "nan.json", "nan"),
+    ),
+    C(
+        "c02",
+        "goals-json-infinity",
+        NEW(*DDPG, "--goals", "{t}/goals/inf.json"),
+        says=("--goals", "inf.json", "inf"),
+    ),
+    C(
+        "c02",
+        "goals-json-huge-int",
+        NEW(*MT, "--goals", "{t}/goals/huge.json"),
+        says=("--goals", "huge.json"),
+    ),
     C("c02", "goals-inline-inf", NEW(*MT, "--goals", "0.5,inf"), says=("--goals", "inf")),
-    C("c02", "meta-test-goals-nan", [*TEST, "--goals", "{t}/goals/nan.txt"], says=("--goals", "nan.txt", "nan")),
-
+    C(
+        "c02",
+        "meta-test-goals-nan",
+        [*TEST, "--goals", "{t}/goals/nan.txt"],
+        says=("--goals", "nan.txt", "nan"),
+    ),
     # 3. user mistakes that used to end in tracebacks
     C("c03", "seed-2**32", NEW(*MT, "--seed", str(2**32)), says=("--seed", str(2**32))),
     C("c03", "seed-minus-1", NEW(*MT, "--seed", "-1"), says=("--seed", "-1")),
     C("c03", "ddpg-seed-minus-1", NEW(*DDPG, "--seed=-1"), says=("--seed", "-1")),
     C("c03", "meta-test-seed-2**32", [*TEST, "--seed", str(2**32)], says=("--seed", str(2**32))),
-    C("c03", "ragged-goals-file", NEW(*MT, "--goals", "{t}/goals/ragged.txt"), says=("--goals", "ragged.txt")),
-    C("c03", "binary-goals-txt", NEW(*MT, "--goals", "{t}/goals/binary.txt"), says=("--goals", "binary.txt")),
-    C("c03", "binary-goals-json", [*TEST, "--goals", "{t}/goals/binary.json"], says=("--goals", "binary.json")),
-    C("c03", "deeply-nested-goals-json", NEW(*MT, "--goals", "{t}/goals/deep.json"), says=("--goals", "deep.json")),
+    C(
+        "c03",
+        "ragged-goals-file",
+        NEW(*MT, "--goals", "{t}/goals/ragged.txt"),
+        says=("--goals", "ragged.txt"),
+    ),
+    C(
+        "c03",
+        "binary-goals-txt",
+        NEW(*MT, "--goals", "{t}/goals/binary.txt"),
+        says=("--goals", "binary.txt"),
+    ),
+    C(
+        "c03",
+        "binary-goals-json",
+        [*TEST, "--goals", "{t}/goals/binary.json"],
+        says=("--goals", "binary.json"),
+    ),
+    C(
+        "c03",
+        "deeply-nested-goals-json",
+        NEW(*MT, "--goals", "{t}/goals/deep.json"),
+        says=("--goals", "deep.json"),
+    ),
     C("c03", "cpu-threads-minus-1", NEW(*MT, "--cpu-threads=-1"), says=("--cpu-threads", "-1")),
-    C("c03", "cpu-threads-100000", NEW(*MT, "--cpu-threads", "100000"), says=("--cpu-threads", "100000")),
-    C("c03", "ddpg-cpu-threads-100000", NEW(*DDPG, "--cpu-threads", "100000"), says=("--cpu-threads",)),
-    C("c03", "meta-test-no-critic-state", TEST, setup=drop_key("run", "critic_state"), says=("critic_state",)),
-    C("c03", "resume-no-critic-state", RESUME, setup=drop_key("run", "critic_state"), says=("critic_state",)),
-    C("c03", "ddpg-resume-no-agent-state", RESUME_DDPG, setup=drop_key("ddpg", "agent_state"), says=("agent_state",)),
-    C("c03", "meta-test-garbage-checkpoint", TEST, setup=garbage_checkpoint, says=("checkpoint.pt", "readable")),
-    C("c03", "meta-test-list-checkpoint", TEST, setup=list_checkpoint, says=("checkpoint.pt", "not a warp-critic")),
-    C("c03", "resume-a-ddpg-run", ["meta-train", "{R}", "--resume", "--out", "{ddpg}", "--device", "cpu"],
-      says=("ddpg",)),
-    C("c03", "meta-critic-resume-a-ddpg-run", ["baseline", "meta-critic", "{R}", "--resume", "--out", "{ddpg}",
-                                               "--device", "cpu"], says=("ddpg", "meta-critic")),
-    C("c03", "truncated-last-metrics-line", RESUME, code=0, setup=truncate_metrics, changes=("run/",),
-      check=run_written("run", 3)),
-    C("c03", "corrupt-metrics-middle-line", RESUME, setup=corrupt_metrics_middle, says=("metrics.jsonl", "line 1")),
-    *[C("c03", f"threads-env-{value}", NEW(*MT), env={"WARP_CRITIC_TORCH_THREADS": value},
-        says=("WARP_CRITIC_TORCH_THREADS", value)) for value in ("abc", "0", "-2", "100000", "1.5")],
-    C("c03", "threads-env-meta-test", TEST, env={"WARP_CRITIC_TORCH_THREADS": "abc"},
-      says=("WARP_CRITIC_TORCH_THREADS",)),
-    *[C("c03", f"graphs-env-{value}", NEW(*MT), env={"WARP_CRITIC_GRAPHS": value},
-        says=("WARP_CRITIC_GRAPHS", value)) for value in ("yes", "2", "-1")],
+    C(
+        "c03",
+        "cpu-threads-100000",
+        NEW(*MT, "--cpu-threads", "100000"),
+        says=("--cpu-threads", "100000"),
+    ),
+    C(
+        "c03",
+        "ddpg-cpu-threads-100000",
+        NEW(*DDPG, "--cpu-threads", "100000"),
+        says=("--cpu-threads",),
+    ),
+    C(
+        "c03",
+        "meta-test-no-critic-state",
+        TEST,
+        setup=drop_key("run", "critic_state"),
+        says=("critic_state",),
+    ),
+    C(
+        "c03",
+        "resume-no-critic-state",
+        RESUME,
+        setup=drop_key("run", "critic_state"),
+        says=("critic_state",),
+    ),
+    C(
+        "c03",
+        "ddpg-resume-no-agent-state",
+        RESUME_DDPG,
+        setup=drop_key("ddpg", "agent_state"),
+        says=("agent_state",),
+    ),
+    C(
+        "c03",
+        "meta-test-garbage-checkpoint",
+        TEST,
+        setup=garbage_checkpoint,
+        says=("checkpoint.pt", "readable"),
+    ),
+    C(
+        "c03",
+        "meta-test-list-checkpoint",
+        TEST,
+        setup=list_checkpoint,
+        says=("checkpoint.pt", "not a warp-critic"),
+    ),
+    C(
+        "c03",
+        "resume-a-ddpg-run",
+        ["meta-train", "{R}", "--resume", "--out", "{ddpg}", "--device", "cpu"],
+        says=("ddpg",),
+    ),
+    C(
+        "c03",
+        "meta-critic-resume-a-ddpg-run",
+        ["baseline", "meta-critic", "{R}", "--resume", "--out", "{ddpg}", "--device", "cpu"],
+        says=("ddpg", "meta-critic"),
+    ),
+    C(
+        "c03",
+        "truncated-last-metrics-line",
+        RESUME,
+        code=0,
+        setup=truncate_metrics,
+        changes=("run/",),
+        check=run_written("run", 3),
+    ),
+    C(
+        "c03",
+        "corrupt-metrics-middle-line",
+        RESUME,
+        setup=corrupt_metrics_middle,
+        says=("metrics.jsonl", "line 1"),
+    ),
+    *[
+        C(
+            "c03",
+            f"threads-env-{value}",
+            NEW(*MT),
+            env={"WARP_CRITIC_TORCH_THREADS": value},
+            says=("WARP_CRITIC_TORCH_THREADS", value),
+        )
+        for value in ("abc", "0", "-2", "100000", "1.5")
+    ],
+    C(
+        "c03",
+        "threads-env-meta-test",
+        TEST,
+        env={"WARP_CRITIC_TORCH_THREADS": "abc"},
+        says=("WARP_CRITIC_TORCH_THREADS",),
+    ),
+    *[
+        C(
+            "c03",
+            f"graphs-env-{value}",
+            NEW(*MT),
+            env={"WARP_CRITIC_GRAPHS": value},
+            says=("WARP_CRITIC_GRAPHS", value),
+        )
+        for value in ("yes", "2", "-1")
+    ],
     C("c03", "empty-goals", NEW(*MT, "--goals="), says=("--goals", "no goals")),
     C("c03", "goals-only-separators", NEW(*MT, "--goals", ";;"), says=("--goals", "no goals")),
     C("c03", "goals-a-directory", NEW(*MT, "--goals", "{t}/goals"), says=("--goals", "directory")),
-    C("c03", "goals-empty-file", NEW(*MT, "--goals", "{t}/goals/empty.txt"), says=("--goals", "empty.txt")),
-    C("c03", "goals-missing-file", NEW(*MT, "--goals", "{t}/goals/missing.json"), says=("--goals", "missing.json")),
-    C("c03", "goals-wrong-dof", NEW(*MT, "--goals", "0.1,0.2,0.3"), says=("--goals", "2 joint values")),
-    C("c03", "meta-test-goals-wrong-dof", [*TEST, "--goals", "0.1,0.2,0.3"], says=("--goals", "2 joint values")),
+    C(
+        "c03",
+        "goals-empty-file",
+        NEW(*MT, "--goals", "{t}/goals/empty.txt"),
+        says=("--goals", "empty.txt"),
+    ),
+    C(
+        "c03",
+        "goals-missing-file",
+        NEW(*MT, "--goals", "{t}/goals/missing.json"),
+        says=("--goals", "missing.json"),
+    ),
+    C(
+        "c03",
+        "goals-wrong-dof",
+        NEW(*MT, "--goals", "0.1,0.2,0.3"),
+        says=("--goals", "2 joint values"),
+    ),
+    C(
+        "c03",
+        "meta-test-goals-wrong-dof",
+        [*TEST, "--goals", "0.1,0.2,0.3"],
+        says=("--goals", "2 joint values"),
+    ),
     C("c03", "meta-test-around-minus-1", [*TEST, "--around=-1"], says=("--around", "-1")),
     C("c03", "meta-test-around-past-the-goals", [*TEST, "--around", "0,9"], says=("--around", "9")),
     C("c03", "binary-scene", NEW("meta-train", "{t}/binary.usda", *TINY), says=("binary.usda",)),
@@ -395,161 +685,530 @@ CASES = [
     C("c03", "home-starts-over-worlds", NEW(*MT, "--home-starts", "2"), says=("--home-starts",)),
     C("c03", "max-torque-wrong-count", NEW(*MT, "--max-torque", "1,2,3"), says=("--max-torque",)),
     C("c03", "max-torque-no-values", NEW(*MT, "--max-torque", ","), says=("--max-torque",)),
-    C("c03", "meta-test-run-is-a-file", ["meta-test", "{t}/afile", "--device", "cpu"], says=("afile",)),
-    C("c03", "meta-test-run-is-user-dir", ["meta-test", "{user}", "--device", "cpu"], says=("user",)),
-    C("c03", "meta-test-missing-run", ["meta-test", "{new}", "--device", "cpu"], says=("new_out", "not found")),
+    C(
+        "c03",
+        "meta-test-run-is-a-file",
+        ["meta-test", "{t}/afile", "--device", "cpu"],
+        says=("afile",),
+    ),
+    C(
+        "c03",
+        "meta-test-run-is-user-dir",
+        ["meta-test", "{user}", "--device", "cpu"],
+        says=("user",),
+    ),
+    C(
+        "c03",
+        "meta-test-missing-run",
+        ["meta-test", "{new}", "--device", "cpu"],
+        says=("new_out", "not found"),
+    ),
     C("c03", "unknown-flag", NEW(*MT, "--horizn", "3"), says=("--horizn",)),
     C("c03", "unknown-command", ["meta-trian", "{R}"], says=("meta-trian",)),
     C("c03", "int-flag-float-text", NEW(*MT, "--horizon", "2.5"), says=("--horizon", "2.5")),
-
     # 4. the file system: refused before any work, nothing created, no temporary file left
     C("c04", "out-is-a-file", [*MT, "--out", "{t}/afile"], says=("afile", "file")),
     C("c04", "out-under-a-file", [*MT, "--out", "{t}/afile/sub"], says=("afile",)),
     C("c04", "ddpg-out-under-a-file", [*DDPG, "--out", "{t}/afile/sub/deeper"], says=("afile",)),
     C("c04", "meta-test-out-is-a-directory", [*TEST, "--out", "{user}"], says=("user",)),
-    C("c04", "meta-test-out-is-a-json-directory", [*TEST, "--out", "{t}/dir.json"], setup=make_dir("dir.json"),
-      says=("dir.json", "directory")),
-    C("c04", "meta-test-out-parent-is-a-file", [*TEST, "--out", "{t}/afile/x.json"], says=("afile",)),
-    C("c04", "meta-test-out-grandparent-is-a-file", [*TEST, "--out", "{t}/afile/a/b/x.json"], says=("afile",)),
-    C("c04", "read-only-out-parent", [*MT, "--out", "{t}/ro/sub"], setup=read_only_dir, says=("ro",),
-      marks=pytest.mark.skipif(IS_ROOT, reason="root ignores permissions")),
-    C("c04", "meta-test-read-only-out", [*TEST, "--out", "{t}/ro/x.json"], setup=read_only_dir, says=("ro",),
-      marks=pytest.mark.skipif(IS_ROOT, reason="root ignores permissions")),
-
+    C(
+        "c04",
+        "meta-test-out-is-a-json-directory",
+        [*TEST, "--out", "{t}/dir.json"],
+        setup=make_dir("dir.json"),
+        says=("dir.json", "directory"),
+    ),
+    C(
+        "c04",
+        "meta-test-out-parent-is-a-file",
+        [*TEST, "--out", "{t}/afile/x.json"],
+        says=("afile",),
+    ),
+    C(
+        "c04",
+        "meta-test-out-grandparent-is-a-file",
+        [*TEST, "--out", "{t}/afile/a/b/x.json"],
+        says=("afile",),
+    ),
+    C(
+        "c04",
+        "read-only-out-parent",
+        [*MT, "--out", "{t}/ro/sub"],
+        setup=read_only_dir,
+        says=("ro",),
+        marks=pytest.mark.skipif(IS_ROOT, reason="root ignores permissions"),
+    ),
+    C(
+        "c04",
+        "meta-test-read-only-out",
+        [*TEST, "--out", "{t}/ro/x.json"],
+        setup=read_only_dir,
+        says=("ro",),
+        marks=pytest.mark.skipif(IS_ROOT, reason="root ignores permissions"),
+    ),
     # paths the system refuses: a name over 255 bytes
     C("c04", "meta-train-out-name-too-long", [*MT, "--out", "{t}/" + LONG], says=("too long",)),
-    C("c04", "meta-train-scene-name-too-long", ["meta-train", "{t}/" + LONG + ".usda", *TINY], says=("too long",)),
-    C("c04", "meta-train-goals-name-too-long", NEW(*MT, "--goals", "{t}/" + LONG + ".json"), says=("too long",)),
-    C("c04", "meta-test-run-name-too-long", ["meta-test", "{t}/" + LONG, "--device", "cpu"], says=("too long",)),
-    C("c04", "reproduce-out-name-too-long", ["reproduce", "--quick", "--out", "{t}/" + LONG], says=("too long",)),
-    C("c04", "toy-out-name-too-long", ["analyze", "toy", "--out", "{t}/" + LONG], says=("too long",)),
-
+    C(
+        "c04",
+        "meta-train-scene-name-too-long",
+        ["meta-train", "{t}/" + LONG + ".usda", *TINY],
+        says=("too long",),
+    ),
+    C(
+        "c04",
+        "meta-train-goals-name-too-long",
+        NEW(*MT, "--goals", "{t}/" + LONG + ".json"),
+        says=("too long",),
+    ),
+    C(
+        "c04",
+        "meta-test-run-name-too-long",
+        ["meta-test", "{t}/" + LONG, "--device", "cpu"],
+        says=("too long",),
+    ),
+    C(
+        "c04",
+        "reproduce-out-name-too-long",
+        ["reproduce", "--quick", "--out", "{t}/" + LONG],
+        says=("too long",),
+    ),
+    C(
+        "c04",
+        "toy-out-name-too-long",
+        ["analyze", "toy", "--out", "{t}/" + LONG],
+        says=("too long",),
+    ),
     # 5. files that are not ours are never overwritten, files of ours only by their own kind
-    C("c05", "meta-test-out-checkpoint", [*TEST, "--out", "{run}/checkpoint.pt"], says=("checkpoint.pt",)),
-    C("c05", "meta-test-out-run-config", [*TEST, "--out", "{run}/config.json"], says=("config.json",)),
-    C("c05", "meta-test-out-user-json", [*TEST, "--out", "{t}/user_file.json"], says=("user_file.json",)),
-    C("c05", "meta-test-out-user-config", [*TEST, "--out", "{user}/config.json"], says=("config.json",)),
-    C("c05", "meta-test-out-user-metrics", [*TEST, "--out", "{user}/metrics.jsonl"], says=("metrics.jsonl",)),
+    C(
+        "c05",
+        "meta-test-out-checkpoint",
+        [*TEST, "--out", "{run}/checkpoint.pt"],
+        says=("checkpoint.pt",),
+    ),
+    C(
+        "c05",
+        "meta-test-out-run-config",
+        [*TEST, "--out", "{run}/config.json"],
+        says=("config.json",),
+    ),
+    C(
+        "c05",
+        "meta-test-out-user-json",
+        [*TEST, "--out", "{t}/user_file.json"],
+        says=("user_file.json",),
+    ),
+    C(
+        "c05",
+        "meta-test-out-user-config",
+        [*TEST, "--out", "{user}/config.json"],
+        says=("config.json",),
+    ),
+    C(
+        "c05",
+        "meta-test-out-user-metrics",
+        [*TEST, "--out", "{user}/metrics.jsonl"],
+        says=("metrics.jsonl",),
+    ),
     C("c05", "meta-test-out-user-notes", [*TEST, "--out", "{t}/notes.txt"], says=("notes.txt",)),
     C("c05", "meta-train-into-user-dir", [*MT, "--out", "{user}"], says=("user", "not empty")),
     C("c05", "meta-train-into-cwd", [*MT, "--out", "."], says=("not empty",)),
     C("c05", "ddpg-into-user-dir", [*DDPG, "--out", "{user}"], says=("user", "not empty")),
     C("c05", "meta-critic-into-user-dir", [*MC, "--out", "{user}"], says=("user",)),
-    C("c05", "resume-user-dir", ["meta-train", "{R}", "--resume", "--out", "{user}", "--device", "cpu"],
-      says=("user",)),
+    C(
+        "c05",
+        "resume-user-dir",
+        ["meta-train", "{R}", "--resume", "--out", "{user}", "--device", "cpu"],
+        says=("user",),
+    ),
     C("c05", "meta-train-over-a-run", [*MT, "--out", "{run}"], says=("run", "--resume")),
     C("c05", "ddpg-over-a-run", [*DDPG, "--out", "{ddpg}"], says=("ddpg", "--resume")),
     C("c05", "ddpg-over-our-run", [*DDPG, "--out", "{run}"], says=("run",)),
-
     # 6. locks
-    C("c06", "live-lock-parent", RESUME, setup=write_lock("run", os.getppid), says=("process {lock_pid}",)),
+    C(
+        "c06",
+        "live-lock-parent",
+        RESUME,
+        setup=write_lock("run", os.getppid),
+        says=("process {lock_pid}",),
+    ),
     C("c06", "live-lock-pid-1", RESUME, setup=write_lock("run", lambda: 1), says=("process 1 ",)),
-    C("c06", "lock-of-another-host", RESUME, setup=write_lock("run", dead_pid, lambda: "another-host.example"),
-      says=("another-host.example",)),
+    C(
+        "c06",
+        "lock-of-another-host",
+        RESUME,
+        setup=write_lock("run", dead_pid, lambda: "another-host.example"),
+        says=("another-host.example",),
+    ),
     C("c06", "garbage-lock", RESUME, setup=garbage_lock, says=("locked",)),
-    C("c06", "ddpg-live-lock", RESUME_DDPG, setup=write_lock("ddpg", os.getppid), says=("process {lock_pid}",)),
-    C("c06", "dead-lock-taken-over", RESUME, code=0, setup=write_lock("run", dead_pid), warns=1,
-      says=("{lock_pid}", "taking over"), changes=("run/",), check=lambda w: (run_written("run", 3)(w), lock_released(w))),
-    C("c06", "ddpg-dead-lock-taken-over", RESUME_DDPG, code=0, setup=write_lock("ddpg", dead_pid), warns=1,
-      says=("{lock_pid}",), changes=("ddpg/",), check=run_written("ddpg", 2)),
-
+    C(
+        "c06",
+        "ddpg-live-lock",
+        RESUME_DDPG,
+        setup=write_lock("ddpg", os.getppid),
+        says=("process {lock_pid}",),
+    ),
+    C(
+        "c06",
+        "dead-lock-taken-over",
+        RESUME,
+        code=0,
+        setup=write_lock("run", dead_pid),
+        warns=1,
+        says=("{lock_pid}", "taking over"),
+        changes=("run/",),
+        check=lambda w: (run_written("run", 3)(w), lock_released(w)),
+    ),
+    C(
+        "c06",
+        "ddpg-dead-lock-taken-over",
+        RESUME_DDPG,
+        code=0,
+        setup=write_lock("ddpg", dead_pid),
+        warns=1,
+        says=("{lock_pid}",),
+        changes=("ddpg/",),
+        check=run_written("ddpg", 2),
+    ),
     # 7. resume: the saved settings hold
     C("c07", "resume-other-horizon", [*RESUME, "--horizon", "4"], says=("horizon", "3", "4")),
     C("c07", "resume-other-worlds", [*RESUME, "--worlds-per-goal", "3"], says=("worlds", "1 -> 3")),
-    C("c07", "resume-other-critic-input", [*RESUME, "--critic-input", "relative"], says=("--critic-input", "relative")),
+    C(
+        "c07",
+        "resume-other-critic-input",
+        [*RESUME, "--critic-input", "relative"],
+        says=("--critic-input", "relative"),
+    ),
     C("c07", "resume-other-seed", [*RESUME, "--seed", "7"], says=("seed", "7")),
     C("c07", "ddpg-resume-other-gamma", [*RESUME_DDPG, "--gamma", "0.5"], says=("gamma", "0.5")),
     C("c07", "resume-iterations-0", [*RESUME, "--iterations", "0"], says=("--iterations",)),
     C("c07", "resume-fewer-iterations", [*RESUME, "--iterations", "1"], says=("--iterations", "2")),
-    C("c07", "resume-changed-scene", ["meta-train", "{t}/changed/reacher.usda", "--resume", "--out", "{run}",
-                                      "--device", "cpu", "--iterations", "3"], says=("scene", "differs")),
-    C("c07", "resume-missing-run", ["meta-train", "{R}", "--resume", "--out", "{new}", "--device", "cpu"],
-      says=("new_out", "not found")),
-    C("c07", "resume-missing-metrics", RESUME, code=0, setup=delete_metrics, warns=1, says=("metrics.jsonl", "missing"),
-      changes=("run/",)),
-
+    C(
+        "c07",
+        "resume-changed-scene",
+        [
+            "meta-train",
+            "{t}/changed/reacher.usda",
+            "--resume",
+            "--out",
+            "{run}",
+            "--device",
+            "cpu",
+            "--iterations",
+            "3",
+        ],
+        says=("scene", "differs"),
+    ),
+    C(
+        "c07",
+        "resume-missing-run",
+        ["meta-train", "{R}", "--resume", "--out", "{new}", "--device", "cpu"],
+        says=("new_out", "not found"),
+    ),
+    C(
+        "c07",
+        "resume-missing-metrics",
+        RESUME,
+        code=0,
+        setup=delete_metrics,
+        warns=1,
+        says=("metrics.jsonl", "missing"),
+        changes=("run/",),
+    ),
     # 8. absurd sizes: refused at once, naming an estimate or a limit
-    C("c08", "worlds-per-goal-1e9", NEW(*MT, "--worlds-per-goal", "1000000000"), says=("--worlds-per-goal", "GiB"), seconds=5),
-    C("c08", "inner-steps-1e9", NEW(*MT, "--inner-steps", "1000000000"), says=("--inner-steps", "10000"), seconds=5),
-    C("c08", "horizon-1e8", NEW(*MT, "--horizon", "100000000"), says=("--horizon", "1000000"), seconds=5),
-    C("c08", "iterations-1e12", NEW(*MT, "--iterations", str(10**12)), says=("--iterations", "100000000"), seconds=5),
+    C(
+        "c08",
+        "worlds-per-goal-1e9",
+        NEW(*MT, "--worlds-per-goal", "1000000000"),
+        says=("--worlds-per-goal", "GiB"),
+        seconds=5,
+    ),
+    C(
+        "c08",
+        "inner-steps-1e9",
+        NEW(*MT, "--inner-steps", "1000000000"),
+        says=("--inner-steps", "10000"),
+        seconds=5,
+    ),
+    C(
+        "c08",
+        "horizon-1e8",
+        NEW(*MT, "--horizon", "100000000"),
+        says=("--horizon", "1000000"),
+        seconds=5,
+    ),
+    C(
+        "c08",
+        "iterations-1e12",
+        NEW(*MT, "--iterations", str(10**12)),
+        says=("--iterations", "100000000"),
+        seconds=5,
+    ),
     C("c08", "substeps-1e9", NEW(*MT, "--substeps", str(10**9)), says=("--substeps",), seconds=5),
-    C("c08", "critic-hidden-1e9", NEW(*MT, "--critic-hidden", str(10**9)), says=("--critic-hidden",), seconds=5),
-    C("c08", "ddpg-worlds-per-goal-1e9", NEW(*DDPG, "--worlds-per-goal", str(10**9)), says=("--worlds-per-goal", "GiB"),
-      seconds=5),
-    C("c08", "ddpg-buffer-size-1e12", NEW(*DDPG, "--buffer-size", str(10**12)), says=("--buffer-size", "1000000000"), seconds=5),
-    C("c08", "ddpg-batch-size-1e9", NEW(*DDPG, "--batch-size", str(10**9)), says=("--batch-size", "10000000"), seconds=5),
-    C("c08", "ddpg-updates-1e12", NEW(*DDPG, "--updates-per-iteration", str(10**12)), says=("--updates-per-iteration",),
-      seconds=5),
-    C("c08", "meta-test-inits-1e9", [*TEST, "--inits", str(10**9)], says=("--inits", "1000000"), seconds=5),
-    C("c08", "meta-test-num-goals-1e9", [*TEST, "--num-goals", str(10**9)], says=("--num-goals",), seconds=5),
-    C("c08", "meta-test-policy-steps-1e9", [*TEST, "--policy-steps", str(10**9)], says=("--policy-steps",), seconds=5),
-    C("c08", "meta-test-horizon-1e9", [*TEST, "--horizon", str(10**9)], says=("--horizon",), seconds=5),
-    C("c08", "meta-test-1e7-worlds", ["meta-test", "{run}", "--device", "cpu", "--num-goals", "10", "--inits", "1000000"],
-      says=("--inits",), seconds=5),
-
+    C(
+        "c08",
+        "critic-hidden-1e9",
+        NEW(*MT, "--critic-hidden", str(10**9)),
+        says=("--critic-hidden",),
+        seconds=5,
+    ),
+    C(
+        "c08",
+        "ddpg-worlds-per-goal-1e9",
+        NEW(*DDPG, "--worlds-per-goal", str(10**9)),
+        says=("--worlds-per-goal", "GiB"),
+        seconds=5,
+    ),
+    C(
+        "c08",
+        "ddpg-buffer-size-1e12",
+        NEW(*DDPG, "--buffer-size", str(10**12)),
+        says=("--buffer-size", "1000000000"),
+        seconds=5,
+    ),
+    C(
+        "c08",
+        "ddpg-batch-size-1e9",
+        NEW(*DDPG, "--batch-size", str(10**9)),
+        says=("--batch-size", "10000000"),
+        seconds=5,
+    ),
+    C(
+        "c08",
+        "ddpg-updates-1e12",
+        NEW(*DDPG, "--updates-per-iteration", str(10**12)),
+        says=("--updates-per-iteration",),
+        seconds=5,
+    ),
+    C(
+        "c08",
+        "meta-test-inits-1e9",
+        [*TEST, "--inits", str(10**9)],
+        says=("--inits", "1000000"),
+        seconds=5,
+    ),
+    C(
+        "c08",
+        "meta-test-num-goals-1e9",
+        [*TEST, "--num-goals", str(10**9)],
+        says=("--num-goals",),
+        seconds=5,
+    ),
+    C(
+        "c08",
+        "meta-test-policy-steps-1e9",
+        [*TEST, "--policy-steps", str(10**9)],
+        says=("--policy-steps",),
+        seconds=5,
+    ),
+    C(
+        "c08",
+        "meta-test-horizon-1e9",
+        [*TEST, "--horizon", str(10**9)],
+        says=("--horizon",),
+        seconds=5,
+    ),
+    C(
+        "c08",
+        "meta-test-1e7-worlds",
+        ["meta-test", "{run}", "--device", "cpu", "--num-goals", "10", "--inits", "1000000"],
+        says=("--inits",),
+        seconds=5,
+    ),
     # 9. a crafted checkpoint's code never runs
-    C("c09", "meta-test-crafted-checkpoint", TEST, setup=crafted("run", full=False), says=("checkpoint.pt", "refused"),
-      check=no_code_ran),
-    C("c09", "resume-crafted-checkpoint", RESUME, setup=crafted("run", full=True), says=("checkpoint.pt", "refused"),
-      check=no_code_ran),
-    C("c09", "ddpg-resume-crafted-checkpoint", RESUME_DDPG, setup=crafted("ddpg", full=True),
-      says=("checkpoint.pt", "refused"), check=no_code_ran),
-    C("c09", "meta-test-crafted-ddpg-checkpoint", ["meta-test", "{ddpg}", "--device", "cpu"],
-      setup=crafted("ddpg", full=True), says=("checkpoint.pt", "refused"), check=no_code_ran),
-
+    C(
+        "c09",
+        "meta-test-crafted-checkpoint",
+        TEST,
+        setup=crafted("run", full=False),
+        says=("checkpoint.pt", "refused"),
+        check=no_code_ran,
+    ),
+    C(
+        "c09",
+        "resume-crafted-checkpoint",
+        RESUME,
+        setup=crafted("run", full=True),
+        says=("checkpoint.pt", "refused"),
+        check=no_code_ran,
+    ),
+    C(
+        "c09",
+        "ddpg-resume-crafted-checkpoint",
+        RESUME_DDPG,
+        setup=crafted("ddpg", full=True),
+        says=("checkpoint.pt", "refused"),
+        check=no_code_ran,
+    ),
+    C(
+        "c09",
+        "meta-test-crafted-ddpg-checkpoint",
+        ["meta-test", "{ddpg}", "--device", "cpu"],
+        setup=crafted("ddpg", full=True),
+        says=("checkpoint.pt", "refused"),
+        check=no_code_ran,
+    ),
     # 10. zero is a value, not "the default"
-    *[C("c10", f"meta-test-{flag}-0", [*TEST, f"--{flag}", "0"], says=(f"--{flag}", "> 0"))
-      for flag in ("alpha", "horizon", "policy-steps", "inits", "num-goals")],
-    *[C("c10", f"meta-train-{flag}-0", NEW(*MT, f"--{flag}", "0"), says=(f"--{flag}", "> 0"))
-      for flag in ("worlds-per-goal", "inner-steps", "dt", "qd-scale", "substeps", "critic-hidden")],
-    *[C("c10", f"ddpg-{flag}-0", NEW(*DDPG, f"--{flag}", "0"), says=(f"--{flag}",))
-      for flag in ("batch-size", "gamma", "tau", "updates-per-iteration")],
-
+    *[
+        C("c10", f"meta-test-{flag}-0", [*TEST, f"--{flag}", "0"], says=(f"--{flag}", "> 0"))
+        for flag in ("alpha", "horizon", "policy-steps", "inits", "num-goals")
+    ],
+    *[
+        C("c10", f"meta-train-{flag}-0", NEW(*MT, f"--{flag}", "0"), says=(f"--{flag}", "> 0"))
+        for flag in (
+            "worlds-per-goal",
+            "inner-steps",
+            "dt",
+            "qd-scale",
+            "substeps",
+            "critic-hidden",
+        )
+    ],
+    *[
+        C("c10", f"ddpg-{flag}-0", NEW(*DDPG, f"--{flag}", "0"), says=(f"--{flag}",))
+        for flag in ("batch-size", "gamma", "tau", "updates-per-iteration")
+    ],
     # 11. early failures leave no directory behind, not even the parents of --out
     C("c11", "nested-out-bad-flag", [*MT, "--lr", "nan", "--out", "{t}/a/b/c"], says=("--lr",)),
-    C("c11", "nested-out-bad-scene", ["meta-train", "{t}/missing.usda", *TINY, "--out", "{t}/a/b/c"],
-      says=("missing.usda",)),
-    C("c11", "ddpg-nested-out-bad-seed", [*DDPG, "--seed=-1", "--out", "{t}/a/b/c"], says=("--seed",)),
-    C("c11", "meta-test-nested-out-bad-alpha", [*TEST, "--alpha", "0", "--out", "{t}/a/b/x.json"], says=("--alpha",)),
-    C("c11", "meta-test-nested-out-bad-checkpoint", [*TEST, "--out", "{t}/a/b/x.json"],
-      setup=drop_key("run", "critic_state"), says=("critic_state",)),
-    C("c11", "no-cuda-device", NEW(*MT, "--device", "cuda"), says=("--device", "cuda"),
-      marks=pytest.mark.skipif(HAS_CUDA, reason="needs a machine without CUDA")),
-    C("c11", "no-cuda-device-nested-out", [*MT, "--device", "cuda", "--out", "{t}/a/b/c"], says=("--device", "cuda"),
-      marks=pytest.mark.skipif(HAS_CUDA, reason="needs a machine without CUDA")),
-
+    C(
+        "c11",
+        "nested-out-bad-scene",
+        ["meta-train", "{t}/missing.usda", *TINY, "--out", "{t}/a/b/c"],
+        says=("missing.usda",),
+    ),
+    C(
+        "c11",
+        "ddpg-nested-out-bad-seed",
+        [*DDPG, "--seed=-1", "--out", "{t}/a/b/c"],
+        says=("--seed",),
+    ),
+    C(
+        "c11",
+        "meta-test-nested-out-bad-alpha",
+        [*TEST, "--alpha", "0", "--out", "{t}/a/b/x.json"],
+        says=("--alpha",),
+    ),
+    C(
+        "c11",
+        "meta-test-nested-out-bad-checkpoint",
+        [*TEST, "--out", "{t}/a/b/x.json"],
+        setup=drop_key("run", "critic_state"),
+        says=("critic_state",),
+    ),
+    C(
+        "c11",
+        "no-cuda-device",
+        NEW(*MT, "--device", "cuda"),
+        says=("--device", "cuda"),
+        marks=pytest.mark.skipif(HAS_CUDA, reason="needs a machine without CUDA"),
+    ),
+    C(
+        "c11",
+        "no-cuda-device-nested-out",
+        [*MT, "--device", "cuda", "--out", "{t}/a/b/c"],
+        says=("--device", "cuda"),
+        marks=pytest.mark.skipif(HAS_CUDA, reason="needs a machine without CUDA"),
+    ),
     # 12. valid input still works
     C("c12", "meta-train", NEW(*MT), code=0, check=run_written("new_out", 1)),
     C("c12", "ddpg", NEW(*DDPG), code=0, check=run_written("new_out", 1)),
     C("c12", "meta-critic", NEW(*MC), code=0, check=run_written("new_out", 1)),
     C("c12", "resume", RESUME, code=0, changes=("run/",), check=run_written("run", 3)),
-    C("c12", "meta-test-out-json", [*TEST, "--out", "{t}/x.json"], code=0, check=result_written("x.json")),
-    C("c12", "meta-test-out-new-dirs", [*TEST, "--out", "{t}/results/today/x.json"], code=0,
-      check=result_written("results/today/x.json")),
-    C("c12", "meta-test-overwrites-own-result", TEST, code=0, changes=("run/metatest.json",),
-      check=result_written("run/metatest.json")),
-    C("c12", "meta-test-overwrites-earlier-result", [*TEST, "--out", "{t}/prev.json"], setup=copy_result, code=0,
-      changes=("prev.json",), check=result_written("prev.json")),
-    C("c12", "meta-test-ddpg", ["meta-test", "{ddpg}", "--device", "cpu", "--num-goals", "1", "--inits", "1",
-                                "--out", "{t}/d.json"], code=0, check=result_written("d.json", "ddpg")),
+    C(
+        "c12",
+        "meta-test-out-json",
+        [*TEST, "--out", "{t}/x.json"],
+        code=0,
+        check=result_written("x.json"),
+    ),
+    C(
+        "c12",
+        "meta-test-out-new-dirs",
+        [*TEST, "--out", "{t}/results/today/x.json"],
+        code=0,
+        check=result_written("results/today/x.json"),
+    ),
+    C(
+        "c12",
+        "meta-test-overwrites-own-result",
+        TEST,
+        code=0,
+        changes=("run/metatest.json",),
+        check=result_written("run/metatest.json"),
+    ),
+    C(
+        "c12",
+        "meta-test-overwrites-earlier-result",
+        [*TEST, "--out", "{t}/prev.json"],
+        setup=copy_result,
+        code=0,
+        changes=("prev.json",),
+        check=result_written("prev.json"),
+    ),
+    C(
+        "c12",
+        "meta-test-ddpg",
+        [
+            "meta-test",
+            "{ddpg}",
+            "--device",
+            "cpu",
+            "--num-goals",
+            "1",
+            "--inits",
+            "1",
+            "--out",
+            "{t}/d.json",
+        ],
+        code=0,
+        check=result_written("d.json", "ddpg"),
+    ),
     C("c12", "meta-test-goal-std-0", [*TEST, "--goal-std", "0", "--out", "{t}/x.json"], code=0),
-    C("c12", "meta-test-goals-file", [*TEST, "--goals", "{t}/goals/good.txt", "--out", "{t}/x.json"], code=0),
+    C(
+        "c12",
+        "meta-test-goals-file",
+        [*TEST, "--goals", "{t}/goals/good.txt", "--out", "{t}/x.json"],
+        code=0,
+    ),
     C("c12", "meta-train-gravity-0", NEW(*MT, "--gravity", "0", "--start-std", "0"), code=0),
     # a long inline goal list is not a file name (the OS refuses names over 255 bytes)
-    C("c12", "meta-test-long-inline-goals", [*TEST, "--goals=" + ";".join(["-0.25,0.125"] * 40), "--out", "{t}/x.json"],
-      code=0, check=result_written("x.json")),
-
+    C(
+        "c12",
+        "meta-test-long-inline-goals",
+        [*TEST, "--goals=" + ";".join(["-0.25,0.125"] * 40), "--out", "{t}/x.json"],
+        code=0,
+        check=result_written("x.json"),
+    ),
     # the analyses (being refactored elsewhere)
     C("ana", "toy-s0-nan", NEW("analyze", "toy", "--s0", "nan"), says=("--s0", "nan")),
     C("ana", "toy-iters-0", NEW("analyze", "toy", "--iters", "0"), says=("--iters",)),
     C("ana", "toy-alpha-minus-inf", NEW("analyze", "toy", "--alpha=-inf"), says=("--alpha", "inf")),
     C("ana", "toy-out-is-a-file", ["analyze", "toy", "--out", "{t}/afile"], says=("afile",)),
     C("ana", "toy-out-under-a-file", ["analyze", "toy", "--out", "{t}/afile/sub"], says=("afile",)),
-    C("ana", "landscape-grid-1e5", NEW("analyze", "landscape", "--grid", "100000"), says=("--grid",), seconds=5),
-    C("ana", "landscape-range-nan", NEW("analyze", "landscape", "--range", "nan"), says=("--range", "nan")),
-    C("ana", "landscape-goal-nan", NEW("analyze", "landscape", "--goal", "nan,1"), says=("--goal", "nan")),
-    C("ana", "landscape-iterations-0", NEW("analyze", "landscape", "--iterations", "0"), says=("--iterations",)),
+    C(
+        "ana",
+        "landscape-grid-1e5",
+        NEW("analyze", "landscape", "--grid", "100000"),
+        says=("--grid",),
+        seconds=5,
+    ),
+    C(
+        "ana",
+        "landscape-range-nan",
+        NEW("analyze", "landscape", "--range", "nan"),
+        says=("--range", "nan"),
+    ),
+    C(
+        "ana",
+        "landscape-goal-nan",
+        NEW("analyze", "landscape", "--goal", "nan,1"),
+        says=("--goal", "nan"),
+    ),
+    C(
+        "ana",
+        "landscape-iterations-0",
+        NEW("analyze", "landscape", "--iterations", "0"),
+        says=("--iterations",),
+    ),
 ]
 
 
@@ -560,7 +1219,15 @@ def test_bad_input(case: Case, world, capfd, monkeypatch):
         monkeypatch.setenv(key, value)
     if case.setup is not None:
         case.setup(w)
-    names = dict(R=REACHER, t=w.t, run=w.run, ddpg=w.ddpg, user=w.user, new=w.new, lock_pid=getattr(w, "lock_pid", None))
+    names = dict(
+        R=REACHER,
+        t=w.t,
+        run=w.run,
+        ddpg=w.ddpg,
+        user=w.user,
+        new=w.new,
+        lock_pid=getattr(w, "lock_pid", None),
+    )
     argv = [a.format(**names) for a in case.argv]
     says = [s.format(**names) for s in case.says]
     files, dirs = snapshot(w.t)
@@ -569,7 +1236,9 @@ def test_bad_input(case: Case, world, capfd, monkeypatch):
     code, seconds = run_cli(argv, limit=case.seconds + 2)
 
     out, err = capfd.readouterr()
-    lines = [x for x in err.splitlines() if x.strip() and not x.startswith("[")]  # minus progress-bar lines
+    lines = [
+        x for x in err.splitlines() if x.strip() and not x.startswith("[")
+    ]  # minus progress-bar lines
     assert "Traceback" not in err, err
     assert code == case.code, (code, err)
     assert seconds < case.seconds, f"took {seconds:.1f} s"
@@ -581,14 +1250,22 @@ def test_bad_input(case: Case, world, capfd, monkeypatch):
             assert s in lines[0], (s, lines[0])
         # nothing written, nothing created (not even an empty directory), nothing removed
         assert after_files == files and after_dirs == dirs, (
-            sorted(set(after_files) ^ set(files)), sorted(after_dirs ^ dirs),
-            [p for p in files if after_files.get(p) != files[p]])
+            sorted(set(after_files) ^ set(files)),
+            sorted(after_dirs ^ dirs),
+            [p for p in files if after_files.get(p) != files[p]],
+        )
     else:
-        assert len(lines) == case.warns and all(x.startswith("warp-critic: warning: ") for x in lines), lines
+        assert len(lines) == case.warns and all(
+            x.startswith("warp-critic: warning: ") for x in lines
+        ), lines
         for s in says:
             assert all(s in x for x in lines), (s, lines)
-        kept = {p: h for p, h in files.items() if not p.startswith(case.changes) or not case.changes}
-        assert {p: after_files.get(p) for p in kept} == kept, [p for p in kept if after_files.get(p) != kept[p]]
+        kept = {
+            p: h for p, h in files.items() if not p.startswith(case.changes) or not case.changes
+        }
+        assert {p: after_files.get(p) for p in kept} == kept, [
+            p for p in kept if after_files.get(p) != kept[p]
+        ]
         assert not [p for p in after_files if p.endswith(".lock")], after_files
     if case.check is not None:
         case.check(w)
@@ -608,12 +1285,38 @@ def test_table_covers_every_class():
 # property-based: arbitrary numbers in numeric flags, down to the config checks
 # ------------------------------------------------------------------------------------------------
 
-SPECIAL = ["nan", "NaN", "-nan", "inf", "+inf", "-inf", "Infinity", "1e999", "-1e999", "0", "-0", "0.0", "1e-320",
-           "1e308", "-1", "1", "2", "4294967295", "4294967296", "1000000", "1000001", "100000000", "1e3", "0x10",
-           "1_000", " 3 ", ""]
+SPECIAL = [
+    "nan",
+    "NaN",
+    "-nan",
+    "inf",
+    "+inf",
+    "-inf",
+    "Infinity",
+    "1e999",
+    "-1e999",
+    "0",
+    "-0",
+    "0.0",
+    "1e-320",
+    "1e308",
+    "-1",
+    "1",
+    "2",
+    "4294967295",
+    "4294967296",
+    "1000000",
+    "1000001",
+    "100000000",
+    "1e3",
+    "0x10",
+    "1_000",
+    " 3 ",
+    "",
+]
 NUMBER_TEXT = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True).map(repr),
-    st.integers(min_value=-10**13, max_value=10**13).map(str),
+    st.integers(min_value=-(10**13), max_value=10**13).map(str),
     st.sampled_from(SPECIAL),
 )
 
@@ -629,9 +1332,13 @@ def _parse(kind, text: str):
 def in_spec(meta, x) -> bool:
     if not math.isfinite(x):
         return False
-    return not (("cap" in meta and x > meta["cap"]) or ("gt" in meta and not x > meta["gt"])
-                or ("ge" in meta and not x >= meta["ge"]) or ("lt" in meta and not x < meta["lt"])
-                or ("le" in meta and not x <= meta["le"]))
+    return not (
+        ("cap" in meta and x > meta["cap"])
+        or ("gt" in meta and not x > meta["gt"])
+        or ("ge" in meta and not x >= meta["ge"])
+        or ("lt" in meta and not x < meta["lt"])
+        or ("le" in meta and not x <= meta["le"])
+    )
 
 
 def run_quiet(argv: list[str]) -> tuple[int, str]:
@@ -663,31 +1370,65 @@ def check_outcome(cls, name: str, text: str, code: int, err: str) -> None:
         assert valid and not lines, (text, lines)
 
 
-TRAIN_NUMBERS = ["gravity", "start_std", "alpha", "lr", "ee_mass", "link_length", "link_scale", "qd_scale", "dt",
-                 "clip_grad", "horizon", "worlds_per_goal", "iterations", "inner_steps", "seed", "policy_lifetime"]
-TEST_NUMBERS = ["goal_std", "alpha", "ee_mass", "link_length", "link_scale", "inits", "num_goals", "horizon",
-                "policy_steps", "seed"]
+TRAIN_NUMBERS = [
+    "gravity",
+    "start_std",
+    "alpha",
+    "lr",
+    "ee_mass",
+    "link_length",
+    "link_scale",
+    "qd_scale",
+    "dt",
+    "clip_grad",
+    "horizon",
+    "worlds_per_goal",
+    "iterations",
+    "inner_steps",
+    "seed",
+    "policy_lifetime",
+]
+TEST_NUMBERS = [
+    "goal_std",
+    "alpha",
+    "ee_mass",
+    "link_length",
+    "link_scale",
+    "inits",
+    "num_goals",
+    "horizon",
+    "policy_steps",
+    "seed",
+]
 
 
-@settings(max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(
+    max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow]
+)
 @given(name=st.sampled_from(TRAIN_NUMBERS), text=NUMBER_TEXT)
 def test_meta_train_numbers_property(name, text):
     from warp_critic.methods import ours as train
     from warp_critic.running.loop import TrainResult
     from warp_critic.running.task import load_task_scene
 
-    def checks_only(cfg, given=None, **kw):  # everything meta_train checks before it builds the worlds
+    def checks_only(
+        cfg, given=None, **kw
+    ):  # everything meta_train checks before it builds the worlds
         load_task_scene(cfg)
         return TrainResult(Path(cfg.out), [])
 
     with tempfile.TemporaryDirectory() as tmp, mock.patch.object(train, "meta_train", checks_only):
         out = Path(tmp) / "run"
-        code, err = run_quiet(["meta-train", REACHER, *TINY, f"--{name.replace('_', '-')}={text}", "--out", str(out)])
+        code, err = run_quiet(
+            ["meta-train", REACHER, *TINY, f"--{name.replace('_', '-')}={text}", "--out", str(out)]
+        )
         check_outcome(train.TrainConfig, name, text, code, err)
         assert not out.exists()
 
 
-@settings(max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(
+    max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow]
+)
 @given(name=st.sampled_from(TEST_NUMBERS), text=NUMBER_TEXT)
 def test_meta_test_numbers_property(name, text, base):
     from warp_critic.evaluation import metatest
@@ -699,9 +1440,21 @@ def test_meta_test_numbers_property(name, text, base):
         check_fields(tc)
         return {"output": str(out)}
 
-    with tempfile.TemporaryDirectory() as tmp, mock.patch.object(metatest, "meta_test", checks_only):
+    with (
+        tempfile.TemporaryDirectory() as tmp,
+        mock.patch.object(metatest, "meta_test", checks_only),
+    ):
         out = Path(tmp) / "x.json"
-        code, err = run_quiet(["meta-test", str(base / "run"), "--device", "cpu",
-                               f"--{name.replace('_', '-')}={text}", "--out", str(out)])
+        code, err = run_quiet(
+            [
+                "meta-test",
+                str(base / "run"),
+                "--device",
+                "cpu",
+                f"--{name.replace('_', '-')}={text}",
+                "--out",
+                str(out),
+            ]
+        )
         check_outcome(metatest.TestConfig, name, text, code, err)
         assert not out.exists()

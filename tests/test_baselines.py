@@ -9,34 +9,61 @@ from pathlib import Path
 
 import pytest
 import torch
+from conftest import REACHER
 
+from warp_critic.cli.main import main
+from warp_critic.core.errors import UserError
+from warp_critic.evaluation.metatest import TestConfig, build_test_critic, meta_test
+from warp_critic.learning.networks import Normalizer
+from warp_critic.learning.rollout import Trajectory
 from warp_critic.methods import q_networks as baseline_networks
-from warp_critic.methods.replay import ReplayBuffer, rewards
 from warp_critic.methods.baseline import BaselineConfig
 from warp_critic.methods.ddpg import train_ddpg
 from warp_critic.methods.meta_critic import train_meta_critic
-from warp_critic.cli.main import main
-from warp_critic.core.errors import UserError
+from warp_critic.methods.replay import ReplayBuffer, rewards
 from warp_critic.physics.scene import load_scene
-from warp_critic.running.task import TaskConfig
-from warp_critic.evaluation.metatest import TestConfig, build_test_critic, meta_test
-from warp_critic.learning.networks import Normalizer
 from warp_critic.running.recording import read_entity_paths
-from warp_critic.learning.rollout import Trajectory
 from warp_critic.running.rundir import CHECKPOINT_KIND
-from conftest import REACHER
-
+from warp_critic.running.task import TaskConfig
 
 TRAIN = {"ddpg": train_ddpg, "meta-critic": train_meta_critic}
 # tiny settings for the CLI / resume tests (no learning expected)
-TINY = ["--goals", "0.5,0.3", "--worlds-per-goal", "2", "--horizon", "5", "--device", "cpu",
-        "--critic-hidden", "32", "--updates-per-iteration", "3", "--batch-size", "8", "--warmup-iterations", "1"]
+TINY = [
+    "--goals",
+    "0.5,0.3",
+    "--worlds-per-goal",
+    "2",
+    "--horizon",
+    "5",
+    "--device",
+    "cpu",
+    "--critic-hidden",
+    "32",
+    "--updates-per-iteration",
+    "3",
+    "--batch-size",
+    "8",
+    "--warmup-iterations",
+    "1",
+]
 
 
 def tiny_cfg(out: Path, method: str, **kw) -> BaselineConfig:
-    cfg = BaselineConfig(scene=REACHER, method=method, goals=[[0.5, 0.3]], worlds_per_goal=2, horizon=5,
-                         iterations=3, device="cpu", out=str(out), critic_hidden=32, updates_per_iteration=3,
-                         batch_size=8, warmup_iterations=1, checkpoint_every=1)
+    cfg = BaselineConfig(
+        scene=REACHER,
+        method=method,
+        goals=[[0.5, 0.3]],
+        worlds_per_goal=2,
+        horizon=5,
+        iterations=3,
+        device="cpu",
+        out=str(out),
+        critic_hidden=32,
+        updates_per_iteration=3,
+        batch_size=8,
+        warmup_iterations=1,
+        checkpoint_every=1,
+    )
     for k, v in kw.items():
         setattr(cfg, k, v)
     return cfg
@@ -46,12 +73,23 @@ def tiny_cfg(out: Path, method: str, **kw) -> BaselineConfig:
 # learning + meta-test
 # ------------------------------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("method", ["ddpg", "meta-critic"])
 def test_baseline_learns_and_its_q_runs_through_meta_test(tmp_path, method):
     # the reacher's four default goals, 4 worlds each, a shortened horizon; published DDPG settings
     out = tmp_path / method
-    cfg = BaselineConfig(scene=REACHER, method=method, iterations=40, horizon=30, worlds_per_goal=4,
-                         device="cpu", out=str(out), checkpoint_every=20, record_every=100, seed=0)
+    cfg = BaselineConfig(
+        scene=REACHER,
+        method=method,
+        iterations=40,
+        horizon=30,
+        worlds_per_goal=4,
+        device="cpu",
+        out=str(out),
+        checkpoint_every=20,
+        record_every=100,
+        seed=0,
+    )
     res = TRAIN[method](cfg, progress=False)
     losses = [r["task_loss"] for r in res.metrics]
     assert len(losses) == 40 and all(math.isfinite(x) for x in losses)
@@ -69,14 +107,22 @@ def test_baseline_learns_and_its_q_runs_through_meta_test(tmp_path, method):
     assert "/train/task_loss/goal3" in entities
     assert any(e.startswith("/rollout/after/it39/goal0/body") for e in entities)
     ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
-    assert ckpt["kind"] == CHECKPOINT_KIND and ckpt["method"] == method and ckpt["scene"] == "reacher"
+    assert (
+        ckpt["kind"] == CHECKPOINT_KIND and ckpt["method"] == method and ckpt["scene"] == "reacher"
+    )
     assert ckpt["iteration"] == 39 and ckpt["dof"] == 2 and ckpt["metrics"]["iteration"] == 39
     tc = TaskConfig.from_dict(ckpt["config"])
-    assert tc.horizon == 30 and ckpt["config"]["inner_steps"] == 3 and len(tc.goals) == 4  # the scene's, as ours
+    assert (
+        tc.horizon == 30 and ckpt["config"]["inner_steps"] == 3 and len(tc.goals) == 4
+    )  # the scene's, as ours
 
     # the meta-test critic is -Q(s - g, a)
-    norm = Normalizer.from_limits(torch.tensor([-2.97, -2.97]), torch.tensor([2.97, 2.97]),
-                                  torch.tensor(tc.max_torque), tc.qd_scale)
+    norm = Normalizer.from_limits(
+        torch.tensor([-2.97, -2.97]),
+        torch.tensor([2.97, 2.97]),
+        torch.tensor(tc.max_torque),
+        tc.qd_scale,
+    )
     loss_fn, defaults = build_test_critic(ckpt, norm)
     assert defaults["alpha"] > 0 and defaults["steps"] == 3
     assert defaults["alpha"] == ckpt["metrics"]["alpha"]  # selected by the fresh-policy grid search
@@ -84,7 +130,9 @@ def test_baseline_learns_and_its_q_runs_through_meta_test(tmp_path, method):
     g = torch.tensor([[1.0, 0.5]]).expand(5, 2)
     assert torch.allclose(loss_fn(q, qd, tau, g), -res.model.q(q, qd, tau, g), atol=1e-6)
 
-    result = meta_test(TestConfig(run_dir=str(out), num_goals=2, inits=2, device="cpu"), progress=None)
+    result = meta_test(
+        TestConfig(run_dir=str(out), num_goals=2, inits=2, device="cpu"), progress=None
+    )
     assert result["method"] == method and math.isfinite(result["mean"])
     assert len(result["final_error_per_goal"]) == 2
 
@@ -92,6 +140,7 @@ def test_baseline_learns_and_its_q_runs_through_meta_test(tmp_path, method):
 # ------------------------------------------------------------------------------------------------
 # pieces
 # ------------------------------------------------------------------------------------------------
+
 
 def test_rewards_dense_and_sparse():
     q = torch.tensor([[[0.0, 0.0]], [[1.0, 0.0]], [[1.0, 1.0]]])  # (T+1=3, W=1, 2)
@@ -121,10 +170,13 @@ def test_replay_buffer_ring_and_state_dict():
 
 @pytest.mark.parametrize("method", ["ddpg", "meta-critic"])
 def test_resume_is_exact_on_cpu(tmp_path, method):
-    straight = TRAIN[method](tiny_cfg(tmp_path / "a", method, iterations=4), progress=False, record=False)
+    straight = TRAIN[method](
+        tiny_cfg(tmp_path / "a", method, iterations=4), progress=False, record=False
+    )
     TRAIN[method](tiny_cfg(tmp_path / "b", method, iterations=2), progress=False, record=False)
-    resumed = TRAIN[method](tiny_cfg(tmp_path / "b", method, iterations=4, resume=True), progress=False,
-                            record=False)
+    resumed = TRAIN[method](
+        tiny_cfg(tmp_path / "b", method, iterations=4, resume=True), progress=False, record=False
+    )
     a = [(r["task_loss"], r.get("critic_loss")) for r in straight.metrics]
     b = [(r["task_loss"], r.get("critic_loss")) for r in resumed.metrics]
     assert a == b
@@ -134,9 +186,13 @@ def test_resume_is_exact_on_cpu(tmp_path, method):
 # command line
 # ------------------------------------------------------------------------------------------------
 
+
 def test_baseline_cli_writes_run_directory_and_resumes(tmp_path, capsys):
     out = tmp_path / "run"
-    assert main(["baseline", "meta-critic", REACHER, *TINY, "--iterations", "2", "--out", str(out)]) == 0
+    assert (
+        main(["baseline", "meta-critic", REACHER, *TINY, "--iterations", "2", "--out", str(out)])
+        == 0
+    )
     printed = capsys.readouterr().out
     assert "final task loss" in printed and str(out) in printed
     rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
@@ -144,13 +200,33 @@ def test_baseline_cli_writes_run_directory_and_resumes(tmp_path, capsys):
     assert json.loads((out / "config.json").read_text())["method"] == "meta-critic"
 
     # never overwrite an existing run without --resume; never resume a run of another method
-    assert main(["baseline", "meta-critic", REACHER, *TINY, "--iterations", "2", "--out", str(out)]) == 2
+    assert (
+        main(["baseline", "meta-critic", REACHER, *TINY, "--iterations", "2", "--out", str(out)])
+        == 2
+    )
     assert "--resume" in capsys.readouterr().err
-    assert main(["baseline", "ddpg", REACHER, "--iterations", "3", "--out", str(out), "--resume"]) == 2
+    assert (
+        main(["baseline", "ddpg", REACHER, "--iterations", "3", "--out", str(out), "--resume"]) == 2
+    )
     assert "meta-critic" in capsys.readouterr().err
 
-    assert main(["baseline", "meta-critic", REACHER, "--iterations", "3", "--out", str(out), "--resume",
-                 "--device", "cpu"]) == 0
+    assert (
+        main(
+            [
+                "baseline",
+                "meta-critic",
+                REACHER,
+                "--iterations",
+                "3",
+                "--out",
+                str(out),
+                "--resume",
+                "--device",
+                "cpu",
+            ]
+        )
+        == 0
+    )
     rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
     assert [r["iteration"] for r in rows] == [0, 1, 2]
     assert torch.load(out / "checkpoint.pt", weights_only=False)["iteration"] == 2
@@ -162,25 +238,28 @@ def test_default_out_directory():
     assert cfg.out == "runs/reacher-meta-critic" and cfg.horizon is not None and cfg.goals
 
 
-@pytest.mark.parametrize("argv, fragment", [
-    (["baseline", "td3", REACHER], "invalid choice"),
-    (["baseline", "ddpg", REACHER, "--gamma", "1.5"], "--gamma must be in (0, 1]"),
-    (["baseline", "ddpg", REACHER, "--gamma", "0"], "--gamma must be in (0, 1]"),
-    (["baseline", "meta-critic", REACHER, "--tau", "0"], "--tau must be in (0, 1]"),
-    (["baseline", "ddpg", REACHER, "--tau", "2"], "--tau must be in (0, 1]"),
-    (["baseline", "ddpg", REACHER, "--actor-lr=-1e-4"], "--actor-lr must be > 0"),
-    (["baseline", "ddpg", REACHER, "--critic-lr", "0"], "--critic-lr must be > 0"),
-    (["baseline", "meta-critic", REACHER, "--aux-lr", "0"], "--aux-lr must be > 0"),
-    (["baseline", "ddpg", REACHER, "--batch-size", "0"], "--batch-size must be > 0"),
-    (["baseline", "ddpg", REACHER, "--horizon", "0"], "--horizon must be > 0"),
-    (["baseline", "ddpg", REACHER, "--buffer-size=-5"], "--buffer-size must be > 0"),
-    (["baseline", "ddpg", REACHER, "--noise", "pink"], "--noise"),
-    (["baseline", "ddpg", REACHER, "--reward", "shaped"], "--reward"),
-    (["baseline", "ddpg", REACHER, "--noise-std=-0.1"], "--noise-std"),
-    (["baseline", "ddpg", REACHER, "--batch-size", "abc"], "invalid int value"),
-    (["baseline", "ddpg", REACHER, "--goals", "0.1,0.2,0.3"], "needs 2 joint values"),
-    (["baseline", "ddpg", "nope/missing.usda"], "missing.usda"),
-])
+@pytest.mark.parametrize(
+    "argv, fragment",
+    [
+        (["baseline", "td3", REACHER], "invalid choice"),
+        (["baseline", "ddpg", REACHER, "--gamma", "1.5"], "--gamma must be in (0, 1]"),
+        (["baseline", "ddpg", REACHER, "--gamma", "0"], "--gamma must be in (0, 1]"),
+        (["baseline", "meta-critic", REACHER, "--tau", "0"], "--tau must be in (0, 1]"),
+        (["baseline", "ddpg", REACHER, "--tau", "2"], "--tau must be in (0, 1]"),
+        (["baseline", "ddpg", REACHER, "--actor-lr=-1e-4"], "--actor-lr must be > 0"),
+        (["baseline", "ddpg", REACHER, "--critic-lr", "0"], "--critic-lr must be > 0"),
+        (["baseline", "meta-critic", REACHER, "--aux-lr", "0"], "--aux-lr must be > 0"),
+        (["baseline", "ddpg", REACHER, "--batch-size", "0"], "--batch-size must be > 0"),
+        (["baseline", "ddpg", REACHER, "--horizon", "0"], "--horizon must be > 0"),
+        (["baseline", "ddpg", REACHER, "--buffer-size=-5"], "--buffer-size must be > 0"),
+        (["baseline", "ddpg", REACHER, "--noise", "pink"], "--noise"),
+        (["baseline", "ddpg", REACHER, "--reward", "shaped"], "--reward"),
+        (["baseline", "ddpg", REACHER, "--noise-std=-0.1"], "--noise-std"),
+        (["baseline", "ddpg", REACHER, "--batch-size", "abc"], "invalid int value"),
+        (["baseline", "ddpg", REACHER, "--goals", "0.1,0.2,0.3"], "needs 2 joint values"),
+        (["baseline", "ddpg", "nope/missing.usda"], "missing.usda"),
+    ],
+)
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, fragment):
     try:
         code = main([*argv, "--out", str(tmp_path / "run"), "--device", "cpu", "--iterations", "1"])

@@ -10,14 +10,13 @@ from pathlib import Path
 
 import pytest
 import torch
+from conftest import ROOT
 
 from warp_critic.core.errors import DivergenceError
 from warp_critic.learning.networks import Normalizer, init_policy, policy_action
 from warp_critic.learning.rollout import rollout
 from warp_critic.physics.scene import Variant, load_scene
 from warp_critic.physics.simulator import Simulator
-from conftest import ROOT
-
 
 
 def drm_robot(name: str):
@@ -25,14 +24,18 @@ def drm_robot(name: str):
     from differentiable_robot_model.robot_model import DifferentiableRobotModel
 
     data = Path(pkg.__file__).resolve().parents[1] / "diff_robot_data"
-    urdf = {"kuka": data / "kuka_iiwa" / "urdf" / "iiwa7.urdf", "reacher": data / "2link_robot.urdf"}[name]
+    urdf = {
+        "kuka": data / "kuka_iiwa" / "urdf" / "iiwa7.urdf",
+        "reacher": data / "2link_robot.urdf",
+    }[name]
     return DifferentiableRobotModel(str(urdf), name, device="cpu")
 
 
 def drm_step(robot, q, qd, tau, dt, substeps):
     for _ in range(substeps):
-        qdd = robot.compute_forward_dynamics(q.float(), qd.float(), tau * 1.0, include_gravity=True,
-                                             use_damping=True).double()
+        qdd = robot.compute_forward_dynamics(
+            q.float(), qd.float(), tau * 1.0, include_gravity=True, use_damping=True
+        ).double()
         qd = qd + dt * qdd
         q = q + dt * qd
     return q, qd
@@ -82,11 +85,19 @@ def test_policy_parameter_gradient_matches_paper_model():
     sim = Simulator(scene, [Variant()] * 3, dt=0.01, substeps=2, device="cpu")
     norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, torch.tensor([4.0, 4.0]), 5.0)
     gen = torch.Generator().manual_seed(1)
-    params = {k: v.requires_grad_() for k, v in init_policy(3, 4, 2, generator=gen, out_scale=3.0).items()}
+    params = {
+        k: v.requires_grad_() for k, v in init_policy(3, 4, 2, generator=gen, out_scale=3.0).items()
+    }
     goal = torch.tensor([[1.0, 0.5], [-1.0, 0.2], [0.3, -0.8]])
     H = 40
-    traj = rollout(sim, lambda q, qd: policy_action(params, norm, q, qd), sim.zeros(), sim.zeros(), H,
-                   differentiable=True)
+    traj = rollout(
+        sim,
+        lambda q, qd: policy_action(params, norm, q, qd),
+        sim.zeros(),
+        sim.zeros(),
+        H,
+        differentiable=True,
+    )
     loss = ((traj.q[-1] - goal) ** 2).sum()
     grads = torch.autograd.grad(loss, list(params.values()))
 
@@ -123,7 +134,9 @@ def test_gradient_matches_finite_differences():
     t = taus.clone().requires_grad_()
     (g,) = torch.autograd.grad(loss_of(t, True), [t])
     eps = 1e-2
-    fd = (loss_of(taus + eps * direction, False) - loss_of(taus - eps * direction, False)) / (2 * eps)
+    fd = (loss_of(taus + eps * direction, False) - loss_of(taus - eps * direction, False)) / (
+        2 * eps
+    )
     analytic = (g * direction).sum()
     assert abs(analytic - fd) / abs(fd) < 1e-2
 
@@ -179,7 +192,9 @@ def test_tip_kernel_matches_link_geometry():
     import math
 
     scene = load_scene(ROOT / "scenes" / "reacher.usda")
-    sim = Simulator(scene, [Variant(), Variant(link_scale=1.5)], dt=0.01, device="cpu", differentiable=False)
+    sim = Simulator(
+        scene, [Variant(), Variant(link_scale=1.5)], dt=0.01, device="cpu", differentiable=False
+    )
     q = torch.tensor([[0.3, -0.7], [0.3, -0.7]])
     tips = sim.tip_positions(q)
     for w, l2 in ((0, 1.0), (1, 1.5)):
@@ -194,7 +209,9 @@ def test_gravity_setting_is_per_simulator():
     q0 = torch.tensor([[0.0, 0.5, 0.0, -0.5, 0.0, 0.3, 0.0]])
     moved = {}
     for g in (0.0, 9.81):
-        sim = Simulator(scene, [Variant()], dt=0.0025, substeps=4, device="cpu", differentiable=False, gravity=g)
+        sim = Simulator(
+            scene, [Variant()], dt=0.0025, substeps=4, device="cpu", differentiable=False, gravity=g
+        )
         q, qd = q0.clone(), torch.zeros(1, 7)
         for _ in range(10):
             q, qd = sim.step(q, qd, torch.zeros(1, 7))
@@ -209,11 +226,20 @@ def test_graph_replay_is_bitwise_the_direct_path():
     and replay (later), forward-only steps interleaved, gradients through all of them.
     """
     scene = load_scene(ROOT / "scenes" / "kuka.usda")
-    sims = [Simulator(scene, [Variant()] * 3, dt=0.0025, substeps=2, device="cpu", graphs=g) for g in (False, True)]
+    sims = [
+        Simulator(scene, [Variant()] * 3, dt=0.0025, substeps=2, device="cpu", graphs=g)
+        for g in (False, True)
+    ]
     assert not sims[0].bridge.graphs and sims[1].bridge.graphs
     gen = torch.Generator().manual_seed(3)
-    cases = [(torch.rand(3, 7, generator=gen) * 0.4, torch.randn(3, 7, generator=gen),
-              torch.randn(h, 3, 7, generator=gen) * 8) for h in (4, 6, 3, 6, 6)]
+    cases = [
+        (
+            torch.rand(3, 7, generator=gen) * 0.4,
+            torch.randn(3, 7, generator=gen),
+            torch.randn(h, 3, 7, generator=gen) * 8,
+        )
+        for h in (4, 6, 3, 6, 6)
+    ]
     results = []
     for sim in sims:
         out = []
@@ -227,9 +253,12 @@ def test_graph_replay_is_bitwise_the_direct_path():
             q, qd = q0g, qd0
             for t in range(len(taus)):
                 q, qd = sim.step(q, qd, taus_g[t])
-            ((q ** 2).sum() + (qd ** 3).sum()).backward()
+            ((q**2).sum() + (qd**3).sum()).backward()
             out += [q_fw, qd_fw, q.detach(), qd.detach(), q0g.grad, taus_g.grad]
         results.append(out)
-    assert sims[1].bridge._fw_run.graph is not None and sims[1].bridge._steps[0].backward.graph is not None
+    assert (
+        sims[1].bridge._fw_run.graph is not None
+        and sims[1].bridge._steps[0].backward.graph is not None
+    )
     for a, b in zip(*results):
         assert torch.equal(a, b)

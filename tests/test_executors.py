@@ -18,6 +18,7 @@ VOLATILE = ("seconds", "wall", "finished", "written", "command", "seconds_this_c
 
 def numbers(out: Path) -> dict:
     """``results.json`` without wall times and the command line: every number the report shows."""
+
     def strip(x):
         if isinstance(x, dict):
             return {k: strip(v) for k, v in x.items() if k not in VOLATILE}
@@ -29,8 +30,13 @@ def numbers(out: Path) -> dict:
 
 
 def cli(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "warp_critic.cli.main", *args], capture_output=True, text=True,
-                          timeout=600, env={**os.environ, **(env or {})})
+    return subprocess.run(
+        [sys.executable, "-m", "warp_critic.cli.main", *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, **(env or {})},
+    )
 
 
 @pytest.fixture(scope="module")
@@ -47,8 +53,19 @@ def on_ray(tmp_path_factory) -> tuple[Path, Path, subprocess.CompletedProcess]:
     pytest.importorskip("ray")
     tmp = tmp_path_factory.mktemp("ray")
     out, marker = tmp / "out", tmp / "killed"
-    p = cli("reproduce", "--quick", "--out", str(out), "--device", "cpu", "--ray",
-            env={"WARP_CRITIC_UNIT_FAULT": f"metatrain-reacher-ours:{marker}", "RAY_DISABLE_USAGE_STATS": "1"})
+    p = cli(
+        "reproduce",
+        "--quick",
+        "--out",
+        str(out),
+        "--device",
+        "cpu",
+        "--ray",
+        env={
+            "WARP_CRITIC_UNIT_FAULT": f"metatrain-reacher-ours:{marker}",
+            "RAY_DISABLE_USAGE_STATS": "1",
+        },
+    )
     return out, marker, p
 
 
@@ -63,18 +80,35 @@ def test_ray_reproduce_gives_the_in_process_numbers(in_process, on_ray):
 def test_a_killed_ray_worker_costs_only_its_unit(in_process, on_ray):
     out, marker, p = on_ray
     assert p.returncode == 0, p.stderr[-3000:]
-    assert marker.exists() and int(marker.read_text()) != os.getpid()  # the first try died in a worker
+    assert (
+        marker.exists() and int(marker.read_text()) != os.getpid()
+    )  # the first try died in a worker
     stage = next(out.glob("metatrain-reacher-ours-*"))
     assert (stage / "stage.json").exists()
     ours = json.loads((stage / "stage.json").read_text())["result"]
-    ref = json.loads(next(in_process.glob("metatrain-reacher-ours-*")).joinpath("stage.json").read_text())["result"]
-    assert {k: v["task_loss"] for k, v in ours["seeds"].items()} == {k: v["task_loss"] for k, v in ref["seeds"].items()}
+    ref = json.loads(
+        next(in_process.glob("metatrain-reacher-ours-*")).joinpath("stage.json").read_text()
+    )["result"]
+    assert {k: v["task_loss"] for k, v in ours["seeds"].items()} == {
+        k: v["task_loss"] for k, v in ref["seeds"].items()
+    }
 
 
 def test_local_processes_rerun_a_unit_whose_process_died(tmp_path, in_process):
     out, marker = tmp_path / "out", tmp_path / "killed"
-    p = cli("reproduce", "--quick", "--only", "toy,landscape", "--out", str(out), "--device", "cpu", "--jobs", "2",
-            env={"WARP_CRITIC_UNIT_FAULT": f"toy:{marker}"})
+    p = cli(
+        "reproduce",
+        "--quick",
+        "--only",
+        "toy,landscape",
+        "--out",
+        str(out),
+        "--device",
+        "cpu",
+        "--jobs",
+        "2",
+        env={"WARP_CRITIC_UNIT_FAULT": f"toy:{marker}"},
+    )
     assert p.returncode == 0, p.stderr[-3000:]
     assert marker.exists() and "a worker process died; running it again" in p.stderr
     toy = json.loads(next(out.glob("toy-*")).joinpath("stage.json").read_text())["result"]
@@ -82,17 +116,24 @@ def test_local_processes_rerun_a_unit_whose_process_died(tmp_path, in_process):
     assert toy == ref
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["--ray", "127.0.0.1:1"], ("--ray", "127.0.0.1:1")),
-    (["--ray", "nowhere"], ("--ray", "HOST:PORT")),
-    (["--jobs", "0"], ("--jobs",)),
-    (["--jobs", "2", "--ray"], ("--jobs", "--ray")),
-])
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--ray", "127.0.0.1:1"], ("--ray", "127.0.0.1:1")),
+        (["--ray", "nowhere"], ("--ray", "HOST:PORT")),
+        (["--jobs", "0"], ("--jobs",)),
+        (["--jobs", "2", "--ray"], ("--jobs", "--ray")),
+    ],
+)
 def test_bad_executor_flags_are_one_line_and_start_nothing(tmp_path, capsys, argv, words):
     out = tmp_path / "out"
     assert main(["reproduce", "--quick", "--out", str(out), *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and err[0].startswith("warp-critic: error:") and all(w in err[0] for w in words), err
+    assert (
+        len(err) == 1
+        and err[0].startswith("warp-critic: error:")
+        and all(w in err[0] for w in words)
+    ), err
     assert not out.exists()
 
 
@@ -103,21 +144,48 @@ def test_stopping_a_jobs_driver_stops_its_workers_cleanly(tmp_path, in_process):
     import time
 
     out = tmp_path / "out"
-    args = ["reproduce", "--quick", "--only", "metatrain", "--out", str(out), "--device", "cpu", "--jobs", "2",
-            "--set", "metatrain.reacher.ours.iterations=100000", "--set", "metatrain.reacher.ddpg.iterations=100000"]
-    p = subprocess.Popen([sys.executable, "-m", "warp_critic.cli.main", *args], stdout=subprocess.PIPE,
-                         stderr=subprocess.PIPE, text=True)
+    args = [
+        "reproduce",
+        "--quick",
+        "--only",
+        "metatrain",
+        "--out",
+        str(out),
+        "--device",
+        "cpu",
+        "--jobs",
+        "2",
+        "--set",
+        "metatrain.reacher.ours.iterations=100000",
+        "--set",
+        "metatrain.reacher.ddpg.iterations=100000",
+    ]
+    p = subprocess.Popen(
+        [sys.executable, "-m", "warp_critic.cli.main", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.time() + 300
     # both long units are past their first checkpoint (quick: every 3 iterations)
-    while time.time() < deadline and len(list(out.glob("metatrain-reacher-*/run/seed*/checkpoint.pt"))) < 4:
+    while (
+        time.time() < deadline
+        and len(list(out.glob("metatrain-reacher-*/run/seed*/checkpoint.pt"))) < 4
+    ):
         assert p.poll() is None, p.communicate()
         time.sleep(0.5)
     p.send_signal(signal.SIGTERM)
     _, err = p.communicate(timeout=120)
     assert p.returncode == 130, err
-    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith("warp-critic: interrupted"), err
+    assert "Traceback" not in err and err.strip().splitlines()[-1].startswith(
+        "warp-critic: interrupted"
+    ), err
     assert not list(out.rglob(".lock")), "a worker left its run locked"
     for rec in out.glob("metatrain-reacher-*/run/seed*/recording.rrd"):
-        v = subprocess.run([sys.executable, "-m", "rerun_cli", "rrd", "verify", str(rec)], capture_output=True,
-                           text=True, timeout=120)
+        v = subprocess.run(
+            [sys.executable, "-m", "rerun_cli", "rrd", "verify", str(rec)],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert v.returncode == 0, v.stderr

@@ -18,12 +18,24 @@ from pathlib import Path
 
 import pytest
 import torch
-
-from warp_critic.running.recording import read_entity_paths
 from conftest import REACHER
 
-TINY = ["--goals", "0.5,0.3;-0.4,0.2", "--worlds-per-goal", "2", "--horizon", "5", "--device", "cpu",
-        "--checkpoint-every", "1", "--record-every", "1"]
+from warp_critic.running.recording import read_entity_paths
+
+TINY = [
+    "--goals",
+    "0.5,0.3;-0.4,0.2",
+    "--worlds-per-goal",
+    "2",
+    "--horizon",
+    "5",
+    "--device",
+    "cpu",
+    "--checkpoint-every",
+    "1",
+    "--record-every",
+    "1",
+]
 ITERATIONS = 6
 
 
@@ -34,7 +46,9 @@ def cli(*args: str, fault: str | None = None, wait: bool = True, **kw):
         env["WARP_CRITIC_FAULT"] = fault
     cmd = [sys.executable, "-m", "warp_critic.cli.main", *args]
     if not wait:
-        return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+        return subprocess.Popen(
+            cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw
+        )
     return subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300, **kw)
 
 
@@ -43,8 +57,12 @@ def rows(run: Path) -> list[dict]:
 
 
 def rerun_verify(path: Path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rerun_cli", "rrd", "verify", str(path)], capture_output=True,
-                          text=True, timeout=120)
+    return subprocess.run(
+        [sys.executable, "-m", "rerun_cli", "rrd", "verify", str(path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -55,22 +73,52 @@ def straight(tmp_path_factory) -> Path:
     return run
 
 
-def test_sigkill_at_several_points_resumes_to_the_same_metrics_and_a_complete_recording(tmp_path, straight):
+def test_sigkill_at_several_points_resumes_to_the_same_metrics_and_a_complete_recording(
+    tmp_path, straight
+):
     run = tmp_path / "run"
     # 1. killed while writing its 3rd checkpoint (written to a temporary file, not yet in place)
-    p = cli("meta-train", REACHER, *TINY, "--iterations", str(ITERATIONS), "--out", str(run),
-            fault="checkpoint.pt:3")
+    p = cli(
+        "meta-train",
+        REACHER,
+        *TINY,
+        "--iterations",
+        str(ITERATIONS),
+        "--out",
+        str(run),
+        fault="checkpoint.pt:3",
+    )
     assert p.returncode == -signal.SIGKILL
-    assert torch.load(run / "checkpoint.pt", weights_only=True)["iteration"] == 1  # the last one in place
-    assert (run / ".lock").exists() and list(run.glob(".checkpoint.pt.*.tmp"))  # what a crash leaves
+    assert (
+        torch.load(run / "checkpoint.pt", weights_only=True)["iteration"] == 1
+    )  # the last one in place
+    assert (run / ".lock").exists() and list(
+        run.glob(".checkpoint.pt.*.tmp")
+    )  # what a crash leaves
     # 2. resumed, killed right after the metrics row of its 2nd iteration (before that checkpoint)
-    p = cli("meta-train", REACHER, "--iterations", str(ITERATIONS), "--out", str(run), "--resume",
-            fault="metrics-row:2")
+    p = cli(
+        "meta-train",
+        REACHER,
+        "--iterations",
+        str(ITERATIONS),
+        "--out",
+        str(run),
+        "--resume",
+        fault="metrics-row:2",
+    )
     assert p.returncode == -signal.SIGKILL
     assert "taking over the lock" in p.stderr
     # 3. resumed, killed while writing the recording merge of... no: while writing config.json at start
-    p = cli("meta-train", REACHER, "--iterations", str(ITERATIONS), "--out", str(run), "--resume",
-            fault="config.json:1")
+    p = cli(
+        "meta-train",
+        REACHER,
+        "--iterations",
+        str(ITERATIONS),
+        "--out",
+        str(run),
+        "--resume",
+        fault="config.json:1",
+    )
     assert p.returncode == -signal.SIGKILL
     # 4. resumed to the end
     p = cli("meta-train", REACHER, "--iterations", str(ITERATIONS), "--out", str(run), "--resume")
@@ -89,7 +137,10 @@ def test_sigkill_at_several_points_resumes_to_the_same_metrics_and_a_complete_re
     entities = read_entity_paths(run / "recording.rrd")
     for it in range(ITERATIONS):
         for label in ("before", "after"):
-            assert any(e.startswith(f"/rollout/{label}/it{it}/goal1/body") for e in entities), (label, it)
+            assert any(e.startswith(f"/rollout/{label}/it{it}/goal1/body") for e in entities), (
+                label,
+                it,
+            )
 
 
 def start_long_run(run: Path, until: str) -> subprocess.Popen:
@@ -108,7 +159,12 @@ def test_sigterm_stops_like_ctrl_c_and_closes_the_recording(tmp_path):
     _, err = p.communicate(timeout=120)
     lines = [x for x in err.splitlines() if not x.startswith("[")]
     assert p.returncode == 130, err
-    assert len(lines) == 1 and "interrupted" in lines[0] and "is kept" in lines[0] and "--resume" in lines[0], lines
+    assert (
+        len(lines) == 1
+        and "interrupted" in lines[0]
+        and "is kept" in lines[0]
+        and "--resume" in lines[0]
+    ), lines
     assert rerun_verify(run / "recording.rrd").returncode == 0
     assert not (run / ".lock").exists()
 
@@ -117,8 +173,10 @@ def test_a_second_run_into_a_locked_directory_is_refused_at_once(tmp_path):
     run = tmp_path / "run"
     first = start_long_run(run, "metrics.jsonl")
     assert (run / ".lock").exists()
-    for argv in (["meta-train", REACHER, "--iterations", "8", "--out", str(run), "--resume"],
-                 ["meta-train", REACHER, *TINY, "--iterations", "8", "--out", str(run)]):
+    for argv in (
+        ["meta-train", REACHER, "--iterations", "8", "--out", str(run), "--resume"],
+        ["meta-train", REACHER, *TINY, "--iterations", "8", "--out", str(run)],
+    ):
         t0 = time.monotonic()
         second = cli(*argv)
         assert second.returncode == 2, second.stderr
@@ -163,7 +221,10 @@ def test_a_crafted_checkpoint_does_not_run_its_payload(tmp_path, straight, comma
     run = tmp_path / "run"
     shutil.copytree(straight, run)
     marker = tmp_path / "pwned"
-    torch.save({"kind": "warp-critic/checkpoint-v1", "config": {}, "x": _Payload(str(marker))}, run / "checkpoint.pt")
+    torch.save(
+        {"kind": "warp-critic/checkpoint-v1", "config": {}, "x": _Payload(str(marker))},
+        run / "checkpoint.pt",
+    )
     before = (run / "checkpoint.pt").read_bytes()
     if command == "meta-test":
         p = cli("meta-test", str(run), "--device", "cpu")

@@ -20,8 +20,17 @@ def result(tmp_path_factory):
 
     runtime.init()  # one torch thread, Warp started quietly: what the CLI does
     out = tmp_path_factory.mktemp("landscape")
-    cfg = LandscapeConfig(out=out, iterations=4, grid=9, inits_per_state=2, sup_fit_steps=2, quiet=True,
-                            goal=GOAL, test_goals=TEST_GOALS, init_states=INITS)
+    cfg = LandscapeConfig(
+        out=out,
+        iterations=4,
+        grid=9,
+        inits_per_state=2,
+        sup_fit_steps=2,
+        quiet=True,
+        goal=GOAL,
+        test_goals=TEST_GOALS,
+        init_states=INITS,
+    )
     return run_landscape(cfg)
 
 
@@ -35,7 +44,9 @@ def test_analytic_gain_semi_implicit_euler():
         q = q + dt * qd
     assert np.allclose(analytic_gain(dt, T), q)
     assert np.allclose(analytic_gain(dt, T), dt * dt * T * (T + 1) / 2 / np.array([1.001, 1.0]))
-    assert np.allclose(analytic_gain(0.025, 10, substeps=2), 0.025 ** 2 * 20 * 21 / 2 / np.array(AXIS_MASS))
+    assert np.allclose(
+        analytic_gain(0.025, 10, substeps=2), 0.025**2 * 20 * 21 / 2 / np.array(AXIS_MASS)
+    )
 
 
 def test_shapes_and_finite(result):
@@ -44,7 +55,9 @@ def test_shapes_and_finite(result):
     assert result["grads"].shape == (G, 3, n, n, 2)
     assert np.isfinite(result["values"]).all() and np.isfinite(result["grads"]).all()
     assert result["trace_new"].shape == (4, 4, 2) and np.isfinite(result["trace_new"]).all()
-    assert len(result["fractions"]) == G and all(set(f) == set(METHODS) for f in result["fractions"])
+    assert len(result["fractions"]) == G and all(
+        set(f) == set(METHODS) for f in result["fractions"]
+    )
 
 
 def test_q_true_matches_newton_and_analytic_optimum(result):
@@ -56,7 +69,7 @@ def test_q_true_matches_newton_and_analytic_optimum(result):
     for gi, g in enumerate(goals):
         err = q0 + theta * gain - g
         # the Newton rollout agrees with the closed form q_T = q0 + theta dt^2 T(T+1)/(2m) ...
-        np.testing.assert_allclose(values[gi, 0], (err ** 2).sum(-1), rtol=2e-3, atol=2e-4)
+        np.testing.assert_allclose(values[gi, 0], (err**2).sum(-1), rtol=2e-3, atol=2e-4)
         # ... and so does its gradient through the differentiable model
         np.testing.assert_allclose(grads[gi, 0], 2 * err * gain, rtol=2e-3, atol=2e-4)
         opt = analytic_optimum(g, q0, 0.05, 20)
@@ -91,19 +104,22 @@ def test_outputs(result):
     assert "/train/ours_task_loss" in paths
 
 
-@pytest.mark.parametrize("argv,flag", [
-    (["--grid", "2"], "--grid"),
-    (["--iterations", "0"], "--iterations"),
-    (["--range", "-1"], "--range"),
-    (["--goal", "1"], "--goal"),
-    (["--test-goals", "a,b"], "--test-goals"),
-    (["--tolerance", "nan"], "--tolerance"),
-    (["--dt", "inf"], "--dt"),
-    (["--seed", "-1"], "--seed"),
-    (["--init-states", "0,0;1"], "--init-states"),
-    (["--grid", "100000"], "--grid"),
-    (["--iterations", "1000000000000"], "--iterations"),
-])
+@pytest.mark.parametrize(
+    "argv,flag",
+    [
+        (["--grid", "2"], "--grid"),
+        (["--iterations", "0"], "--iterations"),
+        (["--range", "-1"], "--range"),
+        (["--goal", "1"], "--goal"),
+        (["--test-goals", "a,b"], "--test-goals"),
+        (["--tolerance", "nan"], "--tolerance"),
+        (["--dt", "inf"], "--dt"),
+        (["--seed", "-1"], "--seed"),
+        (["--init-states", "0,0;1"], "--init-states"),
+        (["--grid", "100000"], "--grid"),
+        (["--iterations", "1000000000000"], "--iterations"),
+    ],
+)
 def test_cli_errors_name_the_flag(argv, flag, capsys, tmp_path):
     from warp_critic.cli.main import main
 
@@ -127,8 +143,24 @@ def test_default_scene_is_found_from_any_directory(tmp_path, monkeypatch, capsys
 
     monkeypatch.chdir(tmp_path)  # no scenes/ here: the scene comes from the installed package
     assert LandscapeConfig().scene.is_file()
-    code = main(["analyze", "landscape", "--out", "o", "--iterations", "1", "--grid", "3", "--horizon", "3",
-                 "--inits-per-state", "1", "--sup-fit-steps", "1"])
+    code = main(
+        [
+            "analyze",
+            "landscape",
+            "--out",
+            "o",
+            "--iterations",
+            "1",
+            "--grid",
+            "3",
+            "--horizon",
+            "3",
+            "--inits-per-state",
+            "1",
+            "--sup-fit-steps",
+            "1",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     assert (tmp_path / "o" / "landscape.npz").is_file()
 
@@ -143,7 +175,9 @@ def test_sample_tasks_paper_setting_is_fixed_and_draws_nothing():
     from warp_critic.analysis.landscape.training import sample_tasks, varied_tasks
 
     cfg = LandscapeConfig()
-    assert not varied_tasks(cfg) and cfg.train_goals == () and cfg.goal_std == 0 and cfg.start_std == 0
+    assert (
+        not varied_tasks(cfg) and cfg.train_goals == () and cfg.goal_std == 0 and cfg.start_std == 0
+    )
     q0 = torch.tensor([[0.0, 0.0], [0.0, 0.0], [-0.5, 0.5], [-0.5, 0.5]])
     goal = torch.tensor([[1.0, 1.0]])
     gen = torch.Generator().manual_seed(3)
@@ -182,9 +216,31 @@ def test_sample_tasks_draws_goals_and_starts_per_world():
 def test_task_distribution_flags_run(tmp_path, capsys):
     from warp_critic.cli.main import main
 
-    code = main(["analyze", "landscape", "--out", str(tmp_path / "o"), "--iterations", "2", "--grid", "3",
-                 "--horizon", "3", "--inits-per-state", "1", "--sup-fit-steps", "1", "--ours-goal-input", "relative",
-                 "--train-goals=-1,1;1,-1", "--goal-std", "0.2", "--start-std", "0.5"])
+    code = main(
+        [
+            "analyze",
+            "landscape",
+            "--out",
+            str(tmp_path / "o"),
+            "--iterations",
+            "2",
+            "--grid",
+            "3",
+            "--horizon",
+            "3",
+            "--inits-per-state",
+            "1",
+            "--sup-fit-steps",
+            "1",
+            "--ours-goal-input",
+            "relative",
+            "--train-goals=-1,1;1,-1",
+            "--goal-std",
+            "0.2",
+            "--start-std",
+            "0.5",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     z = np.load(tmp_path / "o" / "landscape.npz")
     assert np.isfinite(z["grads"]).all() and z["trace_new"].shape == (2, 2, 2)
@@ -198,18 +254,26 @@ def test_task_distribution_flags_reach_the_config():
     parser = argparse.ArgumentParser()
     add_arguments(parser)
     cfg = config_from_args(parser.parse_args([]))
-    assert (cfg.train_goals, cfg.goal_std, cfg.start_std) == ((), 0.0, 0.0)  # the paper's setting by default
-    cfg = config_from_args(parser.parse_args(["--train-goals=-1,1;0.5,2", "--goal-std", "0.3",
-                                              "--start-std", "1"]))
+    assert (cfg.train_goals, cfg.goal_std, cfg.start_std) == (
+        (),
+        0.0,
+        0.0,
+    )  # the paper's setting by default
+    cfg = config_from_args(
+        parser.parse_args(["--train-goals=-1,1;0.5,2", "--goal-std", "0.3", "--start-std", "1"])
+    )
     assert (cfg.train_goals, cfg.goal_std, cfg.start_std) == (((-1.0, 1.0), (0.5, 2.0)), 0.3, 1.0)
 
 
-@pytest.mark.parametrize("argv,flag", [
-    (["--goal-std", "-0.1"], "--goal-std"),
-    (["--start-std", "nan"], "--start-std"),
-    (["--train-goals", "a,b"], "--train-goals"),
-    (["--train-goals=1,2;3"], "--train-goals"),
-])
+@pytest.mark.parametrize(
+    "argv,flag",
+    [
+        (["--goal-std", "-0.1"], "--goal-std"),
+        (["--start-std", "nan"], "--start-std"),
+        (["--train-goals", "a,b"], "--train-goals"),
+        (["--train-goals=1,2;3"], "--train-goals"),
+    ],
+)
 def test_task_distribution_flag_errors(argv, flag, capsys, tmp_path):
     from warp_critic.cli.main import main
 
@@ -230,10 +294,16 @@ def test_reproduce_stage_runs_the_paper_setting_and_the_generalising_one(tmp_pat
     skip = {"out", "quiet", "scene"}
     for f in d.__dataclass_fields__:
         if f not in skip:
-            assert getattr(paper, f) == getattr(d, f), f  # the paper's setting = the analysis defaults
+            assert getattr(paper, f) == getattr(d, f), (
+                f
+            )  # the paper's setting = the analysis defaults
     assert paper.out == tmp_path and gen.out == tmp_path / GENERALISING_DIR
-    assert gen.ours_goal_input == "relative" and gen.start_std > 0  # the closest setting that generalises
-    changed = {f for f in d.__dataclass_fields__ if f not in skip and getattr(gen, f) != getattr(paper, f)}
+    assert (
+        gen.ours_goal_input == "relative" and gen.start_std > 0
+    )  # the closest setting that generalises
+    changed = {
+        f for f in d.__dataclass_fields__ if f not in skip and getattr(gen, f) != getattr(paper, f)
+    }
     assert changed == {"ours_goal_input", "start_std"}
     q = default_settings(quick=True, seeds=1)["landscape"]
     qp, qg = landscape_configs(tmp_path, q, "cpu")

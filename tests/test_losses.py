@@ -11,7 +11,9 @@ from warp_critic.learning.rollout import Trajectory
 
 
 def _norm(dof=3):
-    return Normalizer.from_limits(-2 * torch.ones(dof), 2 * torch.ones(dof), 5 * torch.ones(dof), 4.0)
+    return Normalizer.from_limits(
+        -2 * torch.ones(dof), 2 * torch.ones(dof), 5 * torch.ones(dof), 4.0
+    )
 
 
 def _batch(dof=3, n=16, seed=0):
@@ -23,10 +25,15 @@ def test_relative_critic_is_equivariant_to_moving_goal_and_state_together():
     torch.manual_seed(0)
     q, qd, tau, goal = _batch()
     shift = torch.tensor([0.3, -0.7, 0.2])
-    rel, full = Critic(3, _norm(), hidden=32, inputs="relative"), Critic(3, _norm(), hidden=32, inputs="full")
+    rel, full = (
+        Critic(3, _norm(), hidden=32, inputs="relative"),
+        Critic(3, _norm(), hidden=32, inputs="full"),
+    )
     assert torch.allclose(rel(q + shift, qd, tau, goal + shift), rel(q, qd, tau, goal), atol=1e-6)
     # the full layout sees q and g themselves, so the same shift changes its value
-    assert not torch.allclose(full(q + shift, qd, tau, goal + shift), full(q, qd, tau, goal), atol=1e-3)
+    assert not torch.allclose(
+        full(q + shift, qd, tau, goal + shift), full(q, qd, tau, goal), atol=1e-3
+    )
     # ... and the relative one still depends on the goal
     assert not torch.allclose(rel(q, qd, tau, goal + shift), rel(q, qd, tau, goal), atol=1e-3)
 
@@ -39,8 +46,11 @@ def test_critic_rejects_unknown_input_layout():
 def test_task_loss_terms():
     T, W, dof = 5, 4, 3
     g = torch.Generator().manual_seed(1)
-    traj = Trajectory(torch.randn(T + 1, W, dof, generator=g), torch.randn(T + 1, W, dof, generator=g),
-                      torch.randn(T, W, dof, generator=g))
+    traj = Trajectory(
+        torch.randn(T + 1, W, dof, generator=g),
+        torch.randn(T + 1, W, dof, generator=g),
+        torch.randn(T, W, dof, generator=g),
+    )
     goal = torch.randn(W, dof, generator=g)
     final = ((traj.q[-1] - goal) ** 2).sum(-1)
     assert torch.allclose(task_loss(traj, goal), final)
@@ -60,9 +70,9 @@ def test_goal_noise_readings_of_the_papers_protocol():
     per_joint = sample_goals(centres, 4000, 0.1, [0, 1], lo, hi, gen)
     distance = sample_goals(centres, 4000, 0.1, [0, 1], lo, hi, gen, noise="distance")
     # per joint: E||offset||^2 = 7 std^2; along a random direction: E||offset||^2 = std^2
-    assert (per_joint ** 2).sum(1).mean().item() == pytest.approx(0.07, rel=0.05)
-    assert (distance ** 2).sum(1).mean().item() == pytest.approx(0.01, rel=0.08)
+    assert (per_joint**2).sum(1).mean().item() == pytest.approx(0.07, rel=0.05)
+    assert (distance**2).sum(1).mean().item() == pytest.approx(0.01, rel=0.08)
     # ... and the direction is isotropic: every joint gets the same share
-    assert torch.allclose((distance ** 2).mean(0), torch.full((7,), 0.01 / 7), rtol=0.2)
+    assert torch.allclose((distance**2).mean(0), torch.full((7,), 0.01 / 7), rtol=0.2)
     with pytest.raises(UserError, match="goal_noise"):
         sample_goals(centres, 1, 0.1, None, lo, hi, gen, noise="sphere")

@@ -17,11 +17,17 @@ import pytest
 from conftest import ROOT
 
 TESTED = {"newton": "1.8.0", "warp-lang": "1.19.0"}
-ADVICE = ("bridge.py depends on Newton internals; re-run tests/test_bridge.py's exactness tests and update "
-          "the pins (tests/test_newton_internals.py, pyproject.toml)")
+ADVICE = (
+    "bridge.py depends on Newton internals; re-run tests/test_bridge.py's exactness tests and update "
+    "the pins (tests/test_newton_internals.py, pyproject.toml)"
+)
 SCRATCH = ("M", "J", "P", "H", "L")
-TILE_VIEWS = {"_J_by_size": ("J", "articulation_J_start"), "_M_by_size": ("M", "articulation_M_start"),
-              "_H_by_size": ("H", "articulation_H_start"), "_L_by_size": ("L", "articulation_H_start")}
+TILE_VIEWS = {
+    "_J_by_size": ("J", "articulation_J_start"),
+    "_M_by_size": ("M", "articulation_M_start"),
+    "_H_by_size": ("H", "articulation_H_start"),
+    "_L_by_size": ("L", "articulation_H_start"),
+}
 
 
 def pin(ok: bool, what: str) -> None:
@@ -44,8 +50,14 @@ def test_versions_are_the_tested_ones():
     import newton
     import warp as wp
 
-    pin(newton.__version__ == TESTED["newton"], f"newton {newton.__version__} is installed, tested: {TESTED['newton']}")
-    pin(wp.config.version == TESTED["warp-lang"], f"warp-lang {wp.config.version} is installed, tested: {TESTED['warp-lang']}")
+    pin(
+        newton.__version__ == TESTED["newton"],
+        f"newton {newton.__version__} is installed, tested: {TESTED['newton']}",
+    )
+    pin(
+        wp.config.version == TESTED["warp-lang"],
+        f"warp-lang {wp.config.version} is installed, tested: {TESTED['warp-lang']}",
+    )
     pyproject = (ROOT / "pyproject.toml").read_text()
     for name, version in TESTED.items():
         pin(f'"{name}=={version}"' in pyproject, f"pyproject.toml does not pin {name}=={version}")
@@ -57,11 +69,16 @@ def test_solver_signatures():
     cls = newton.solvers.SolverFeatherstone
     init = inspect.signature(cls.__init__).parameters
     pin("use_tile_gemm" in init, "SolverFeatherstone(model, use_tile_gemm=...) is gone")
-    pin(init.get("update_mass_matrix_interval") is not None and init["update_mass_matrix_interval"].default == 1,
-        "SolverFeatherstone's update_mass_matrix_interval no longer defaults to 1 (every step must rebuild M, J, H, L)")
+    pin(
+        init.get("update_mass_matrix_interval") is not None
+        and init["update_mass_matrix_interval"].default == 1,
+        "SolverFeatherstone's update_mass_matrix_interval no longer defaults to 1 (every step must rebuild M, J, H, L)",
+    )
     step = list(inspect.signature(cls.step).parameters)
-    pin(step[:6] == ["self", "state_in", "state_out", "control", "contacts", "dt"],
-        f"SolverFeatherstone.step's signature changed: {step}")
+    pin(
+        step[:6] == ["self", "state_in", "state_out", "control", "contacts", "dt"],
+        f"SolverFeatherstone.step's signature changed: {step}",
+    )
 
 
 def test_step_reads_the_scratch_from_the_solver_attributes():
@@ -73,9 +90,14 @@ def test_step_reads_the_scratch_from_the_solver_attributes():
     for name in SCRATCH:
         pin(f"self.{name}" in src, f"SolverFeatherstone.step no longer reads self.{name}")
     for name in (*TILE_VIEWS, "_group_to_art"):
-        pin(f"self.{name}[size]" in src, f"SolverFeatherstone.step no longer reads self.{name}[size]")
-    pin("state_aug = state_out" in src,
-        "SolverFeatherstone.step no longer keeps its differentiable intermediates on state_out")
+        pin(
+            f"self.{name}[size]" in src,
+            f"SolverFeatherstone.step no longer reads self.{name}[size]",
+        )
+    pin(
+        "state_aug = state_out" in src,
+        "SolverFeatherstone.step no longer keeps its differentiable intermediates on state_out",
+    )
 
 
 def test_solver_scratch_layout(sim):
@@ -84,56 +106,106 @@ def test_solver_scratch_layout(sim):
     solver, model = sim.bridge.solver, sim.model
     pin(solver.use_tile_gemm is True, "the bridge's solver does not use tile GEMM")
     pin(solver.update_mass_matrix_interval == 1, "the mass matrix is not rebuilt every step")
-    sizes = {"M": solver.M_size, "J": solver.J_size, "P": solver.J_size, "H": solver.H_size, "L": solver.H_size}
+    sizes = {
+        "M": solver.M_size,
+        "J": solver.J_size,
+        "P": solver.J_size,
+        "H": solver.H_size,
+        "L": solver.H_size,
+    }
     for name in SCRATCH:
         arr = getattr(solver, name, None)
         pin(isinstance(arr, wp.array), f"SolverFeatherstone.{name} is not a wp.array")
-        pin(arr.ndim == 1 and arr.dtype == wp.float32 and arr.shape == (sizes[name],),
-            f"SolverFeatherstone.{name}: {arr.dtype} {arr.shape}, expected flat float32 ({sizes[name]},)")
-        pin(arr.requires_grad, f"SolverFeatherstone.{name} has no gradient on a requires_grad model")
+        pin(
+            arr.ndim == 1 and arr.dtype == wp.float32 and arr.shape == (sizes[name],),
+            f"SolverFeatherstone.{name}: {arr.dtype} {arr.shape}, expected flat float32 ({sizes[name]},)",
+        )
+        pin(
+            arr.requires_grad, f"SolverFeatherstone.{name} has no gradient on a requires_grad model"
+        )
     arts = model.articulation_count
     for name in ("articulation_J_start", "articulation_M_start", "articulation_H_start"):
         arr = getattr(solver, name, None)
-        pin(isinstance(arr, wp.array) and arr.dtype == wp.int32 and arr.shape == (arts,),
-            f"SolverFeatherstone.{name} is not an int32 array with one start per articulation")
+        pin(
+            isinstance(arr, wp.array) and arr.dtype == wp.int32 and arr.shape == (arts,),
+            f"SolverFeatherstone.{name} is not an int32 array with one start per articulation",
+        )
 
     groups = getattr(solver, "_group_to_art", None)
-    pin(isinstance(groups, dict) and groups, "SolverFeatherstone._group_to_art is not a non-empty dict")
+    pin(
+        isinstance(groups, dict) and groups,
+        "SolverFeatherstone._group_to_art is not a non-empty dict",
+    )
     seen = []
     for size, group in groups.items():
-        pin(isinstance(size, tuple) and len(size) == 2 and all(isinstance(x, int) for x in size),
-            f"_group_to_art key {size!r} is not (joint_count, dof_count)")
-        pin(isinstance(group, wp.array) and group.dtype == wp.int32, "_group_to_art values are not int32 arrays")
+        pin(
+            isinstance(size, tuple) and len(size) == 2 and all(isinstance(x, int) for x in size),
+            f"_group_to_art key {size!r} is not (joint_count, dof_count)",
+        )
+        pin(
+            isinstance(group, wp.array) and group.dtype == wp.int32,
+            "_group_to_art values are not int32 arrays",
+        )
         seen += group.numpy().tolist()
     pin(sorted(seen) == list(range(arts)), "_group_to_art does not cover every articulation once")
-    pin(sim.dof == 2 and set(groups) == {(2, 2)}, f"reacher worlds are not one (2 joints, 2 dofs) group: {set(groups)}")
+    pin(
+        sim.dof == 2 and set(groups) == {(2, 2)},
+        f"reacher worlds are not one (2 joints, 2 dofs) group: {set(groups)}",
+    )
 
     for view_name, (array_name, start_name) in TILE_VIEWS.items():
         views = getattr(solver, view_name, None)
-        pin(isinstance(views, dict) and set(views) == set(groups), f"SolverFeatherstone.{view_name} is not keyed like _group_to_art")
+        pin(
+            isinstance(views, dict) and set(views) == set(groups),
+            f"SolverFeatherstone.{view_name} is not keyed like _group_to_art",
+        )
         base, starts = getattr(solver, array_name), getattr(solver, start_name).numpy()
         for (joints, dofs), view in views.items():
             group = groups[joints, dofs]
-            rows = {"J": (6 * joints, dofs), "M": (6 * joints, 6 * joints), "H": (dofs, dofs), "L": (dofs, dofs)}[array_name]
-            pin(isinstance(view, wp.array) and view.shape == (group.shape[0], *rows),
-                f"{view_name}[{(joints, dofs)}] has shape {getattr(view, 'shape', None)}, expected {(group.shape[0], *rows)}")
+            rows = {
+                "J": (6 * joints, dofs),
+                "M": (6 * joints, 6 * joints),
+                "H": (dofs, dofs),
+                "L": (dofs, dofs),
+            }[array_name]
+            pin(
+                isinstance(view, wp.array) and view.shape == (group.shape[0], *rows),
+                f"{view_name}[{(joints, dofs)}] has shape {getattr(view, 'shape', None)}, expected {(group.shape[0], *rows)}",
+            )
             first = int(group.numpy()[0])
-            pin(view.ptr == base.ptr + int(starts[first]) * 4,
-                f"{view_name}[{(joints, dofs)}] is not a view into {array_name} at articulation {first}'s start")
+            pin(
+                view.ptr == base.ptr + int(starts[first]) * 4,
+                f"{view_name}[{(joints, dofs)}] is not a view into {array_name} at articulation {first}'s start",
+            )
 
 
 def test_model_and_warp_api_the_bridge_uses(sim):
     import warp as wp
 
     model = sim.model
-    pin(model.requires_grad is True and model.joint_dof_count == model.joint_coord_count == 3 * 2,
-        "Model.requires_grad / joint_dof_count / joint_coord_count changed")
+    pin(
+        model.requires_grad is True and model.joint_dof_count == model.joint_coord_count == 3 * 2,
+        "Model.requires_grad / joint_dof_count / joint_coord_count changed",
+    )
     state = model.state(requires_grad=True)
     control = model.control(clone_variables=True, requires_grad=True)
-    for arr, name in ((state.joint_q, "State.joint_q"), (state.joint_qd, "State.joint_qd"),
-                      (control.joint_f, "Control.joint_f")):
-        pin(isinstance(arr, wp.array) and arr.shape == (6,) and arr.grad is not None, f"{name} is not a per-dof array with a gradient")
-    for name in ("Tape", "ScopedStream", "stream_from_torch", "to_torch", "device_to_torch", "zeros_like"):
+    for arr, name in (
+        (state.joint_q, "State.joint_q"),
+        (state.joint_qd, "State.joint_qd"),
+        (control.joint_f, "Control.joint_f"),
+    ):
+        pin(
+            isinstance(arr, wp.array) and arr.shape == (6,) and arr.grad is not None,
+            f"{name} is not a per-dof array with a gradient",
+        )
+    for name in (
+        "Tape",
+        "ScopedStream",
+        "stream_from_torch",
+        "to_torch",
+        "device_to_torch",
+        "zeros_like",
+    ):
         pin(callable(getattr(wp, name, None)), f"wp.{name} is gone")
 
 
@@ -161,5 +233,7 @@ def test_a_step_writes_the_swapped_in_scratch_and_leaves_the_solver_own(sim):
         pin(np.abs(scratch[name].numpy()).sum() > 0, f"a step did not write the swapped-in {name}")
     for name in SCRATCH:
         # bitwise: scratch Newton allocates uninitialised may hold NaNs, which never compare equal
-        pin(own[name].numpy().tobytes() == before[name].tobytes(),
-            f"a step wrote the solver's own {name} while it was swapped out")
+        pin(
+            own[name].numpy().tobytes() == before[name].tobytes(),
+            f"a step wrote the solver's own {name} while it was swapped out",
+        )

@@ -18,11 +18,31 @@ from warp_critic.cli.main import main as cli_main
 def reproduce_main(argv):
     return cli_main(["reproduce", *argv])
 
+
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
-SECTIONS = ("## Stages", "## Section 4.1", "## Section 4.2", "## Figure 3", "### reacher", "### kuka",
-            "## Figures 4-6", "## Tables 1-3", "### Table 1", "### Table 2", "### Table 3", "## Figures")
-FIGURES = ("fig1_landscape.png", "fig2_exploration.png", "fig3_metatrain_reacher.png", "fig3_metatrain_kuka.png",
-           "fig4_reacher_goals.png", "fig5_reacher_mass.png", "fig6_reacher_length.png")
+SECTIONS = (
+    "## Stages",
+    "## Section 4.1",
+    "## Section 4.2",
+    "## Figure 3",
+    "### reacher",
+    "### kuka",
+    "## Figures 4-6",
+    "## Tables 1-3",
+    "### Table 1",
+    "### Table 2",
+    "### Table 3",
+    "## Figures",
+)
+FIGURES = (
+    "fig1_landscape.png",
+    "fig2_exploration.png",
+    "fig3_metatrain_reacher.png",
+    "fig3_metatrain_kuka.png",
+    "fig4_reacher_goals.png",
+    "fig5_reacher_mass.png",
+    "fig6_reacher_length.png",
+)
 
 
 def _stage_mtimes(out: Path) -> dict[str, float]:
@@ -56,8 +76,13 @@ def test_quick_end_to_end(quick):
         stage = out / cell["file"]
         assert stage.is_file()
         data = json.loads(stage.read_text())
-        match = [c for c in data["result"]["cells"] if c["table"] == cell["table"] and c["value"] == cell["value"]
-                 and c["method"] == cell["method"]]
+        match = [
+            c
+            for c in data["result"]["cells"]
+            if c["table"] == cell["table"]
+            and c["value"] == cell["value"]
+            and c["method"] == cell["method"]
+        ]
         assert len(match) == 1 and match[0]["mse_mean"] == cell["mse_mean"]
         assert len(cell["runs"]) == 2  # quick: 2 seeds
         for run in cell["runs"]:
@@ -65,8 +90,11 @@ def test_quick_end_to_end(quick):
         assert f"{cell['mse_mean']:.3g}({cell['mse_std']:.3g})" in report
     for entry in results["figures"]:
         assert (out / entry["file"]).is_file()
-    verify = subprocess.run([sys.executable, "-m", "rerun_cli", "rrd", "verify", str(out / "report.rrd")],
-                            capture_output=True, text=True)
+    verify = subprocess.run(
+        [sys.executable, "-m", "rerun_cli", "rrd", "verify", str(out / "report.rrd")],
+        capture_output=True,
+        text=True,
+    )
     assert verify.returncode == 0, verify.stderr
 
 
@@ -94,9 +122,25 @@ def test_only_toy_and_changed_setting(tmp_path, capsys):
     old = out / dirs[0] / "stage.json"
     mtime = old.stat().st_mtime_ns
     report = (out / "REPORT.md").read_text()
-    assert "Not run (stage `tables`)" in report and "| theta" not in report.split("## Section 4.2")[1]
-    assert reproduce_main(["--quick", "--only", "toy", "--out", str(out), "--device", "cpu",
-                           "--set", "toy.iters=60"]) == 0
+    assert (
+        "Not run (stage `tables`)" in report and "| theta" not in report.split("## Section 4.2")[1]
+    )
+    assert (
+        reproduce_main(
+            [
+                "--quick",
+                "--only",
+                "toy",
+                "--out",
+                str(out),
+                "--device",
+                "cpu",
+                "--set",
+                "toy.iters=60",
+            ]
+        )
+        == 0
+    )
     dirs2 = sorted(p.name for p in out.iterdir() if p.is_dir() and p.name != "figures")
     assert len(dirs2) == 2 and dirs[0] in dirs2
     assert old.stat().st_mtime_ns == mtime
@@ -104,14 +148,17 @@ def test_only_toy_and_changed_setting(tmp_path, capsys):
     assert new["settings"]["iters"] == 60
 
 
-@pytest.mark.parametrize("argv, words", [
-    (["--only", "toy,bogus"], "unknown stage"),
-    (["--seeds", "0"], "--seeds"),
-    (["--seeds", "-3"], "--seeds"),
-    (["--set", "toy.nope=1"], "unknown key"),
-    (["--set", "metatrain.kuka.ours.nope=1"], "unknown ours setting"),
-    (["--device", "tpu"], "--device"),
-])
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--only", "toy,bogus"], "unknown stage"),
+        (["--seeds", "0"], "--seeds"),
+        (["--seeds", "-3"], "--seeds"),
+        (["--set", "toy.nope=1"], "unknown key"),
+        (["--set", "metatrain.kuka.ours.nope=1"], "unknown ours setting"),
+        (["--device", "tpu"], "--device"),
+    ],
+)
 def test_bad_input(tmp_path, capsys, argv, words):
     out = tmp_path / "o"
     rc = reproduce_main(["--quick", "--out", str(out), *argv])
@@ -144,21 +191,34 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
     import torch
 
     from warp_critic.evaluation.metatest import TestConfig, meta_test
-    from warp_critic.reproduce.evaluate import Job, evaluate
     from warp_critic.physics.scene import Variant
+    from warp_critic.reproduce.evaluate import Job, evaluate
 
     out, rc, _ = quick
-    runs = {m: sorted((next(out.glob(f"metatrain-reacher-{m}-*")) / "run").glob("seed*")) for m in ("ours", "ddpg")}
+    runs = {
+        m: sorted((next(out.glob(f"metatrain-reacher-{m}-*")) / "run").glob("seed*"))
+        for m in ("ours", "ddpg")
+    }
     goals = torch.tensor([[0.3, -0.2], [-1.0, 0.8], [1.5, 0.1]])
-    jobs = [Job("ours0", str(runs["ours"][0]), goals, Variant()),
-            Job("ddpg1", str(runs["ddpg"][1]), goals, Variant(ee_mass=2.0)),
-            Job("ours1", str(runs["ours"][1]), goals[:2], Variant(link_length=1.4))]
+    jobs = [
+        Job("ours0", str(runs["ours"][0]), goals, Variant()),
+        Job("ddpg1", str(runs["ddpg"][1]), goals, Variant(ee_mass=2.0)),
+        Job("ours1", str(runs["ours"][1]), goals[:2], Variant(link_length=1.4)),
+    ]
     r = evaluate(jobs, inits=2, steps=3, seed=7, device="cpu", progress=False)
     for job, err in zip(jobs, r["errors"]):
         v = job.variant
-        tc = TestConfig(run_dir=job.run_dir, goals=job.goals.tolist(), inits=2, policy_steps=3, seed=7,
-                        device="cpu", ee_mass=v.ee_mass, link_length=v.link_length,
-                        out=str(tmp_path / f"{job.key}.json"))
+        tc = TestConfig(
+            run_dir=job.run_dir,
+            goals=job.goals.tolist(),
+            inits=2,
+            policy_steps=3,
+            seed=7,
+            device="cpu",
+            ee_mass=v.ee_mass,
+            link_length=v.link_length,
+            out=str(tmp_path / f"{job.key}.json"),
+        )
         ref = np.asarray(meta_test(tc, progress=None)["final_error_all"])
         np.testing.assert_allclose(err, ref, rtol=1e-4, atol=1e-6)
 
@@ -166,26 +226,33 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
 def test_interrupted_metatrain_resumes(tmp_path, capsys):
     """A sub-stage without stage.json (killed mid-training) resumes its run directories to the end;
     seed directories without a checkpoint (killed before the first one) are started afresh."""
+    from warp_critic.reproduce.metatrain import run_metatrain_stage
     from warp_critic.reproduce.pipeline import ReproduceConfig, plan
     from warp_critic.reproduce.stages import prepare_out
-    from warp_critic.reproduce.metatrain import run_metatrain_stage
 
     out = prepare_out(tmp_path / "r")
     settings = ReproduceConfig(out=out, quick=True, seeds=2).validate()
     st = plan(settings)["metatrain-reacher-ours"]
     d = out / f"metatrain-reacher-ours-{st['hash']}"
     values = dict(settings["metatrain"]["reacher"]["ours"], iterations=3)
-    run_metatrain_stage(d, "reacher", "ours", values, [0, 1], "cpu", progress=False)  # "killed" after 3 iterations
+    run_metatrain_stage(
+        d, "reacher", "ours", values, [0, 1], "cpu", progress=False
+    )  # "killed" after 3 iterations
     lines = (d / "run" / "seed0" / "metrics.jsonl").read_text().splitlines()
     assert len(lines) == 3 and not (d / "stage.json").exists()
     other = plan(settings)["metatrain-reacher-ddpg"]
     stray = out / f"metatrain-reacher-ddpg-{other['hash']}" / "run" / "seed0"
     stray.mkdir(parents=True)
     (stray / ".warp-critic-run").write_text("{}")  # claimed, but no checkpoint was ever written
-    assert reproduce_main(["--quick", "--only", "metatrain", "--out", str(out), "--device", "cpu"]) == 0
+    assert (
+        reproduce_main(["--quick", "--only", "metatrain", "--out", str(out), "--device", "cpu"])
+        == 0
+    )
     data = json.loads((d / "stage.json").read_text())
     rows = [json.loads(x) for x in (d / "run" / "seed0" / "metrics.jsonl").read_text().splitlines()]
     assert [r["iteration"] for r in rows] == list(range(6))
-    assert rows[:3] == [json.loads(x) for x in lines]  # the first three iterations were kept, not retrained
+    assert rows[:3] == [
+        json.loads(x) for x in lines
+    ]  # the first three iterations were kept, not retrained
     assert data["result"]["seeds"]["0"]["iteration"] == list(range(6))
     assert (stray / "checkpoint.pt").is_file()

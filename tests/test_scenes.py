@@ -13,16 +13,15 @@ import subprocess
 import sys
 from pathlib import Path
 
+import newton
 import numpy as np
 import pytest
 import torch
 import warp as wp
-
-import newton
-from warp_critic.core.errors import SceneError, UserError
-from warp_critic.physics.scene import Variant, load_scene
 from conftest import ROOT, SCENES
 
+from warp_critic.core.errors import SceneError, UserError
+from warp_critic.physics.scene import Variant, load_scene
 
 DT = 1e-2  # s; any dt gives the same qdd (see the module docstring)
 
@@ -42,8 +41,10 @@ URDF = {
 def newton_qdd(model, q, qd, tau) -> np.ndarray:
     """(worlds, dof) accelerations from one Featherstone step at (q, qd) with torques tau."""
     worlds = model.world_count
-    q, qd, tau = (np.broadcast_to(np.asarray(a, np.float32), (worlds, model.joint_dof_count // worlds))
-                  for a in (q, qd, tau))
+    q, qd, tau = (
+        np.broadcast_to(np.asarray(a, np.float32), (worlds, model.joint_dof_count // worlds))
+        for a in (q, qd, tau)
+    )
     s0, s1, control = model.state(), model.state(), model.control()
     s0.joint_q.assign(q.reshape(-1))
     s0.joint_qd.assign(qd.reshape(-1))
@@ -59,7 +60,9 @@ def drm_qdd(urdf: Path, q, qd, tau) -> np.ndarray:
 
     robot = DifferentiableRobotModel(str(urdf), device="cpu")
     t = lambda a: torch.tensor(np.asarray(a, np.float32))  # noqa: E731  (same float32 inputs as newton)
-    qdd = robot.compute_forward_dynamics(t(q), t(qd), t(tau) * 1.0, include_gravity=True, use_damping=True)
+    qdd = robot.compute_forward_dynamics(
+        t(q), t(qd), t(tau) * 1.0, include_gravity=True, use_damping=True
+    )
     return qdd.detach().numpy().astype(np.float64)
 
 
@@ -90,8 +93,12 @@ def test_forward_dynamics_match_drm(name):
     scene = load_scene(SCENES / f"{name}.usda")
     q, qd, tau = random_states(scene, 10)
     model = scene.build_model([Variant()] * len(q))
-    abs_err, rel_err = assert_qdd_close(newton_qdd(model, q, qd, tau), drm_qdd(URDF[name](), q, qd, tau))
-    print(f"{name}: max |qdd - qdd_drm| = {abs_err:.3g} rad/s^2, max relative (norm) = {rel_err:.3g}")
+    abs_err, rel_err = assert_qdd_close(
+        newton_qdd(model, q, qd, tau), drm_qdd(URDF[name](), q, qd, tau)
+    )
+    print(
+        f"{name}: max |qdd - qdd_drm| = {abs_err:.3g} rad/s^2, max relative (norm) = {rel_err:.3g}"
+    )
 
 
 # ------------------------------------------------------------------------------------------------
@@ -116,12 +123,19 @@ def test_usd_equals_newton_urdf_import(name):
     # URDF bodies that are welded on (fixed joints: the base and the massless end-effector frames)
     # are not bodies in the scene; everything else must match one to one, in order.
     jtype, jchild = urdf.joint_type.numpy(), urdf.joint_child.numpy()
-    moving = [int(jchild[j]) for j in range(urdf.joint_count) if jtype[j] != int(newton.JointType.FIXED)]
+    moving = [
+        int(jchild[j]) for j in range(urdf.joint_count) if jtype[j] != int(newton.JointType.FIXED)
+    ]
     names = [urdf.body_label[b].rsplit("/", 1)[-1] for b in moving]
     assert names == scene.body_names
     for attr in ("body_mass", "body_com", "body_inertia"):
-        np.testing.assert_allclose(getattr(usd, attr).numpy(), getattr(urdf, attr).numpy()[moving],
-                                   rtol=1e-6, atol=1e-8, err_msg=attr)
+        np.testing.assert_allclose(
+            getattr(usd, attr).numpy(),
+            getattr(urdf, attr).numpy()[moving],
+            rtol=1e-6,
+            atol=1e-8,
+            err_msg=attr,
+        )
 
     revolute = [j for j in range(urdf.joint_count) if jtype[j] != int(newton.JointType.FIXED)]
     assert [urdf.joint_label[j].rsplit("/", 1)[-1] for j in revolute] == scene.joint_names
@@ -132,7 +146,9 @@ def test_usd_equals_newton_urdf_import(name):
             np.testing.assert_allclose(_rot(a[3:]), _rot(b[3:]), atol=1e-6, err_msg=attr)
     np.testing.assert_allclose(usd.joint_axis.numpy(), urdf.joint_axis.numpy(), atol=1e-7)
     for attr in ("joint_limit_lower", "joint_limit_upper", "joint_damping", "joint_effort_limit"):
-        np.testing.assert_allclose(getattr(usd, attr).numpy(), getattr(urdf, attr).numpy(), rtol=1e-6, err_msg=attr)
+        np.testing.assert_allclose(
+            getattr(usd, attr).numpy(), getattr(urdf, attr).numpy(), rtol=1e-6, err_msg=attr
+        )
     # the scene's own gains, independent of newton's URDF defaults
     np.testing.assert_allclose(usd.joint_damping.numpy(), 0.5, rtol=1e-6)
     np.testing.assert_allclose(usd.joint_limit_ke.numpy(), 1000.0, rtol=1e-6)
@@ -141,7 +157,10 @@ def test_usd_equals_newton_urdf_import(name):
     if name == "kuka":  # the tip offset is the URDF's fixed iiwa_link_ee frame
         q = random_states(scene, 1, seed=2)[0][0]
         poses = []
-        for model, body in ((usd, scene.ee_body), (urdf, urdf.body_label.index("iiwa7/iiwa_link_ee"))):
+        for model, body in (
+            (usd, scene.ee_body),
+            (urdf, urdf.body_label.index("iiwa7/iiwa_link_ee")),
+        ):
             state = model.state()
             state.joint_q.assign(q)
             newton.eval_fk(model, state.joint_q, state.joint_qd, state)
@@ -152,7 +171,11 @@ def test_usd_equals_newton_urdf_import(name):
 
 def test_scene_metadata():
     reacher = load_scene(SCENES / "reacher.usda")
-    assert (reacher.name, reacher.dof, reacher.joint_names) == ("reacher", 2, ["baseHinge", "interArm"])
+    assert (reacher.name, reacher.dof, reacher.joint_names) == (
+        "reacher",
+        2,
+        ["baseHinge", "interArm"],
+    )
     assert reacher.body_names[reacher.ee_body] == "arm2"
     np.testing.assert_allclose(reacher.tip_offset, [1.0, 0.0, 0.0])
     np.testing.assert_allclose(reacher.effort_limit, [20.0, 20.0])
@@ -182,11 +205,15 @@ def test_scene_metadata():
 
 
 def test_generator_reproduces_committed_scenes(tmp_path):
-    subprocess.run([sys.executable, str(ROOT / "tools" / "make_scenes.py"), str(tmp_path)],
-                   check=True, capture_output=True)
+    subprocess.run(
+        [sys.executable, str(ROOT / "tools" / "make_scenes.py"), str(tmp_path)],
+        check=True,
+        capture_output=True,
+    )
     for name in ("point_mass", "reacher", "kuka"):
         assert (tmp_path / f"{name}.usda").read_text() == (SCENES / f"{name}.usda").read_text(), (
-            f"scenes/{name}.usda is stale: run python tools/make_scenes.py")
+            f"scenes/{name}.usda is stale: run python tools/make_scenes.py"
+        )
 
 
 # ------------------------------------------------------------------------------------------------
@@ -208,14 +235,23 @@ def reacher_mass_matrix(lc2: float, i2: float, ma: float, tip: float) -> np.ndar
     return np.array([[m11, m12], [m12, m22]]) + ma * np.outer(jac, jac)
 
 
-@pytest.mark.parametrize("variant, lc2, i2, ma, tip", [
-    (Variant(), 0.5, 0.001, 0.0, 1.0),
-    (Variant(ee_mass=0.7), 0.5, 0.001, 0.7, 1.0),
-    # stretch rule: Sigma = tr(I)/2 - I = 0.0005 * 1; Sigma_xx *= s^2; I_zz = Sigma_xx + Sigma_yy
-    (Variant(link_scale=2.0), 1.0, 0.0005 * (4 + 1), 0.0, 2.0),
-    (Variant(link_length=0.5), 0.25, 0.0005 * (0.25 + 1), 0.0, 0.5),
-    (Variant(ee_mass=0.3, link_length=0.5, link_scale=3.0), 0.75, 0.0005 * (2.25 + 1), 0.3, 1.5),
-])
+@pytest.mark.parametrize(
+    "variant, lc2, i2, ma, tip",
+    [
+        (Variant(), 0.5, 0.001, 0.0, 1.0),
+        (Variant(ee_mass=0.7), 0.5, 0.001, 0.7, 1.0),
+        # stretch rule: Sigma = tr(I)/2 - I = 0.0005 * 1; Sigma_xx *= s^2; I_zz = Sigma_xx + Sigma_yy
+        (Variant(link_scale=2.0), 1.0, 0.0005 * (4 + 1), 0.0, 2.0),
+        (Variant(link_length=0.5), 0.25, 0.0005 * (0.25 + 1), 0.0, 0.5),
+        (
+            Variant(ee_mass=0.3, link_length=0.5, link_scale=3.0),
+            0.75,
+            0.0005 * (2.25 + 1),
+            0.3,
+            1.5,
+        ),
+    ],
+)
 def test_reacher_variant_matches_analytic_mass_matrix(variant, lc2, i2, ma, tip):
     scene = load_scene(SCENES / "reacher.usda")
     tau = np.array([1.0, 0.0])
@@ -233,10 +269,13 @@ def _scaled_reacher_urdf(tmp_path: Path, ma: float, s: float) -> Path:
     iyy = 0.0005 * (s * s + 1) + m2 * (c2 - com) ** 2 + ma * (tip - com) ** 2
     text = URDF["reacher"]().read_text()
     arm2 = re.search(r'<link name="arm2">.*?</link>', text, re.S).group(0)
-    new = re.sub(r'<inertial>.*?</inertial>',
-                 f'<inertial><origin rpy="0 0 0" xyz="{com!r} 0 0"/><mass value="{mass!r}"/>'
-                 f'<inertia ixx="{ixx!r}" ixy="0" ixz="0" iyy="{iyy!r}" iyz="0" izz="{iyy!r}"/></inertial>',
-                 arm2, flags=re.S)
+    new = re.sub(
+        r"<inertial>.*?</inertial>",
+        f'<inertial><origin rpy="0 0 0" xyz="{com!r} 0 0"/><mass value="{mass!r}"/>'
+        f'<inertia ixx="{ixx!r}" ixy="0" ixz="0" iyy="{iyy!r}" iyz="0" izz="{iyy!r}"/></inertial>',
+        arm2,
+        flags=re.S,
+    )
     path = tmp_path / "reacher_variant.urdf"
     path.write_text(text.replace(arm2, new))
     return path
@@ -249,7 +288,9 @@ def test_reacher_variant_matches_drm_on_modified_urdf(tmp_path):
     ours = newton_qdd(scene.build_model([variant] * len(q)), q, qd, tau)
     ref = drm_qdd(_scaled_reacher_urdf(tmp_path, 0.5, 1.5), q, qd, tau)
     assert_qdd_close(ours, ref)
-    assert not np.allclose(ours, newton_qdd(scene.build_model([Variant()] * len(q)), q, qd, tau), rtol=1e-2)
+    assert not np.allclose(
+        ours, newton_qdd(scene.build_model([Variant()] * len(q)), q, qd, tau), rtol=1e-2
+    )
 
 
 def test_link_scale_moves_the_tip():
@@ -265,23 +306,46 @@ def test_link_scale_moves_the_tip():
     dists = []
     for w, variant in enumerate(variants):
         pose = body_q[w, scene.ee_body]
-        tip = np.array(wp.transform_point(wp.transform(*map(float, pose)), wp.vec3(*scene.tip_offset_of(variant))))
+        tip = np.array(
+            wp.transform_point(
+                wp.transform(*map(float, pose)), wp.vec3(*scene.tip_offset_of(variant))
+            )
+        )
         dists.append(np.linalg.norm(tip - pose[:3]))  # arm2's origin is the elbow joint
-        expected = np.array([math.cos(0.3), math.sin(0.3), 0]) + (w + 1) * np.array([math.cos(-0.4), math.sin(-0.4), 0])
+        expected = np.array([math.cos(0.3), math.sin(0.3), 0]) + (w + 1) * np.array(
+            [math.cos(-0.4), math.sin(-0.4), 0]
+        )
         np.testing.assert_allclose(tip, expected + [0, 0, 0.15], atol=1e-5)
     assert dists[1] == pytest.approx(2 * dists[0], rel=1e-6)
-    np.testing.assert_allclose(scene.tip_offset_of(Variant(link_length=0.25, link_scale=2.0)), [0.5, 0, 0])
+    np.testing.assert_allclose(
+        scene.tip_offset_of(Variant(link_length=0.25, link_scale=2.0)), [0.5, 0, 0]
+    )
     # the drawn capsule of arm2 (visual only) follows: centre and half height double
     shapes = np.flatnonzero(model.shape_body.numpy() == len(scene.body_names) + scene.ee_body)
     assert len(shapes) == 1
-    np.testing.assert_allclose(model.shape_transform.numpy()[shapes[0], :3], [1.0, 0.0, 0.0], atol=1e-6)
+    np.testing.assert_allclose(
+        model.shape_transform.numpy()[shapes[0], :3], [1.0, 0.0, 0.0], atol=1e-6
+    )
     np.testing.assert_allclose(model.shape_scale.numpy()[shapes[0], :2], [0.025, 1.0], atol=1e-6)
 
 
 def _arrays(model) -> dict[str, np.ndarray]:
-    names = ("body_mass", "body_com", "body_inertia", "body_inv_mass", "body_inv_inertia", "joint_X_p",
-             "joint_X_c", "joint_axis", "joint_limit_lower", "joint_limit_upper", "joint_damping",
-             "joint_effort_limit", "shape_transform", "shape_scale")
+    names = (
+        "body_mass",
+        "body_com",
+        "body_inertia",
+        "body_inv_mass",
+        "body_inv_inertia",
+        "joint_X_p",
+        "joint_X_c",
+        "joint_axis",
+        "joint_limit_lower",
+        "joint_limit_upper",
+        "joint_damping",
+        "joint_effort_limit",
+        "shape_transform",
+        "shape_scale",
+    )
     return {n: getattr(model, n).numpy() for n in names}
 
 
@@ -322,7 +386,9 @@ def test_worlds_carry_their_own_variants():
     c_new = (m * c + ma * p) / (m + ma)
     added = m * (c - c_new) ** 2 + ma * (p - c_new) ** 2
     np.testing.assert_allclose(inertia[1] - inertia[0], np.diag([added, added, 0.0]), atol=1e-7)
-    np.testing.assert_allclose(model.body_com.numpy().reshape(2, nb, 3)[1, scene.ee_body], [0, 0, c_new], atol=1e-7)
+    np.testing.assert_allclose(
+        model.body_com.numpy().reshape(2, nb, 3)[1, scene.ee_body], [0, 0, c_new], atol=1e-7
+    )
 
 
 def test_kuka_wrist_limit_is_stable_at_control_rate():
@@ -375,21 +441,52 @@ def _no_root(stage):
 BAD_SCENES = {
     "missing": (lambda tmp: tmp / "nope.usda", "no such"),
     "directory": (lambda tmp: tmp, "directory"),
-    "text": (lambda tmp: (tmp / "notes.usda", (tmp / "notes.usda").write_text("just some text\n"))[0], "not a"),
-    "txt_ext": (lambda tmp: (tmp / "notes.txt", (tmp / "notes.txt").write_text("text\n"))[0], "not a USD"),
-    "urdf": (lambda tmp: (tmp / "robot.urdf", (tmp / "robot.urdf").write_text(URDF["reacher"]().read_text()))[0],
-             "not a USD"),
+    "text": (
+        lambda tmp: (tmp / "notes.usda", (tmp / "notes.usda").write_text("just some text\n"))[0],
+        "not a",
+    ),
+    "txt_ext": (
+        lambda tmp: (tmp / "notes.txt", (tmp / "notes.txt").write_text("text\n"))[0],
+        "not a USD",
+    ),
+    "urdf": (
+        lambda tmp: (
+            tmp / "robot.urdf",
+            (tmp / "robot.urdf").write_text(URDF["reacher"]().read_text()),
+        )[0],
+        "not a USD",
+    ),
     "no_articulation": (lambda tmp: _edited_reacher(tmp, _no_root), "ArticulationRootAPI"),
     "spherical": (lambda tmp: _edited_reacher(tmp, _spherical), "PhysicsSphericalJoint"),
-    "zero_mass": (lambda tmp: _edited_reacher(
-        tmp, lambda s: s.GetPrimAtPath("/reacher/arm2").GetAttribute("physics:mass").Set(0.0)), "mass"),
-    "negative_mass": (lambda tmp: _edited_reacher(
-        tmp, lambda s: s.GetPrimAtPath("/reacher/arm2").GetAttribute("physics:mass").Set(-1.0)), "mass"),
-    "missing_mass": (lambda tmp: _edited_reacher(
-        tmp, lambda s: s.GetPrimAtPath("/reacher/arm1").RemoveProperty("physics:mass")), "mass"),
-    "negative_inertia": (lambda tmp: _edited_reacher(
-        tmp, lambda s: s.GetPrimAtPath("/reacher/arm1").GetAttribute("physics:diagonalInertia").Set(
-            (0.001, -0.001, 0.001))), "inertia"),
+    "zero_mass": (
+        lambda tmp: _edited_reacher(
+            tmp, lambda s: s.GetPrimAtPath("/reacher/arm2").GetAttribute("physics:mass").Set(0.0)
+        ),
+        "mass",
+    ),
+    "negative_mass": (
+        lambda tmp: _edited_reacher(
+            tmp, lambda s: s.GetPrimAtPath("/reacher/arm2").GetAttribute("physics:mass").Set(-1.0)
+        ),
+        "mass",
+    ),
+    "missing_mass": (
+        lambda tmp: _edited_reacher(
+            tmp, lambda s: s.GetPrimAtPath("/reacher/arm1").RemoveProperty("physics:mass")
+        ),
+        "mass",
+    ),
+    "negative_inertia": (
+        lambda tmp: _edited_reacher(
+            tmp,
+            lambda s: (
+                s.GetPrimAtPath("/reacher/arm1")
+                .GetAttribute("physics:diagonalInertia")
+                .Set((0.001, -0.001, 0.001))
+            ),
+        ),
+        "inertia",
+    ),
 }
 
 
@@ -403,14 +500,17 @@ def test_bad_scene_files_raise_one_line_scene_error(case, tmp_path):
     assert path.name in message and needle in message and "\n" not in message, message
 
 
-@pytest.mark.parametrize("variant, flag", [
-    (Variant(ee_mass=-1.0), "ee_mass: must be >= 0 (got -1.0)"),
-    (Variant(ee_mass=float("nan")), "ee_mass"),
-    (Variant(link_length=0.0), "link_length: must be > 0"),
-    (Variant(link_length=-0.5), "link_length: must be > 0"),
-    (Variant(link_scale=0.0), "link_scale: must be > 0"),
-    (Variant(link_scale=-2.0), "link_scale: must be > 0"),
-])
+@pytest.mark.parametrize(
+    "variant, flag",
+    [
+        (Variant(ee_mass=-1.0), "ee_mass: must be >= 0 (got -1.0)"),
+        (Variant(ee_mass=float("nan")), "ee_mass"),
+        (Variant(link_length=0.0), "link_length: must be > 0"),
+        (Variant(link_length=-0.5), "link_length: must be > 0"),
+        (Variant(link_scale=0.0), "link_scale: must be > 0"),
+        (Variant(link_scale=-2.0), "link_scale: must be > 0"),
+    ],
+)
 def test_bad_variants_raise_user_error_naming_the_field(variant, flag):
     with pytest.raises(UserError, match=re.escape(flag)):
         variant.validate()
@@ -419,47 +519,100 @@ def test_bad_variants_raise_user_error_naming_the_field(variant, flag):
         scene.build_model([Variant(), variant])
 
 
-@pytest.mark.parametrize("case", ["missing", "text", "urdf", "no_articulation", "spherical", "negative_mass"])
+@pytest.mark.parametrize(
+    "case", ["missing", "text", "urdf", "no_articulation", "spherical", "negative_mass"]
+)
 def test_bad_scene_files_on_the_command_line_exit_2_with_one_line(case, tmp_path, capsys):
     from warp_critic.cli.main import main
 
     make, _ = BAD_SCENES[case]
     path = make(tmp_path)
-    code = main(["meta-train", str(path), "--iterations", "1", "--out", str(tmp_path / "run"), "--device", "cpu"])
+    code = main(
+        [
+            "meta-train",
+            str(path),
+            "--iterations",
+            "1",
+            "--out",
+            str(tmp_path / "run"),
+            "--device",
+            "cpu",
+        ]
+    )
     err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and len(err) == 1 and path.name in err[0] and err[0].startswith("warp-critic: error:"), err
+    assert (
+        code == 2
+        and len(err) == 1
+        and path.name in err[0]
+        and err[0].startswith("warp-critic: error:")
+    ), err
 
 
 # ------------------------------------------------------------------------------------------------
 # 5. Training defaults and content hash: from the file's content, not its name
 # ------------------------------------------------------------------------------------------------
 
-DEFAULT_LINE = re.compile(r"^\s*custom \S+ warp_critic:(goals|horizon|dt|substeps|maxTorque|qdScale|alpha|lr|gravity"
-                          r"|homePose|iterations|innerSteps|criticInput|startStd|homeStarts) = .*\n", re.M)
+DEFAULT_LINE = re.compile(
+    r"^\s*custom \S+ warp_critic:(goals|horizon|dt|substeps|maxTorque|qdScale|alpha|lr|gravity"
+    r"|homePose|iterations|innerSteps|criticInput|startStd|homeStarts) = .*\n",
+    re.M,
+)
 
 
 def test_scene_defaults_are_read_exactly():
     reacher = load_scene(SCENES / "reacher.usda")
     assert reacher.defaults == dict(
-        goals=[[1.0, 0.5], [-1.0, -0.5], [0.5, -1.0], [-0.5, 1.0]], horizon=50, dt=0.01, substeps=2,
-        max_torque=[20.0, 20.0], qd_scale=5.0, alpha=3e-4, lr=1e-3, gravity=9.81,
-        iterations=400, inner_steps=3, critic_input="full", start_std=0.0, home_starts=0)
+        goals=[[1.0, 0.5], [-1.0, -0.5], [0.5, -1.0], [-0.5, 1.0]],
+        horizon=50,
+        dt=0.01,
+        substeps=2,
+        max_torque=[20.0, 20.0],
+        qd_scale=5.0,
+        alpha=3e-4,
+        lr=1e-3,
+        gravity=9.81,
+        iterations=400,
+        inner_steps=3,
+        critic_input="full",
+        start_std=0.0,
+        home_starts=0,
+    )
     assert type(reacher.defaults["horizon"]) is int and type(reacher.defaults["dt"]) is float
     np.testing.assert_array_equal(reacher.home, [0.0, 0.0])
     kuka = load_scene(SCENES / "kuka.usda")
     d = kuka.defaults
-    assert (d["dt"], d["substeps"], d["gravity"], d["alpha"], d["lr"]) == (0.0025, 4, 0.0, 3e-4, 3e-3)  # exact
+    assert (d["dt"], d["substeps"], d["gravity"], d["alpha"], d["lr"]) == (
+        0.0025,
+        4,
+        0.0,
+        3e-4,
+        3e-3,
+    )  # exact
     # the reported KUKA configuration (RESULTS.md, against the paper's Table 1) is the scene's default
-    assert (d["iterations"], d["inner_steps"], d["critic_input"], d["start_std"], d["home_starts"]) == \
-        (3000, 3, "relative", 0.4, 2)
+    assert (
+        d["iterations"],
+        d["inner_steps"],
+        d["critic_input"],
+        d["start_std"],
+        d["home_starts"],
+    ) == (3000, 3, "relative", 0.4, 2)
     assert type(d["iterations"]) is int and type(d["home_starts"]) is int
     assert d["max_torque"] == [20.0, 150.0, 8.0, 40.0, 1.5, 2.0, 1.0]
     assert len(d["goals"]) == 4 and all(len(g) == kuka.dof for g in d["goals"])
     assert d["goals"][2] == [0.3, -0.4, -0.3, -1.0, 0.2, 0.4, 0.0]
     np.testing.assert_array_equal(kuka.home, np.zeros(7))
     point = load_scene(SCENES / "point_mass.usda")
-    assert point.defaults == dict(goals=[[1.0, 1.0]], horizon=20, dt=0.05, substeps=1, max_torque=[5.0, 5.0],
-                                  qd_scale=2.0, alpha=1e-3, lr=3e-3, gravity=9.81)
+    assert point.defaults == dict(
+        goals=[[1.0, 1.0]],
+        horizon=20,
+        dt=0.05,
+        substeps=1,
+        max_torque=[5.0, 5.0],
+        qd_scale=2.0,
+        alpha=1e-3,
+        lr=3e-3,
+        gravity=9.81,
+    )
     # the cached scene hands out copies
     reacher.defaults["goals"].append([0.0, 0.0])
     reacher.home[0] = 1.0
@@ -484,10 +637,16 @@ def test_renamed_and_moved_copy_has_the_same_defaults_home_and_hash(tmp_path):
 def test_content_hash_changes_with_any_value_and_ignores_the_folder_of_assets(tmp_path):
     original = load_scene(SCENES / "reacher.usda").content_hash
     heavier = _edited_reacher(
-        tmp_path, lambda s: s.GetPrimAtPath("/reacher/arm2").GetAttribute("physics:mass").Set(1.001), "heavier.usda")
+        tmp_path,
+        lambda s: s.GetPrimAtPath("/reacher/arm2").GetAttribute("physics:mass").Set(1.001),
+        "heavier.usda",
+    )
     assert load_scene(heavier).content_hash != original
     slower = _edited_reacher(
-        tmp_path, lambda s: s.GetPrimAtPath("/reacher").GetAttribute("warp_critic:dt").Set(0.02), "slower.usda")
+        tmp_path,
+        lambda s: s.GetPrimAtPath("/reacher").GetAttribute("warp_critic:dt").Set(0.02),
+        "slower.usda",
+    )
     assert load_scene(slower).defaults["dt"] == 0.02
     # training defaults are resolved into each run's config: changing one does not change the hash
     assert load_scene(slower).content_hash == original
@@ -498,8 +657,9 @@ def test_content_hash_changes_with_any_value_and_ignores_the_folder_of_assets(tm
     def texture(stage):
         from pxr import Sdf
 
-        stage.GetPrimAtPath("/reacher/base/geom").CreateAttribute("note:texture", Sdf.ValueTypeNames.Asset).Set(
-            Sdf.AssetPath("./wood.png"))
+        stage.GetPrimAtPath("/reacher/base/geom").CreateAttribute(
+            "note:texture", Sdf.ValueTypeNames.Asset
+        ).Set(Sdf.AssetPath("./wood.png"))
 
     textured = _edited_reacher(tmp_path, texture, "textured.usda")
     (tmp_path / "moved").mkdir()
@@ -522,8 +682,12 @@ def test_scene_without_default_attributes_loads_with_empty_defaults(tmp_path):
 
     # a scene authoring only some of them: only those keys
     path = tmp_path / "some.usda"
-    path.write_text(stripped.replace('custom string warp_critic:endEffectorBody',
-                                     'custom int warp_critic:horizon = 7\n    custom string warp_critic:endEffectorBody'))
+    path.write_text(
+        stripped.replace(
+            "custom string warp_critic:endEffectorBody",
+            "custom int warp_critic:horizon = 7\n    custom string warp_critic:endEffectorBody",
+        )
+    )
     assert load_scene(path).defaults == {"horizon": 7}
 
 
@@ -536,6 +700,7 @@ def _set_root(attr: str, value, type_name: str | None = None):
             prim.RemoveProperty(attr)
             prim.CreateAttribute(attr, getattr(Sdf.ValueTypeNames, type_name), custom=True)
         prim.GetAttribute(attr).Set(value)
+
     return edit
 
 
@@ -550,7 +715,12 @@ BAD_DEFAULTS = {
     "string_qd_scale": ("warp_critic:qdScale", "fast", "String", "number"),
     "goals_wrong_length": ("warp_critic:goals", [1.0, 0.5, -1.0], None, "G x 2"),
     "no_goals": ("warp_critic:goals", [], None, "G x 2"),
-    "goal_outside_limits": ("warp_critic:goals", [1.0, 0.5, 0.5, 3.5], None, "goal 1 has interArm = 3.5"),
+    "goal_outside_limits": (
+        "warp_critic:goals",
+        [1.0, 0.5, 0.5, 3.5],
+        None,
+        "goal 1 has interArm = 3.5",
+    ),
     "nan_goal": ("warp_critic:goals", [1.0, float("nan")], None, "finite"),
     "torque_wrong_length": ("warp_critic:maxTorque", [1.0, 2.0, 3.0], None, "1 or 2 values"),
     "negative_torque": ("warp_critic:maxTorque", [5.0, -1.0], None, "> 0"),
@@ -566,7 +736,9 @@ def test_bad_default_attributes_raise_one_line_scene_error(case, tmp_path):
     with pytest.raises(SceneError) as info:
         load_scene(path)
     message = str(info.value)
-    assert path.name in message and attr in message and needle in message and "\n" not in message, message
+    assert path.name in message and attr in message and needle in message and "\n" not in message, (
+        message
+    )
 
 
 def test_one_torque_bound_for_all_joints_is_accepted(tmp_path):

@@ -10,9 +10,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import REACHER, ROOT
 
 from warp_critic.core.errors import FieldError, UserError
-from conftest import ROOT, REACHER
 
 PAPER = Path("/work/shared/paper/model_based_meta_learning_of_critics.tex")
 
@@ -27,8 +27,17 @@ def load_tool(name: str):
 def tiny_cfg(out: Path, **kw):
     from warp_critic.methods.ours import TrainConfig
 
-    cfg = TrainConfig(scene=REACHER, goals=[[0.5, 0.3], [-0.4, 0.2]], worlds_per_goal=2, horizon=6,
-                      iterations=3, device="cpu", out=str(out), checkpoint_every=1, record_every=2)
+    cfg = TrainConfig(
+        scene=REACHER,
+        goals=[[0.5, 0.3], [-0.4, 0.2]],
+        worlds_per_goal=2,
+        horizon=6,
+        iterations=3,
+        device="cpu",
+        out=str(out),
+        checkpoint_every=1,
+        record_every=2,
+    )
     for k, v in kw.items():
         setattr(cfg, k, v)
     return cfg
@@ -48,12 +57,30 @@ def saved_config(run_dir: Path) -> dict:
 # the tools (moved here from tests/test_train.py; every assertion kept, lists now comma-separated)
 # ------------------------------------------------------------------------------------------------
 
+
 def test_diagnose_tool_runs_on_a_run_directory(tmp_path, capsys):
     tool = load_tool("diagnose_metatest")
     out = tmp_path / "run"
     meta_train(tiny_cfg(out, iterations=1, horizon=30))  # 0.3 s: goals reachable
-    assert tool.main([str(out), "--goal-std", "0", "--around", "", "--inits", "2", "--steps", "2",
-                      "--reachability", "--reach-iterations", "60"]) == 0
+    assert (
+        tool.main(
+            [
+                str(out),
+                "--goal-std",
+                "0",
+                "--around",
+                "",
+                "--inits",
+                "2",
+                "--steps",
+                "2",
+                "--reachability",
+                "--reach-iterations",
+                "60",
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "step 2: mean" in text and "goal  1" in text
     reach = [float(x) for x in text.split("final sq. error per goal")[1].strip(" []\n").split()]
@@ -72,8 +99,26 @@ def test_paper_table_tool_pools_seeds_and_reports_the_mean_over_joints(tmp_path,
     for seed, out in enumerate(runs):
         meta_train(tiny_cfg(out, iterations=1, seed=seed))
     table_json = tmp_path / "table.json"
-    assert tool.main([str(r) for r in runs] + ["--stds", "0.1,0.3", "--num-goals", "2", "--inits", "2",
-                                               "--around", "", "--device", "cpu", "--out", str(table_json)]) == 0
+    assert (
+        tool.main(
+            [str(r) for r in runs]
+            + [
+                "--stds",
+                "0.1,0.3",
+                "--num-goals",
+                "2",
+                "--inits",
+                "2",
+                "--around",
+                "",
+                "--device",
+                "cpu",
+                "--out",
+                str(table_json),
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "| per-joint | MSE |" in text and "| distance | sum sq. |" in text
     table = json.loads(table_json.read_text())
@@ -81,11 +126,23 @@ def test_paper_table_tool_pools_seeds_and_reports_the_mean_over_joints(tmp_path,
     for cell in table["cells"]:
         assert cell["n"] == 2 * 2 * 2 and cell["dof"] == 2
         assert cell["sq_mean"] == pytest.approx(2 * cell["mse_mean"])
-        assert cell["mse_mean"] == pytest.approx(np.mean(cell["mse_mean_per_run"]))  # equal-sized runs
+        assert cell["mse_mean"] == pytest.approx(
+            np.mean(cell["mse_mean_per_run"])
+        )  # equal-sized runs
     # each run's share is exactly that run's own meta-test on the same goals and inits
     cell = next(c for c in table["cells"] if c["reading"] == "distance" and c["std"] == 0.3)
-    alone = meta_test(TestConfig(run_dir=str(runs[1]), num_goals=2, inits=2, goal_std=0.3, goal_noise="distance",
-                                 seed=table["seed"], device="cpu"), progress=None)
+    alone = meta_test(
+        TestConfig(
+            run_dir=str(runs[1]),
+            num_goals=2,
+            inits=2,
+            goal_std=0.3,
+            goal_noise="distance",
+            seed=table["seed"],
+            device="cpu",
+        ),
+        progress=None,
+    )
     assert cell["mse_mean_per_run"][1] == pytest.approx(alone["mse_mean"])
     assert tool.main([str(tmp_path / "missing")]) == 2
     assert "run directory not found" in capsys.readouterr().err
@@ -99,13 +156,35 @@ def test_paper_table_tool_pools_seeds_and_reports_the_mean_over_joints(tmp_path,
 
 def test_benchmark_quick_version_trains_two_seeds_and_prints_the_pooled_table(tmp_path, capsys):
     tool = load_tool("bench_metatrain")
-    assert tool.main(["--quick", "--scenes", "reacher", "--seeds", "0,3", "--iterations", "2",
-                      "--device", "cpu", "--runs-dir", str(tmp_path)]) == 0
+    assert (
+        tool.main(
+            [
+                "--quick",
+                "--scenes",
+                "reacher",
+                "--seeds",
+                "0,3",
+                "--iterations",
+                "2",
+                "--device",
+                "cpu",
+                "--runs-dir",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
-    assert "reacher seed 0: meta-train 2 iterations" in text and "reacher seed 3: meta-train 2 iterations" in text
+    assert (
+        "reacher seed 0: meta-train 2 iterations" in text
+        and "reacher seed 3: meta-train 2 iterations" in text
+    )
     assert "2 seed(s) x 2 goals x 1 inits" in text and "| per-joint | MSE |" in text
     assert "paper (Table 1)" not in text  # the paper's row is the KUKA's
-    seeds = [saved_config(tmp_path / d)["seed"] for d in ("bench-reacher-quick", "bench-reacher-quick-seed3")]
+    seeds = [
+        saved_config(tmp_path / d)["seed"]
+        for d in ("bench-reacher-quick", "bench-reacher-quick-seed3")
+    ]
     assert seeds == [0, 3]
     # the preset's settings reached the runs (config field names)
     from warp_critic.evaluation.presets import preset
@@ -120,12 +199,19 @@ def test_tools_print_one_line_errors_with_exit_code_2(tmp_path, capsys):
     # a bad value is refused by the library under its field name; the tool names its flag
     assert paper_table.main([str(tmp_path), "--goal-noise", "sphere"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("paper_table: error: --goal-noise ") and err.count("\n") == 1 and "sphere" in err
+    assert (
+        err.startswith("paper_table: error: --goal-noise ")
+        and err.count("\n") == 1
+        and "sphere" in err
+    )
     assert paper_table.main([str(tmp_path), "--stds", "0.1,-0.2"]) == 2
     assert capsys.readouterr().err.startswith("paper_table: error: --stds")
     # argparse's own errors are one line too
-    for tool, argv in ((paper_table, ["x", "--stds", "0.1,abc"]), (bench, ["--seeds", "0", "1"]),
-                       (bench, ["--scenes", "pendulum"])):
+    for tool, argv in (
+        (paper_table, ["x", "--stds", "0.1,abc"]),
+        (bench, ["--seeds", "0", "1"]),
+        (bench, ["--scenes", "pendulum"]),
+    ):
         with pytest.raises(SystemExit) as e:
             tool.main(argv)
         assert e.value.code == 2
@@ -138,8 +224,12 @@ def test_no_tool_deletes_run_directories_or_edits_sys_path():
         src = path.read_text()
         assert "rmtree" not in src and "os.remove" not in src, path.name
         assert "sys.path" not in src, path.name
-        if path.name != "make_scenes.py":  # one list syntax: A,B,C (only positional run directories repeat)
-            assert 'nargs="*"' not in src and src.count('nargs="+"') == src.count('"run_dirs", nargs="+"'), path.name
+        if (
+            path.name != "make_scenes.py"
+        ):  # one list syntax: A,B,C (only positional run directories repeat)
+            assert 'nargs="*"' not in src and src.count('nargs="+"') == src.count(
+                '"run_dirs", nargs="+"'
+            ), path.name
 
 
 def test_bench_baselines_refuses_existing_directories_that_are_not_its_runs(tmp_path, capsys):
@@ -147,25 +237,72 @@ def test_bench_baselines_refuses_existing_directories_that_are_not_its_runs(tmp_
     # a directory with someone's files: refused in one line, nothing touched
     (tmp_path / "reacher-ddpg").mkdir()
     (tmp_path / "reacher-ddpg" / "notes.txt").write_text("mine")
-    argv = ["--scenes", "reacher", "--methods", "ddpg", "--iterations", "2", "--num-goals", "1", "--inits", "1",
-            "--stds", "0.1", "--device", "cpu"]
+    argv = [
+        "--scenes",
+        "reacher",
+        "--methods",
+        "ddpg",
+        "--iterations",
+        "2",
+        "--num-goals",
+        "1",
+        "--inits",
+        "1",
+        "--stds",
+        "0.1",
+        "--device",
+        "cpu",
+    ]
     assert tool.main(argv + ["--out-root", str(tmp_path)]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("bench_baselines: error: ") and err.count("\n") == 1 and "never deleted" in err
+    assert (
+        err.startswith("bench_baselines: error: ")
+        and err.count("\n") == 1
+        and "never deleted" in err
+    )
     assert (tmp_path / "reacher-ddpg" / "notes.txt").read_text() == "mine"
     assert tool.plan_run(tmp_path / "nothing-here", "ddpg", 2) == "train"
     # bad meta-test settings are refused before any training
     assert tool.main(argv + ["--out-root", str(tmp_path / "new"), "--goal-noise", "sphere"]) == 2
     assert "--goal-noise" in capsys.readouterr().err and not (tmp_path / "new").exists()
     # --reuse of a missing run: one line
-    assert tool.main(["--scenes", "reacher", "--methods", "ddpg", "--reuse", "--out-root", str(tmp_path / "none")]) == 2
+    assert (
+        tool.main(
+            [
+                "--scenes",
+                "reacher",
+                "--methods",
+                "ddpg",
+                "--reuse",
+                "--out-root",
+                str(tmp_path / "none"),
+            ]
+        )
+        == 2
+    )
     assert "run directory not found" in capsys.readouterr().err
 
 
 def test_bench_baselines_trains_then_only_meta_tests_a_complete_run(tmp_path, capsys):
     tool = load_tool("bench_baselines")
-    argv = ["--scenes", "reacher", "--methods", "ddpg", "--iterations", "2", "--num-goals", "1", "--inits", "1",
-            "--stds", "0.1", "--device", "cpu", "--out-root", str(tmp_path)]
+    argv = [
+        "--scenes",
+        "reacher",
+        "--methods",
+        "ddpg",
+        "--iterations",
+        "2",
+        "--num-goals",
+        "1",
+        "--inits",
+        "1",
+        "--stds",
+        "0.1",
+        "--device",
+        "cpu",
+        "--out-root",
+        str(tmp_path),
+    ]
     assert tool.main(argv) == 0
     run = tmp_path / "reacher-ddpg"
     stamp = (run / "checkpoint.pt").stat().st_mtime_ns
@@ -177,10 +314,24 @@ def test_bench_baselines_trains_then_only_meta_tests_a_complete_run(tmp_path, ca
     assert "is complete, meta-test only" in capsys.readouterr().out
     assert (run / "checkpoint.pt").stat().st_mtime_ns == stamp
     rows = json.loads((tmp_path / "bench_baselines.json").read_text())
-    assert rows[0]["run"] == "reacher-ddpg" and rows[0]["iterations"] == 2 and "0.1" in rows[0]["meta_test"]
+    assert (
+        rows[0]["run"] == "reacher-ddpg"
+        and rows[0]["iterations"] == 2
+        and "0.1" in rows[0]["meta_test"]
+    )
     # more iterations: the run is resumed, not started again (its first iterations stay)
     first = rows[0]["task_loss_first"]
-    assert tool.main([*argv[:argv.index("--iterations")], "--iterations", "3", *argv[argv.index("--iterations") + 2:]]) == 0
+    assert (
+        tool.main(
+            [
+                *argv[: argv.index("--iterations")],
+                "--iterations",
+                "3",
+                *argv[argv.index("--iterations") + 2 :],
+            ]
+        )
+        == 0
+    )
     assert "== resume ddpg on reacher: 3 iterations" in capsys.readouterr().out
     rows = json.loads((tmp_path / "bench_baselines.json").read_text())
     assert rows[0]["iterations"] == 3 and rows[0]["task_loss_first"] == first
@@ -190,11 +341,25 @@ def test_bench_baselines_trains_then_only_meta_tests_a_complete_run(tmp_path, ca
 # warp_critic.evaluation.protocol
 # ------------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("field, value", [
-    ("goal_noise", ["sphere"]), ("goal_noise", "per-joint"), ("goal_noise", []),
-    ("stds", [0.1, -0.1]), ("stds", [float("nan")]), ("stds", [float("inf")]), ("stds", []), ("stds", ["0.1"]),
-    ("around", [-1]), ("around", "0,1"), ("num_goals", 0), ("inits", 1.5), ("seed", -1),
-])
+
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("goal_noise", ["sphere"]),
+        ("goal_noise", "per-joint"),
+        ("goal_noise", []),
+        ("stds", [0.1, -0.1]),
+        ("stds", [float("nan")]),
+        ("stds", [float("inf")]),
+        ("stds", []),
+        ("stds", ["0.1"]),
+        ("around", [-1]),
+        ("around", "0,1"),
+        ("num_goals", 0),
+        ("inits", 1.5),
+        ("seed", -1),
+    ],
+)
 def test_protocol_refuses_bad_settings_by_field_name_before_any_work(tmp_path, field, value):
     from warp_critic.evaluation.protocol import ProtocolConfig, run_protocol
 
@@ -218,7 +383,12 @@ def test_protocol_refuses_bad_run_directories_before_any_work(tmp_path):
 
 
 def test_protocol_pools_runs_and_checks_training_goal_indices(tmp_path):
-    from warp_critic.evaluation.protocol import ProtocolConfig, ProtocolResult, format_table, run_protocol
+    from warp_critic.evaluation.protocol import (
+        ProtocolConfig,
+        ProtocolResult,
+        format_table,
+        run_protocol,
+    )
 
     runs = [tmp_path / "a", tmp_path / "b"]
     for seed, out in enumerate(runs):
@@ -227,11 +397,24 @@ def test_protocol_pools_runs_and_checks_training_goal_indices(tmp_path):
         run_protocol(ProtocolConfig(run_dirs=[str(r) for r in runs], around=[0, 2]))
     assert e.value.field == "around" and "2 training goals" in e.value.problem
     lines = []
-    res = run_protocol(ProtocolConfig(run_dirs=[str(r) for r in runs], stds=[0.0, 0.2], goal_noise=["distance"],
-                                      around=[1], num_goals=2, inits=1, device="cpu", write_run_json=False),
-                       log=lines.append)
+    res = run_protocol(
+        ProtocolConfig(
+            run_dirs=[str(r) for r in runs],
+            stds=[0.0, 0.2],
+            goal_noise=["distance"],
+            around=[1],
+            num_goals=2,
+            inits=1,
+            device="cpu",
+            write_run_json=False,
+        ),
+        log=lines.append,
+    )
     assert len(lines) == 4 and all("distance std" in x for x in lines)
-    assert [(c.reading, c.std, c.n, c.dof) for c in res.cells] == [("distance", 0.0, 4, 2), ("distance", 0.2, 4, 2)]
+    assert [(c.reading, c.std, c.n, c.dof) for c in res.cells] == [
+        ("distance", 0.0, 4, 2),
+        ("distance", 0.2, 4, 2),
+    ]
     for c in res.cells:
         assert c.sq_mean == pytest.approx(2 * c.mse_mean) and len(c.mse_mean_per_run) == 2
     assert not list(runs[0].glob("table-*.json"))
@@ -246,20 +429,27 @@ def _tex_table(label: str) -> tuple[list[float], dict[str, list[tuple[float, flo
     """Columns and rows ``mean(std)`` of the paper's LaTeX table ``label``."""
     tex = PAPER.read_text()
     end = tex.index("\\label{" + label + "}")
-    body = tex[tex.rindex("\\begin{tabular}", 0, end):end]
+    body = tex[tex.rindex("\\begin{tabular}", 0, end) : end]
     lines = [x.strip().removesuffix("\\\\").strip() for x in body.splitlines() if "&" in x]
     columns = [float(c.split("=")[1]) for c in lines[0].split("&")[1:]]
     rows = {}
     for line in lines[1:]:
         cells = [c.strip() for c in line.split("&")]
         method = {"DDPG": "ddpg", "Meta Critic": "meta-critic"}.get(cells[0], "ours")
-        rows[method] = [tuple(float(x) for x in re.fullmatch(r"(?:\\textbf\{)?([\d.]+)\(([\d.]+)\)\}?", c).groups())
-                        for c in cells[1:]]
+        rows[method] = [
+            tuple(
+                float(x)
+                for x in re.fullmatch(r"(?:\\textbf\{)?([\d.]+)\(([\d.]+)\)\}?", c).groups()
+            )
+            for c in cells[1:]
+        ]
     return columns, rows
 
 
 @pytest.mark.skipif(not PAPER.is_file(), reason="the paper's LaTeX source is not on this machine")
-@pytest.mark.parametrize("label", ["table:gen_tasks_kuka", "table:gen_kuka_mass", "table:gen_kuka_link"])
+@pytest.mark.parametrize(
+    "label", ["table:gen_tasks_kuka", "table:gen_kuka_mass", "table:gen_kuka_link"]
+)
 def test_paper_tables_are_the_papers_latex_tables(label):
     from warp_critic.evaluation.protocol import PAPER_METHODS, PAPER_TABLES
 
@@ -275,7 +465,9 @@ def test_paper_table1_has_the_ten_stds():
     from warp_critic.evaluation.protocol import PAPER_TABLE1, TABLE1_STDS
 
     assert TABLE1_STDS == (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
-    assert PAPER_TABLE1["ours"][0.1][0] == 0.02 and PAPER_TABLE1["ours"][0.4][0] == 0.07  # README, RESULTS.md
+    assert (
+        PAPER_TABLE1["ours"][0.1][0] == 0.02 and PAPER_TABLE1["ours"][0.4][0] == 0.07
+    )  # README, RESULTS.md
 
 
 def test_protocol_readings_are_meta_tests():
@@ -291,14 +483,29 @@ def test_protocol_readings_are_meta_tests():
 # warp_critic.evaluation.presets
 # ------------------------------------------------------------------------------------------------
 
+
 def test_presets_are_the_reported_settings_keyed_by_config_fields():
-    from warp_critic.methods.ddpg import BaselineConfig
-    from warp_critic.evaluation.presets import DESCRIPTIONS, EVALUATIONS, PRESETS, SCENES, evaluation, preset
+    from warp_critic.evaluation.presets import (
+        DESCRIPTIONS,
+        EVALUATIONS,
+        PRESETS,
+        SCENES,
+        evaluation,
+        preset,
+    )
     from warp_critic.evaluation.protocol import ProtocolConfig, check_settings
+    from warp_critic.methods.ddpg import BaselineConfig
     from warp_critic.methods.ours import TrainConfig
 
-    assert preset("kuka-table1") == {"critic_input": "relative", "start_std": 0.4, "home_starts": 2,
-                                     "iterations": 3000, "inner_steps": 3, "alpha": 3e-4, "lr": 3e-3}
+    assert preset("kuka-table1") == {
+        "critic_input": "relative",
+        "start_std": 0.4,
+        "home_starts": 2,
+        "iterations": 3000,
+        "inner_steps": 3,
+        "alpha": 3e-4,
+        "lr": 3e-3,
+    }
     assert preset("reacher") == {"iterations": 400, "inner_steps": 3, "alpha": 3e-4}
     assert set(PRESETS) == set(DESCRIPTIONS) == set(SCENES) == set(EVALUATIONS)
     train_fields = {f.name for f in dataclasses.fields(TrainConfig)}

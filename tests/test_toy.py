@@ -8,8 +8,12 @@ import numpy as np
 import pytest
 
 from warp_critic.analysis.toy import command as toy
-from warp_critic.analysis.toy.closed_forms import (closed_form, closed_form_critic_params, fixed_points,
-                                                   paper_meta_critic_theta)
+from warp_critic.analysis.toy.closed_forms import (
+    closed_form,
+    closed_form_critic_params,
+    fixed_points,
+    paper_meta_critic_theta,
+)
 from warp_critic.analysis.toy.curves import curves, default_thetas
 from warp_critic.analysis.toy.loops import init_sweep, run_meta_critic, run_ours, run_supervised
 from warp_critic.analysis.toy.problem import METHODS
@@ -76,14 +80,19 @@ def test_autograd_critic_fits_match_closed_form(s0, g):
     thetas = default_thetas(s0, g, 60)
     cv = curves(s0, g, thetas)
     ref = closed_form_critic_params(s0, g, thetas)
-    for key, ref_key in (("supervised_phi", "supervised"), ("ours_phi", "ours"),
-                         ("meta_critic_beta", "meta_critic_beta")):
+    for key, ref_key in (
+        ("supervised_phi", "supervised"),
+        ("ours_phi", "ours"),
+        ("meta_critic_beta", "meta_critic_beta"),
+    ):
         ok = np.isfinite(ref[ref_key])
         assert ok.sum() >= 55
         np.testing.assert_allclose(cv[key][ok], ref[ref_key][ok], rtol=1e-7, atol=1e-9)
     s1, s2 = s0 + thetas, s0 + 2 * thetas
     np.testing.assert_allclose(cv["Q_true"], (s2 - g) ** 2)
-    np.testing.assert_allclose(cv["supervised_dQ"], 2 * cv["supervised_phi"] * (s0 + s1 + 2 * thetas), atol=1e-9)
+    np.testing.assert_allclose(
+        cv["supervised_dQ"], 2 * cv["supervised_phi"] * (s0 + s1 + 2 * thetas), atol=1e-9
+    )
     # our fitted critic's policy gradient is s0 + 2 theta - g, a quarter of dQ_true/dtheta
     np.testing.assert_allclose(cv["ours_dL"], 0.25 * cv["dQ_true"], rtol=1e-7, atol=1e-9)
 
@@ -94,12 +103,21 @@ def test_stationary_points_helper():
     assert [k for _, k in pts] == ["sign change", "touch"]
     assert pts[0][0] == pytest.approx(-0.5, abs=1e-3)
     assert pts[1][0] == pytest.approx(1.0, abs=0.01)
-    xi = np.arange(-100, 201) / 100.0  # contains 1.0 exactly: an exact zero is a touch even if not flat
-    assert [k for _, k in stationary_points(xi, (xi + 0.5) * (xi - 1.0) ** 2)] == ["sign change", "touch"]
-    assert stationary_points(x, (x + 0.5) * ((x - 1.0) ** 2 + 0.1)) == [(pytest.approx(-0.5, abs=1e-3), "sign change")]
+    xi = (
+        np.arange(-100, 201) / 100.0
+    )  # contains 1.0 exactly: an exact zero is a touch even if not flat
+    assert [k for _, k in stationary_points(xi, (xi + 0.5) * (xi - 1.0) ** 2)] == [
+        "sign change",
+        "touch",
+    ]
+    assert stationary_points(x, (x + 0.5) * ((x - 1.0) ** 2 + 0.1)) == [
+        (pytest.approx(-0.5, abs=1e-3), "sign change")
+    ]
     # a double zero between grid points: found by the parabola through the neighbouring samples
     quad = stationary_points(x, (x + 0.5) * (x - 1.0) ** 2)
-    assert [k for _, k in quad] == ["sign change", "touch"] and quad[1][0] == pytest.approx(1.0, abs=0.01)
+    assert [k for _, k in quad] == ["sign change", "touch"] and quad[1][0] == pytest.approx(
+        1.0, abs=0.01
+    )
     assert stationary_points(x, x + 5.0) == []
     assert len(stationary_points(x, np.sin(6 * x))) == 5  # 6x = k pi, k = -1..3
 
@@ -146,9 +164,13 @@ def test_paper_printed_meta_critic_formula_is_not_a_fixed_point():
     s0, g = -6.0, 0.0
     th_paper = paper_meta_critic_theta(s0)
     s1 = s0 + th_paper
-    assert th_paper == pytest.approx(-(s0 + s1) / (2 * ((s0 + th_paper) ** 2 + (s1 + th_paper) ** 2)), abs=1e-9)
+    assert th_paper == pytest.approx(
+        -(s0 + s1) / (2 * ((s0 + th_paper) ** 2 + (s1 + th_paper) ** 2)), abs=1e-9
+    )
     theta, _, trace = run_meta_critic(s0, g, theta0=th_paper)
-    assert trace["theta"][1] == pytest.approx(-(s0 + s1) / 2.0, abs=1e-9)  # jumps to the TD critic's minimiser
+    assert trace["theta"][1] == pytest.approx(
+        -(s0 + s1) / 2.0, abs=1e-9
+    )  # jumps to the TD critic's minimiser
     assert abs(trace["theta"][1] - th_paper) > 1.0
     assert theta == pytest.approx(closed_form(s0, g)["meta_critic"], abs=1e-8)
 
@@ -189,7 +211,14 @@ def test_run_toy_writes_outputs(tmp_path, capsys):
     assert rrd.is_file()
     paths = read_entity_paths(rrd)
     for m in METHODS:
-        for e in ("value/Q_true", "value/critic", "gradient/critic", "gradient/dQ_true", "trace/theta", "trace/phi"):
+        for e in (
+            "value/Q_true",
+            "value/critic",
+            "gradient/critic",
+            "gradient/dQ_true",
+            "trace/theta",
+            "trace/phi",
+        ):
             assert f"/toy/{m}/{e}" in paths
     assert "/toy/meta_critic/trace/beta" in paths
 
@@ -201,15 +230,39 @@ def test_cli(tmp_path, monkeypatch):
     assert args.s0 == -6.0 and args.goal == 0.0 and str(args.out) == "runs/analysis-toy"
     out = tmp_path / "o"
     calls = []
-    monkeypatch.setattr(toy, "run_toy", lambda *a, **k: calls.append((a, k)) or {})  # run_toy is tested above
-    args = parser.parse_args(["--s0", "2", "--goal", "-2", "--out", str(out), "--iters", "50", "--grid", "40",
-                              "--theta0", "0.3", "--alpha", "0.25"])
+    monkeypatch.setattr(
+        toy, "run_toy", lambda *a, **k: calls.append((a, k)) or {}
+    )  # run_toy is tested above
+    args = parser.parse_args(
+        [
+            "--s0",
+            "2",
+            "--goal",
+            "-2",
+            "--out",
+            str(out),
+            "--iters",
+            "50",
+            "--grid",
+            "40",
+            "--theta0",
+            "0.3",
+            "--alpha",
+            "0.25",
+        ]
+    )
     assert toy.run_from_args(args) == 0
-    (a, k), = calls
+    ((a, k),) = calls
     assert a == (out, 2.0, -2.0) and k["iters"] == 50 and k["theta0"] == 0.3 and k["alpha"] == 0.25
     assert len(k["thetas"]) == 40
-    bad = [(["--iters", "0"], "--iters"), (["--s0", "nan"], "--s0"), (["--goal", "inf"], "--goal"),
-           (["--alpha", "-1"], "--alpha"), (["--s0", "0"], "--s0"), (["--grid", "2"], "--grid")]
+    bad = [
+        (["--iters", "0"], "--iters"),
+        (["--s0", "nan"], "--s0"),
+        (["--goal", "inf"], "--goal"),
+        (["--alpha", "-1"], "--alpha"),
+        (["--s0", "0"], "--s0"),
+        (["--grid", "2"], "--grid"),
+    ]
     for argv, flag in bad:
         with pytest.raises(UserError, match=flag) as err:
             toy.run_from_args(parser.parse_args(argv + ["--out", str(out)]))
@@ -220,16 +273,19 @@ def test_cli(tmp_path, monkeypatch):
         toy.run_from_args(parser.parse_args(["--out", str(afile)]))
 
 
-@pytest.mark.parametrize("argv,flag,words", [
-    (["--s0", "1e300"], "--s0", "within"),
-    (["--s0", "1e-9"], "--s0", "non-zero"),
-    (["--goal=-1e300"], "--goal", "within"),
-    (["--theta0", "inf"], "--theta0", "finite"),
-    (["--alpha", "1e300"], "--alpha", "<="),
-    (["--plain-lr", "0"], "--plain-lr", "> 0"),
-    (["--iters", "10000000000"], "--iters", "<="),
-    (["--grid", "1000000000000000"], "--grid", "memory"),
-])
+@pytest.mark.parametrize(
+    "argv,flag,words",
+    [
+        (["--s0", "1e300"], "--s0", "within"),
+        (["--s0", "1e-9"], "--s0", "non-zero"),
+        (["--goal=-1e300"], "--goal", "within"),
+        (["--theta0", "inf"], "--theta0", "finite"),
+        (["--alpha", "1e300"], "--alpha", "<="),
+        (["--plain-lr", "0"], "--plain-lr", "> 0"),
+        (["--iters", "10000000000"], "--iters", "<="),
+        (["--grid", "1000000000000000"], "--grid", "memory"),
+    ],
+)
 def test_cli_rejects_absurd_values_on_one_line(argv, flag, words, tmp_path, capsys):
     from warp_critic.cli.main import main
 

@@ -8,23 +8,41 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-
-from warp_critic.physics import bridge
-from warp_critic.methods import ours as train
-from warp_critic.cli.main import main
-from warp_critic.core.errors import UserError
-from warp_critic.running.rundir import load_checkpoint
-from warp_critic.methods.ours import TrainConfig
-from warp_critic.evaluation.metatest import TestConfig, meta_test
-from warp_critic.running.recording import read_entity_paths
 from conftest import KUKA, REACHER
 
-TINY = ["--goals", "0.5,0.3;-0.4,0.2", "--worlds-per-goal", "2", "--horizon", "6", "--device", "cpu"]
+from warp_critic.cli.main import main
+from warp_critic.core.errors import UserError
+from warp_critic.evaluation.metatest import TestConfig, meta_test
+from warp_critic.methods import ours as train
+from warp_critic.methods.ours import TrainConfig
+from warp_critic.physics import bridge
+from warp_critic.running.recording import read_entity_paths
+from warp_critic.running.rundir import load_checkpoint
+
+TINY = [
+    "--goals",
+    "0.5,0.3;-0.4,0.2",
+    "--worlds-per-goal",
+    "2",
+    "--horizon",
+    "6",
+    "--device",
+    "cpu",
+]
 
 
 def tiny_cfg(out: Path, **kw) -> TrainConfig:
-    cfg = TrainConfig(scene=REACHER, goals=[[0.5, 0.3], [-0.4, 0.2]], worlds_per_goal=2, horizon=6,
-                      iterations=3, device="cpu", out=str(out), checkpoint_every=1, record_every=2)
+    cfg = TrainConfig(
+        scene=REACHER,
+        goals=[[0.5, 0.3], [-0.4, 0.2]],
+        worlds_per_goal=2,
+        horizon=6,
+        iterations=3,
+        device="cpu",
+        out=str(out),
+        checkpoint_every=1,
+        record_every=2,
+    )
     for k, v in kw.items():
         setattr(cfg, k, v)
     return cfg
@@ -48,7 +66,22 @@ def test_meta_train_cli_writes_run_directory_and_resumes(tmp_path, capsys):
     assert main(["meta-train", REACHER, *TINY, "--iterations", "3", "--out", str(out)]) == 2
     assert "--resume" in capsys.readouterr().err
 
-    assert main(["meta-train", REACHER, "--iterations", "5", "--out", str(out), "--resume", "--device", "cpu"]) == 0
+    assert (
+        main(
+            [
+                "meta-train",
+                REACHER,
+                "--iterations",
+                "5",
+                "--out",
+                str(out),
+                "--resume",
+                "--device",
+                "cpu",
+            ]
+        )
+        == 0
+    )
     rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
     assert [r["iteration"] for r in rows] == [0, 1, 2, 3, 4]
     assert torch.load(out / "checkpoint.pt", weights_only=False)["iteration"] == 4
@@ -57,7 +90,22 @@ def test_meta_train_cli_writes_run_directory_and_resumes(tmp_path, capsys):
     # a moved run directory resumes and records where it now is
     moved = tmp_path / "moved"
     out.rename(moved)
-    assert main(["meta-train", REACHER, "--iterations", "6", "--out", str(moved), "--resume", "--device", "cpu"]) == 0
+    assert (
+        main(
+            [
+                "meta-train",
+                REACHER,
+                "--iterations",
+                "6",
+                "--out",
+                str(moved),
+                "--resume",
+                "--device",
+                "cpu",
+            ]
+        )
+        == 0
+    )
     assert json.loads((moved / "config.json").read_text())["out"] == str(moved)
     assert torch.load(moved / "checkpoint.pt", weights_only=False)["config"]["out"] == str(moved)
 
@@ -71,9 +119,13 @@ def test_interrupted_run_resumes_exactly_on_cpu(tmp_path, extra):
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        train.meta_train(tiny_cfg(tmp_path / "b", iterations=4, **extra), callbacks=[interrupt], progress=False)
+        train.meta_train(
+            tiny_cfg(tmp_path / "b", iterations=4, **extra), callbacks=[interrupt], progress=False
+        )
     assert torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=False)["iteration"] == 1
-    resumed = train.meta_train(tiny_cfg(tmp_path / "b", iterations=4, resume=True, **extra), progress=False)
+    resumed = train.meta_train(
+        tiny_cfg(tmp_path / "b", iterations=4, resume=True, **extra), progress=False
+    )
     a = [r["task_loss"] for r in straight.metrics]
     b = [r["task_loss"] for r in resumed.metrics]
     assert a == pytest.approx(b, rel=1e-5)
@@ -92,9 +144,14 @@ def test_outer_gradient_reaches_the_critic_through_model_and_inner_update(tmp_pa
     sim = Simulator(scene, [Variant()] * 2, dt=0.01, substeps=2, device="cpu")
     norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, torch.tensor([20.0, 20.0]), 5.0)
     critic = Critic(2, norm)
-    params = {k: v.requires_grad_() for k, v in init_policy(2, 4, 2, generator=torch.Generator().manual_seed(0)).items()}
+    params = {
+        k: v.requires_grad_()
+        for k, v in init_policy(2, 4, 2, generator=torch.Generator().manual_seed(0)).items()
+    }
     goal = torch.tensor([[0.5, 0.3], [0.5, 0.3]])
-    res = meta_loss(critic, MLPPolicy(norm), params, sim, sim.zeros(), sim.zeros(), goal, horizon=8, alpha=1e-3)
+    res = meta_loss(
+        critic, MLPPolicy(norm), params, sim, sim.zeros(), sim.zeros(), goal, horizon=8, alpha=1e-3
+    )
     grads = torch.autograd.grad(res.loss, list(critic.parameters()), allow_unused=True)
     # a constant offset of the critic cannot change the policy update: no path from the output bias
     assert grads[-1] is None
@@ -103,14 +160,37 @@ def test_outer_gradient_reaches_the_critic_through_model_and_inner_update(tmp_pa
 
     # finite differences on the critic's output weights, through the whole bi-level graph
     w = critic.net[-1].weight
-    (g_w,) = torch.autograd.grad(meta_loss(critic, MLPPolicy(norm), params, sim, sim.zeros(), sim.zeros(), goal,
-                                           horizon=8, alpha=1e-3).loss, [w])
+    (g_w,) = torch.autograd.grad(
+        meta_loss(
+            critic,
+            MLPPolicy(norm),
+            params,
+            sim,
+            sim.zeros(),
+            sim.zeros(),
+            goal,
+            horizon=8,
+            alpha=1e-3,
+        ).loss,
+        [w],
+    )
     direction = torch.randn_like(w)
     eps = 1e-2
+
     def loss_at(shift):
         with torch.no_grad():
             w.add_(shift * direction)
-        value = meta_loss(critic, MLPPolicy(norm), params, sim, sim.zeros(), sim.zeros(), goal, horizon=8, alpha=1e-3).loss.item()
+        value = meta_loss(
+            critic,
+            MLPPolicy(norm),
+            params,
+            sim,
+            sim.zeros(),
+            sim.zeros(),
+            goal,
+            horizon=8,
+            alpha=1e-3,
+        ).loss.item()
         with torch.no_grad():
             w.sub_(shift * direction)
         return value
@@ -137,23 +217,47 @@ def test_meta_test_uses_no_model_gradient(tmp_path, monkeypatch, capsys):
         real_init(self, model, *a, **k)
 
     monkeypatch.setattr(bridge.NewtonBridge, "__init__", spy)
-    res = meta_test(TestConfig(run_dir=str(out), num_goals=3, inits=2, goal_std=0.2, device="cpu"), progress=None)
+    res = meta_test(
+        TestConfig(run_dir=str(out), num_goals=3, inits=2, goal_std=0.2, device="cpu"),
+        progress=None,
+    )
     assert built == [False]  # the test-time model has no gradient buffers at all
     assert len(res["final_error_per_goal"]) == 3 and res["mean"] >= 0
     # the paper's "mean squared error" averages over the joints; ours sums (the task loss)
     dof = len(res["goals"][0])
     all_err = np.asarray(res["final_error_all"])
     np.testing.assert_allclose(res["mse_per_goal"], all_err.mean(1) / dof, rtol=1e-6)
-    assert res["mse_mean"] == pytest.approx(all_err.mean() / dof) and res["mse_std"] == pytest.approx(all_err.std() / dof)
+    assert res["mse_mean"] == pytest.approx(all_err.mean() / dof) and res[
+        "mse_std"
+    ] == pytest.approx(all_err.std() / dof)
     assert (out / "metatest.json").is_file()
 
-    assert main(["meta-test", str(out), "--num-goals", "2", "--inits", "1", "--ee-mass", "0.5",
-                 "--link-scale", "1.2", "--device", "cpu"]) == 0
+    assert (
+        main(
+            [
+                "meta-test",
+                str(out),
+                "--num-goals",
+                "2",
+                "--inits",
+                "1",
+                "--ee-mass",
+                "0.5",
+                "--link-scale",
+                "1.2",
+                "--device",
+                "cpu",
+            ]
+        )
+        == 0
+    )
     text = capsys.readouterr().out
     assert "mean" in text and "goal  1" in text and "MSE" in text
 
 
-def test_divergence_stops_with_iteration_and_keeps_last_good_checkpoint(tmp_path, monkeypatch, capsys):
+def test_divergence_stops_with_iteration_and_keeps_last_good_checkpoint(
+    tmp_path, monkeypatch, capsys
+):
     real = train.meta_loss
     calls = {"n": 0}
 
@@ -166,29 +270,49 @@ def test_divergence_stops_with_iteration_and_keeps_last_good_checkpoint(tmp_path
 
     monkeypatch.setattr(train, "meta_loss", sometimes_nan)
     out = tmp_path / "run"
-    code = main(["meta-train", REACHER, *TINY, "--iterations", "5", "--checkpoint-every", "1", "--out", str(out)])
-    err = [line for line in capsys.readouterr().err.splitlines() if not line.startswith("[")]  # minus progress
+    code = main(
+        [
+            "meta-train",
+            REACHER,
+            *TINY,
+            "--iterations",
+            "5",
+            "--checkpoint-every",
+            "1",
+            "--out",
+            str(out),
+        ]
+    )
+    err = [
+        line for line in capsys.readouterr().err.splitlines() if not line.startswith("[")
+    ]  # minus progress
     assert code == 1 and len(err) == 1 and "iteration 2" in err[0], err
     assert torch.load(out / "checkpoint.pt", weights_only=False)["iteration"] == 1
 
 
-@pytest.mark.parametrize("argv, fragment", [
-    (["meta-train", REACHER, "--goals", "0.1,0.2,0.3"], "needs 2 joint values"),
-    (["meta-train", REACHER, "--goals", "5.0,0.0"], "outside the joint limits"),
-    (["meta-train", REACHER, "--horizon", "0"], "--horizon must be > 0"),
-    (["meta-train", REACHER, "--lr", "-1"], "--lr must be > 0"),
-    (["meta-train", REACHER, "--alpha", "0"], "--alpha must be > 0"),
-    (["meta-train", REACHER, "--ee-mass", "-1"], "--ee-mass"),
-    (["meta-train", REACHER, "--link-length", "-0.5"], "--link-length"),
-    (["meta-train", REACHER, "--horizon", "abc"], "invalid int value"),
-    (["meta-train", "nope/missing.usda"], "missing.usda"),
-    (["meta-train", REACHER, "--policy-init", "weird"], "--policy-init"),
-    (["meta-train", REACHER, "--critic-input", "absolute"], "--critic-input"),
-    (["meta-train", REACHER, "--velocity-weight", "-1"], "--velocity-weight"),
-    (["meta-train", REACHER, "--policy-lifetime", "3", "--policy-init", "fixed"], "--policy-lifetime"),
-    (["meta-train", REACHER, "--policy-lifetime", "0"], "--policy-lifetime"),
-    (["meta-train", REACHER, "--goals", "goals_missing.json"], "goals_missing.json"),
-])
+@pytest.mark.parametrize(
+    "argv, fragment",
+    [
+        (["meta-train", REACHER, "--goals", "0.1,0.2,0.3"], "needs 2 joint values"),
+        (["meta-train", REACHER, "--goals", "5.0,0.0"], "outside the joint limits"),
+        (["meta-train", REACHER, "--horizon", "0"], "--horizon must be > 0"),
+        (["meta-train", REACHER, "--lr", "-1"], "--lr must be > 0"),
+        (["meta-train", REACHER, "--alpha", "0"], "--alpha must be > 0"),
+        (["meta-train", REACHER, "--ee-mass", "-1"], "--ee-mass"),
+        (["meta-train", REACHER, "--link-length", "-0.5"], "--link-length"),
+        (["meta-train", REACHER, "--horizon", "abc"], "invalid int value"),
+        (["meta-train", "nope/missing.usda"], "missing.usda"),
+        (["meta-train", REACHER, "--policy-init", "weird"], "--policy-init"),
+        (["meta-train", REACHER, "--critic-input", "absolute"], "--critic-input"),
+        (["meta-train", REACHER, "--velocity-weight", "-1"], "--velocity-weight"),
+        (
+            ["meta-train", REACHER, "--policy-lifetime", "3", "--policy-init", "fixed"],
+            "--policy-lifetime",
+        ),
+        (["meta-train", REACHER, "--policy-lifetime", "0"], "--policy-lifetime"),
+        (["meta-train", REACHER, "--goals", "goals_missing.json"], "goals_missing.json"),
+    ],
+)
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, fragment):
     try:
         code = main([*argv, "--out", str(tmp_path / "run"), "--device", "cpu", "--iterations", "1"])
@@ -225,14 +349,29 @@ def test_help_and_version(capsys):
     with pytest.raises(SystemExit):
         main(["meta-train", "--help"])
     text = capsys.readouterr().out
-    for flag in ("--goals", "--iterations", "--horizon", "--dt", "--lr", "--alpha", "--inner-steps",
-                 "--worlds-per-goal", "--seed", "--device", "--out", "--resume", "--policy-init"):
+    for flag in (
+        "--goals",
+        "--iterations",
+        "--horizon",
+        "--dt",
+        "--lr",
+        "--alpha",
+        "--inner-steps",
+        "--worlds-per-goal",
+        "--seed",
+        "--device",
+        "--out",
+        "--resume",
+        "--policy-init",
+    ):
         assert flag in text
 
 
 def test_relative_critic_run_meta_tests_from_its_checkpoint(tmp_path):
     out = tmp_path / "rel"
-    train.meta_train(tiny_cfg(out, iterations=2, critic_input="relative", velocity_weight=0.01), progress=False)
+    train.meta_train(
+        tiny_cfg(out, iterations=2, critic_input="relative", velocity_weight=0.01), progress=False
+    )
     ckpt = load_checkpoint(out)
     assert ckpt["critic_input"] == "relative" and ckpt["config"]["velocity_weight"] == 0.01
     res = meta_test(TestConfig(run_dir=str(out), num_goals=2, inits=1, device="cpu"), progress=None)
@@ -242,9 +381,11 @@ def test_relative_critic_run_meta_tests_from_its_checkpoint(tmp_path):
 def test_staggered_policy_lifetime_continues_each_policy_until_it_is_replaced(tmp_path):
     """lifetime 2, 2 worlds per goal: slot 0 is fresh at even iterations, slot 1 at odd ones."""
     seen = []
-    train.meta_train(tiny_cfg(tmp_path / "s", iterations=3, policy_lifetime=2),
-                     callbacks=[lambda info: seen.append((info.result.before.q, info.result.after.q))],
-                     progress=False)
+    train.meta_train(
+        tiny_cfg(tmp_path / "s", iterations=3, policy_lifetime=2),
+        callbacks=[lambda info: seen.append((info.result.before.q, info.result.after.q))],
+        progress=False,
+    )
     (_, after0), (before1, _), (before2, _) = seen
     # world 0 (goal 0, slot 0) is not replaced at iteration 1: it starts from its updated policy ...
     assert torch.allclose(before1[:, 0], after0[:, 0], atol=1e-6)
@@ -253,18 +394,39 @@ def test_staggered_policy_lifetime_continues_each_policy_until_it_is_replaced(tm
     assert not torch.allclose(before2[:, 0], seen[1][1][:, 0], atol=1e-3)
     assert torch.allclose(before2[:, 1], seen[1][1][:, 1], atol=1e-6)
     ckpt = load_checkpoint(tmp_path / "s")
-    res = meta_test(TestConfig(run_dir=str(tmp_path / "s"), num_goals=1, inits=1, device="cpu"), progress=None)
+    res = meta_test(
+        TestConfig(run_dir=str(tmp_path / "s"), num_goals=1, inits=1, device="cpu"), progress=None
+    )
     assert res["policy_steps"] == ckpt["config"]["inner_steps"] * 2
 
 
 def test_home_starts_keep_some_worlds_at_the_home_pose(tmp_path, capsys):
     seen = []
-    train.meta_train(tiny_cfg(tmp_path / "h", iterations=2, start_std=0.3, home_starts=1),
-                     callbacks=[lambda info: seen.append(info.result.before.q[0])], progress=False)
-    for q0 in seen:  # worlds are goal-major: (goal 0, slot 0), (goal 0, slot 1), (goal 1, slot 0), ...
+    train.meta_train(
+        tiny_cfg(tmp_path / "h", iterations=2, start_std=0.3, home_starts=1),
+        callbacks=[lambda info: seen.append(info.result.before.q[0])],
+        progress=False,
+    )
+    for (
+        q0
+    ) in seen:  # worlds are goal-major: (goal 0, slot 0), (goal 0, slot 1), (goal 1, slot 0), ...
         assert torch.all(q0[0::2] == 0) and torch.all(q0[1::2].abs().sum(1) > 0)
-    assert main(["meta-train", REACHER, *TINY, "--start-std", "0.3", "--home-starts", "3",
-                 "--out", str(tmp_path / "bad")]) == 2
+    assert (
+        main(
+            [
+                "meta-train",
+                REACHER,
+                *TINY,
+                "--start-std",
+                "0.3",
+                "--home-starts",
+                "3",
+                "--out",
+                str(tmp_path / "bad"),
+            ]
+        )
+        == 2
+    )
     assert "--home-starts" in capsys.readouterr().err and not (tmp_path / "bad").exists()
 
 
@@ -283,15 +445,25 @@ def test_seeds_batched_in_one_process_equal_single_seed_runs(tmp_path):
     for k, v in cks["critic_state"].items():
         assert torch.allclose(ckb["critic_state"][k], v, atol=1e-6), k
     for k, v in cks["optimizer_state"]["state"].items():
-        assert torch.allclose(ckb["optimizer_state"]["state"][k]["exp_avg_sq"], v["exp_avg_sq"], atol=1e-9)
-    assert torch.equal(ckb["rng_state"], cks["rng_state"]) and torch.equal(ckb["torch_rng_state"], cks["torch_rng_state"])
+        assert torch.allclose(
+            ckb["optimizer_state"]["state"][k]["exp_avg_sq"], v["exp_avg_sq"], atol=1e-9
+        )
+    assert torch.equal(ckb["rng_state"], cks["rng_state"]) and torch.equal(
+        ckb["torch_rng_state"], cks["torch_rng_state"]
+    )
     # a seed of a batched run resumes on its own, and the batch resumes as a batch
-    alone = train.meta_train(tiny_cfg(tmp_path / "b" / "seed2", seed=2, resume=True, **{**extra, "iterations": 4}),
-                             progress=False)
+    alone = train.meta_train(
+        tiny_cfg(tmp_path / "b" / "seed2", seed=2, resume=True, **{**extra, "iterations": 4}),
+        progress=False,
+    )
     assert [r["iteration"] for r in alone.metrics] == [0, 1, 2, 3]
     with pytest.raises(UserError, match="different iterations"):
-        train.meta_train(tiny_cfg(tmp_path / "b", seeds=[0, 2, 5], resume=True, **{**extra, "iterations": 5}),
-                         progress=False)
-    again = train.meta_train(tiny_cfg(tmp_path / "b", seeds=[0, 5], resume=True, **{**extra, "iterations": 4}),
-                             progress=False)
+        train.meta_train(
+            tiny_cfg(tmp_path / "b", seeds=[0, 2, 5], resume=True, **{**extra, "iterations": 5}),
+            progress=False,
+        )
+    again = train.meta_train(
+        tiny_cfg(tmp_path / "b", seeds=[0, 5], resume=True, **{**extra, "iterations": 4}),
+        progress=False,
+    )
     assert [r["iteration"] for r in again.seeds[1].metrics] == [0, 1, 2, 3]

@@ -27,12 +27,16 @@ from warp_critic.cli.flags import ToolParser, comma_list  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def bench_newton(worlds: int, horizon: int, dt: float, device: str, repeats: int = 2) -> tuple[float, float]:
+def bench_newton(
+    worlds: int, horizon: int, dt: float, device: str, repeats: int = 2
+) -> tuple[float, float]:
     from warp_critic.physics.scene import Variant, load_scene
     from warp_critic.physics.simulator import Simulator
 
     scene = load_scene(ROOT / "scenes" / "kuka.usda")
-    sim = Simulator(scene, [Variant()] * worlds, dt=dt, substeps=1, device=device, differentiable=True)
+    sim = Simulator(
+        scene, [Variant()] * worlds, dt=dt, substeps=1, device=device, differentiable=True
+    )
     dev = sim.torch_device
     gen = torch.Generator().manual_seed(0)
     tau = (torch.randn(horizon, worlds, 7, generator=gen) * 5).to(dev).requires_grad_()
@@ -74,15 +78,23 @@ def bench_newton(worlds: int, horizon: int, dt: float, device: str, repeats: int
 
 
 def bench_drm(worlds: int, horizon: int, dt: float) -> float:
-    import differentiable_robot_model as drm_pkg
-    from differentiable_robot_model.robot_model import DifferentiableRobotModel
-
     import contextlib
     import io
 
-    urdf = Path(drm_pkg.__file__).resolve().parents[1] / "diff_robot_data" / "kuka_iiwa" / "urdf" / "iiwa7.urdf"
+    import differentiable_robot_model as drm_pkg
+    from differentiable_robot_model.robot_model import DifferentiableRobotModel
+
+    urdf = (
+        Path(drm_pkg.__file__).resolve().parents[1]
+        / "diff_robot_data"
+        / "kuka_iiwa"
+        / "urdf"
+        / "iiwa7.urdf"
+    )
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        robot = DifferentiableRobotModel(str(urdf), "iiwa7", device="cpu")  # its URDF parser is chatty
+        robot = DifferentiableRobotModel(
+            str(urdf), "iiwa7", device="cpu"
+        )  # its URDF parser is chatty
     gen = torch.Generator().manual_seed(0)
     tau = (torch.randn(horizon, worlds, 7, generator=gen) * 5).requires_grad_()
     w = torch.randn(horizon, worlds, 7, generator=gen)
@@ -90,20 +102,31 @@ def bench_drm(worlds: int, horizon: int, dt: float) -> float:
     t0 = time.perf_counter()
     q, qd, loss = q0, torch.zeros(worlds, 7), 0.0
     for t in range(horizon):
-        qdd = robot.compute_forward_dynamics(q, qd, tau[t] * 1.0, include_gravity=True, use_damping=True)
+        qdd = robot.compute_forward_dynamics(
+            q, qd, tau[t] * 1.0, include_gravity=True, use_damping=True
+        )
         qd = qd + dt * qdd
         q = q + dt * qd
         loss = loss + (w[t] * q).sum()
     loss.backward()
     return worlds * horizon / (time.perf_counter() - t0)
 
+
 def main(argv: list[str] | None = None) -> int:
     p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
-    p.add_argument("--worlds", type=comma_list(int), default=[1, 64, 512], help="world counts, e.g. 1,64,512")
+    p.add_argument(
+        "--worlds", type=comma_list(int), default=[1, 64, 512], help="world counts, e.g. 1,64,512"
+    )
     p.add_argument("--horizon", type=int, default=100, help="physics steps per rollout")
     p.add_argument("--dt", type=float, default=0.0025, help="time step (s)")
-    p.add_argument("--device", default="cpu", help="cpu or cuda for Newton (the paper's model runs on CPU)")
-    p.add_argument("--no-reference", action="store_true", help="skip the paper's model (e.g. for 4096 worlds on GPU)")
+    p.add_argument(
+        "--device", default="cpu", help="cpu or cuda for Newton (the paper's model runs on CPU)"
+    )
+    p.add_argument(
+        "--no-reference",
+        action="store_true",
+        help="skip the paper's model (e.g. for 4096 worlds on GPU)",
+    )
     args = p.parse_args(argv)
     from warp_critic.core import runtime
     from warp_critic.core.errors import UserError
@@ -111,11 +134,16 @@ def main(argv: list[str] | None = None) -> int:
     # torch's default thread count: the paper's model (torch autograd) is the reference here
     runtime.init(threads=0)
     import logging
+
     logging.getLogger().setLevel(logging.ERROR)
 
-    print(f"iiwa7, horizon {args.horizon}, dt {args.dt} s, fwd+bwd world-steps/s "
-          f"(torch threads: {torch.get_num_threads()}, newton device: {args.device})")
-    print(f"{'worlds':>7} | {'warp-critic fwd+bwd':>20} | {'warp-critic fwd':>16} | {'paper model fwd+bwd':>20} | {'ratio':>6}")
+    print(
+        f"iiwa7, horizon {args.horizon}, dt {args.dt} s, fwd+bwd world-steps/s "
+        f"(torch threads: {torch.get_num_threads()}, newton device: {args.device})"
+    )
+    print(
+        f"{'worlds':>7} | {'warp-critic fwd+bwd':>20} | {'warp-critic fwd':>16} | {'paper model fwd+bwd':>20} | {'ratio':>6}"
+    )
     for n in args.worlds:
         try:
             fb, fw = bench_newton(n, args.horizon, args.dt, args.device)

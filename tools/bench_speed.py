@@ -31,8 +31,14 @@ WARMUP = 2  # iterations not timed
 
 def categorise(stats: pstats.Stats) -> dict[str, float]:
     """Own time (s) grouped by where it is spent."""
-    groups = {"warp kernels": 0.0, "warp launch overhead": 0.0, "newton python": 0.0,
-              "torch backward engine": 0.0, "torch ops": 0.0, "other python": 0.0}
+    groups = {
+        "warp kernels": 0.0,
+        "warp launch overhead": 0.0,
+        "newton python": 0.0,
+        "torch backward engine": 0.0,
+        "torch ops": 0.0,
+        "other python": 0.0,
+    }
     for (filename, _, name), (_, _, tottime, _, _) in stats.stats.items():
         if "warp/" in filename and name in ("invoke", "capture_launch"):
             groups["warp kernels"] += tottime
@@ -49,16 +55,31 @@ def categorise(stats: pstats.Stats) -> dict[str, float]:
     return groups
 
 
-def run(scene: str, preset: dict, seeds: list[int], iterations: int, device: str, graphs: bool, profile: bool):
+def run(
+    scene: str,
+    preset: dict,
+    seeds: list[int],
+    iterations: int,
+    device: str,
+    graphs: bool,
+    profile: bool,
+):
     """Meta-train ``iterations`` outer iterations; returns (s/iteration after the first, wall s, breakdown)."""
     from warp_critic.methods.ours import TrainConfig, meta_train
 
     os.environ[runtime.GRAPHS_ENV] = "1" if graphs else "0"
     with tempfile.TemporaryDirectory(prefix="bench-speed-") as tmp:
         out = Path(tmp)
-        cfg = TrainConfig(scene=scene, **{**preset, "iterations": iterations}, device=device, out=str(out / "run"),
-                          seed=seeds[0], seeds=seeds if len(seeds) > 1 else None,
-                          checkpoint_every=10**6, record_every=10**6)
+        cfg = TrainConfig(
+            scene=scene,
+            **{**preset, "iterations": iterations},
+            device=device,
+            out=str(out / "run"),
+            seed=seeds[0],
+            seeds=seeds if len(seeds) > 1 else None,
+            checkpoint_every=10**6,
+            record_every=10**6,
+        )
         prof = cProfile.Profile() if profile else None
         t0 = time.perf_counter()
         if prof:
@@ -76,13 +97,24 @@ def run(scene: str, preset: dict, seeds: list[int], iterations: int, device: str
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--scene", default=str(ROOT / "scenes" / "kuka.usda"))
-    p.add_argument("--preset", default="kuka-table1", help="training settings (warp_critic.evaluation.presets)")
-    p.add_argument("--iterations", type=int, default=8,
-                   help=f"iterations per run (the first {WARMUP} are not timed)")
-    p.add_argument("--seeds", default="0,1,2,3,4", help="seeds batched in the second run, comma-separated")
+    p.add_argument(
+        "--preset", default="kuka-table1", help="training settings (warp_critic.evaluation.presets)"
+    )
+    p.add_argument(
+        "--iterations",
+        type=int,
+        default=8,
+        help=f"iterations per run (the first {WARMUP} are not timed)",
+    )
+    p.add_argument(
+        "--seeds", default="0,1,2,3,4", help="seeds batched in the second run, comma-separated"
+    )
     p.add_argument("--device", default="cpu")
-    p.add_argument("--profile", action="store_true",
-                   help="also profile each configuration (extra runs) and print where the time goes")
+    p.add_argument(
+        "--profile",
+        action="store_true",
+        help="also profile each configuration (extra runs) and print where the time goes",
+    )
     args = p.parse_args(argv)
 
     from warp_critic.core.errors import UserError
@@ -95,18 +127,30 @@ def main(argv: list[str] | None = None) -> int:
         settings = preset(args.preset)
         settings.pop("iterations", None)
         runtime.init()
-        configs = [(f"1 seed, {mode}", seeds[:1], graphs) for graphs, mode in ((False, "direct"), (True, "graphs"))]
+        configs = [
+            (f"1 seed, {mode}", seeds[:1], graphs)
+            for graphs, mode in ((False, "direct"), (True, "graphs"))
+        ]
         if len(seeds) > 1:
-            configs += [(f"{len(seeds)} seeds, {mode}", seeds, graphs)
-                        for graphs, mode in ((False, "direct"), (True, "graphs"))]
+            configs += [
+                (f"{len(seeds)} seeds, {mode}", seeds, graphs)
+                for graphs, mode in ((False, "direct"), (True, "graphs"))
+            ]
         times, groups = {}, {}
         for label, s, graphs in configs:
-            per_it, wall, _ = run(args.scene, settings, s, args.iterations, args.device, graphs, False)
+            per_it, wall, _ = run(
+                args.scene, settings, s, args.iterations, args.device, graphs, False
+            )
             times[label] = per_it
-            print(f"{label:>18}: {per_it:.3f} s/iteration ({wall:.1f} s for {args.iterations} iterations)", flush=True)
+            print(
+                f"{label:>18}: {per_it:.3f} s/iteration ({wall:.1f} s for {args.iterations} iterations)",
+                flush=True,
+            )
         if args.profile:
             for label, s, graphs in configs:
-                groups[label] = run(args.scene, settings, s, WARMUP + 2, args.device, graphs, True)[2]
+                groups[label] = run(args.scene, settings, s, WARMUP + 2, args.device, graphs, True)[
+                    2
+                ]
     except UserError as e:
         print(f"bench_speed: error: {e}", file=sys.stderr)
         return 2
@@ -116,9 +160,13 @@ def main(argv: list[str] | None = None) -> int:
         n = len(seeds)
         many_d, many_g = times[f"{n} seeds, direct"], times[f"{n} seeds, graphs"]
         print(f"graph replay: {n} seeds {many_d / many_g:.2f}x faster per iteration")
-        print(f"{n} seeds batched (graphs): {many_g / one_g:.2f}x the time per iteration of 1 seed, "
-              f"{n * one_g / many_g:.2f}x the throughput (seeds x iterations per second)")
-        print(f"{n} seeds batched (graphs) vs 1 seed direct: {n * one_d / many_g:.2f}x the throughput")
+        print(
+            f"{n} seeds batched (graphs): {many_g / one_g:.2f}x the time per iteration of 1 seed, "
+            f"{n * one_g / many_g:.2f}x the throughput (seeds x iterations per second)"
+        )
+        print(
+            f"{n} seeds batched (graphs) vs 1 seed direct: {n * one_d / many_g:.2f}x the throughput"
+        )
     if groups:
         print("\nbreakdown (cProfile own time, share of each profiled run):")
         labels = list(groups)

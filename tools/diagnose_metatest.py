@@ -49,24 +49,51 @@ def main(argv=None) -> int:
     p.add_argument("run_dir")
     p.add_argument("--goal-std", type=float, default=0.1, help="0 = the training goals themselves")
     p.add_argument("--goal-noise", default="per-joint", choices=["per-joint", "distance"])
-    p.add_argument("--around", type=comma_list(int), default=[0, 1],
-                   help="training goals to use / sample around, e.g. 0,1 ('' = all)")
+    p.add_argument(
+        "--around",
+        type=comma_list(int),
+        default=[0, 1],
+        help="training goals to use / sample around, e.g. 0,1 ('' = all)",
+    )
     p.add_argument("--num-goals", type=int, default=10)
     p.add_argument("--inits", type=int, default=5)
-    p.add_argument("--steps", type=int, default=None, help="policy steps (default: as meta-test, the run's inner steps x policy lifetime)")
+    p.add_argument(
+        "--steps",
+        type=int,
+        default=None,
+        help="policy steps (default: as meta-test, the run's inner steps x policy lifetime)",
+    )
     p.add_argument("--seed", type=int, default=1)
-    p.add_argument("--goals", default=None, help="explicit goals, inline 'a,b;c,d' or a file (instead of sampling)")
-    p.add_argument("--ee-mass", type=float, default=0.0, help="mass added at the end-effector tip (kg), as meta-test")
-    p.add_argument("--link-length", type=float, default=None, help="set the end-effector link length (m), as meta-test")
-    p.add_argument("--reachability", action="store_true", help="also optimise open-loop torques through the model")
+    p.add_argument(
+        "--goals",
+        default=None,
+        help="explicit goals, inline 'a,b;c,d' or a file (instead of sampling)",
+    )
+    p.add_argument(
+        "--ee-mass",
+        type=float,
+        default=0.0,
+        help="mass added at the end-effector tip (kg), as meta-test",
+    )
+    p.add_argument(
+        "--link-length",
+        type=float,
+        default=None,
+        help="set the end-effector link length (m), as meta-test",
+    )
+    p.add_argument(
+        "--reachability",
+        action="store_true",
+        help="also optimise open-loop torques through the model",
+    )
     p.add_argument("--reach-iterations", type=int, default=150)
     args = p.parse_args(argv)
 
     from warp_critic.core import runtime
     from warp_critic.core.errors import UserError
+    from warp_critic.evaluation.metatest import TestConfig, setup_meta_test
     from warp_critic.learning.inner import inner_update, policy_fn
     from warp_critic.learning.networks import MLPPolicy
-    from warp_critic.evaluation.metatest import TestConfig, setup_meta_test
     from warp_critic.learning.rollout import rollout
     from warp_critic.physics.scene import Variant
     from warp_critic.physics.simulator import Simulator
@@ -76,11 +103,27 @@ def main(argv=None) -> int:
         runtime.init()
         n_train = _training_goals(args.run_dir)
         # goal std 0: one goal per training goal named in --around (sampling with std 0 returns them)
-        num_goals = (len(around) if around else n_train or args.num_goals) if args.goal_std == 0 else args.num_goals
-        m = setup_meta_test(TestConfig(run_dir=args.run_dir, goals=parse_goals(args.goals), num_goals=num_goals, goal_std=args.goal_std,
-                                       goal_noise=args.goal_noise, around=around, inits=args.inits,
-                                       policy_steps=args.steps, seed=args.seed, device="cpu",
-                                       ee_mass=args.ee_mass, link_length=args.link_length))
+        num_goals = (
+            (len(around) if around else n_train or args.num_goals)
+            if args.goal_std == 0
+            else args.num_goals
+        )
+        m = setup_meta_test(
+            TestConfig(
+                run_dir=args.run_dir,
+                goals=parse_goals(args.goals),
+                num_goals=num_goals,
+                goal_std=args.goal_std,
+                goal_noise=args.goal_noise,
+                around=around,
+                inits=args.inits,
+                policy_steps=args.steps,
+                seed=args.seed,
+                device="cpu",
+                ee_mass=args.ee_mass,
+                link_length=args.link_length,
+            )
+        )
     except UserError as e:
         print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
         return 2
@@ -91,42 +134,76 @@ def main(argv=None) -> int:
     def fmt(t: torch.Tensor) -> str:
         return np.array2string(t.numpy(), precision=3, floatmode="fixed", max_line_width=200)
 
-    print(f"{args.run_dir}: {G} goals x {K} inits, goal std {args.goal_std} ({args.goal_noise}), "
-          f"alpha {alpha}, {steps} policy steps, end-effector +{args.ee_mass} kg, link length "
-          f"{'as trained' if args.link_length is None else f'{args.link_length} m'}")
+    print(
+        f"{args.run_dir}: {G} goals x {K} inits, goal std {args.goal_std} ({args.goal_noise}), "
+        f"alpha {alpha}, {steps} policy steps, end-effector +{args.ee_mass} kg, link length "
+        f"{'as trained' if args.link_length is None else f'{args.link_length} m'}"
+    )
     traj = rollout(sim, policy_fn(MLPPolicy(norm), params), q0, qd0, horizon)
     print(f"step 0 (untrained): mean {((traj.q[-1] - goal) ** 2).sum(-1).mean():.4f}")
     for step in range(1, steps + 1):
-        params, _ = inner_update(critic, MLPPolicy(norm), params, sim, q0, qd0, goal, horizon=horizon,
-                                 alpha=alpha, steps=1, create_graph=False)
+        params, _ = inner_update(
+            critic,
+            MLPPolicy(norm),
+            params,
+            sim,
+            q0,
+            qd0,
+            goal,
+            horizon=horizon,
+            alpha=alpha,
+            steps=1,
+            create_graph=False,
+        )
         traj = rollout(sim, policy_fn(MLPPolicy(norm), params), q0, qd0, horizon)
         sq = (traj.q[-1] - goal) ** 2
         sat = (traj.tau.abs() / norm.max_torque > 0.9).float().mean((0, 1))
-        print(f"step {step}: mean {sq.sum(-1).mean():.4f}  per joint {fmt(sq.mean(0))}\n"
-              f"         final |qd| {fmt(traj.qd[-1].abs().mean(0))} rad/s  torque >90% of bound {fmt(sat)}")
+        print(
+            f"step {step}: mean {sq.sum(-1).mean():.4f}  per joint {fmt(sq.mean(0))}\n"
+            f"         final |qd| {fmt(traj.qd[-1].abs().mean(0))} rad/s  torque >90% of bound {fmt(sat)}"
+        )
     per = sq.sum(-1).view(G, K)
     print("per goal: mean, spread over inits (max - min)")
     for i in range(G):
-        print(f"  goal {i:2d} {fmt(goals[i])}  {per[i].mean():.4f}  {per[i].max() - per[i].min():.4f}")
+        print(
+            f"  goal {i:2d} {fmt(goals[i])}  {per[i].mean():.4f}  {per[i].max() - per[i].min():.4f}"
+        )
 
     if args.reachability:
         variant = Variant(ee_mass=args.ee_mass, link_length=args.link_length)
-        dsim = Simulator(scene, [variant] * G, dt=sim.dt, substeps=sim.substeps, device="cpu",
-                         differentiable=True, gravity=sim.gravity)
+        dsim = Simulator(
+            scene,
+            [variant] * G,
+            dt=sim.dt,
+            substeps=sim.substeps,
+            device="cpu",
+            differentiable=True,
+            gravity=sim.gravity,
+        )
         u = torch.zeros(horizon, G, scene.dof, requires_grad=True)
         opt = torch.optim.Adam([u], lr=0.1)
-        best = torch.full((G,), float("inf"))  # per goal: the best open-loop torques found, not the last
+        best = torch.full(
+            (G,), float("inf")
+        )  # per goal: the best open-loop torques found, not the last
         for _ in range(args.reach_iterations):
             t = iter(range(horizon))
-            traj = rollout(dsim, lambda q, qd: norm.max_torque * torch.tanh(u[next(t)]), dsim.zeros(),
-                           dsim.zeros(), horizon, differentiable=True)
+            traj = rollout(
+                dsim,
+                lambda q, qd, t=t: norm.max_torque * torch.tanh(u[next(t)]),
+                dsim.zeros(),
+                dsim.zeros(),
+                horizon,
+                differentiable=True,
+            )
             err = ((traj.q[-1] - goals) ** 2).sum(-1)
             best = torch.minimum(best, err.detach())
             opt.zero_grad()
             err.sum().backward()
             opt.step()
-        print(f"open-loop torques through the model ({args.reach_iterations} Adam steps): "
-              f"best final sq. error per goal {fmt(best)}")
+        print(
+            f"open-loop torques through the model ({args.reach_iterations} Adam steps): "
+            f"best final sq. error per goal {fmt(best)}"
+        )
     return 0
 
 

@@ -87,49 +87,56 @@ PASSIVE_DAMPING = 0.5  # N*m*s/rad on every revolute joint (both URDFs: <dynamic
 # allows ke = 1000 with kd = 0.5 (spectral radius 0.91 per step, kd = 10 would diverge); the
 # reacher's smallest axis inertia is 0.25 kg*m^2 and the point mass has 1 kg, so kd = 10 is fine.
 
-IIWA_LIMITS = (2.9670597283903604, 2.0943951023931953, 2.9670597283903604, 2.0943951023931953,
-               2.9670597283903604, 2.0943951023931953, 3.0543261909900763)
+IIWA_LIMITS = (
+    2.9670597283903604,
+    2.0943951023931953,
+    2.9670597283903604,
+    2.0943951023931953,
+    2.9670597283903604,
+    2.0943951023931953,
+    3.0543261909900763,
+)
 HALF_PI, PI = 1.5707963267948966, 3.141592653589793
 
 
 @dataclass(frozen=True)
 class Link:
     name: str
-    mass: float                                   # kg
-    com: tuple[float, float, float]               # m, link frame
+    mass: float  # kg
+    com: tuple[float, float, float]  # m, link frame
     inertia: tuple[float, float, float, float, float, float]  # ixx iyy izz ixy ixz iyz about com
-    visual_radius: float = 0.03                   # m, capsule radius of the drawn link
+    visual_radius: float = 0.03  # m, capsule radius of the drawn link
 
 
 @dataclass(frozen=True)
 class Joint:
     name: str
-    kind: str                                     # "revolute" | "prismatic"
-    parent: str | None                            # None = world
+    kind: str  # "revolute" | "prismatic"
+    parent: str | None  # None = world
     child: str
-    xyz: tuple[float, float, float]               # m, origin in the parent frame (world if None)
-    rpy: tuple[float, float, float]               # rad, URDF fixed-axis roll-pitch-yaw
-    axis: str                                     # "X" | "Y" | "Z" in the joint frame
-    lower: float                                  # rad or m
+    xyz: tuple[float, float, float]  # m, origin in the parent frame (world if None)
+    rpy: tuple[float, float, float]  # rad, URDF fixed-axis roll-pitch-yaw
+    axis: str  # "X" | "Y" | "Z" in the joint frame
+    lower: float  # rad or m
     upper: float
-    effort: float                                 # N*m or N
-    damping: float                                # N*m*s/rad or N*s/m
+    effort: float  # N*m or N
+    damping: float  # N*m*s/rad or N*s/m
 
 
 @dataclass(frozen=True)
 class Defaults:
     """Training defaults of a scene, written as ``warp_critic:*`` attributes of the root (see above)."""
 
-    goals: tuple[tuple[float, ...], ...]          # G x dof, rad or m
-    horizon: int                                  # control steps per rollout
-    dt: float                                     # s
-    substeps: int                                 # physics steps per control step
-    max_torque: tuple[float, ...]                 # N*m or N, dof values (or 1)
-    qd_scale: float                               # rad/s
-    alpha: float                                  # inner learning rate
-    lr: float                                     # outer learning rate
-    gravity: float                                # m/s^2 along -z
-    home: tuple[float, ...] | None = None         # rad or m; None = zeros
+    goals: tuple[tuple[float, ...], ...]  # G x dof, rad or m
+    horizon: int  # control steps per rollout
+    dt: float  # s
+    substeps: int  # physics steps per control step
+    max_torque: tuple[float, ...]  # N*m or N, dof values (or 1)
+    qd_scale: float  # rad/s
+    alpha: float  # inner learning rate
+    lr: float  # outer learning rate
+    gravity: float  # m/s^2 along -z
+    home: tuple[float, ...] | None = None  # rad or m; None = zeros
     # the reported training schedule (None: not authored, the generic defaults apply)
     iterations: int | None = None
     inner_steps: int | None = None
@@ -142,13 +149,13 @@ class Defaults:
 class Robot:
     links: tuple[Link, ...]
     joints: tuple[Joint, ...]
-    ee: str                                       # end-effector link name
-    tip: tuple[float, float, float]               # m, tip in the ee link frame
+    ee: str  # end-effector link name
+    tip: tuple[float, float, float]  # m, tip in the ee link frame
     limit_ke: float
     limit_kd: float
     base_visual: tuple[float, float] | None = None  # (radius, height) of a static base cylinder
     point_visual: dict[str, float] = field(default_factory=dict)  # link -> sphere radius
-    defaults: Defaults | None = None              # training defaults (None: none authored)
+    defaults: Defaults | None = None  # training defaults (None: none authored)
 
 
 ROBOTS: dict[str, Robot] = {
@@ -161,15 +168,49 @@ ROBOTS: dict[str, Robot] = {
             Link("mass", 1.0, (0.0, 0.0, 0.0), (1e-3, 1e-3, 1e-3, 0.0, 0.0, 0.0), 0.0),
         ),
         joints=(
-            Joint("slide_x", "prismatic", None, "carriage", (0, 0, 0), (0, 0, 0), "X",
-                  -5.0, 5.0, 10.0, 0.0),
-            Joint("slide_y", "prismatic", "carriage", "mass", (0, 0, 0), (0, 0, 0), "Y",
-                  -5.0, 5.0, 10.0, 0.0),
+            Joint(
+                "slide_x",
+                "prismatic",
+                None,
+                "carriage",
+                (0, 0, 0),
+                (0, 0, 0),
+                "X",
+                -5.0,
+                5.0,
+                10.0,
+                0.0,
+            ),
+            Joint(
+                "slide_y",
+                "prismatic",
+                "carriage",
+                "mass",
+                (0, 0, 0),
+                (0, 0, 0),
+                "Y",
+                -5.0,
+                5.0,
+                10.0,
+                0.0,
+            ),
         ),
-        ee="mass", tip=(0.0, 0.0, 0.0), limit_ke=1000.0, limit_kd=10.0,
+        ee="mass",
+        tip=(0.0, 0.0, 0.0),
+        limit_ke=1000.0,
+        limit_kd=10.0,
         point_visual={"mass": 0.05},
-        defaults=Defaults(goals=((1.0, 1.0),), horizon=20, dt=0.05, substeps=1, max_torque=(5.0, 5.0),
-                          qd_scale=2.0, alpha=1e-3, lr=3e-3, gravity=9.81),
+        defaults=Defaults(
+            goals=((1.0, 1.0),),
+            horizon=20,
+            dt=0.05,
+            substeps=1,
+            max_torque=(5.0, 5.0),
+            qd_scale=2.0,
+            alpha=1e-3,
+            lr=3e-3,
+            gravity=9.81,
+        ),
     ),
     # diff_robot_data/2link_robot.urdf
     "reacher": Robot(
@@ -178,47 +219,126 @@ ROBOTS: dict[str, Robot] = {
             Link("arm2", 1.0, (0.5, 0.0, 0.0), (0.001, 0.001, 0.001, 0.0, 0.0, 0.0), 0.025),
         ),
         joints=(
-            Joint("baseHinge", "revolute", None, "arm1", (0, 0, 0.15), (0, 0, 0), "Z",
-                  -2.9670597283903604, 2.9670597283903604, 20.0, PASSIVE_DAMPING),
-            Joint("interArm", "revolute", "arm1", "arm2", (1, 0, 0), (0, 0, 0), "Z",
-                  -2.9670597283903604, 2.9670597283903604, 20.0, PASSIVE_DAMPING),
+            Joint(
+                "baseHinge",
+                "revolute",
+                None,
+                "arm1",
+                (0, 0, 0.15),
+                (0, 0, 0),
+                "Z",
+                -2.9670597283903604,
+                2.9670597283903604,
+                20.0,
+                PASSIVE_DAMPING,
+            ),
+            Joint(
+                "interArm",
+                "revolute",
+                "arm1",
+                "arm2",
+                (1, 0, 0),
+                (0, 0, 0),
+                "Z",
+                -2.9670597283903604,
+                2.9670597283903604,
+                20.0,
+                PASSIVE_DAMPING,
+            ),
         ),
-        ee="arm2", tip=(1.0, 0.0, 0.0), limit_ke=1000.0, limit_kd=10.0,
+        ee="arm2",
+        tip=(1.0, 0.0, 0.0),
+        limit_ke=1000.0,
+        limit_kd=10.0,
         base_visual=(0.05, 0.15),
         # Goals in joint space (rad), four per robot as in the paper's section 5 (the paper does not
         # list its goals; these are spread over the workspace, well inside the limits).
-        defaults=Defaults(goals=((1.0, 0.5), (-1.0, -0.5), (0.5, -1.0), (-0.5, 1.0)),
-                          horizon=50, dt=0.01, substeps=2, max_torque=(20.0, 20.0), qd_scale=5.0,
-                          alpha=3e-4, lr=1e-3, gravity=9.81,
-                          # reported (RESULTS.md): 3 inner steps at alpha 3e-4, 400 iterations
-                          iterations=400, inner_steps=3, critic_input="full", start_std=0.0, home_starts=0),
+        defaults=Defaults(
+            goals=((1.0, 0.5), (-1.0, -0.5), (0.5, -1.0), (-0.5, 1.0)),
+            horizon=50,
+            dt=0.01,
+            substeps=2,
+            max_torque=(20.0, 20.0),
+            qd_scale=5.0,
+            alpha=3e-4,
+            lr=1e-3,
+            gravity=9.81,
+            # reported (RESULTS.md): 3 inner steps at alpha 3e-4, 400 iterations
+            iterations=400,
+            inner_steps=3,
+            critic_input="full",
+            start_std=0.0,
+            home_starts=0,
+        ),
     ),
     # diff_robot_data/kuka_iiwa/urdf/iiwa7.urdf (iiwa_link_0 is welded to the world and dropped)
     "kuka": Robot(
         links=(
-            Link("iiwa_link_1", 3.4525, (0, -0.03, 0.12), (0.02183, 0.007703, 0.02083, 0, 0, -0.003887)),
-            Link("iiwa_link_2", 3.4821, (0.0003, 0.059, 0.042), (0.02076, 0.02179, 0.00779, 0, -0.003626, 0)),
-            Link("iiwa_link_3", 4.05623, (0, 0.03, 0.13), (0.03204, 0.00972, 0.03042, 0, 0, 0.006227)),
-            Link("iiwa_link_4", 3.4822, (0, 0.067, 0.034), (0.02178, 0.02075, 0.007785, 0, 0, -0.003625)),
-            Link("iiwa_link_5", 2.1633, (0.0001, 0.021, 0.076), (0.01287, 0.005708, 0.01112, 0, 0, -0.003946)),
-            Link("iiwa_link_6", 2.3466, (0, 0.0006, 0.0004), (0.006509, 0.006259, 0.004527, 0, 0, 0.00031891)),
+            Link(
+                "iiwa_link_1",
+                3.4525,
+                (0, -0.03, 0.12),
+                (0.02183, 0.007703, 0.02083, 0, 0, -0.003887),
+            ),
+            Link(
+                "iiwa_link_2",
+                3.4821,
+                (0.0003, 0.059, 0.042),
+                (0.02076, 0.02179, 0.00779, 0, -0.003626, 0),
+            ),
+            Link(
+                "iiwa_link_3", 4.05623, (0, 0.03, 0.13), (0.03204, 0.00972, 0.03042, 0, 0, 0.006227)
+            ),
+            Link(
+                "iiwa_link_4",
+                3.4822,
+                (0, 0.067, 0.034),
+                (0.02178, 0.02075, 0.007785, 0, 0, -0.003625),
+            ),
+            Link(
+                "iiwa_link_5",
+                2.1633,
+                (0.0001, 0.021, 0.076),
+                (0.01287, 0.005708, 0.01112, 0, 0, -0.003946),
+            ),
+            Link(
+                "iiwa_link_6",
+                2.3466,
+                (0, 0.0006, 0.0004),
+                (0.006509, 0.006259, 0.004527, 0, 0, 0.00031891),
+            ),
             Link("iiwa_link_7", 3.129, (0, 0, 0.02), (0.01464, 0.01465, 0.002872, 0.0005912, 0, 0)),
         ),
         joints=tuple(
-            Joint(f"iiwa_joint_{i + 1}", "revolute", None if i == 0 else f"iiwa_link_{i}",
-                  f"iiwa_link_{i + 1}", xyz, rpy, "Z", -IIWA_LIMITS[i], IIWA_LIMITS[i], 300.0,
-                  PASSIVE_DAMPING)
-            for i, (xyz, rpy) in enumerate([
-                ((0, 0, 0.15), (0, 0, 0)),
-                ((0, 0, 0.19), (HALF_PI, 0, PI)),
-                ((0, 0.21, 0), (HALF_PI, 0, PI)),
-                ((0, 0, 0.19), (HALF_PI, 0, 0)),
-                ((0, 0.21, 0), (-HALF_PI, PI, 0)),
-                ((0, 0.06070, 0.19), (HALF_PI, 0, 0)),
-                ((0, 0.081, 0.06070), (-HALF_PI, PI, 0)),
-            ])
+            Joint(
+                f"iiwa_joint_{i + 1}",
+                "revolute",
+                None if i == 0 else f"iiwa_link_{i}",
+                f"iiwa_link_{i + 1}",
+                xyz,
+                rpy,
+                "Z",
+                -IIWA_LIMITS[i],
+                IIWA_LIMITS[i],
+                300.0,
+                PASSIVE_DAMPING,
+            )
+            for i, (xyz, rpy) in enumerate(
+                [
+                    ((0, 0, 0.15), (0, 0, 0)),
+                    ((0, 0, 0.19), (HALF_PI, 0, PI)),
+                    ((0, 0.21, 0), (HALF_PI, 0, PI)),
+                    ((0, 0, 0.19), (HALF_PI, 0, 0)),
+                    ((0, 0.21, 0), (-HALF_PI, PI, 0)),
+                    ((0, 0.06070, 0.19), (HALF_PI, 0, 0)),
+                    ((0, 0.081, 0.06070), (-HALF_PI, PI, 0)),
+                ]
+            )
         ),
-        ee="iiwa_link_7", tip=(0.0, 0.0, 0.045), limit_ke=1000.0, limit_kd=0.5,
+        ee="iiwa_link_7",
+        tip=(0.0, 0.0, 0.045),
+        limit_ke=1000.0,
+        limit_kd=0.5,
         base_visual=(0.1, 0.15),
         # Torque bounds scaled to the joints (mass-matrix diagonal at home 0.14, 6.35, 0.089, 1.39,
         # 0.030, 0.051, 0.0029 kg m^2): joints 1-6 peak at 24-140 rad/s^2. The URDF's 300 N·m would
@@ -226,17 +346,29 @@ ROBOTS: dict[str, Robot] = {
         # 0.5 N·m·s/rad damping rather than its inertia: 1 N·m gives it 2 rad/s (the earlier 0.1 N·m
         # allowed only 0.2 rad/s, i.e. 0.1 rad in a 0.5 s rollout). Gravity 0: a perfectly
         # gravity-compensated robot (the iiwa's torque mode).
-        defaults=Defaults(goals=((0.5, 0.4, 0.0, -0.8, 0.0, 0.5, 0.0),
-                                 (-0.5, 0.6, 0.3, -0.6, 0.0, 0.3, 0.0),
-                                 (0.3, -0.4, -0.3, -1.0, 0.2, 0.4, 0.0),
-                                 (-0.3, -0.6, 0.0, -0.4, -0.2, 0.6, 0.0)),
-                          horizon=50, dt=0.0025, substeps=4,
-                          max_torque=(20.0, 150.0, 8.0, 40.0, 1.5, 2.0, 1.0),
-                          qd_scale=5.0, alpha=3e-4, lr=3e-3, gravity=0.0,
-                          # reported against the paper's Table 1 (RESULTS.md): the goal-relative critic,
-                          # random starts 0.4 rad with 2 of 4 worlds per goal at home, 3 inner steps
-                          iterations=3000, inner_steps=3, critic_input="relative", start_std=0.4,
-                          home_starts=2),
+        defaults=Defaults(
+            goals=(
+                (0.5, 0.4, 0.0, -0.8, 0.0, 0.5, 0.0),
+                (-0.5, 0.6, 0.3, -0.6, 0.0, 0.3, 0.0),
+                (0.3, -0.4, -0.3, -1.0, 0.2, 0.4, 0.0),
+                (-0.3, -0.6, 0.0, -0.4, -0.2, 0.6, 0.0),
+            ),
+            horizon=50,
+            dt=0.0025,
+            substeps=4,
+            max_torque=(20.0, 150.0, 8.0, 40.0, 1.5, 2.0, 1.0),
+            qd_scale=5.0,
+            alpha=3e-4,
+            lr=3e-3,
+            gravity=0.0,
+            # reported against the paper's Table 1 (RESULTS.md): the goal-relative critic,
+            # random starts 0.4 rad with 2 of 4 worlds per goal at home, 3 inner steps
+            iterations=3000,
+            inner_steps=3,
+            critic_input="relative",
+            start_std=0.4,
+            home_starts=2,
+        ),
     ),
 }
 
@@ -248,7 +380,14 @@ ROBOTS: dict[str, Robot] = {
 def rpy_to_matrix(rpy) -> np.ndarray:
     """URDF roll-pitch-yaw (fixed X, then Y, then Z axes): R = Rz(yaw) Ry(pitch) Rx(roll)."""
     r, p, y = rpy
-    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    cr, sr, cp, sp, cy, sy = (
+        math.cos(r),
+        math.sin(r),
+        math.cos(p),
+        math.sin(p),
+        math.cos(y),
+        math.sin(y),
+    )
     rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
     ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
     rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
@@ -270,11 +409,13 @@ def matrix_to_quat(m: np.ndarray) -> np.ndarray:
 
 def quat_to_matrix(q) -> np.ndarray:
     w, x, y, z = q
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def inertia_matrix(i6) -> np.ndarray:
@@ -347,8 +488,14 @@ def write_defaults(name: str, robot: Robot, prim: Usd.Prim) -> None:
     assert d.goals and all(len(g) == dof for g in d.goals), f"{name}: goals need {dof} values each"
     assert len(d.max_torque) in (1, dof) and len(home) == dof, f"{name}: maxTorque/homePose length"
     for q in (*d.goals, home):
-        assert all(j.lower <= v <= j.upper for v, j in zip(q, robot.joints)), f"{name}: {q} outside the limits"
-    double, double_array, int_ = Sdf.ValueTypeNames.Double, Sdf.ValueTypeNames.DoubleArray, Sdf.ValueTypeNames.Int
+        assert all(j.lower <= v <= j.upper for v, j in zip(q, robot.joints)), (
+            f"{name}: {q} outside the limits"
+        )
+    double, double_array, int_ = (
+        Sdf.ValueTypeNames.Double,
+        Sdf.ValueTypeNames.DoubleArray,
+        Sdf.ValueTypeNames.Int,
+    )
     values = {
         "goals": (double_array, [float(v) for g in d.goals for v in g]),
         "horizon": (int_, int(d.horizon)),
@@ -361,10 +508,13 @@ def write_defaults(name: str, robot: Robot, prim: Usd.Prim) -> None:
         "gravity": (double, float(d.gravity)),
         "homePose": (double_array, [float(v) for v in home]),
     }
-    optional = {"iterations": (int_, d.iterations), "innerSteps": (int_, d.inner_steps),
-                "criticInput": (Sdf.ValueTypeNames.String, d.critic_input),
-                "startStd": (double, None if d.start_std is None else float(d.start_std)),
-                "homeStarts": (int_, d.home_starts)}
+    optional = {
+        "iterations": (int_, d.iterations),
+        "innerSteps": (int_, d.inner_steps),
+        "criticInput": (Sdf.ValueTypeNames.String, d.critic_input),
+        "startStd": (double, None if d.start_std is None else float(d.start_std)),
+        "homeStarts": (int_, d.home_starts),
+    }
     values.update({k: v for k, v in optional.items() if v[1] is not None})
     for attr, (type_name, value) in values.items():
         prim.CreateAttribute(f"warp_critic:{attr}", type_name, custom=True).Set(value)
@@ -375,15 +525,19 @@ def write_robot(name: str, robot: Robot, path: Path) -> None:
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
     UsdPhysics.SetStageKilogramsPerUnit(stage, 1.0)
-    stage.SetMetadata("comment", "Generated by tools/make_scenes.py -- edit the table there, not this file.")
+    stage.SetMetadata(
+        "comment", "Generated by tools/make_scenes.py -- edit the table there, not this file."
+    )
 
     root = UsdGeom.Xform.Define(stage, f"/{name}")
     stage.SetDefaultPrim(root.GetPrim())
     UsdPhysics.ArticulationRootAPI.Apply(root.GetPrim())
-    root.GetPrim().CreateAttribute("warp_critic:endEffectorBody", Sdf.ValueTypeNames.String,
-                                   custom=True).Set(robot.ee)
-    root.GetPrim().CreateAttribute("warp_critic:tipOffset", Sdf.ValueTypeNames.Float3,
-                                   custom=True).Set(Gf.Vec3f(*map(float, robot.tip)))
+    root.GetPrim().CreateAttribute(
+        "warp_critic:endEffectorBody", Sdf.ValueTypeNames.String, custom=True
+    ).Set(robot.ee)
+    root.GetPrim().CreateAttribute(
+        "warp_critic:tipOffset", Sdf.ValueTypeNames.Float3, custom=True
+    ).Set(Gf.Vec3f(*map(float, robot.tip)))
     if robot.defaults is not None:
         write_defaults(name, robot, root.GetPrim())
 
@@ -397,13 +551,17 @@ def write_robot(name: str, robot: Robot, path: Path) -> None:
         set_pose(cyl, (0, 0, height / 2.0), (1, 0, 0, 0))
         cyl.CreateDisplayColorAttr([Gf.Vec3f(0.3, 0.3, 0.3)])
 
-    assert robot.ee in {link.name for link in robot.links}, f"{name}: end-effector {robot.ee!r} is not a link"
+    assert robot.ee in {link.name for link in robot.links}, (
+        f"{name}: end-effector {robot.ee!r} is not a link"
+    )
     # World pose of every link at q = 0 (URDF: the child link frame is the joint frame).
     world_rot: dict[str | None, np.ndarray] = {None: np.eye(3)}
     world_pos: dict[str | None, np.ndarray] = {None: np.zeros(3)}
     for joint in robot.joints:
         rot = rpy_to_matrix(joint.rpy)
-        world_pos[joint.child] = world_pos[joint.parent] + world_rot[joint.parent] @ np.asarray(joint.xyz, float)
+        world_pos[joint.child] = world_pos[joint.parent] + world_rot[joint.parent] @ np.asarray(
+            joint.xyz, float
+        )
         world_rot[joint.child] = world_rot[joint.parent] @ rot
 
     children = {j.parent: [] for j in robot.joints}
@@ -428,11 +586,23 @@ def write_robot(name: str, robot: Robot, path: Path) -> None:
         color = COLORS[k % len(COLORS)]
         if link.visual_radius > 0.0:
             for e, end in enumerate(ends):
-                add_capsule(stage, f"/{name}/{link.name}/visual_{e}", np.zeros(3), end,
-                            link.visual_radius, color)
+                add_capsule(
+                    stage,
+                    f"/{name}/{link.name}/visual_{e}",
+                    np.zeros(3),
+                    end,
+                    link.visual_radius,
+                    color,
+                )
         if link.name in robot.point_visual:
-            add_capsule(stage, f"/{name}/{link.name}/visual_point", np.zeros(3), np.zeros(3),
-                        robot.point_visual[link.name], color)
+            add_capsule(
+                stage,
+                f"/{name}/{link.name}/visual_point",
+                np.zeros(3),
+                np.zeros(3),
+                robot.point_visual[link.name],
+                color,
+            )
 
     UsdGeom.Scope.Define(stage, f"/{name}/joints")
     for joint in robot.joints:
@@ -458,10 +628,18 @@ def write_robot(name: str, robot: Robot, path: Path) -> None:
         uj.CreateLocalRot1Attr(Gf.Quatf(1.0))
         prim = uj.GetPrim()
         # newton reads these per degree for revolute joints (value * 180/pi), per metre otherwise
-        prim.CreateAttribute("newton:damping", Sdf.ValueTypeNames.Float).Set(joint.damping * gain_scale)
-        prim.CreateAttribute("newton:limitStiffness", Sdf.ValueTypeNames.Float).Set(robot.limit_ke * gain_scale)
-        prim.CreateAttribute("newton:limitDamping", Sdf.ValueTypeNames.Float).Set(robot.limit_kd * gain_scale)
-        prim.CreateAttribute("warp_critic:effortLimit", Sdf.ValueTypeNames.Float, custom=True).Set(joint.effort)
+        prim.CreateAttribute("newton:damping", Sdf.ValueTypeNames.Float).Set(
+            joint.damping * gain_scale
+        )
+        prim.CreateAttribute("newton:limitStiffness", Sdf.ValueTypeNames.Float).Set(
+            robot.limit_ke * gain_scale
+        )
+        prim.CreateAttribute("newton:limitDamping", Sdf.ValueTypeNames.Float).Set(
+            robot.limit_kd * gain_scale
+        )
+        prim.CreateAttribute("warp_critic:effortLimit", Sdf.ValueTypeNames.Float, custom=True).Set(
+            joint.effort
+        )
 
     stage.GetRootLayer().Save()
 

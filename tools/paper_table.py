@@ -32,15 +32,33 @@ RENAME = {"run_dirs": "RUN_DIR"}
 
 def main(argv: list[str] | None = None) -> int:
     p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
-    p.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run directories (one per meta-train seed)")
-    p.add_argument("--stds", type=comma_list(float), default=[0.1, 0.4], help="goal stds (rad), e.g. 0.1,0.4; the paper: 0.1 .. 1.0")
-    p.add_argument("--goal-noise", type=comma_list(str), default=["per-joint", "distance"], dest="goal_noise",
-                   help="readings of 'at a distance of N(0, std)': per-joint and/or distance (see warp_critic.evaluation.metatest.sample_goals)")
-    p.add_argument("--around", type=comma_list(int), default=[0, 1],
-                   help="training goals to sample around, e.g. 0,1 (the paper: two of the four); '' = all")
+    p.add_argument(
+        "run_dirs", nargs="+", metavar="RUN_DIR", help="run directories (one per meta-train seed)"
+    )
+    p.add_argument(
+        "--stds",
+        type=comma_list(float),
+        default=[0.1, 0.4],
+        help="goal stds (rad), e.g. 0.1,0.4; the paper: 0.1 .. 1.0",
+    )
+    p.add_argument(
+        "--goal-noise",
+        type=comma_list(str),
+        default=["per-joint", "distance"],
+        dest="goal_noise",
+        help="readings of 'at a distance of N(0, std)': per-joint and/or distance (see warp_critic.evaluation.metatest.sample_goals)",
+    )
+    p.add_argument(
+        "--around",
+        type=comma_list(int),
+        default=[0, 1],
+        help="training goals to sample around, e.g. 0,1 (the paper: two of the four); '' = all",
+    )
     p.add_argument("--num-goals", type=int, default=10)
     p.add_argument("--inits", type=int, default=5, help="fresh policy initialisations per goal")
-    p.add_argument("--seed", type=int, default=1, help="seed of the goals and policy initialisations")
+    p.add_argument(
+        "--seed", type=int, default=1, help="seed of the goals and policy initialisations"
+    )
     p.add_argument("--device", default="auto")
     p.add_argument("--out", default=None, help="write the table as JSON here")
     args = p.parse_args(argv)
@@ -49,17 +67,26 @@ def main(argv: list[str] | None = None) -> int:
     from warp_critic.core.errors import UserError
     from warp_critic.evaluation.protocol import ProtocolConfig, format_table, run_protocol
 
-    pc = ProtocolConfig(run_dirs=args.run_dirs, stds=args.stds, goal_noise=args.goal_noise,
-                        around=args.around or None, num_goals=args.num_goals, inits=args.inits, seed=args.seed,
-                        device=args.device)
+    pc = ProtocolConfig(
+        run_dirs=args.run_dirs,
+        stds=args.stds,
+        goal_noise=args.goal_noise,
+        around=args.around or None,
+        num_goals=args.num_goals,
+        inits=args.inits,
+        seed=args.seed,
+        device=args.device,
+    )
     try:
         runtime.init()
         result = run_protocol(pc)
     except UserError as e:
         print(f"{PROG}: error: {user_message(e, rename=RENAME)}", file=sys.stderr)
         return 2
-    print(f"{len(pc.run_dirs)} run(s) x {pc.num_goals} goals x {pc.inits} inits per cell, "
-          f"around training goals {result.around or 'all'}; {result.seconds:.0f} s")
+    print(
+        f"{len(pc.run_dirs)} run(s) x {pc.num_goals} goals x {pc.inits} inits per cell, "
+        f"around training goals {result.around or 'all'}; {result.seconds:.0f} s"
+    )
     print("\n".join(format_table(result)))
     if args.out:
         Path(args.out).write_text(json.dumps(result.to_dict(), indent=2))

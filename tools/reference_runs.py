@@ -29,13 +29,35 @@ PROG = "reference_runs"
 SCENE = str(Path(__file__).resolve().parents[1] / "scenes" / "reacher.usda")
 TASK = ["--horizon", "30", "--seed", "3", "--record-every", "2", "--checkpoint-every", "2"]
 RUNS = {
-    "ours": ["meta-train", SCENE, "--iterations", "4", "--inner-steps", "2", "--start-std", "0.3",
-             "--home-starts", "1", *TASK],
+    "ours": [
+        "meta-train",
+        SCENE,
+        "--iterations",
+        "4",
+        "--inner-steps",
+        "2",
+        "--start-std",
+        "0.3",
+        "--home-starts",
+        "1",
+        *TASK,
+    ],
     "ddpg": ["baseline", "ddpg", SCENE, "--iterations", "4", "--warmup-iterations", "1", *TASK],
-    "meta-critic": ["baseline", "meta-critic", SCENE, "--iterations", "4", "--warmup-iterations", "1", *TASK],
+    "meta-critic": [
+        "baseline",
+        "meta-critic",
+        SCENE,
+        "--iterations",
+        "4",
+        "--warmup-iterations",
+        "1",
+        *TASK,
+    ],
 }
-TESTS = {"ours": ["--num-goals", "3", "--inits", "2", "--goal-std", "0.3"],
-         "ddpg": ["--num-goals", "3", "--inits", "2", "--goal-std", "0.3"]}
+TESTS = {
+    "ours": ["--num-goals", "3", "--inits", "2", "--goal-std", "0.3"],
+    "ddpg": ["--num-goals", "3", "--inits", "2", "--goal-std", "0.3"],
+}
 
 
 def run_all(command: list[str], out: Path) -> dict:
@@ -44,10 +66,22 @@ def run_all(command: list[str], out: Path) -> dict:
         raise SystemExit(f"{PROG}: error: --out {out} exists; give a new directory")
     out.mkdir(parents=True)
     for name, args in RUNS.items():
-        subprocess.run([*command, *args, "--out", str(out / name)], check=True, stdout=subprocess.DEVNULL)
+        subprocess.run(
+            [*command, *args, "--out", str(out / name)], check=True, stdout=subprocess.DEVNULL
+        )
     for name, args in TESTS.items():
-        subprocess.run([*command, "meta-test", str(out / name), *args, "--out", str(out / f"metatest-{name}.json")],
-                       check=True, stdout=subprocess.DEVNULL)
+        subprocess.run(
+            [
+                *command,
+                "meta-test",
+                str(out / name),
+                *args,
+                "--out",
+                str(out / f"metatest-{name}.json"),
+            ],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
     return fingerprint(out)
 
 
@@ -56,7 +90,11 @@ def fingerprint(out: Path) -> dict:
 
     prints: dict = {}
     for name in RUNS:
-        rows = [json.loads(line) for line in (out / name / "metrics.jsonl").read_text().splitlines() if line]
+        rows = [
+            json.loads(line)
+            for line in (out / name / "metrics.jsonl").read_text().splitlines()
+            if line
+        ]
         for row in rows:  # wall-clock fields differ between any two runs
             for key in [k for k in row if _is_time(k)]:
                 row.pop(key)
@@ -119,7 +157,9 @@ def compare(a: dict, b: dict) -> tuple[float, list[str]]:
         elif isinstance(x, list) and isinstance(y, list) and len(x) == len(y):
             for i, (u, v) in enumerate(zip(x, y)):
                 walk(u, v, f"{path}/{i}")
-        elif isinstance(x, (int, float)) and isinstance(y, (int, float)) and not isinstance(x, bool):
+        elif (
+            isinstance(x, (int, float)) and isinstance(y, (int, float)) and not isinstance(x, bool)
+        ):
             if x != y and not (math.isnan(x) and math.isnan(y)):
                 worst = max(worst, abs(x - y) / max(abs(x), abs(y), 1e-300))
         elif x != y:
@@ -132,11 +172,21 @@ def compare(a: dict, b: dict) -> tuple[float, list[str]]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, help="new directory for the five runs and fingerprint.json")
-    parser.add_argument("--command", default="warp-critic",
-                        help="the warp-critic executable to run (quoted, may hold arguments)")
-    parser.add_argument("--compare", nargs=2, type=Path, metavar=("A", "B"),
-                        help="compare two OUT directories; exit 1 unless every number is identical")
+    parser.add_argument(
+        "--out", type=Path, help="new directory for the five runs and fingerprint.json"
+    )
+    parser.add_argument(
+        "--command",
+        default="warp-critic",
+        help="the warp-critic executable to run (quoted, may hold arguments)",
+    )
+    parser.add_argument(
+        "--compare",
+        nargs=2,
+        type=Path,
+        metavar=("A", "B"),
+        help="compare two OUT directories; exit 1 unless every number is identical",
+    )
     args = parser.parse_args(argv)
     if args.compare:
         a, b = (json.loads((d / "fingerprint.json").read_text()) for d in args.compare)

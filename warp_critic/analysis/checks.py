@@ -15,8 +15,15 @@ from pathlib import Path
 from warp_critic.core.errors import FieldError, UserError
 
 
-def number(field: str, value, *, lo: float | None = None, hi: float | None = None,
-           positive: bool = False, max_abs: float | None = None) -> float:
+def number(
+    field: str,
+    value,
+    *,
+    lo: float | None = None,
+    hi: float | None = None,
+    positive: bool = False,
+    max_abs: float | None = None,
+) -> float:
     """A finite float, optionally ``> 0``, within ``[lo, hi]`` and with ``|value| <= max_abs``."""
     try:
         x = float(value)
@@ -40,8 +47,12 @@ def integer(field: str, value, lo: int, hi: int | None = None) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise FieldError(field, f"must be an integer, got {value!r}")
     if value < lo or (hi is not None and value > hi):
-        raise FieldError(field, f"must be an integer >= {lo}" + (f" and <= {hi}" if hi is not None else "")
-                         + f", got {value!r}")
+        raise FieldError(
+            field,
+            f"must be an integer >= {lo}"
+            + (f" and <= {hi}" if hi is not None else "")
+            + f", got {value!r}",
+        )
     return int(value)
 
 
@@ -90,8 +101,11 @@ def memory(field: str, value, need: float, device: str = "cpu", what: str = "") 
     """Refuse a size setting whose estimated memory ``need`` (bytes) exceeds the free memory."""
     free = available_memory(device)
     if free is not None and need > free:
-        raise FieldError(field, f"{value!r} needs about {_size(need)} of memory{what}, more than the "
-                                f"{_size(free)} available on {device}")
+        raise FieldError(
+            field,
+            f"{value!r} needs about {_size(need)} of memory{what}, more than the "
+            f"{_size(free)} available on {device}",
+        )
 
 
 def flag(field: str) -> str:

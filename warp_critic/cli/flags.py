@@ -67,7 +67,9 @@ def _number_list(kind):
     def parse(text: str):
         values = values_of(text)
         if not values:
-            raise argparse.ArgumentTypeError(f"expected comma-separated {kind.__name__}s, got {text!r}")
+            raise argparse.ArgumentTypeError(
+                f"expected comma-separated {kind.__name__}s, got {text!r}"
+            )
         return values
 
     return parse
@@ -77,7 +79,9 @@ def flag_of(field: str) -> str:
     return "--" + field.replace("_", "-")
 
 
-def add_dataclass_arguments(parser: argparse.ArgumentParser, cls, skip: tuple[str, ...] = ()) -> None:
+def add_dataclass_arguments(
+    parser: argparse.ArgumentParser, cls, skip: tuple[str, ...] = ()
+) -> None:
     """One typed ``--flag`` per field of ``cls``; the default shown is the field's."""
     hints = typing.get_type_hints(cls)
     for f in dataclasses.fields(cls):
@@ -100,13 +104,21 @@ def add_dataclass_arguments(parser: argparse.ArgumentParser, cls, skip: tuple[st
             parser.add_argument(flag_of(f.name), type=str, metavar="GOALS", **kwargs)
         elif typing.get_origin(base) is list:
             inner = typing.get_args(base)[0]
-            parser.add_argument(flag_of(f.name), type=_number_list(int if inner is int else float),
-                                metavar="A,B,..", **kwargs)
+            parser.add_argument(
+                flag_of(f.name),
+                type=_number_list(int if inner is int else float),
+                metavar="A,B,..",
+                **kwargs,
+            )
         elif base in (int, float):
-            parser.add_argument(flag_of(f.name), type=_number(base), metavar=base.__name__.upper(), **kwargs)
+            parser.add_argument(
+                flag_of(f.name), type=_number(base), metavar=base.__name__.upper(), **kwargs
+            )
         elif base is str:
             choices = f.metadata.get("choices")
-            parser.add_argument(flag_of(f.name), type=str, metavar="|".join(choices) if choices else "STR", **kwargs)
+            parser.add_argument(
+                flag_of(f.name), type=str, metavar="|".join(choices) if choices else "STR", **kwargs
+            )
         else:  # pragma: no cover - programming error
             raise TypeError(f"unsupported field type {hint} for {f.name}")
 
@@ -135,7 +147,9 @@ def parse_goals(spec: str | list | None, name: str = "goals") -> list[list[float
     if spec is None or isinstance(spec, list):
         return spec
     if not spec.strip():
-        raise FieldError(name, "no goals given (expected inline '0.1,0.2;0.3,0.4' or a .json/.txt file)")
+        raise FieldError(
+            name, "no goals given (expected inline '0.1,0.2;0.3,0.4' or a .json/.txt file)"
+        )
     path = Path(spec)
     if path.suffix in (".json", ".txt", ".csv") or _is_existing_path(path):
         if path.is_dir():
@@ -150,10 +164,15 @@ def parse_goals(spec: str | list | None, name: str = "goals") -> list[list[float
             if path.suffix == ".json":
                 goals = json.loads(text)
             else:
-                goals = [[float(x) for x in line.replace(",", " ").split()] for line in text.splitlines()
-                         if line.strip() and not line.lstrip().startswith("#")]
+                goals = [
+                    [float(x) for x in line.replace(",", " ").split()]
+                    for line in text.splitlines()
+                    if line.strip() and not line.lstrip().startswith("#")
+                ]
         except (ValueError, RecursionError) as e:
-            raise FieldError(name, f"{spec}: cannot parse goals ({' '.join(str(e).split())[:120]})") from None
+            raise FieldError(
+                name, f"{spec}: cannot parse goals ({' '.join(str(e).split())[:120]})"
+            ) from None
         where = f"{spec}: "
     else:
         try:
@@ -161,27 +180,55 @@ def parse_goals(spec: str | list | None, name: str = "goals") -> list[list[float
         except ValueError:
             raise FieldError(name, f"{spec!r}: expected numbers like '0.1,0.2;0.3,0.4'") from None
         where = ""
-    if not isinstance(goals, list) or not goals or not all(isinstance(g, list) and g for g in goals):
-        raise FieldError(name, f"{where}no goals given (expected a list of goals, each a list of numbers)")
-    if any(isinstance(x, (bool, list, dict, str)) or not isinstance(x, (int, float)) for g in goals for x in g):
+    if (
+        not isinstance(goals, list)
+        or not goals
+        or not all(isinstance(g, list) and g for g in goals)
+    ):
+        raise FieldError(
+            name, f"{where}no goals given (expected a list of goals, each a list of numbers)"
+        )
+    if any(
+        isinstance(x, (bool, list, dict, str)) or not isinstance(x, (int, float))
+        for g in goals
+        for x in g
+    ):
         raise FieldError(name, f"{where}every goal value must be a number")
     try:
         goals = [[float(x) for x in g] for g in goals]
     except OverflowError:
-        raise FieldError(name, f"{where}goal values must be finite numbers (got an integer too large for a float)") from None
+        raise FieldError(
+            name,
+            f"{where}goal values must be finite numbers (got an integer too large for a float)",
+        ) from None
     if len({len(g) for g in goals}) != 1:
-        raise FieldError(name, f"{where}goals of different lengths {sorted({len(g) for g in goals})}")
-    bad = next(((i, j, x) for i, g in enumerate(goals) for j, x in enumerate(g) if not math.isfinite(x)), None)
+        raise FieldError(
+            name, f"{where}goals of different lengths {sorted({len(g) for g in goals})}"
+        )
+    bad = next(
+        ((i, j, x) for i, g in enumerate(goals) for j, x in enumerate(g) if not math.isfinite(x)),
+        None,
+    )
     if bad is not None:
         i, j, x = bad
-        raise FieldError(name, f"{where}goal values must be finite numbers (goal {i} joint {j} is {x!r})")
+        raise FieldError(
+            name, f"{where}goal values must be finite numbers (goal {i} joint {j} is {x!r})"
+        )
     return goals
 
 
-def user_message(e: UserError, positional: tuple[str, ...] = (), rename: dict[str, str] | None = None) -> str:
+def user_message(
+    e: UserError, positional: tuple[str, ...] = (), rename: dict[str, str] | None = None
+) -> str:
     """The one-line message for the CLI: a field error names the flag (or the positional argument;
     ``rename`` maps a field to what the user typed instead)."""
     if isinstance(e, FieldError):
-        who = (rename or {}).get(e.field) or (e.field if e.field in positional else flag_of(e.field))
-        return f"{who} {e.problem}" if e.problem.startswith(("must", "needs", "may")) else f"{who}: {e.problem}"
+        who = (rename or {}).get(e.field) or (
+            e.field if e.field in positional else flag_of(e.field)
+        )
+        return (
+            f"{who} {e.problem}"
+            if e.problem.startswith(("must", "needs", "may"))
+            else f"{who}: {e.problem}"
+        )
     return str(e)

@@ -14,8 +14,14 @@ import signal
 import sys
 
 from warp_critic import __version__
+from warp_critic.cli.flags import (
+    Parser,
+    add_dataclass_arguments,
+    dataclass_from_args,
+    flag_of,
+    user_message,
+)
 from warp_critic.core.errors import DivergenceError, UserError
-from warp_critic.cli.flags import Parser, add_dataclass_arguments, dataclass_from_args, flag_of, user_message
 
 EXIT_USER_ERROR = 2
 EXIT_DIVERGED = 1
@@ -27,6 +33,7 @@ POSITIONAL = ("scene", "run_dir", "method")
 # commands
 # ------------------------------------------------------------------------------------------------
 
+
 def cmd_meta_train(args: argparse.Namespace) -> int:
     from warp_critic.methods.ours import TrainConfig, meta_train
 
@@ -35,7 +42,9 @@ def cmd_meta_train(args: argparse.Namespace) -> int:
     last = result.metrics[-1] if result.metrics else {}
     print(f"run directory: {result.run_dir}")
     if last:
-        print(f"final task loss (mean ||q_T - g||^2 of the updated policies): {last['task_loss']:.5f}")
+        print(
+            f"final task loss (mean ||q_T - g||^2 of the updated policies): {last['task_loss']:.5f}"
+        )
     print(f"recording: rerun {result.run_dir / 'recording.rrd'}")
     return 0
 
@@ -50,9 +59,9 @@ def cmd_meta_test(args: argparse.Namespace) -> int:
 
 
 def cmd_baseline(args: argparse.Namespace) -> int:
+    from warp_critic.methods.baseline import BaselineConfig
     from warp_critic.methods.ddpg import train_ddpg
     from warp_critic.methods.meta_critic import train_meta_critic
-    from warp_critic.methods.baseline import BaselineConfig
 
     cfg, given = dataclass_from_args(BaselineConfig, args)
     train = train_ddpg if cfg.method == "ddpg" else train_meta_critic
@@ -60,10 +69,14 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     last = result.metrics[-1] if result.metrics else {}
     print(f"run directory: {result.run_dir}")
     if last:
-        print(f"final task loss (mean ||q_T - g||^2 of the {cfg.method} actor, no noise): {last['task_loss']:.5f}")
+        print(
+            f"final task loss (mean ||q_T - g||^2 of the {cfg.method} actor, no noise): {last['task_loss']:.5f}"
+        )
         if "fresh_policy_loss" in last:
-            print(f"fresh policies trained with -Q on the training goals: {last['fresh_policy_loss']:.5f} "
-                  f"(meta-test alpha {last['alpha']:.3g})")
+            print(
+                f"fresh policies trained with -Q on the training goals: {last['fresh_policy_loss']:.5f} "
+                f"(meta-test alpha {last['alpha']:.3g})"
+            )
     print(f"recording: rerun {result.run_dir / 'recording.rrd'}")
     print(f"meta-test: warp-critic meta-test {result.run_dir}")
     return 0
@@ -72,45 +85,68 @@ def cmd_baseline(args: argparse.Namespace) -> int:
 def build_parser() -> argparse.ArgumentParser:
     from warp_critic.analysis.landscape import command as landscape
     from warp_critic.analysis.toy import command as toy
-    from warp_critic.methods.q_networks import METHODS
-    from warp_critic.methods.baseline import BaselineConfig
     from warp_critic.evaluation.metatest import TestConfig
+    from warp_critic.methods.baseline import BaselineConfig
     from warp_critic.methods.ours import TrainConfig
+    from warp_critic.methods.q_networks import METHODS
 
-    p = Parser(prog="warp-critic", description="Model-based meta-learning of critics for policy gradients "
-               "(Bechtle, Righetti, Meier, ICML 2022) on Newton/Warp.")
+    p = Parser(
+        prog="warp-critic",
+        description="Model-based meta-learning of critics for policy gradients "
+        "(Bechtle, Righetti, Meier, ICML 2022) on Newton/Warp.",
+    )
     p.add_argument("--version", action="version", version=f"warp-critic {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
 
-    mt = sub.add_parser("meta-train", help="meta-learn a critic through the differentiable Newton model (Algorithm 2)",
-                        description="Meta-learn the critic L(s, a, g) with a bi-level loop through the differentiable Newton model.")
+    mt = sub.add_parser(
+        "meta-train",
+        help="meta-learn a critic through the differentiable Newton model (Algorithm 2)",
+        description="Meta-learn the critic L(s, a, g) with a bi-level loop through the differentiable Newton model.",
+    )
     mt.add_argument("scene", help="USD scene, e.g. scenes/kuka.usda")
     add_dataclass_arguments(mt, TrainConfig, skip=("scene",))
     mt.set_defaults(func=cmd_meta_train)
 
-    te = sub.add_parser("meta-test", help="train fresh policies with a saved critic, model-free (Algorithm 3)",
-                        description="Train fresh policies for new goals / dynamics with a saved critic (any method); "
-                                    "prints the final joint-space squared error per goal, mean and std, both summed "
-                                    "over the joints (||q_T - g||^2, the task loss) and averaged over them (MSE, the "
-                                    "paper's tables).")
+    te = sub.add_parser(
+        "meta-test",
+        help="train fresh policies with a saved critic, model-free (Algorithm 3)",
+        description="Train fresh policies for new goals / dynamics with a saved critic (any method); "
+        "prints the final joint-space squared error per goal, mean and std, both summed "
+        "over the joints (||q_T - g||^2, the task loss) and averaged over them (MSE, the "
+        "paper's tables).",
+    )
     te.add_argument("run_dir", help="run directory written by meta-train or baseline")
     add_dataclass_arguments(te, TestConfig, skip=("run_dir",))
     te.set_defaults(func=cmd_meta_test)
 
-    bl = sub.add_parser("baseline", help="train a baseline: ddpg or meta-critic",
-                        description="Train a baseline critic (DDPG or Meta-Critic) on the same scenes, goals and "
-                                    "training distribution as meta-train; its run directory works with meta-test.")
-    bl.add_argument("method", choices=METHODS, help="ddpg (Lillicrap et al. 2015) or meta-critic (Zhou et al. 2020)")
+    bl = sub.add_parser(
+        "baseline",
+        help="train a baseline: ddpg or meta-critic",
+        description="Train a baseline critic (DDPG or Meta-Critic) on the same scenes, goals and "
+        "training distribution as meta-train; its run directory works with meta-test.",
+    )
+    bl.add_argument(
+        "method",
+        choices=METHODS,
+        help="ddpg (Lillicrap et al. 2015) or meta-critic (Zhou et al. 2020)",
+    )
     bl.add_argument("scene", help="USD scene, e.g. scenes/reacher.usda")
     add_dataclass_arguments(bl, BaselineConfig, skip=("scene", "method"))
     bl.set_defaults(func=cmd_baseline)
 
-    an = sub.add_parser("analyze", help="the paper's analyses: toy (1-D, section 4.1) and landscape (2-D point mass, section 4.2)")
+    an = sub.add_parser(
+        "analyze",
+        help="the paper's analyses: toy (1-D, section 4.1) and landscape (2-D point mass, section 4.2)",
+    )
     an_sub = an.add_subparsers(dest="analysis", metavar="ANALYSIS", parser_class=Parser)
-    at = an_sub.add_parser("toy", help="1-D analytic example: fixed points of Q learning, ours and Meta-Critic")
+    at = an_sub.add_parser(
+        "toy", help="1-D analytic example: fixed points of Q learning, ours and Meta-Critic"
+    )
     toy.add_arguments(at)
     at.set_defaults(func=toy.run_from_args)
-    al = an_sub.add_parser("landscape", help="2-D point mass: Q_true, Q_sup and L_critic landscapes")
+    al = an_sub.add_parser(
+        "landscape", help="2-D point mass: Q_true, Q_sup and L_critic landscapes"
+    )
     landscape.add_arguments(al)
     al.set_defaults(func=landscape.run_from_args)
 
@@ -135,9 +171,9 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_USER_ERROR
     previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
     try:
+        from warp_critic.core.runtime import init
         from warp_critic.running.loop import Interrupted, ResumeMismatch
         from warp_critic.running.rundir import RunExistsError
-        from warp_critic.core.runtime import init
 
         try:
             init()
@@ -146,7 +182,9 @@ def main(argv: list[str] | None = None) -> int:
             sys.stderr.write(f"warp-critic: error: {e.render(flag_of)}\n")
             return EXIT_USER_ERROR
         except RunExistsError as e:
-            sys.stderr.write(f"warp-critic: error: {e} (continue it with --resume, or choose another --out)\n")
+            sys.stderr.write(
+                f"warp-critic: error: {e} (continue it with --resume, or choose another --out)\n"
+            )
             return EXIT_USER_ERROR
         except UserError as e:
             sys.stderr.write(f"warp-critic: error: {user_message(e, POSITIONAL)}\n")

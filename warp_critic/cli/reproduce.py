@@ -19,30 +19,68 @@ from warp_critic.reproduce.settings import STAGES
 __all__ = ["add_arguments", "run_from_args", "config_from_args"]
 
 HELP = "run the paper's experiments end to end and write REPORT.md, figures and report.rrd"
-DESCRIPTION = ("Run the paper's experiments (toy, landscape, meta-training, reacher maps, KUKA tables) and write "
-               "REPORT.md, results.json, PNG figures and report.rrd into --out. Each stage works in its own "
-               "sub-directory keyed by a hash of its settings: complete stages are skipped, interrupted ones resume.")
+DESCRIPTION = (
+    "Run the paper's experiments (toy, landscape, meta-training, reacher maps, KUKA tables) and write "
+    "REPORT.md, results.json, PNG figures and report.rrd into --out. Each stage works in its own "
+    "sub-directory keyed by a hash of its settings: complete stages are skipped, interrupted ones resume."
+)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """Add the flags of ``warp-critic reproduce`` to ``parser``."""
     A = parser.add_argument
-    A("--out", type=Path, default=Path("runs/paper"), metavar="DIR",
-      help="output folder (new, empty, or an earlier reproduce output; default runs/paper)")
-    A("--seeds", type=_int, default=None, metavar="N",
-      help="meta-train seeds 0..N-1 for every method (>= 1; default 5, with --quick 2)")
-    A("--only", type=str, default=None, metavar="STAGE,...",
-      help=f"run only these stages (comma-separated: {', '.join(STAGES)}); maps and tables also run the "
-           "meta-training they read (skipped when complete)")
-    A("--quick", action="store_true", help="tiny settings for every stage (a plumbing check in a few minutes, not the paper)")
+    A(
+        "--out",
+        type=Path,
+        default=Path("runs/paper"),
+        metavar="DIR",
+        help="output folder (new, empty, or an earlier reproduce output; default runs/paper)",
+    )
+    A(
+        "--seeds",
+        type=_int,
+        default=None,
+        metavar="N",
+        help="meta-train seeds 0..N-1 for every method (>= 1; default 5, with --quick 2)",
+    )
+    A(
+        "--only",
+        type=str,
+        default=None,
+        metavar="STAGE,...",
+        help=f"run only these stages (comma-separated: {', '.join(STAGES)}); maps and tables also run the "
+        "meta-training they read (skipped when complete)",
+    )
+    A(
+        "--quick",
+        action="store_true",
+        help="tiny settings for every stage (a plumbing check in a few minutes, not the paper)",
+    )
     A("--device", type=str, default="auto", metavar="DEV", help="cpu, cuda or auto (default auto)")
-    A("--jobs", type=_int, default=None, metavar="N",
-      help="run independent stages in N local processes (default: one after the other, in this process)")
-    A("--ray", nargs="?", const="local", default=None, metavar="ADDRESS",
-      help="run each stage as a Ray task: no ADDRESS starts a local cluster, 'auto' joins the running one, "
-           "HOST:PORT the head at that address (pip install -e '.[ray]'); results come back to --out")
-    A("--set", dest="overrides", action="append", default=[], metavar="STAGE.KEY=VALUE",
-      help="override one stage setting (repeatable), e.g. toy.iters=50 or metatrain.kuka.ours.iterations=100")
+    A(
+        "--jobs",
+        type=_int,
+        default=None,
+        metavar="N",
+        help="run independent stages in N local processes (default: one after the other, in this process)",
+    )
+    A(
+        "--ray",
+        nargs="?",
+        const="local",
+        default=None,
+        metavar="ADDRESS",
+        help="run each stage as a Ray task: no ADDRESS starts a local cluster, 'auto' joins the running one, "
+        "HOST:PORT the head at that address (pip install -e '.[ray]'); results come back to --out",
+    )
+    A(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="STAGE.KEY=VALUE",
+        help="override one stage setting (repeatable), e.g. toy.iters=50 or metatrain.kuka.ours.iterations=100",
+    )
 
 
 def _int(text: str) -> int:
@@ -81,22 +119,30 @@ def config_from_args(args: argparse.Namespace):
     from warp_critic.reproduce.settings import default_seeds
 
     seeds = args.seeds if args.seeds is not None else default_seeds(bool(args.quick))
-    return ReproduceConfig(out=Path(args.out), seeds=seeds, only=_only(args.only), quick=bool(args.quick),
-                           device=args.device, overrides=list(args.overrides or []), command=command_line(args))
+    return ReproduceConfig(
+        out=Path(args.out),
+        seeds=seeds,
+        only=_only(args.only),
+        quick=bool(args.quick),
+        device=args.device,
+        overrides=list(args.overrides or []),
+        command=command_line(args),
+    )
 
 
 def run_from_args(args: argparse.Namespace) -> int:
     """Validate the flags, run the stages, write the report; returns the exit code (0)."""
     from warp_critic.core.runtime import init
-    from warp_critic.reproduce.pipeline import reproduce
-
     from warp_critic.physics.simulator import resolve_device
     from warp_critic.reproduce.executors import make_executor
+    from warp_critic.reproduce.pipeline import reproduce
 
     rc = config_from_args(args)
     rc.validate()  # one-line UserError before any work
     init()
-    executor = make_executor(getattr(args, "jobs", None), getattr(args, "ray", None), resolve_device(rc.device))
+    executor = make_executor(
+        getattr(args, "jobs", None), getattr(args, "ray", None), resolve_device(rc.device)
+    )
     result = reproduce(rc, executor)
     print(f"report: {result['report']}")
     print(f"recording: rerun {Path(result['out']) / 'report.rrd'}")

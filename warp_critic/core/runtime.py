@@ -47,8 +47,11 @@ def check_threads(n: int, name: str = "cpu_threads") -> int:
     """A torch thread count: 0 = torch's default, else 1 .. 4 x the cores (more only thrashes)."""
     limit = 4 * (os.cpu_count() or 1)
     if isinstance(n, bool) or not isinstance(n, int) or not 0 <= n <= limit:
-        raise FieldError(name, f"must be an integer in 0..{limit} (0 = torch's default; this machine has "
-                               f"{os.cpu_count()} cores), got {n!r}")
+        raise FieldError(
+            name,
+            f"must be an integer in 0..{limit} (0 = torch's default; this machine has "
+            f"{os.cpu_count()} cores), got {n!r}",
+        )
     return n
 
 
@@ -58,7 +61,9 @@ def threads_from_env() -> int:
     try:
         n = int(text)
     except ValueError:
-        raise UserError(f"${THREADS_ENV}={text!r}: expected an integer number of torch threads") from None
+        raise UserError(
+            f"${THREADS_ENV}={text!r}: expected an integer number of torch threads"
+        ) from None
     if n < 1:
         raise UserError(f"${THREADS_ENV}={text!r}: must be >= 1")
     try:
@@ -99,6 +104,7 @@ def init(threads: int | None = None, quiet: bool = True) -> None:
 # ------------------------------------------------------------------------------------------------
 # seeding and RNG state
 # ------------------------------------------------------------------------------------------------
+
 
 def check_seed(seed, name: str = "seed") -> int:
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:

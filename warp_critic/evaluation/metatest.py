@@ -19,24 +19,32 @@ Two aggregations of the final error are reported, for every goal and init:
 from __future__ import annotations
 
 import importlib
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 import torch
 
 from warp_critic.core.errors import FieldError, UserError
+from warp_critic.core.runtime import seed_everything
 from warp_critic.learning.inner import inner_update, policy_fn
 from warp_critic.learning.losses import final_error
 from warp_critic.learning.networks import Critic, MLPPolicy, Normalizer
 from warp_critic.learning.rollout import rollout
-from warp_critic.running.rundir import RunDir, check_output_file, write_result
-from warp_critic.core.runtime import seed_everything
 from warp_critic.physics.scene import load_scene
 from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
-from warp_critic.running.task import (SerializableConfig, TaskConfig, available_memory, build_task, check_fields, estimate_memory,
-                   goals_tensor, spec)
+from warp_critic.running.rundir import RunDir, check_output_file, write_result
+from warp_critic.running.task import (
+    SerializableConfig,
+    TaskConfig,
+    available_memory,
+    build_task,
+    check_fields,
+    estimate_memory,
+    goals_tensor,
+    spec,
+)
 
 RESULT_KIND = "warp-critic/metatest-v1"
 
@@ -48,14 +56,32 @@ class TestConfig(SerializableConfig):
     __test__ = False  # not a pytest class
 
     run_dir: str = spec("", "run directory written by meta-train or baseline")
-    goals: list[list[float]] | None = spec(None, "explicit goals, inline 'a,b;c,d' or a file; default: sampled around the training goals")
+    goals: list[list[float]] | None = spec(
+        None,
+        "explicit goals, inline 'a,b;c,d' or a file; default: sampled around the training goals",
+    )
     num_goals: int = spec(10, "number of sampled goals", gt=0, cap=10**6)
-    goal_std: float = spec(0.3, "std (rad) of the Gaussian around the training goals", ge=0, cap=100)
-    goal_noise: str = spec("per-joint", "per-joint: N(g, std^2) on every joint; distance: a random direction at a distance N(0, std^2) (the paper's 'at a distance of N(0, std)' reads both ways)", choices=("per-joint", "distance"))
-    around: list[int] | None = spec(None, "indices of the training goals to sample around (default: all, cycled)", ge=0)
+    goal_std: float = spec(
+        0.3, "std (rad) of the Gaussian around the training goals", ge=0, cap=100
+    )
+    goal_noise: str = spec(
+        "per-joint",
+        "per-joint: N(g, std^2) on every joint; distance: a random direction at a distance N(0, std^2) (the paper's 'at a distance of N(0, std)' reads both ways)",
+        choices=("per-joint", "distance"),
+    )
+    around: list[int] | None = spec(
+        None, "indices of the training goals to sample around (default: all, cycled)", ge=0
+    )
     inits: int = spec(5, "fresh policy initialisations per goal", gt=0, cap=10**6)
-    policy_steps: int | None = spec(None, "critic-gradient steps per fresh policy (default: the run's inner steps x its policy lifetime)", gt=0, cap=10**6)
-    alpha: float | None = spec(None, "policy learning rate (default: the run's inner learning rate)", gt=0, cap=1e6)
+    policy_steps: int | None = spec(
+        None,
+        "critic-gradient steps per fresh policy (default: the run's inner steps x its policy lifetime)",
+        gt=0,
+        cap=10**6,
+    )
+    alpha: float | None = spec(
+        None, "policy learning rate (default: the run's inner learning rate)", gt=0, cap=1e6
+    )
     horizon: int | None = spec(None, "rollout length (default: the run's)", gt=0, cap=10**6)
     ee_mass: float = spec(0.0, "mass added at the end-effector (kg)", ge=0, cap=1e4)
     link_length: float | None = spec(None, "set the end-effector link length (m)", gt=0, cap=100)
@@ -69,10 +95,16 @@ class TestConfig(SerializableConfig):
 # critic loaders: method -> the loss a fresh policy descends, and the run's meta-test defaults
 # ------------------------------------------------------------------------------------------------
 
+
 def load_our_critic(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, dict]:
     """Our meta-learned critic; meta-test defaults: its inner lr, inner steps x policy lifetime."""
     cfg = ckpt["config"]
-    critic = Critic(ckpt["dof"], norm, hidden=ckpt.get("critic_hidden", 400), inputs=ckpt.get("critic_input", "full"))
+    critic = Critic(
+        ckpt["dof"],
+        norm,
+        hidden=ckpt.get("critic_hidden", 400),
+        inputs=ckpt.get("critic_input", "full"),
+    )
     critic.load_state_dict(ckpt["critic_state"])
     # a critic trained on policies of every age up to the policy lifetime keeps improving them that long
     steps = int(cfg.get("inner_steps", 1)) * int(cfg.get("policy_lifetime", 1))
@@ -99,7 +131,9 @@ def build_test_critic(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, di
     method = ckpt.get("method", "ours")
     loader = CRITIC_LOADERS.get(method)
     if loader is None:
-        raise UserError(f"checkpoint of method {method!r}: meta-test knows {', '.join(CRITIC_LOADERS)}")
+        raise UserError(
+            f"checkpoint of method {method!r}: meta-test knows {', '.join(CRITIC_LOADERS)}"
+        )
     if isinstance(loader, str):
         module, name = loader.split(":")
         loader = getattr(importlib.import_module(module), name)
@@ -108,16 +142,25 @@ def build_test_critic(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, di
     except (KeyError, RuntimeError, TypeError, ValueError) as e:
         if isinstance(e, UserError):
             raise
-        raise UserError(f"{method} checkpoint has no usable critic ({type(e).__name__}: "
-                        f"{str(e).splitlines()[0] if str(e) else ''})") from None
+        raise UserError(
+            f"{method} checkpoint has no usable critic ({type(e).__name__}: "
+            f"{str(e).splitlines()[0] if str(e) else ''})"
+        ) from None
 
 
 GOAL_NOISE = ("per-joint", "distance")
 
 
-def sample_goals(train_goals: torch.Tensor, num: int, std: float, around: list[int] | None,
-                 lower: torch.Tensor, upper: torch.Tensor, gen: torch.Generator,
-                 noise: str = "per-joint") -> torch.Tensor:
+def sample_goals(
+    train_goals: torch.Tensor,
+    num: int,
+    std: float,
+    around: list[int] | None,
+    lower: torch.Tensor,
+    upper: torch.Tensor,
+    gen: torch.Generator,
+    noise: str = "per-joint",
+) -> torch.Tensor:
     """``num`` goals around training goals (cycled), clipped into the limits.
 
     The paper (Table 1) samples new goals "at a distance of N(0, std)" around the training goals,
@@ -136,7 +179,9 @@ def sample_goals(train_goals: torch.Tensor, num: int, std: float, around: list[i
     if noise == "per-joint":
         offset = offset * std
     else:
-        offset = offset / offset.norm(dim=1, keepdim=True) * (torch.randn(num, 1, generator=gen) * std)
+        offset = (
+            offset / offset.norm(dim=1, keepdim=True) * (torch.randn(num, 1, generator=gen) * std)
+        )
     return torch.clamp(centres + offset, lower * 0.98, upper * 0.98)
 
 
@@ -173,10 +218,17 @@ def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
         raise UserError(f"{tc.run_dir}: checkpoint holds an unusable config ({e})") from None
     scene = load_scene(cfg.scene)
     if scene.name != ckpt["scene"] or scene.dof != ckpt["dof"]:
-        raise UserError(f"{tc.run_dir}: checkpoint is for scene {ckpt['scene']} ({ckpt['dof']} dof), "
-                        f"but {cfg.scene} is {scene.name} ({scene.dof} dof)")
-    if ckpt.get("scene_hash") and getattr(scene, "content_hash", None) not in (None, ckpt["scene_hash"]):
-        raise UserError(f"{tc.run_dir}: the scene file {cfg.scene} has changed since the run was trained")
+        raise UserError(
+            f"{tc.run_dir}: checkpoint is for scene {ckpt['scene']} ({ckpt['dof']} dof), "
+            f"but {cfg.scene} is {scene.name} ({scene.dof} dof)"
+        )
+    if ckpt.get("scene_hash") and getattr(scene, "content_hash", None) not in (
+        None,
+        ckpt["scene_hash"],
+    ):
+        raise UserError(
+            f"{tc.run_dir}: the scene file {cfg.scene} has changed since the run was trained"
+        )
     horizon = tc.horizon if tc.horizon is not None else cfg.horizon
 
     gen = seed_everything(tc.seed)
@@ -186,18 +238,31 @@ def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
     if tc.goals is not None:
         goals = goals_tensor(tc.goals, scene)
     else:
-        goals = sample_goals(train_goals, tc.num_goals, tc.goal_std, tc.around, lo, hi, gen, tc.goal_noise)
+        goals = sample_goals(
+            train_goals, tc.num_goals, tc.goal_std, tc.around, lo, hi, gen, tc.goal_noise
+        )
     G, K = goals.shape[0], tc.inits
     W = G * K
     need, have = estimate_memory(W, scene.dof, horizon, cfg.substeps), available_memory()
     if need > 0.8 * have:
-        raise FieldError("inits", f"{G} goals x {K} inits = {W} worlds, horizon {horizon} need about "
-                                  f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB available")
+        raise FieldError(
+            "inits",
+            f"{G} goals x {K} inits = {W} worlds, horizon {horizon} need about "
+            f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB available",
+        )
     # the run's task with the test's goals, inits and dynamics variant, as training laid it out; built
     # without gradient buffers (differentiable=False): a taped rollout through it is impossible
-    test_task = replace(cfg, goals=goals.tolist(), worlds_per_goal=K, ee_mass=tc.ee_mass, link_length=tc.link_length,
-                        link_scale=tc.link_scale, device=tc.device, horizon=horizon,
-                        gravity=cfg.gravity if cfg.gravity is not None else STANDARD_GRAVITY)
+    test_task = replace(
+        cfg,
+        goals=goals.tolist(),
+        worlds_per_goal=K,
+        ee_mass=tc.ee_mass,
+        link_length=tc.link_length,
+        link_scale=tc.link_scale,
+        device=tc.device,
+        horizon=horizon,
+        gravity=cfg.gravity if cfg.gravity is not None else STANDARD_GRAVITY,
+    )
     task = build_task(test_task, scene, differentiable=False)
     sim, norm, dev, goal = task.sim, task.norm, task.device, task.goal
     critic, defaults = build_test_critic(ckpt, norm)
@@ -207,25 +272,63 @@ def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
     alpha = tc.alpha if tc.alpha is not None else defaults.get("alpha")
     steps = tc.policy_steps if tc.policy_steps is not None else defaults.get("steps", 1)
     if not (isinstance(alpha, (int, float)) and alpha > 0):
-        raise UserError(f"{tc.run_dir}: the run stores no usable policy learning rate (alpha {alpha!r}); give one")
+        raise UserError(
+            f"{tc.run_dir}: the run stores no usable policy learning rate (alpha {alpha!r}); give one"
+        )
     q0, qd0 = task.home, torch.zeros_like(task.home)
     policy = MLPPolicy(norm)
-    params = {k: v.requires_grad_(True) for k, v in policy.init(W, generator=gen, device=dev).items()}
-    return MetaTestSetup(ckpt=ckpt, cfg=cfg, scene=scene, goals=goals, goal=goal, sim=sim, norm=norm,
-                         critic=critic, policy=policy, params=params, q0=q0, qd0=qd0, inits=K, steps=steps,
-                         horizon=horizon, alpha=alpha)
+    params = {
+        k: v.requires_grad_(True) for k, v in policy.init(W, generator=gen, device=dev).items()
+    }
+    return MetaTestSetup(
+        ckpt=ckpt,
+        cfg=cfg,
+        scene=scene,
+        goals=goals,
+        goal=goal,
+        sim=sim,
+        norm=norm,
+        critic=critic,
+        policy=policy,
+        params=params,
+        q0=q0,
+        qd0=qd0,
+        inits=K,
+        steps=steps,
+        horizon=horizon,
+        alpha=alpha,
+    )
 
 
 def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) -> dict:
     """Algorithm 3 on ``G x K`` fresh policies; writes and returns the results (see the module docstring)."""
     out = check_output_file(Path(tc.out) if tc.out else Path(tc.run_dir) / "metatest.json", "out")
     m = setup_meta_test(tc)
-    ckpt, scene, goals, goal, sim, critic, policy = m.ckpt, m.scene, m.goals, m.goal, m.sim, m.critic, m.policy
+    ckpt, scene, goals, goal, sim, critic, policy = (
+        m.ckpt,
+        m.scene,
+        m.goals,
+        m.goal,
+        m.sim,
+        m.critic,
+        m.policy,
+    )
     params, q0, qd0, steps, horizon, alpha = m.params, m.q0, m.qd0, m.steps, m.horizon, m.alpha
     G, K = goals.shape[0], m.inits
     before = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
-    params, _ = inner_update(critic, policy, params, sim, q0, qd0, goal, horizon=horizon, alpha=alpha,
-                             steps=steps, create_graph=False)
+    params, _ = inner_update(
+        critic,
+        policy,
+        params,
+        sim,
+        q0,
+        qd0,
+        goal,
+        horizon=horizon,
+        alpha=alpha,
+        steps=steps,
+        create_graph=False,
+    )
     after = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
     err = final_error(after.q[-1], goal).view(G, K).cpu()
     err0 = final_error(before.q[-1], goal).view(G, K).cpu()
@@ -233,32 +336,54 @@ def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) ->
     mse, mse0 = err / scene.dof, err0 / scene.dof  # mean over the joints instead of the sum
     result = {
         "kind": RESULT_KIND,
-        "run_dir": str(tc.run_dir), "method": ckpt.get("method", "ours"), "scene": scene.name,
-        "goals": goals.tolist(), "goal_std": tc.goal_std if tc.goals is None else None,
+        "run_dir": str(tc.run_dir),
+        "method": ckpt.get("method", "ours"),
+        "scene": scene.name,
+        "goals": goals.tolist(),
+        "goal_std": tc.goal_std if tc.goals is None else None,
         "goal_noise": tc.goal_noise if tc.goals is None else None,
-        "inits": K, "policy_steps": steps, "alpha": alpha, "horizon": horizon,
-        "variant": {"ee_mass": tc.ee_mass, "link_length": tc.link_length, "link_scale": tc.link_scale},
+        "inits": K,
+        "policy_steps": steps,
+        "alpha": alpha,
+        "horizon": horizon,
+        "variant": {
+            "ee_mass": tc.ee_mass,
+            "link_length": tc.link_length,
+            "link_scale": tc.link_scale,
+        },
         "final_error_per_goal": per_goal.tolist(),
         "final_error_all": err.tolist(),
-        "mean": float(err.mean()), "std": float(err.std(unbiased=False)),
+        "mean": float(err.mean()),
+        "std": float(err.std(unbiased=False)),
         "mean_before": float(err0.mean()),
         # the same, averaged over the joints instead of summed (the paper's "mean squared error")
         "mse_per_goal": mse.mean(1).tolist(),
-        "mse_mean": float(mse.mean()), "mse_std": float(mse.std(unbiased=False)),
+        "mse_mean": float(mse.mean()),
+        "mse_std": float(mse.std(unbiased=False)),
         "mse_mean_before": float(mse0.mean()),
     }
     if progress:
-        progress(f"meta-test {result['method']} on {scene.name}: {G} goals x {K} inits, "
-                 f"{steps} policy step(s), no model gradient")
-        progress(f"  final error per goal, mean over {K} inits: ||q_T - g||^2 summed over the joints, "
-                 f"and its mean over the {scene.dof} joints (MSE, the paper's tables)")
+        progress(
+            f"meta-test {result['method']} on {scene.name}: {G} goals x {K} inits, "
+            f"{steps} policy step(s), no model gradient"
+        )
+        progress(
+            f"  final error per goal, mean over {K} inits: ||q_T - g||^2 summed over the joints, "
+            f"and its mean over the {scene.dof} joints (MSE, the paper's tables)"
+        )
         for i, e in enumerate(per_goal.tolist()):
-            progress(f"  goal {i:2d} {np.array2string(goals[i].numpy(), precision=2)}  "
-                     f"final sq. error {e:.4f}  MSE {e / scene.dof:.4f}")
-        progress(f"  sq. error: mean {result['mean']:.4f}  std {result['std']:.4f}  "
-                 f"(untrained policies: {result['mean_before']:.4f})")
-        progress(f"  MSE:       mean {result['mse_mean']:.4f}  std {result['mse_std']:.4f}  "
-                 f"(untrained policies: {result['mse_mean_before']:.4f})")
+            progress(
+                f"  goal {i:2d} {np.array2string(goals[i].numpy(), precision=2)}  "
+                f"final sq. error {e:.4f}  MSE {e / scene.dof:.4f}"
+            )
+        progress(
+            f"  sq. error: mean {result['mean']:.4f}  std {result['std']:.4f}  "
+            f"(untrained policies: {result['mean_before']:.4f})"
+        )
+        progress(
+            f"  MSE:       mean {result['mse_mean']:.4f}  std {result['mse_std']:.4f}  "
+            f"(untrained policies: {result['mse_mean_before']:.4f})"
+        )
     write_result(out, result)
     result["output"] = str(out)
     return result

@@ -27,8 +27,15 @@ from warp_critic.core.errors import FieldError
 PRESETS: dict[str, dict[str, Any]] = {
     # meta-training (TrainConfig fields)
     "reacher": {"iterations": 400, "inner_steps": 3, "alpha": 3e-4},
-    "kuka-table1": {"critic_input": "relative", "start_std": 0.4, "home_starts": 2, "iterations": 3000,
-                    "inner_steps": 3, "alpha": 3e-4, "lr": 3e-3},
+    "kuka-table1": {
+        "critic_input": "relative",
+        "start_std": 0.4,
+        "home_starts": 2,
+        "iterations": 3000,
+        "inner_steps": 3,
+        "alpha": 3e-4,
+        "lr": 3e-3,
+    },
     # baselines (BaselineConfig fields): the published DDPG / Meta-Critic settings, 300 iterations
     "ddpg": {"method": "ddpg", "iterations": 300},
     "meta-critic": {"method": "meta-critic", "iterations": 300},
@@ -36,27 +43,56 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 DESCRIPTIONS: dict[str, str] = {
     "reacher": "reacher benchmark: 3 inner steps at alpha 3e-4, 400 iterations "
-               "(meta-train 0.0083 rad^2, meta-test 0.033 summed at std 0.3)",
+    "(meta-train 0.0083 rad^2, meta-test 0.033 summed at std 0.3)",
     "kuka-table1": "KUKA against the paper's Table 1: goal-relative critic, random starts 0.4 rad with 2 of 4 "
-                   "worlds per goal at home, 3 inner steps at alpha 3e-4, lr 3e-3, 3000 iterations "
-                   "(MSE 0.019 / 0.056 at std 0.1 / 0.4 per-joint)",
+    "worlds per goal at home, 3 inner steps at alpha 3e-4, lr 3e-3, 3000 iterations "
+    "(MSE 0.019 / 0.056 at std 0.1 / 0.4 per-joint)",
     "ddpg": "DDPG baseline: the published settings (BaselineConfig defaults), 300 iterations",
     "meta-critic": "Meta-Critic baseline: Zhou et al.'s settings (BaselineConfig defaults), 300 iterations",
 }
 
 #: The scene (file stem under ``scenes/``) each preset was measured on; ``None``: reported on several.
-SCENES: dict[str, str | None] = {"reacher": "reacher", "kuka-table1": "kuka", "ddpg": None, "meta-critic": None}
+SCENES: dict[str, str | None] = {
+    "reacher": "reacher",
+    "kuka-table1": "kuka",
+    "ddpg": None,
+    "meta-critic": None,
+}
 
 #: The meta-test protocol each preset's numbers were reported with (ProtocolConfig fields).
 EVALUATIONS: dict[str, dict[str, Any]] = {
-    "reacher": {"stds": [0.3], "goal_noise": ["per-joint"], "around": None, "num_goals": 10, "inits": 5,
-                "seed": 1},
-    "kuka-table1": {"stds": [0.1, 0.4], "goal_noise": ["per-joint", "distance"], "around": [0, 1],
-                    "num_goals": 10, "inits": 5, "seed": 1},
-    "ddpg": {"stds": [0.1, 0.3, 0.4], "goal_noise": ["per-joint"], "around": [0, 1], "num_goals": 10,
-             "inits": 5, "seed": 1},
-    "meta-critic": {"stds": [0.1, 0.3, 0.4], "goal_noise": ["per-joint"], "around": [0, 1], "num_goals": 10,
-                    "inits": 5, "seed": 1},
+    "reacher": {
+        "stds": [0.3],
+        "goal_noise": ["per-joint"],
+        "around": None,
+        "num_goals": 10,
+        "inits": 5,
+        "seed": 1,
+    },
+    "kuka-table1": {
+        "stds": [0.1, 0.4],
+        "goal_noise": ["per-joint", "distance"],
+        "around": [0, 1],
+        "num_goals": 10,
+        "inits": 5,
+        "seed": 1,
+    },
+    "ddpg": {
+        "stds": [0.1, 0.3, 0.4],
+        "goal_noise": ["per-joint"],
+        "around": [0, 1],
+        "num_goals": 10,
+        "inits": 5,
+        "seed": 1,
+    },
+    "meta-critic": {
+        "stds": [0.1, 0.3, 0.4],
+        "goal_noise": ["per-joint"],
+        "around": [0, 1],
+        "num_goals": 10,
+        "inits": 5,
+        "seed": 1,
+    },
 }
 
 

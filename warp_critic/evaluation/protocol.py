@@ -28,9 +28,10 @@ meta-test runs.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from warp_critic.core.errors import FieldError, UserError
 
@@ -43,39 +44,122 @@ PAPER_METHODS = ("ours", "ddpg", "meta-critic")
 
 #: Table 1 (``table:gen_tasks_kuka``): new goals sampled at N(0, std) around the training goals.
 PAPER_TABLE1: dict[str, dict[float, tuple[float, float]]] = {
-    "ours": {0.1: (0.02, 0.02), 0.2: (0.04, 0.03), 0.3: (0.05, 0.04), 0.4: (0.07, 0.05), 0.5: (0.41, 0.58),
-             0.6: (1.65, 2.63), 0.7: (2.05, 3.78), 0.8: (1.01, 1.92), 0.9: (0.27, 0.2), 1.0: (0.95, 0.8)},
-    "ddpg": {0.1: (3.425, 2.136), 0.2: (3.943, 2.415), 0.3: (5.638, 1.621), 0.4: (4.426, 2.841),
-             0.5: (4.001, 1.735), 0.6: (3.9, 1.664), 0.7: (4.312, 2.268), 0.8: (4.293, 1.609),
-             0.9: (4.095, 2.85), 1.0: (5.031, 3.801)},
-    "meta-critic": {0.1: (4.149, 1.781), 0.2: (3.817, 1.763), 0.3: (4.962, 2.298), 0.4: (4.413, 1.746),
-                    0.5: (5.611, 2.059), 0.6: (5.544, 2.5), 0.7: (4.622, 2.254), 0.8: (4.77, 1.585),
-                    0.9: (4.754, 2.804), 1.0: (7.771, 3.304)},
+    "ours": {
+        0.1: (0.02, 0.02),
+        0.2: (0.04, 0.03),
+        0.3: (0.05, 0.04),
+        0.4: (0.07, 0.05),
+        0.5: (0.41, 0.58),
+        0.6: (1.65, 2.63),
+        0.7: (2.05, 3.78),
+        0.8: (1.01, 1.92),
+        0.9: (0.27, 0.2),
+        1.0: (0.95, 0.8),
+    },
+    "ddpg": {
+        0.1: (3.425, 2.136),
+        0.2: (3.943, 2.415),
+        0.3: (5.638, 1.621),
+        0.4: (4.426, 2.841),
+        0.5: (4.001, 1.735),
+        0.6: (3.9, 1.664),
+        0.7: (4.312, 2.268),
+        0.8: (4.293, 1.609),
+        0.9: (4.095, 2.85),
+        1.0: (5.031, 3.801),
+    },
+    "meta-critic": {
+        0.1: (4.149, 1.781),
+        0.2: (3.817, 1.763),
+        0.3: (4.962, 2.298),
+        0.4: (4.413, 1.746),
+        0.5: (5.611, 2.059),
+        0.6: (5.544, 2.5),
+        0.7: (4.622, 2.254),
+        0.8: (4.77, 1.585),
+        0.9: (4.754, 2.804),
+        1.0: (7.771, 3.304),
+    },
 }
 
 #: Table 2 (``table:gen_kuka_mass``): end-effector mass at meta-test ("training mass is at mass=3.12").
 PAPER_TABLE2: dict[str, dict[float, tuple[float, float]]] = {
-    "ours": {0.0: (0.066, 0.058), 1.0: (0.061, 0.054), 2.0: (0.06, 0.053), 3.0: (0.06, 0.053),
-             4.0: (0.06, 0.053), 5.0: (0.06, 0.053), 6.0: (0.06, 0.053), 7.0: (0.06, 0.054),
-             8.0: (0.061, 0.054), 9.0: (0.061, 0.054)},
-    "ddpg": {0.0: (3.688, 1.817), 1.0: (4.276, 1.295), 2.0: (5.132, 0.595), 3.0: (3.494, 2.585),
-             4.0: (2.141, 1.489), 5.0: (1.882, 0.841), 6.0: (4.503, 3.101), 7.0: (3.919, 2.408),
-             8.0: (3.96, 2.321), 9.0: (2.327, 2.229)},
-    "meta-critic": {0.0: (1.495, 0.105), 1.0: (2.696, 0.865), 2.0: (3.31, 1.198), 3.0: (2.879, 0.621),
-                    4.0: (3.274, 0.409), 5.0: (4.267, 1.215), 6.0: (4.312, 0.375), 7.0: (3.205, 1.314),
-                    8.0: (2.674, 0.912), 9.0: (2.238, 0.704)},
+    "ours": {
+        0.0: (0.066, 0.058),
+        1.0: (0.061, 0.054),
+        2.0: (0.06, 0.053),
+        3.0: (0.06, 0.053),
+        4.0: (0.06, 0.053),
+        5.0: (0.06, 0.053),
+        6.0: (0.06, 0.053),
+        7.0: (0.06, 0.054),
+        8.0: (0.061, 0.054),
+        9.0: (0.061, 0.054),
+    },
+    "ddpg": {
+        0.0: (3.688, 1.817),
+        1.0: (4.276, 1.295),
+        2.0: (5.132, 0.595),
+        3.0: (3.494, 2.585),
+        4.0: (2.141, 1.489),
+        5.0: (1.882, 0.841),
+        6.0: (4.503, 3.101),
+        7.0: (3.919, 2.408),
+        8.0: (3.96, 2.321),
+        9.0: (2.327, 2.229),
+    },
+    "meta-critic": {
+        0.0: (1.495, 0.105),
+        1.0: (2.696, 0.865),
+        2.0: (3.31, 1.198),
+        3.0: (2.879, 0.621),
+        4.0: (3.274, 0.409),
+        5.0: (4.267, 1.215),
+        6.0: (4.312, 0.375),
+        7.0: (3.205, 1.314),
+        8.0: (2.674, 0.912),
+        9.0: (2.238, 0.704),
+    },
 }
 
 #: Table 3 (``table:gen_kuka_link``): end-effector link length at meta-test ("training value is at length=0").
 PAPER_TABLE3: dict[str, dict[float, tuple[float, float]]] = {
-    "ours": {0.2: (0.009, 0.0), 0.4: (0.009, 0.0), 0.6: (0.009, 0.0), 0.8: (0.009, 0.0), 1.0: (0.021, 0.0),
-             1.2: (0.021, 0.0), 1.4: (0.021, 0.0), 1.6: (0.021, 0.0), 1.8: (0.021, 0.0), 2.0: (0.021, 0.0)},
-    "ddpg": {0.2: (3.717, 1.274), 0.4: (5.295, 1.045), 0.6: (4.341, 2.925), 0.8: (5.197, 1.629),
-             1.0: (1.644, 0.69), 1.2: (1.926, 1.264), 1.4: (3.39, 1.781), 1.6: (1.616, 0.876),
-             1.8: (3.628, 0.577), 2.0: (2.918, 1.118)},
-    "meta-critic": {0.2: (3.92, 0.661), 0.4: (3.003, 0.461), 0.6: (3.736, 1.101), 0.8: (3.047, 0.409),
-                    1.0: (3.685, 0.95), 1.2: (3.147, 1.079), 1.4: (3.673, 1.961), 1.6: (5.166, 0.627),
-                    1.8: (1.737, 0.032), 2.0: (1.944, 0.561)},
+    "ours": {
+        0.2: (0.009, 0.0),
+        0.4: (0.009, 0.0),
+        0.6: (0.009, 0.0),
+        0.8: (0.009, 0.0),
+        1.0: (0.021, 0.0),
+        1.2: (0.021, 0.0),
+        1.4: (0.021, 0.0),
+        1.6: (0.021, 0.0),
+        1.8: (0.021, 0.0),
+        2.0: (0.021, 0.0),
+    },
+    "ddpg": {
+        0.2: (3.717, 1.274),
+        0.4: (5.295, 1.045),
+        0.6: (4.341, 2.925),
+        0.8: (5.197, 1.629),
+        1.0: (1.644, 0.69),
+        1.2: (1.926, 1.264),
+        1.4: (3.39, 1.781),
+        1.6: (1.616, 0.876),
+        1.8: (3.628, 0.577),
+        2.0: (2.918, 1.118),
+    },
+    "meta-critic": {
+        0.2: (3.92, 0.661),
+        0.4: (3.003, 0.461),
+        0.6: (3.736, 1.101),
+        0.8: (3.047, 0.409),
+        1.0: (3.685, 0.95),
+        1.2: (3.147, 1.079),
+        1.4: (3.673, 1.961),
+        1.6: (5.166, 0.627),
+        1.8: (1.737, 0.032),
+        2.0: (1.944, 0.561),
+    },
 }
 
 #: LaTeX label -> (column variable, table), for looking the tables up by the paper's names.
@@ -101,13 +185,19 @@ class ProtocolConfig:
 
     run_dirs: list[str] = field(default_factory=list)  # one meta-trained run per seed, pooled
     stds: list[float] = field(default_factory=lambda: list(TABLE1_STDS))  # goal stds (rad)
-    goal_noise: list[str] = field(default_factory=lambda: list(GOAL_NOISE))  # readings, see GOAL_NOISE
-    around: list[int] | None = field(default_factory=lambda: [0, 1])  # training goals to sample around; None = all
+    goal_noise: list[str] = field(
+        default_factory=lambda: list(GOAL_NOISE)
+    )  # readings, see GOAL_NOISE
+    around: list[int] | None = field(
+        default_factory=lambda: [0, 1]
+    )  # training goals to sample around; None = all
     num_goals: int = 10  # new goals per cell
     inits: int = 5  # fresh policy initialisations per goal
     seed: int = 1  # seed of the goals and the policy initialisations (the same for every run)
     device: str = "auto"
-    write_run_json: bool = True  # each run's meta-test JSON goes to RUN_DIR/table-<reading>-<std>.json
+    write_run_json: bool = (
+        True  # each run's meta-test JSON goes to RUN_DIR/table-<reading>-<std>.json
+    )
 
     def validate(self) -> None:
         """Raise :class:`FieldError` (or :class:`UserError` for a missing run) on a bad setting."""
@@ -153,7 +243,7 @@ class ProtocolResult:
         return asdict(self)
 
     @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> "ProtocolResult":
+    def from_dict(cls, d: dict[str, Any]) -> ProtocolResult:
         d = dict(d)
         d["cells"] = [Cell(**c) for c in d.get("cells", [])]
         return cls(**d)
@@ -162,6 +252,7 @@ class ProtocolResult:
 # ------------------------------------------------------------------------------------------------
 # validation and the protocol
 # ------------------------------------------------------------------------------------------------
+
 
 def _is_int(x) -> bool:
     return isinstance(x, int) and not isinstance(x, bool)
@@ -183,7 +274,9 @@ def check_settings(pc: ProtocolConfig) -> None:
             raise FieldError("goal_noise", f"must be one of {', '.join(GOAL_NOISE)} (got {r!r})")
     if pc.around is not None:
         if isinstance(pc.around, (str, bytes)) or not all(_is_int(i) and i >= 0 for i in pc.around):
-            raise FieldError("around", f"must be training-goal indices >= 0, or None for all (got {pc.around!r})")
+            raise FieldError(
+                "around", f"must be training-goal indices >= 0, or None for all (got {pc.around!r})"
+            )
     for name in ("num_goals", "inits"):
         v = getattr(pc, name)
         if not _is_int(v) or v < 1:
@@ -200,7 +293,9 @@ def validate(pc: ProtocolConfig) -> list[dict | None]:
     """
     check_settings(pc)
     if isinstance(pc.run_dirs, (str, Path)) or not pc.run_dirs:
-        raise FieldError("run_dirs", "give a list of one or more run directories (one per meta-train seed)")
+        raise FieldError(
+            "run_dirs", "give a list of one or more run directories (one per meta-train seed)"
+        )
 
     runs = []
     for run in pc.run_dirs:
@@ -213,12 +308,20 @@ def validate(pc: ProtocolConfig) -> list[dict | None]:
         n_train = len(config["goals"]) if config and config.get("goals") else None
         for i in pc.around or []:
             if n_train is not None and i >= n_train:
-                raise FieldError("around", f"training goal {i} does not exist: {run} has {n_train} training goals")
+                raise FieldError(
+                    "around",
+                    f"training goal {i} does not exist: {run} has {n_train} training goals",
+                )
         runs.append(config)
-    scenes = {(Path(c.get("scene", "?")).stem, len(c["goals"][0])) for c in runs if c and c.get("goals")}
+    scenes = {
+        (Path(c.get("scene", "?")).stem, len(c["goals"][0])) for c in runs if c and c.get("goals")
+    }
     if len(scenes) > 1:
-        raise UserError("the run directories are for different scenes ("
-                        + ", ".join(f"{s}, {d} dof" for s, d in sorted(scenes)) + "); pool runs of one scene")
+        raise UserError(
+            "the run directories are for different scenes ("
+            + ", ".join(f"{s}, {d} dof" for s, d in sorted(scenes))
+            + "); pool runs of one scene"
+        )
     return runs
 
 
@@ -249,28 +352,54 @@ def run_protocol(pc: ProtocolConfig, log: Callable[[str], None] | None = None) -
     validate(pc)
     t0 = time.perf_counter()
     around = list(pc.around) if pc.around else None
-    result = ProtocolResult(runs=[str(r) for r in pc.run_dirs], stds=[float(s) for s in pc.stds],
-                            goal_noise=list(pc.goal_noise), around=around, num_goals=pc.num_goals,
-                            inits=pc.inits, seed=pc.seed)
+    result = ProtocolResult(
+        runs=[str(r) for r in pc.run_dirs],
+        stds=[float(s) for s in pc.stds],
+        goal_noise=list(pc.goal_noise),
+        around=around,
+        num_goals=pc.num_goals,
+        inits=pc.inits,
+        seed=pc.seed,
+    )
     for reading in result.goal_noise:
         for std in result.stds:
             errs, per_run, dof = [], [], 0
             for run in result.runs:
                 out = str(Path(run) / f"table-{reading}-{std}.json") if pc.write_run_json else None
-                tc = TestConfig(run_dir=run, num_goals=pc.num_goals, goal_std=std, goal_noise=reading,
-                                around=around, inits=pc.inits, seed=pc.seed, device=pc.device, out=out)
+                tc = TestConfig(
+                    run_dir=run,
+                    num_goals=pc.num_goals,
+                    goal_std=std,
+                    goal_noise=reading,
+                    around=around,
+                    inits=pc.inits,
+                    seed=pc.seed,
+                    device=pc.device,
+                    out=out,
+                )
                 r = meta_test(tc, progress=None)
                 dof = len(r["goals"][0])
                 errs.append(np.asarray(r["final_error_all"], dtype=np.float64).ravel())
                 per_run.append(float(r["mse_mean"]))
                 if log:
-                    log(f"{run}: {reading} std {std:g}: MSE {r['mse_mean']:.4f} ({r['mse_std']:.4f}), "
-                        f"sum sq. {r['mean']:.4f} ({r['std']:.4f})")
+                    log(
+                        f"{run}: {reading} std {std:g}: MSE {r['mse_mean']:.4f} ({r['mse_std']:.4f}), "
+                        f"sum sq. {r['mean']:.4f} ({r['std']:.4f})"
+                    )
             sq = np.concatenate(errs)
-            result.cells.append(Cell(reading=reading, std=std, dof=dof,
-                                     mse_mean=float(sq.mean() / dof), mse_std=float(sq.std() / dof),
-                                     sq_mean=float(sq.mean()), sq_std=float(sq.std()),
-                                     mse_mean_per_run=per_run, n=int(sq.size)))
+            result.cells.append(
+                Cell(
+                    reading=reading,
+                    std=std,
+                    dof=dof,
+                    mse_mean=float(sq.mean() / dof),
+                    mse_std=float(sq.std() / dof),
+                    sq_mean=float(sq.mean()),
+                    sq_std=float(sq.std()),
+                    mse_mean_per_run=per_run,
+                    n=int(sq.size),
+                )
+            )
     result.seconds = time.perf_counter() - t0
     return result
 
@@ -279,34 +408,53 @@ def run_protocol(pc: ProtocolConfig, log: Callable[[str], None] | None = None) -
 # formatting
 # ------------------------------------------------------------------------------------------------
 
-_PAPER_LABEL = {"ours": "paper (Table 1)", "ddpg": "paper (Table 1, DDPG)", "meta-critic": "paper (Table 1, Meta-Critic)"}
+_PAPER_LABEL = {
+    "ours": "paper (Table 1)",
+    "ddpg": "paper (Table 1, DDPG)",
+    "meta-critic": "paper (Table 1, Meta-Critic)",
+}
 
 
-def format_table(result: ProtocolResult, paper: str | None = "ours", per_run: bool = True) -> list[str]:
+def format_table(
+    result: ProtocolResult, paper: str | None = "ours", per_run: bool = True
+) -> list[str]:
     """Markdown rows ``mean(std)`` per (reading, metric), then (``per_run``) each run's MSE.
 
     ``paper``: a key of :data:`PAPER_TABLE1` whose row is added first (only when every std of the
     result is one of Table 1's), or ``None`` for no paper row.
     """
     if paper is not None and paper not in PAPER_TABLE1:
-        raise FieldError("paper", f"must be one of {', '.join(PAPER_TABLE1)} or None (got {paper!r})")
+        raise FieldError(
+            "paper", f"must be one of {', '.join(PAPER_TABLE1)} or None (got {paper!r})"
+        )
     stds, readings = result.stds, result.goal_noise
-    lines = ["| goal noise | metric | " + " | ".join(f"std={s:g}" for s in stds) + " |",
-             "|" + "---|" * (len(stds) + 2)]
+    lines = [
+        "| goal noise | metric | " + " | ".join(f"std={s:g}" for s in stds) + " |",
+        "|" + "---|" * (len(stds) + 2),
+    ]
     row = PAPER_TABLE1.get(paper or "", {})
     if paper is not None and all(s in row for s in stds):
-        lines.append(f"| {_PAPER_LABEL[paper]} | MSE | " + " | ".join(f"{row[s][0]:g}({row[s][1]:g})" for s in stds)
-                     + " |")
+        lines.append(
+            f"| {_PAPER_LABEL[paper]} | MSE | "
+            + " | ".join(f"{row[s][0]:g}({row[s][1]:g})" for s in stds)
+            + " |"
+        )
     for reading in readings:
         for metric, label in (("mse", "MSE"), ("sq", "sum sq.")):
             cells = [result.cell(reading, s) for s in stds]
-            values = [f"{getattr(c, metric + '_mean'):.3f}({getattr(c, metric + '_std'):.3f})" for c in cells]
+            values = [
+                f"{getattr(c, metric + '_mean'):.3f}({getattr(c, metric + '_std'):.3f})"
+                for c in cells
+            ]
             lines.append(f"| {reading} | {label} | " + " | ".join(values) + " |")
     if per_run:
         lines += ["", "MSE per run (spread over seeds):"]
         for reading in readings:
             for s in stds:
                 c = result.cell(reading, s)
-                lines.append(f"  {reading:9s} std {s:g}: " + " ".join(f"{v:.3f}" for v in c.mse_mean_per_run)
-                             + f"   (n = {c.n} policies)")
+                lines.append(
+                    f"  {reading:9s} std {s:g}: "
+                    + " ".join(f"{v:.3f}" for v in c.mse_mean_per_run)
+                    + f"   (n = {c.n} policies)"
+                )
     return lines

@@ -21,10 +21,20 @@ def policy_fn(policy, params: PolicyParams):
     return lambda q, qd: policy(params, q, qd)
 
 
-def inner_update(critic, policy, params: PolicyParams, sim: Simulator,
-                 q0: torch.Tensor, qd0: torch.Tensor, goal: torch.Tensor, *, horizon: int,
-                 alpha: float, steps: int = 1, create_graph: bool = False,
-                 ) -> tuple[PolicyParams, list[Trajectory]]:
+def inner_update(
+    critic,
+    policy,
+    params: PolicyParams,
+    sim: Simulator,
+    q0: torch.Tensor,
+    qd0: torch.Tensor,
+    goal: torch.Tensor,
+    *,
+    horizon: int,
+    alpha: float,
+    steps: int = 1,
+    create_graph: bool = False,
+) -> tuple[PolicyParams, list[Trajectory]]:
     """``steps`` critic-gradient steps on ``W`` policies at once.
 
     Args:

@@ -21,8 +21,9 @@ def final_error(q_final: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
     return ((q_final - goal) ** 2).sum(-1)
 
 
-def task_loss(traj: Trajectory, goal: torch.Tensor, running_weight: float = 0.0,
-              velocity_weight: float = 0.0) -> torch.Tensor:
+def task_loss(
+    traj: Trajectory, goal: torch.Tensor, running_weight: float = 0.0, velocity_weight: float = 0.0
+) -> torch.Tensor:
     """Per-world task loss ``(W,)``; ``goal`` is ``(W, dof)``; ``velocity_weight`` in s^2."""
     loss = final_error(traj.q[-1], goal)
     if running_weight:
@@ -32,7 +33,9 @@ def task_loss(traj: Trajectory, goal: torch.Tensor, running_weight: float = 0.0,
     return loss
 
 
-def critic_loss(critic, policy, params: PolicyParams, traj: Trajectory, goal: torch.Tensor) -> torch.Tensor:
+def critic_loss(
+    critic, policy, params: PolicyParams, traj: Trajectory, goal: torch.Tensor
+) -> torch.Tensor:
     """Per-world ``sum_t L_critic(s_t, pi_theta(s_t), g)`` ``(W,)``.
 
     The visited states are data (detached): the gradient reaches the policy parameters through the
@@ -44,8 +47,13 @@ def critic_loss(critic, policy, params: PolicyParams, traj: Trajectory, goal: to
     return critic(q, qd, tau, g).sum(0)
 
 
-def td_loss(q: torch.Tensor, reward: torch.Tensor, done: torch.Tensor, q_next: torch.Tensor,
-            gamma: float = 1.0) -> torch.Tensor:
+def td_loss(
+    q: torch.Tensor,
+    reward: torch.Tensor,
+    done: torch.Tensor,
+    q_next: torch.Tensor,
+    gamma: float = 1.0,
+) -> torch.Tensor:
     """Mean squared TD error ``(q - y)^2`` with the target ``y = r + gamma (1 - done) q_next`` held fixed.
 
     All ``(B,)``: ``q = Q(s, a)``, ``q_next = Q'(s', a')`` from the target network at the next state

@@ -48,9 +48,12 @@ class Normalizer:
     max_torque: torch.Tensor
 
     @staticmethod
-    def from_limits(q_lower: torch.Tensor, q_upper: torch.Tensor, max_torque: torch.Tensor,
-                    qd_scale: float) -> "Normalizer":
-        return Normalizer((q_upper + q_lower) / 2, (q_upper - q_lower) / 2, float(qd_scale), max_torque)
+    def from_limits(
+        q_lower: torch.Tensor, q_upper: torch.Tensor, max_torque: torch.Tensor, qd_scale: float
+    ) -> Normalizer:
+        return Normalizer(
+            (q_upper + q_lower) / 2, (q_upper - q_lower) / 2, float(qd_scale), max_torque
+        )
 
     def q(self, q: torch.Tensor) -> torch.Tensor:
         return (q - self.q_centre) / self.q_half_range
@@ -66,13 +69,23 @@ class Normalizer:
 # policy: W independent MLPs evaluated in one batched call
 # ------------------------------------------------------------------------------------------------
 
-def init_policy(worlds: int, obs_dim: int, act_dim: int, *, hidden: int = 64, generator=None,
-                device="cpu", out_scale: float = 0.1) -> PolicyParams:
+
+def init_policy(
+    worlds: int,
+    obs_dim: int,
+    act_dim: int,
+    *,
+    hidden: int = 64,
+    generator=None,
+    device="cpu",
+    out_scale: float = 0.1,
+) -> PolicyParams:
     """PyTorch-default (Kaiming-uniform) initialisation for ``W`` policies.
 
     The last layer is scaled by ``out_scale`` so fresh policies start with small torques.
     Returns tensors ``w1 (W,h,obs) b1 (W,h) w2 (W,h,h) b2 (W,h) w3 (W,act,h) b3 (W,act)``.
     """
+
     def layer(n_out, n_in, scale=1.0):
         bound = 1.0 / math.sqrt(n_in)
         w = (torch.rand(worlds, n_out, n_in, generator=generator) * 2 - 1) * bound * scale
@@ -92,7 +105,9 @@ def policy_forward(params: PolicyParams, obs: torch.Tensor) -> torch.Tensor:
     return torch.einsum("wij,...wj->...wi", params["w3"], h) + params["b3"]
 
 
-def policy_action(params: PolicyParams, norm: Normalizer, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+def policy_action(
+    params: PolicyParams, norm: Normalizer, q: torch.Tensor, qd: torch.Tensor
+) -> torch.Tensor:
     """Joint torques ``(..., W, dof)`` within ``+-max_torque``."""
     return norm.max_torque * torch.tanh(policy_forward(params, norm.state(q, qd)))
 
@@ -111,7 +126,9 @@ class MLPPolicy:
     def init(self, worlds: int, *, generator=None, device="cpu") -> PolicyParams:
         """Fresh parameters for ``worlds`` policies (see :func:`init_policy`)."""
         dof = self.norm.max_torque.shape[0]
-        return init_policy(worlds, 2 * dof, dof, hidden=self.hidden, generator=generator, device=device)
+        return init_policy(
+            worlds, 2 * dof, dof, hidden=self.hidden, generator=generator, device=device
+        )
 
 
 def detach_params(params: PolicyParams, requires_grad: bool = True) -> PolicyParams:
@@ -127,6 +144,7 @@ def flat_params(params: PolicyParams) -> torch.Tensor:
 # critic
 # ------------------------------------------------------------------------------------------------
 
+
 class Critic(nn.Module):
     """``L_critic(s, a, g)``: MLP ``[state, action, goal] -> scalar`` (2 x 400, ELU).
 
@@ -141,8 +159,10 @@ class Critic(nn.Module):
         self.dof, self.inputs = dof, inputs
         n_in = 5 * dof if inputs == "full" else 3 * dof
         self.net = nn.Sequential(
-            nn.Linear(n_in, hidden), nn.ELU(),
-            nn.Linear(hidden, hidden), nn.ELU(),
+            nn.Linear(n_in, hidden),
+            nn.ELU(),
+            nn.Linear(hidden, hidden),
+            nn.ELU(),
             nn.Linear(hidden, 1),
         )
         self.register_buffer("q_centre", norm.q_centre.clone())
@@ -150,19 +170,28 @@ class Critic(nn.Module):
         self.register_buffer("max_torque", norm.max_torque.clone())
         self.qd_scale = norm.qd_scale
 
-    def features(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    def features(
+        self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor
+    ) -> torch.Tensor:
         """The normalised input ``(..., n_in)`` of the input layout."""
         if self.inputs == "relative":
-            return torch.cat([(q - goal) / self.q_half_range, qd / self.qd_scale, tau / self.max_torque], dim=-1)
-        return torch.cat([
-            (q - self.q_centre) / self.q_half_range,
-            qd / self.qd_scale,
-            tau / self.max_torque,
-            (goal - self.q_centre) / self.q_half_range,
-            (q - goal) / self.q_half_range,
-        ], dim=-1)
+            return torch.cat(
+                [(q - goal) / self.q_half_range, qd / self.qd_scale, tau / self.max_torque], dim=-1
+            )
+        return torch.cat(
+            [
+                (q - self.q_centre) / self.q_half_range,
+                qd / self.qd_scale,
+                tau / self.max_torque,
+                (goal - self.q_centre) / self.q_half_range,
+                (q - goal) / self.q_half_range,
+            ],
+            dim=-1,
+        )
 
-    def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor
+    ) -> torch.Tensor:
         """All ``(..., dof)`` -> ``(...)``."""
         return self.net(self.features(q, qd, tau, goal)).squeeze(-1)
 
@@ -187,10 +216,16 @@ class StackedCritic(nn.Module):
         self.weights = nn.ParameterList()
         self.biases = nn.ParameterList()
         for i in self._LAYERS:
-            self.weights.append(nn.Parameter(torch.stack([c.net[i].weight.detach() for c in critics]).clone()))
-            self.biases.append(nn.Parameter(torch.stack([c.net[i].bias.detach() for c in critics]).clone()))
+            self.weights.append(
+                nn.Parameter(torch.stack([c.net[i].weight.detach() for c in critics]).clone())
+            )
+            self.biases.append(
+                nn.Parameter(torch.stack([c.net[i].bias.detach() for c in critics]).clone())
+            )
 
-    def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor
+    ) -> torch.Tensor:
         """All ``(..., S*W, dof)`` -> ``(..., S*W)``."""
         x = self.template[0].features(q, qd, tau, goal)  # (..., S*W, n_in)
         lead, sw, n_in = x.shape[:-2], x.shape[-2], x.shape[-1]
@@ -219,8 +254,12 @@ class StackedCritic(nn.Module):
 
     def critic(self, s: int) -> Critic:
         c = self.template[0]
-        out = Critic(c.dof, Normalizer(c.q_centre, c.q_half_range, c.qd_scale, c.max_torque),
-                     hidden=c.net[0].out_features, inputs=c.inputs).to(c.q_centre.device)
+        out = Critic(
+            c.dof,
+            Normalizer(c.q_centre, c.q_half_range, c.qd_scale, c.max_torque),
+            hidden=c.net[0].out_features,
+            inputs=c.inputs,
+        ).to(c.q_centre.device)
         out.load_state_dict(self.critic_state(s))
         return out
 

@@ -24,13 +24,35 @@ class OuterResult:
     params_new: PolicyParams  # updated policy parameters (detached)
 
 
-def meta_loss(critic, policy, params: PolicyParams, sim: Simulator,
-              q0: torch.Tensor, qd0: torch.Tensor, goal: torch.Tensor, *, horizon: int,
-              alpha: float, inner_steps: int = 1, running_weight: float = 0.0,
-              velocity_weight: float = 0.0) -> OuterResult:
+def meta_loss(
+    critic,
+    policy,
+    params: PolicyParams,
+    sim: Simulator,
+    q0: torch.Tensor,
+    qd0: torch.Tensor,
+    goal: torch.Tensor,
+    *,
+    horizon: int,
+    alpha: float,
+    inner_steps: int = 1,
+    running_weight: float = 0.0,
+    velocity_weight: float = 0.0,
+) -> OuterResult:
     """Task loss of ``pi_{theta_new(phi)}`` rolled out through the model, mean over worlds."""
-    params_new, trajs = inner_update(critic, policy, params, sim, q0, qd0, goal, horizon=horizon,
-                                     alpha=alpha, steps=inner_steps, create_graph=True)
+    params_new, trajs = inner_update(
+        critic,
+        policy,
+        params,
+        sim,
+        q0,
+        qd0,
+        goal,
+        horizon=horizon,
+        alpha=alpha,
+        steps=inner_steps,
+        create_graph=True,
+    )
     after = rollout(sim, policy_fn(policy, params_new), q0, qd0, horizon, differentiable=True)
     per_world = task_loss(after, goal, running_weight, velocity_weight)
     return OuterResult(

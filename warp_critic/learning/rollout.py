@@ -7,8 +7,8 @@ the actions and the initial state (through :mod:`warp_critic.physics.bridge`); o
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import torch
 
@@ -43,12 +43,20 @@ def check_finite(traj: Trajectory, what: str = "rollout") -> None:
         raise DivergenceError(
             f"{what}: non-finite state in world {world} at step {step} "
             f"(unstable dynamics: lower dt, raise substeps or reduce the torque scale)",
-            world=world, step=step,
+            world=world,
+            step=step,
         )
 
 
-def rollout(sim: Simulator, policy: PolicyFn, q0: torch.Tensor, qd0: torch.Tensor, horizon: int,
-            *, differentiable: bool = False) -> Trajectory:
+def rollout(
+    sim: Simulator,
+    policy: PolicyFn,
+    q0: torch.Tensor,
+    qd0: torch.Tensor,
+    horizon: int,
+    *,
+    differentiable: bool = False,
+) -> Trajectory:
     """Roll ``policy`` out for ``horizon`` control steps from ``(q0, qd0)`` in every world.
 
     With ``differentiable=False`` the simulator runs forward only (no tape) and the actions are

@@ -46,25 +46,33 @@ checkpoint's ``config`` (``alpha``) and meta-test's ``alpha`` still overrides it
 search (``fresh_policy_loss``) is the baseline's analogue of our ``task_loss`` and is logged at
 checkpoint iterations.
 """
+
 from __future__ import annotations
 
 import copy
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import torch
 
 from warp_critic.core.errors import DivergenceError
 from warp_critic.learning.inner import inner_update, policy_fn
 from warp_critic.learning.losses import critic_loss, final_error
-from warp_critic.running.loop import Callback, Session, TrainResult
 from warp_critic.learning.networks import MLPPolicy, Normalizer
 from warp_critic.learning.rollout import Trajectory, rollout
-from warp_critic.physics.simulator import Simulator
-from warp_critic.running.task import TaskConfig, spec
 from warp_critic.methods.q_networks import METHODS, NegQ, QNetwork
-from warp_critic.methods.replay import NOISE_KINDS, REWARD_KINDS, ExplorationNoise, ReplayBuffer, rewards
+from warp_critic.methods.replay import (
+    NOISE_KINDS,
+    REWARD_KINDS,
+    ExplorationNoise,
+    ReplayBuffer,
+    rewards,
+)
+from warp_critic.physics.simulator import Simulator
+from warp_critic.running.loop import Callback, Session, TrainResult
+from warp_critic.running.task import TaskConfig, spec
 
 ALPHA_GRID = tuple(10.0 ** (k / 2) for k in range(-12, 1))  # 1e-6, 3.2e-6, ..., 0.32, 1
 
@@ -84,46 +92,100 @@ class BaselineConfig(TaskConfig):
     """
 
     method: str = spec("ddpg", "ddpg or meta-critic", choices=METHODS)
-    iterations: int = spec(300, "training iterations (one episode in every world, then the gradient updates)", gt=0, cap=10**8)
+    iterations: int = spec(
+        300,
+        "training iterations (one episode in every world, then the gradient updates)",
+        gt=0,
+        cap=10**8,
+    )
     # -- DDPG ------------------------------------------------------------------------------------
     actor_lr: float = spec(1e-4, "actor learning rate (Adam)", gt=0, cap=1e3)
     critic_lr: float = spec(1e-3, "Q learning rate (Adam)", gt=0, cap=1e3)
     critic_weight_decay: float = spec(0.0, "L2 weight decay on Q (Lillicrap et al.: 1e-2)", ge=0)
-    tau: float = spec(5e-3, "soft target update rate, in (0, 1] (Lillicrap et al.: 1e-3)", gt=0, le=1)
+    tau: float = spec(
+        5e-3, "soft target update rate, in (0, 1] (Lillicrap et al.: 1e-3)", gt=0, le=1
+    )
     gamma: float = spec(0.99, "discount factor, in (0, 1]", gt=0, le=1)
     batch_size: int = spec(64, "minibatch size", gt=0, cap=10**7)
     buffer_size: int = spec(1_000_000, "replay buffer capacity (transitions)", gt=0, cap=10**9)
-    warmup_iterations: int = spec(5, "first iterations explore with uniformly random torques and train only Q (the actor starts once Q has seen varied actions; 0 = Lillicrap et al.)", ge=0)
-    updates_per_iteration: int | None = spec(None, "gradient updates per iteration (default: the horizon)", gt=0, cap=10**7)
-    noise: str = spec("ou", "exploration noise: ou (Ornstein-Uhlenbeck) or gaussian", choices=NOISE_KINDS)
-    noise_std: float = spec(0.2, "noise scale (OU sigma or Gaussian std) as a fraction of max_torque", ge=0, cap=100)
+    warmup_iterations: int = spec(
+        5,
+        "first iterations explore with uniformly random torques and train only Q (the actor starts once Q has seen varied actions; 0 = Lillicrap et al.)",
+        ge=0,
+    )
+    updates_per_iteration: int | None = spec(
+        None, "gradient updates per iteration (default: the horizon)", gt=0, cap=10**7
+    )
+    noise: str = spec(
+        "ou", "exploration noise: ou (Ornstein-Uhlenbeck) or gaussian", choices=NOISE_KINDS
+    )
+    noise_std: float = spec(
+        0.2, "noise scale (OU sigma or Gaussian std) as a fraction of max_torque", ge=0, cap=100
+    )
     ou_theta: float = spec(0.15, "OU mean reversion per control step, in [0, 1]", ge=0, le=1)
-    reward: str = spec("dense", "dense: r_t = -||q_{t+1}-g||^2 every step; sparse: only -||q_T-g||^2 at the end", choices=REWARD_KINDS)
+    reward: str = spec(
+        "dense",
+        "dense: r_t = -||q_{t+1}-g||^2 every step; sparse: only -||q_T-g||^2 at the end",
+        choices=REWARD_KINDS,
+    )
     reward_scale: float = spec(1.0, "multiply the reward by this", gt=0)
     actor_hidden: int = spec(64, "actor hidden units (2 tanh layers)", gt=0, cap=8192)
     critic_hidden: int = spec(400, "Q hidden units (2 ELU layers)", gt=0, cap=8192)
     # -- Meta-Critic -----------------------------------------------------------------------------
-    aux_lr: float = spec(1e-3, "meta-critic only: learning rate of the auxiliary loss h_omega (Adam)", gt=0, cap=1e3)
+    aux_lr: float = spec(
+        1e-3, "meta-critic only: learning rate of the auxiliary loss h_omega (Adam)", gt=0, cap=1e3
+    )
     aux_weight_decay: float = spec(1e-4, "meta-critic only: weight decay of h_omega", ge=0)
-    aux_hidden: int = spec(100, "meta-critic only: h_omega hidden units (2 ReLU layers)", gt=0, cap=8192)
-    aux_weight: float = spec(1.0, "meta-critic only: weight of the auxiliary loss in the actor update", ge=0)
-    virtual_lr: float | None = spec(None, "meta-critic only: SGD step of the virtual actor updates (default: the actor lr)", gt=0, cap=1e3)
+    aux_hidden: int = spec(
+        100, "meta-critic only: h_omega hidden units (2 ReLU layers)", gt=0, cap=8192
+    )
+    aux_weight: float = spec(
+        1.0, "meta-critic only: weight of the auxiliary loss in the actor update", ge=0
+    )
+    virtual_lr: float | None = spec(
+        None,
+        "meta-critic only: SGD step of the virtual actor updates (default: the actor lr)",
+        gt=0,
+        cap=1e3,
+    )
     # -- meta-test defaults stored in the checkpoint ---------------------------------------------
-    alpha: float | None = spec(None, "policy learning rate meta-test uses with -Q (default: grid search on the training goals at every checkpoint)", gt=0, cap=1e6)
-    inner_steps: int | None = spec(None, "meta-test's default number of fresh-policy updates with -Q (default: the scene's, as meta-train's inner steps, else 1)", gt=0, cap=10**4)
+    alpha: float | None = spec(
+        None,
+        "policy learning rate meta-test uses with -Q (default: grid search on the training goals at every checkpoint)",
+        gt=0,
+        cap=1e6,
+    )
+    inner_steps: int | None = spec(
+        None,
+        "meta-test's default number of fresh-policy updates with -Q (default: the scene's, as meta-train's inner steps, else 1)",
+        gt=0,
+        cap=10**4,
+    )
 
     scene_fields = TaskConfig.scene_fields + ("inner_steps",)
 
     def n_updates(self) -> int:
-        return self.updates_per_iteration if self.updates_per_iteration is not None else self.horizon
+        return (
+            self.updates_per_iteration if self.updates_per_iteration is not None else self.horizon
+        )
 
 
 # ------------------------------------------------------------------------------------------------
 # alpha for meta-test
 # ------------------------------------------------------------------------------------------------
 
-def fresh_policy_errors(qnet: QNetwork, norm: Normalizer, sim: Simulator, goal: torch.Tensor, horizon: int,
-                        steps: int, alphas, seed: int, q0: torch.Tensor | None = None) -> list[float]:
+
+def fresh_policy_errors(
+    qnet: QNetwork,
+    norm: Normalizer,
+    sim: Simulator,
+    goal: torch.Tensor,
+    horizon: int,
+    steps: int,
+    alphas,
+    seed: int,
+    q0: torch.Tensor | None = None,
+) -> list[float]:
     """Meta-test's protocol on the training worlds, for every ``alpha``: fresh policies (the same
     initialisation for every alpha), ``steps`` descents of ``sum_t -Q``, mean final ``||q_T - g||^2``."""
     neg_q = NegQ(copy.deepcopy(qnet)).requires_grad_(False)
@@ -131,7 +193,10 @@ def fresh_policy_errors(qnet: QNetwork, norm: Normalizer, sim: Simulator, goal: 
     q0 = sim.zeros() if q0 is None else q0
     qd0 = torch.zeros_like(q0)
     gen = torch.Generator().manual_seed(seed)
-    params = {k: v.requires_grad_(True) for k, v in policy.init(sim.worlds, generator=gen, device=sim.torch_device).items()}
+    params = {
+        k: v.requires_grad_(True)
+        for k, v in policy.init(sim.worlds, generator=gen, device=sim.torch_device).items()
+    }
     errors = []
     if steps == 1:  # one gradient serves every alpha
         traj = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
@@ -142,8 +207,19 @@ def fresh_policy_errors(qnet: QNetwork, norm: Normalizer, sim: Simulator, goal: 
             if steps == 1:
                 new = {k: (v - alpha * g).detach() for (k, v), g in zip(params.items(), grads)}
             else:
-                new, _ = inner_update(neg_q, policy, params, sim, q0, qd0, goal, horizon=horizon, alpha=alpha,
-                                      steps=steps, create_graph=False)
+                new, _ = inner_update(
+                    neg_q,
+                    policy,
+                    params,
+                    sim,
+                    q0,
+                    qd0,
+                    goal,
+                    horizon=horizon,
+                    alpha=alpha,
+                    steps=steps,
+                    create_graph=False,
+                )
             after = rollout(sim, policy_fn(policy, new), q0, qd0, horizon)
             err = float(final_error(after.q[-1], goal).mean())
         except DivergenceError:
@@ -155,6 +231,7 @@ def fresh_policy_errors(qnet: QNetwork, norm: Normalizer, sim: Simulator, goal: 
 # ------------------------------------------------------------------------------------------------
 # the step
 # ------------------------------------------------------------------------------------------------
+
 
 @dataclass
 class BaselineStepResult:
@@ -168,8 +245,15 @@ class BaselineStepResult:
 AgentFactory = Callable[[BaselineConfig, int, Normalizer, Any], Any]
 
 
-def train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks: list[Callback] | None = None,
-                   progress: bool = True, record: bool = True, given: set[str] | None = None) -> TrainResult:
+def train_baseline(
+    cfg: BaselineConfig,
+    make_agent: AgentFactory,
+    *,
+    callbacks: list[Callback] | None = None,
+    progress: bool = True,
+    record: bool = True,
+    given: set[str] | None = None,
+) -> TrainResult:
     """Run (or resume) a baseline; returns the run directory, metrics and agent (``result.model``).
 
     ``make_agent(cfg, dof, norm, device)`` returns an agent with ``actor``, ``q``,
@@ -178,16 +262,30 @@ def train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks: 
     replay buffer and noise process per seed, each drawing from its own seed's generator), and each
     seed writes the run directory a single-seed run would.
     """
-    with Session(cfg, differentiable=False, given=given,
-                 require=("agent_state", "buffer", "selected_alpha")) as session:
+    with Session(
+        cfg, differentiable=False, given=given, require=("agent_state", "buffer", "selected_alpha")
+    ) as session:
         cfg, task = session.cfg, session.task
-        S, sim, norm, goal, dof, dev = task.S, task.sim, task.norm, task.goal, task.scene.dof, task.device
+        S, sim, norm, goal, dof, dev = (
+            task.S,
+            task.sim,
+            task.norm,
+            task.goal,
+            task.scene.dof,
+            task.device,
+        )
         gens, agents, buffers, noises = [], [], [], []
         for i in range(S):  # each seed's draws in the order of a single-seed run
             gens.append(session.seed(i))
             agents.append(make_agent(cfg, dof, norm, dev))
-            buffers.append(ReplayBuffer(min(cfg.buffer_size, cfg.iterations * task.Wc * cfg.horizon), dof, dev))
-            noises.append(ExplorationNoise(cfg.noise, cfg.noise_std, cfg.ou_theta, (task.Wc, dof), gens[-1], dev))
+            buffers.append(
+                ReplayBuffer(min(cfg.buffer_size, cfg.iterations * task.Wc * cfg.horizon), dof, dev)
+            )
+            noises.append(
+                ExplorationNoise(
+                    cfg.noise, cfg.noise_std, cfg.ou_theta, (task.Wc, dof), gens[-1], dev
+                )
+            )
             session.seeded(i)
         alphas = [cfg.alpha] * S
         for i in range(S):
@@ -200,14 +298,34 @@ def train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks: 
         q0, qd0 = task.home, torch.zeros_like(task.home)
         n_updates = cfg.n_updates()
         # the alpha search runs one seed's worlds at a time (as in a single-seed run)
-        eval_sim = sim if S == 1 else Simulator(task.scene, sim.variants[:task.Wc], dt=cfg.dt, substeps=cfg.substeps,
-                                                device=cfg.device, differentiable=False, gravity=cfg.gravity)
+        eval_sim = (
+            sim
+            if S == 1
+            else Simulator(
+                task.scene,
+                sim.variants[: task.Wc],
+                dt=cfg.dt,
+                substeps=cfg.substeps,
+                device=cfg.device,
+                differentiable=False,
+                gravity=cfg.gravity,
+            )
+        )
 
         def select_alpha(i: int) -> tuple[float, float, dict]:
             grid = [cfg.alpha] if cfg.alpha is not None else list(ALPHA_GRID)
             sl = task.copy(i)
-            errs = fresh_policy_errors(agents[i].q, norm, eval_sim, goal[sl], cfg.horizon, cfg.inner_steps, grid,
-                                       session.runs[i].cfg.seed + 1, q0=task.home[sl])
+            errs = fresh_policy_errors(
+                agents[i].q,
+                norm,
+                eval_sim,
+                goal[sl],
+                cfg.horizon,
+                cfg.inner_steps,
+                grid,
+                session.runs[i].cfg.seed + 1,
+                q0=task.home[sl],
+            )
             best = min(range(len(grid)), key=lambda k: errs[k])
             return grid[best], errs[best], {f"{a:.3g}": e for a, e in zip(grid, errs)}
 
@@ -215,8 +333,9 @@ def train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks: 
             """A rollout policy over all worlds from one function per seed ``fn(i, q, qd, goal)``."""
             if S == 1:
                 return lambda q, qd: fn(0, q, qd, goal)
-            return lambda q, qd: torch.cat([fn(i, q[task.copy(i)], qd[task.copy(i)], goal[task.copy(i)])
-                                            for i in range(S)])
+            return lambda q, qd: torch.cat(
+                [fn(i, q[task.copy(i)], qd[task.copy(i)], goal[task.copy(i)]) for i in range(S)]
+            )
 
         def step(it: int):
             nonlocal q0
@@ -240,45 +359,79 @@ def train_baseline(cfg: BaselineConfig, make_agent: AgentFactory, *, callbacks: 
             rows = []
             for i in range(S):
                 sl = task.copy(i)
-                part = Trajectory(explore_traj.q[:, sl], explore_traj.qd[:, sl], explore_traj.tau[:, sl])
+                part = Trajectory(
+                    explore_traj.q[:, sl], explore_traj.qd[:, sl], explore_traj.tau[:, sl]
+                )
                 buffers[i].add_trajectory(part, goal[sl], r[:, sl], done[:, sl])
                 # 2. gradient updates from the replay buffer
                 stats: dict[str, float] = {}
                 if buffers[i].size >= cfg.batch_size:
                     for _ in range(n_updates):
-                        for k, v in agents[i].update(buffers[i], gens[i], train_actor=not warmup).items():
+                        for k, v in (
+                            agents[i].update(buffers[i], gens[i], train_actor=not warmup).items()
+                        ):
                             stats[k] = stats.get(k, 0.0) + v / n_updates
                 if not all(math.isfinite(v) for v in stats.values()):
-                    raise DivergenceError("non-finite loss: " + ", ".join(f"{k} {v}" for k, v in stats.items()))
+                    raise DivergenceError(
+                        "non-finite loss: " + ", ".join(f"{k} {v}" for k, v in stats.items())
+                    )
                 rows.append(stats)
             # 3. noise-free evaluation of the actors
             with torch.no_grad():
-                eval_traj = rollout(sim, per_seed(lambda i, q, qd, g: agents[i].actor(q, qd, g)), q0, qd0, cfg.horizon)
+                eval_traj = rollout(
+                    sim,
+                    per_seed(lambda i, q, qd, g: agents[i].actor(q, qd, g)),
+                    q0,
+                    qd0,
+                    cfg.horizon,
+                )
             per_world = final_error(eval_traj.q[-1], goal)
             explore_err = final_error(explore_traj.q[-1], goal)
             for i, stats in enumerate(rows):
                 sl = task.copy(i)
-                row = {"task_loss": per_world[sl].mean().item(), "task_loss_per_goal": task.per_goal(per_world[sl]).tolist(),
-                       "task_loss_explore": explore_err[sl].mean().item(), "return_explore": r[:, sl].sum(0).mean().item(),
-                       "buffer_size": buffers[i].size, **stats}
+                row = {
+                    "task_loss": per_world[sl].mean().item(),
+                    "task_loss_per_goal": task.per_goal(per_world[sl]).tolist(),
+                    "task_loss_explore": explore_err[sl].mean().item(),
+                    "return_explore": r[:, sl].sum(0).mean().item(),
+                    "buffer_size": buffers[i].size,
+                    **stats,
+                }
                 if (it + 1) % cfg.checkpoint_every == 0 or it + 1 == cfg.iterations:
                     alphas[i], fresh_loss, search = select_alpha(i)
-                    row.update({"alpha": alphas[i], "fresh_policy_loss": fresh_loss, "alpha_search": search})
+                    row.update(
+                        {
+                            "alpha": alphas[i],
+                            "fresh_policy_loss": fresh_loss,
+                            "alpha_search": search,
+                        }
+                    )
                 rows[i] = row
             return rows, BaselineStepResult(explore_traj, eval_traj)
 
         def state(i: int) -> dict:
             a = agents[i]
-            return {"critic_hidden": cfg.critic_hidden, "actor_hidden": cfg.actor_hidden,
-                    "q_state": a.q.state_dict(), "actor_state": a.actor.state_dict(),
-                    "agent_state": a.state_dict(), "buffer": buffers[i].state_dict(), "selected_alpha": alphas[i]}
+            return {
+                "critic_hidden": cfg.critic_hidden,
+                "actor_hidden": cfg.actor_hidden,
+                "q_state": a.q.state_dict(),
+                "actor_state": a.actor.state_dict(),
+                "agent_state": a.state_dict(),
+                "buffer": buffers[i].state_dict(),
+                "selected_alpha": alphas[i],
+            }
 
         def describe(row: dict) -> str:
-            extra = f" | fresh policies {row['fresh_policy_loss']:.4f} (alpha {row['alpha']:.2g})" \
-                if "fresh_policy_loss" in row else ""
+            extra = (
+                f" | fresh policies {row['fresh_policy_loss']:.4f} (alpha {row['alpha']:.2g})"
+                if "fresh_policy_loss" in row
+                else ""
+            )
             return f"task {row['task_loss']:.4f} (explore {row['task_loss_explore']:.3f}){extra}"
 
-        result = session.run(step, state, callbacks=callbacks, progress=progress, record=record, describe=describe)
+        result = session.run(
+            step, state, callbacks=callbacks, progress=progress, record=record, describe=describe
+        )
     for i, res in enumerate(result.seeds):
         res.model = agents[i]
     return result

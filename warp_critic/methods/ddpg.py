@@ -21,10 +21,10 @@ import torch
 
 from warp_critic.learning.losses import td_loss
 from warp_critic.learning.networks import Normalizer
-from warp_critic.running.loop import TrainResult
 from warp_critic.methods.baseline import BaselineConfig, train_baseline
 from warp_critic.methods.q_networks import Actor, QNetwork, soft_update
 from warp_critic.methods.replay import ReplayBuffer
+from warp_critic.running.loop import TrainResult
 
 
 class DDPGAgent:
@@ -37,7 +37,9 @@ class DDPGAgent:
         self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
         self.q_target = copy.deepcopy(self.q).requires_grad_(False)
         self.actor_opt = torch.optim.Adam(self.actor.parameters(), lr=cfg.actor_lr)
-        self.q_opt = torch.optim.Adam(self.q.parameters(), lr=cfg.critic_lr, weight_decay=cfg.critic_weight_decay)
+        self.q_opt = torch.optim.Adam(
+            self.q.parameters(), lr=cfg.critic_lr, weight_decay=cfg.critic_weight_decay
+        )
 
     # -- one update -------------------------------------------------------------------------------
     def critic_step(self, b: dict[str, torch.Tensor]) -> dict[str, float]:
@@ -52,7 +54,9 @@ class DDPGAgent:
         self.q_opt.step()
         return {"critic_loss": loss.item(), "q_mean": q.mean().item()}
 
-    def actor_step(self, b: dict[str, torch.Tensor], buffer: ReplayBuffer, gen: torch.Generator) -> dict[str, float]:
+    def actor_step(
+        self, b: dict[str, torch.Tensor], buffer: ReplayBuffer, gen: torch.Generator
+    ) -> dict[str, float]:
         a = self.actor(b["q"], b["qd"], b["goal"])
         loss = -self.q(b["q"], b["qd"], a, b["goal"]).mean()
         self.actor_opt.zero_grad(set_to_none=True)
@@ -60,7 +64,9 @@ class DDPGAgent:
         self.actor_opt.step()
         return {"actor_loss": loss.item()}
 
-    def update(self, buffer: ReplayBuffer, gen: torch.Generator, train_actor: bool = True) -> dict[str, float]:
+    def update(
+        self, buffer: ReplayBuffer, gen: torch.Generator, train_actor: bool = True
+    ) -> dict[str, float]:
         """One minibatch update of Q (and, unless warming up, of the actor), then the targets."""
         b = buffer.sample(self.cfg.batch_size, gen)
         stats = self.critic_step(b)
@@ -72,9 +78,14 @@ class DDPGAgent:
 
     # -- checkpoints ------------------------------------------------------------------------------
     def state_dict(self) -> dict:
-        return {"actor": self.actor.state_dict(), "q": self.q.state_dict(),
-                "actor_target": self.actor_target.state_dict(), "q_target": self.q_target.state_dict(),
-                "actor_opt": self.actor_opt.state_dict(), "q_opt": self.q_opt.state_dict()}
+        return {
+            "actor": self.actor.state_dict(),
+            "q": self.q.state_dict(),
+            "actor_target": self.actor_target.state_dict(),
+            "q_target": self.q_target.state_dict(),
+            "actor_opt": self.actor_opt.state_dict(),
+            "q_opt": self.q_opt.state_dict(),
+        }
 
     def load_state_dict(self, state: dict) -> None:
         self.actor.load_state_dict(state["actor"])

@@ -37,11 +37,11 @@ from torch import nn
 from torch.func import functional_call
 
 from warp_critic.learning.networks import Normalizer
-from warp_critic.running.loop import TrainResult
 from warp_critic.methods.baseline import BaselineConfig, train_baseline
+from warp_critic.methods.ddpg import DDPGAgent
 from warp_critic.methods.q_networks import _GoalInput
 from warp_critic.methods.replay import ReplayBuffer
-from warp_critic.methods.ddpg import DDPGAgent
+from warp_critic.running.loop import TrainResult
 
 
 class AuxiliaryLoss(_GoalInput):
@@ -50,10 +50,18 @@ class AuxiliaryLoss(_GoalInput):
     def __init__(self, dof: int, norm: Normalizer, hidden: int = 100):
         super().__init__()
         self._init_norm(norm)
-        self.net = nn.Sequential(nn.Linear(3 * dof, hidden), nn.ReLU(), nn.Linear(hidden, hidden), nn.ReLU(),
-                                 nn.Linear(hidden, 1), nn.Softplus())
+        self.net = nn.Sequential(
+            nn.Linear(3 * dof, hidden),
+            nn.ReLU(),
+            nn.Linear(hidden, hidden),
+            nn.ReLU(),
+            nn.Linear(hidden, 1),
+            nn.Softplus(),
+        )
 
-    def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor
+    ) -> torch.Tensor:
         x = torch.cat([self.obs(q, qd, goal), tau / self.max_torque], dim=-1)
         return self.net(x).squeeze(-1)
 
@@ -64,14 +72,18 @@ class MetaCriticAgent(DDPGAgent):
     def __init__(self, cfg: BaselineConfig, dof: int, norm: Normalizer, device):
         super().__init__(cfg, dof, norm, device)
         self.aux = AuxiliaryLoss(dof, norm, cfg.aux_hidden).to(device)
-        self.aux_opt = torch.optim.Adam(self.aux.parameters(), lr=cfg.aux_lr, weight_decay=cfg.aux_weight_decay)
+        self.aux_opt = torch.optim.Adam(
+            self.aux.parameters(), lr=cfg.aux_lr, weight_decay=cfg.aux_weight_decay
+        )
         self.eta = cfg.virtual_lr if cfg.virtual_lr is not None else cfg.actor_lr
 
     def _main_loss(self, params: dict, b: dict[str, torch.Tensor]) -> torch.Tensor:
         a = functional_call(self.actor, params, (b["q"], b["qd"], b["goal"]))
         return -self.q(b["q"], b["qd"], a, b["goal"]).mean()
 
-    def actor_step(self, b: dict[str, torch.Tensor], buffer: ReplayBuffer, gen: torch.Generator) -> dict[str, float]:
+    def actor_step(
+        self, b: dict[str, torch.Tensor], buffer: ReplayBuffer, gen: torch.Generator
+    ) -> dict[str, float]:
         val = buffer.sample(self.cfg.batch_size, gen)  # separate validation batch
         names = [n for n, _ in self.actor.named_parameters()]
         phi = dict(self.actor.named_parameters())
@@ -81,10 +93,15 @@ class MetaCriticAgent(DDPGAgent):
         main = -self.q(b["q"], b["qd"], a, b["goal"]).mean()
         aux = self.aux(b["q"], b["qd"], a, b["goal"]).mean()
         g_main = torch.autograd.grad(main, list(phi.values()), retain_graph=True)
-        g_aux = torch.autograd.grad(aux, list(phi.values()), create_graph=True)  # a function of omega
+        g_aux = torch.autograd.grad(
+            aux, list(phi.values()), create_graph=True
+        )  # a function of omega
         # virtual steps, evaluated on the validation batch with the main Q
         phi_old = {n: (p - self.eta * gm).detach() for (n, p), gm in zip(phi.items(), g_main)}
-        phi_new = {n: p.detach() - self.eta * (gm + w * ga) for (n, p), gm, ga in zip(phi.items(), g_main, g_aux)}
+        phi_new = {
+            n: p.detach() - self.eta * (gm + w * ga)
+            for (n, p), gm, ga in zip(phi.items(), g_main, g_aux)
+        }
         with torch.no_grad():
             val_old = self._main_loss(phi_old, val)
         val_new = self._main_loss(phi_new, val)
@@ -100,8 +117,12 @@ class MetaCriticAgent(DDPGAgent):
         for p, g in zip(self.aux.parameters(), g_omega):
             p.grad = None if g is None else g.detach()
         self.aux_opt.step()
-        return {"actor_loss": main.item(), "aux_loss": aux.item(), "meta_loss": meta.item(),
-                "meta_improvement": (val_old - val_new).item()}
+        return {
+            "actor_loss": main.item(),
+            "aux_loss": aux.item(),
+            "meta_loss": meta.item(),
+            "meta_improvement": (val_old - val_new).item(),
+        }
 
     def state_dict(self) -> dict:
         state = super().state_dict()

@@ -9,15 +9,22 @@ recording, checkpoints) is the shared harness :class:`warp_critic.running.loop.S
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from dataclasses import dataclass
+from pathlib import Path
 
 import torch
 
 from warp_critic.core.errors import DivergenceError, FieldError
-from warp_critic.running.loop import Callback, Session, TrainResult
-from warp_critic.learning.networks import CRITIC_INPUTS, POLICY_INIT_SCHEMES, Critic, MLPPolicy, StackedCritic, detach_params
+from warp_critic.learning.networks import (
+    CRITIC_INPUTS,
+    POLICY_INIT_SCHEMES,
+    Critic,
+    MLPPolicy,
+    StackedCritic,
+    detach_params,
+)
 from warp_critic.learning.outer import meta_loss
+from warp_critic.running.loop import Callback, Session, TrainResult
 from warp_critic.running.task import TaskConfig, spec
 
 
@@ -25,21 +32,60 @@ from warp_critic.running.task import TaskConfig, spec
 class TrainConfig(TaskConfig):
     """Model-based meta-training of the critic (Algorithm 2). ``None`` = the scene's default."""
 
-    iterations: int | None = spec(None, "outer iterations (critic updates); default: the scene's (the reported runs), else 300", gt=0, cap=10**8)
-    alpha: float | None = spec(None, "inner learning rate (policy update with the critic)", gt=0, cap=1e6)
+    iterations: int | None = spec(
+        None,
+        "outer iterations (critic updates); default: the scene's (the reported runs), else 300",
+        gt=0,
+        cap=10**8,
+    )
+    alpha: float | None = spec(
+        None, "inner learning rate (policy update with the critic)", gt=0, cap=1e6
+    )
     lr: float | None = spec(None, "outer learning rate (Adam on the critic)", gt=0, cap=1e3)
-    lr_schedule: str = spec("cosine", "outer learning-rate schedule: constant, or cosine decay to 10%% over the iterations", choices=("constant", "cosine"))
-    inner_steps: int | None = spec(None, "inner critic-gradient steps per outer iteration; default: the scene's, else 1 (the paper's Algorithm 2)", gt=0, cap=10**4)
-    policy_init: str = spec("fresh", "fresh: new random policies every iteration (paper); fixed: the same initial policies every iteration; persistent: continue from the updated policies", choices=POLICY_INIT_SCHEMES)
-    policy_lifetime: int = spec(1, "with policy-init fresh: outer iterations a policy lives before a fresh random one replaces it; 1 = new policies every iteration (paper). N > 1 staggers the worlds so policies of every age 0..N-1 are trained on at once: the critic learns to keep improving a policy, and meta-test takes N x inner-steps steps", gt=0, cap=10**6)
-    critic_input: str | None = spec(None, "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant); default: the scene's, else full", choices=CRITIC_INPUTS)
+    lr_schedule: str = spec(
+        "cosine",
+        "outer learning-rate schedule: constant, or cosine decay to 10%% over the iterations",
+        choices=("constant", "cosine"),
+    )
+    inner_steps: int | None = spec(
+        None,
+        "inner critic-gradient steps per outer iteration; default: the scene's, else 1 (the paper's Algorithm 2)",
+        gt=0,
+        cap=10**4,
+    )
+    policy_init: str = spec(
+        "fresh",
+        "fresh: new random policies every iteration (paper); fixed: the same initial policies every iteration; persistent: continue from the updated policies",
+        choices=POLICY_INIT_SCHEMES,
+    )
+    policy_lifetime: int = spec(
+        1,
+        "with policy-init fresh: outer iterations a policy lives before a fresh random one replaces it; 1 = new policies every iteration (paper). N > 1 staggers the worlds so policies of every age 0..N-1 are trained on at once: the critic learns to keep improving a policy, and meta-test takes N x inner-steps steps",
+        gt=0,
+        cap=10**6,
+    )
+    critic_input: str | None = spec(
+        None,
+        "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant); default: the scene's, else full",
+        choices=CRITIC_INPUTS,
+    )
     critic_hidden: int = spec(400, "critic hidden units (2 ELU layers)", gt=0, cap=8192)
-    running_weight: float = spec(0.0, "weight of the running term mean_t ||q_t-g||^2 added to the task loss", ge=0)
-    velocity_weight: float = spec(0.0, "weight (s^2) of the final-velocity term ||qd_T||^2 added to the task loss", ge=0)
+    running_weight: float = spec(
+        0.0, "weight of the running term mean_t ||q_t-g||^2 added to the task loss", ge=0
+    )
+    velocity_weight: float = spec(
+        0.0, "weight (s^2) of the final-velocity term ||qd_T||^2 added to the task loss", ge=0
+    )
     clip_grad: float = spec(10.0, "clip the critic's gradient norm (0 = off)", ge=0)
 
     method = "ours"
-    scene_fields = TaskConfig.scene_fields + ("alpha", "lr", "iterations", "inner_steps", "critic_input")
+    scene_fields = TaskConfig.scene_fields + (
+        "alpha",
+        "lr",
+        "iterations",
+        "inner_steps",
+        "critic_input",
+    )
 
     def default_out(self) -> str:
         return f"runs/{Path(self.scene).stem}-meta"
@@ -47,17 +93,27 @@ class TrainConfig(TaskConfig):
     def check(self, scene=None) -> None:
         super().check(scene)
         if self.policy_lifetime > 1 and self.policy_init != "fresh":
-            raise FieldError("policy_lifetime", f"{self.policy_lifetime} needs policy_init fresh (got {self.policy_init})")
+            raise FieldError(
+                "policy_lifetime",
+                f"{self.policy_lifetime} needs policy_init fresh (got {self.policy_init})",
+            )
 
     def lr_at(self, it: int) -> float:
         """Cosine decay to 10% of ``lr`` at the last iteration, or constant."""
         if self.lr_schedule == "cosine":
-            return self.lr * (0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * it / max(self.iterations - 1, 1))))
+            return self.lr * (
+                0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * it / max(self.iterations - 1, 1)))
+            )
         return self.lr
 
 
-def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progress: bool = True,
-               record: bool = True, given: set[str] | None = None) -> TrainResult:
+def meta_train(
+    cfg: TrainConfig,
+    callbacks: list[Callback] | None = None,
+    progress: bool = True,
+    record: bool = True,
+    given: set[str] | None = None,
+) -> TrainResult:
     """Run (or resume) meta-training; returns the run directory, metrics and critic.
 
     With ``cfg.seeds`` the seeds train at once: their worlds share one simulator, their critics are
@@ -67,15 +123,23 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
     :class:`~warp_critic.running.loop.IterationInfo` (of the first seed) after every iteration; ``given``
     names the fields the user set (for the resume rule; see :class:`~warp_critic.running.loop.Session`).
     """
-    with Session(cfg, differentiable=True, given=given,
-                 require=("critic_state", "optimizer_state", "policy_params")) as session:
+    with Session(
+        cfg,
+        differentiable=True,
+        given=given,
+        require=("critic_state", "optimizer_state", "policy_params"),
+    ) as session:
         cfg, task = session.cfg, session.task
         S, dev = task.S, task.device
         policy = MLPPolicy(task.norm)
         gens, critics, params = [], [], []
         for i in range(S):  # each seed's draws in the order of a single-seed run
             gens.append(session.seed(i))
-            critics.append(Critic(task.scene.dof, task.norm, hidden=cfg.critic_hidden, inputs=cfg.critic_input).to(dev))
+            critics.append(
+                Critic(
+                    task.scene.dof, task.norm, hidden=cfg.critic_hidden, inputs=cfg.critic_input
+                ).to(dev)
+            )
             params.append(policy.init(task.Wc, generator=gens[-1], device=dev))
             session.seeded(i)
         critic = StackedCritic(critics)
@@ -86,7 +150,10 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
                 with session.loading(i):
                     critic.load_critic_state(i, ckpt["critic_state"])
                     load_optimizer_slice(opt, critic, i, ckpt["optimizer_state"])
-                    params[i] = {k: ckpt["policy_params"][k].to(dev).reshape(v.shape) for k, v in params[i].items()}
+                    params[i] = {
+                        k: ckpt["policy_params"][k].to(dev).reshape(v.shape)
+                        for k, v in params[i].items()
+                    }
         params = _cat(params)
         q0, qd0 = task.home, torch.zeros_like(task.home)
 
@@ -98,47 +165,81 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
                     params = fresh
                 else:  # ... or, staggered, in the worlds whose policy has reached its lifetime
                     reset = (it + task.slot) % cfg.policy_lifetime == 0  # (W,)
-                    params = {k: torch.where(reset.view(-1, *[1] * (v.dim() - 1)), fresh[k], v)
-                              for k, v in params.items()}
+                    params = {
+                        k: torch.where(reset.view(-1, *[1] * (v.dim() - 1)), fresh[k], v)
+                        for k, v in params.items()
+                    }
             if cfg.start_std:
                 q0 = torch.cat([task.start_states(g, i) for i, g in enumerate(gens)])
-            res = meta_loss(critic, policy, detach_params(params), task.sim, q0, qd0, task.goal,
-                            horizon=cfg.horizon, alpha=cfg.alpha, inner_steps=cfg.inner_steps,
-                            running_weight=cfg.running_weight, velocity_weight=cfg.velocity_weight)
+            res = meta_loss(
+                critic,
+                policy,
+                detach_params(params),
+                task.sim,
+                q0,
+                qd0,
+                task.goal,
+                horizon=cfg.horizon,
+                alpha=cfg.alpha,
+                inner_steps=cfg.inner_steps,
+                running_weight=cfg.running_weight,
+                velocity_weight=cfg.velocity_weight,
+            )
             loss = res.losses.view(S, -1).mean(1)  # (S,) each seed's task loss
             opt.zero_grad(set_to_none=True)
             loss.sum().backward()  # seeds share no parameter: each gets its own gradient
             norms = [slice_norm(critic, i) for i in range(S)]
-            bad = [cfg.seeds[i] if cfg.seeds else cfg.seed for i in range(S)
-                   if not (math.isfinite(loss[i].item()) and math.isfinite(norms[i]))]
+            bad = [
+                cfg.seeds[i] if cfg.seeds else cfg.seed
+                for i in range(S)
+                if not (math.isfinite(loss[i].item()) and math.isfinite(norms[i]))
+            ]
             if bad:
-                raise DivergenceError(f"non-finite task loss or critic gradient (seed {', '.join(map(str, bad))})")
+                raise DivergenceError(
+                    f"non-finite task loss or critic gradient (seed {', '.join(map(str, bad))})"
+                )
             if cfg.clip_grad:
                 for i in range(S):
                     clip_slice_(critic, i, cfg.clip_grad)
             for group in opt.param_groups:
                 group["lr"] = cfg.lr_at(it)
             opt.step()
-            if cfg.policy_init == "persistent" or cfg.policy_lifetime > 1:  # lifetime > 1 implies fresh
+            if (
+                cfg.policy_init == "persistent" or cfg.policy_lifetime > 1
+            ):  # lifetime > 1 implies fresh
                 params = res.params_new
             before = ((res.before.q[-1] - task.goal) ** 2).sum(-1)
             rows = []
             for i in range(S):
                 sl = task.copy(i)
-                rows.append({"task_loss": res.per_world[sl].mean().item(),
-                             "task_loss_before": before[sl].mean().item(),
-                             "task_loss_per_goal": task.per_goal(res.per_world[sl]).tolist(),
-                             "grad_norm": norms[i]})
+                rows.append(
+                    {
+                        "task_loss": res.per_world[sl].mean().item(),
+                        "task_loss_before": before[sl].mean().item(),
+                        "task_loss_per_goal": task.per_goal(res.per_world[sl]).tolist(),
+                        "grad_norm": norms[i],
+                    }
+                )
             return rows, res
 
         def state(i: int) -> dict:
             sl = task.copy(i)
-            return {"critic_state": critic.critic_state(i), "critic_hidden": cfg.critic_hidden,
-                    "critic_input": cfg.critic_input, "optimizer_state": optimizer_slice(opt, critic, i),
-                    "policy_params": {k: v[sl].cpu() for k, v in params.items()}}
+            return {
+                "critic_state": critic.critic_state(i),
+                "critic_hidden": cfg.critic_hidden,
+                "critic_input": cfg.critic_input,
+                "optimizer_state": optimizer_slice(opt, critic, i),
+                "policy_params": {k: v[sl].cpu() for k, v in params.items()},
+            }
 
-        result = session.run(step, state, callbacks=callbacks, progress=progress, record=record,
-                             describe=lambda r: f"task {r['task_loss']:.4f} (before {r['task_loss_before']:.3f})")
+        result = session.run(
+            step,
+            state,
+            callbacks=callbacks,
+            progress=progress,
+            record=record,
+            describe=lambda r: f"task {r['task_loss']:.4f} (before {r['task_loss_before']:.3f})",
+        )
     for i, r in enumerate(result.seeds):
         r.model = critic.critic(i)
     return result
@@ -148,8 +249,13 @@ def meta_train(cfg: TrainConfig, callbacks: list[Callback] | None = None, progre
 # one seed's slice of the stacked critic: gradient norm, clipping, optimiser state
 # ------------------------------------------------------------------------------------------------
 
+
 def _cat(per_seed: list[dict]) -> dict:
-    return {k: torch.cat([p[k] for p in per_seed]) for k in per_seed[0]} if len(per_seed) > 1 else per_seed[0]
+    return (
+        {k: torch.cat([p[k] for p in per_seed]) for k in per_seed[0]}
+        if len(per_seed) > 1
+        else per_seed[0]
+    )
 
 
 def slice_norm(critic: StackedCritic, i: int) -> float:
@@ -173,12 +279,19 @@ def clip_slice_(critic: StackedCritic, i: int, max_norm: float) -> None:
 def optimizer_slice(opt: torch.optim.Optimizer, critic: StackedCritic, i: int) -> dict:
     """Critic ``i``'s Adam state as the state dict of an Adam over one :class:`Critic`."""
     full = opt.state_dict()
-    state = {k: {name: (v[i].clone() if torch.is_tensor(v) and v.dim() > 0 else v) for name, v in st.items()}
-             for k, st in full["state"].items()}
+    state = {
+        k: {
+            name: (v[i].clone() if torch.is_tensor(v) and v.dim() > 0 else v)
+            for name, v in st.items()
+        }
+        for k, st in full["state"].items()
+    }
     return {"state": state, "param_groups": full["param_groups"]}
 
 
-def load_optimizer_slice(opt: torch.optim.Optimizer, critic: StackedCritic, i: int, single: dict) -> None:
+def load_optimizer_slice(
+    opt: torch.optim.Optimizer, critic: StackedCritic, i: int, single: dict
+) -> None:
     """Inverse of :func:`optimizer_slice`: put one critic's Adam state into slice ``i``."""
     params = critic.ordered()
     for k, st in single["state"].items():

@@ -42,8 +42,13 @@ class Actor(_GoalInput):
         super().__init__()
         self._init_norm(norm)
         self.dof = dof
-        self.net = nn.Sequential(nn.Linear(2 * dof, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(),
-                                 nn.Linear(hidden, dof))
+        self.net = nn.Sequential(
+            nn.Linear(2 * dof, hidden),
+            nn.Tanh(),
+            nn.Linear(hidden, hidden),
+            nn.Tanh(),
+            nn.Linear(hidden, dof),
+        )
         _small_last_layer(self.net[-1])
 
     def forward(self, q: torch.Tensor, qd: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
@@ -57,11 +62,18 @@ class QNetwork(_GoalInput):
         super().__init__()
         self._init_norm(norm)
         self.dof = dof
-        self.net = nn.Sequential(nn.Linear(3 * dof, hidden), nn.ELU(), nn.Linear(hidden, hidden), nn.ELU(),
-                                 nn.Linear(hidden, 1))
+        self.net = nn.Sequential(
+            nn.Linear(3 * dof, hidden),
+            nn.ELU(),
+            nn.Linear(hidden, hidden),
+            nn.ELU(),
+            nn.Linear(hidden, 1),
+        )
         _small_last_layer(self.net[-1])
 
-    def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor
+    ) -> torch.Tensor:
         """All ``(..., dof)`` -> ``(...)``."""
         x = torch.cat([self.obs(q, qd, goal), tau / self.max_torque], dim=-1)
         return self.net(x).squeeze(-1)
@@ -74,7 +86,9 @@ class NegQ(nn.Module):
         super().__init__()
         self.q = q
 
-    def forward(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor
+    ) -> torch.Tensor:
         return -self.q(q, qd, tau, goal)
 
 
@@ -93,7 +107,9 @@ def test_critic_from_checkpoint(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.
         qnet = QNetwork(int(ckpt["dof"]), norm, hidden=int(ckpt.get("critic_hidden", 400)))
         qnet.load_state_dict(ckpt["q_state"])
     except (KeyError, RuntimeError) as e:
-        raise UserError(f"{method} checkpoint has no usable Q network ({type(e).__name__}: {str(e).splitlines()[0]})") from None
+        raise UserError(
+            f"{method} checkpoint has no usable Q network ({type(e).__name__}: {str(e).splitlines()[0]})"
+        ) from None
     cfg = ckpt.get("config", {})
     alpha = cfg.get("alpha") if cfg.get("alpha") is not None else ckpt.get("selected_alpha")
     return NegQ(qnet.eval()), {"alpha": alpha, "steps": int(cfg.get("inner_steps", 1))}

@@ -17,7 +17,16 @@ class ReplayBuffer:
 
     def __init__(self, capacity: int, dof: int, device):
         self.capacity, self.dof, self.device = int(capacity), dof, device
-        widths = {"q": dof, "qd": dof, "tau": dof, "goal": dof, "reward": 1, "q2": dof, "qd2": dof, "done": 1}
+        widths = {
+            "q": dof,
+            "qd": dof,
+            "tau": dof,
+            "goal": dof,
+            "reward": 1,
+            "q2": dof,
+            "qd2": dof,
+            "done": 1,
+        }
         self.slices, start = {}, 0
         for name in _FIELDS:
             self.slices[name] = slice(start, start + widths[name])
@@ -26,25 +35,38 @@ class ReplayBuffer:
         self.ptr = 0
         self.size = 0
 
-    def add_trajectory(self, traj: Trajectory, goal: torch.Tensor, reward: torch.Tensor, done: torch.Tensor) -> None:
+    def add_trajectory(
+        self, traj: Trajectory, goal: torch.Tensor, reward: torch.Tensor, done: torch.Tensor
+    ) -> None:
         """All ``T * W`` transitions of a rollout; ``reward, done``: ``(T, W)``."""
         T, W, _ = traj.tau.shape
         g = goal.unsqueeze(0).expand(T, W, -1)
-        rows = torch.cat([traj.q[:-1], traj.qd[:-1], traj.tau, g, reward.unsqueeze(-1),
-                          traj.q[1:], traj.qd[1:], done.unsqueeze(-1)], dim=-1).reshape(T * W, -1)
+        rows = torch.cat(
+            [
+                traj.q[:-1],
+                traj.qd[:-1],
+                traj.tau,
+                g,
+                reward.unsqueeze(-1),
+                traj.q[1:],
+                traj.qd[1:],
+                done.unsqueeze(-1),
+            ],
+            dim=-1,
+        ).reshape(T * W, -1)
         self._add_rows(rows.detach().to(self.device))
 
     def _add_rows(self, rows: torch.Tensor) -> None:
         n = rows.shape[0]
         if n >= self.capacity:
-            rows, n = rows[-self.capacity:], self.capacity
+            rows, n = rows[-self.capacity :], self.capacity
         end = self.ptr + n
         if end <= self.capacity:
-            self.data[self.ptr:end] = rows
+            self.data[self.ptr : end] = rows
         else:
             k = self.capacity - self.ptr
-            self.data[self.ptr:] = rows[:k]
-            self.data[:n - k] = rows[k:]
+            self.data[self.ptr :] = rows[:k]
+            self.data[: n - k] = rows[k:]
         self.ptr = end % self.capacity
         self.size = min(self.size + n, self.capacity)
 
@@ -58,9 +80,9 @@ class ReplayBuffer:
     def state_dict(self) -> dict:
         """The stored transitions oldest first (so a resume may change the capacity)."""
         if self.size < self.capacity:
-            rows = self.data[:self.size]
+            rows = self.data[: self.size]
         else:
-            rows = torch.cat([self.data[self.ptr:], self.data[:self.ptr]])
+            rows = torch.cat([self.data[self.ptr :], self.data[: self.ptr]])
         return {"rows": rows.cpu().clone()}
 
     def load_state_dict(self, state: dict) -> None:
@@ -89,7 +111,9 @@ class ExplorationNoise:
         return self.x.to(self.device)
 
 
-def rewards(traj: Trajectory, goal: torch.Tensor, kind: str, scale: float) -> tuple[torch.Tensor, torch.Tensor]:
+def rewards(
+    traj: Trajectory, goal: torch.Tensor, kind: str, scale: float
+) -> tuple[torch.Tensor, torch.Tensor]:
     """``(reward, done)``, both ``(T, W)``; see the module docstring."""
     err = ((traj.q[1:] - goal.unsqueeze(0)) ** 2).sum(-1)  # (T, W): ||q_{t+1} - g||^2
     done = torch.zeros_like(err)

@@ -46,9 +46,8 @@ returning wrong gradients.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import contextlib
+from dataclasses import dataclass
 
 import newton
 import torch
@@ -56,8 +55,12 @@ import warp as wp
 
 _SCRATCH = ("M", "J", "P", "H", "L")
 # With use_tile_gemm the solver reads batched views of J, M, H, L grouped by articulation size.
-_TILE_VIEWS = {"_J_by_size": ("J", "articulation_J_start"), "_M_by_size": ("M", "articulation_M_start"),
-               "_H_by_size": ("H", "articulation_H_start"), "_L_by_size": ("L", "articulation_H_start")}
+_TILE_VIEWS = {
+    "_J_by_size": ("J", "articulation_J_start"),
+    "_M_by_size": ("M", "articulation_M_start"),
+    "_H_by_size": ("H", "articulation_H_start"),
+    "_L_by_size": ("L", "articulation_H_start"),
+}
 
 
 class _Replay:
@@ -122,8 +125,16 @@ class NewtonBridge:
             module docstring); ``False`` issues every launch from Python (bitwise the same results).
     """
 
-    def __init__(self, model: newton.Model, worlds: int, dof: int, dt: float, substeps: int = 1,
-                 use_tile_gemm: bool = True, graphs: bool = True):
+    def __init__(
+        self,
+        model: newton.Model,
+        worlds: int,
+        dof: int,
+        dt: float,
+        substeps: int = 1,
+        use_tile_gemm: bool = True,
+        graphs: bool = True,
+    ):
         if model.joint_dof_count != worlds * dof or model.joint_coord_count != worlds * dof:
             raise ValueError(
                 f"model has {model.joint_dof_count} dofs / {model.joint_coord_count} coords, "
@@ -167,7 +178,9 @@ class NewtonBridge:
     def _stream(self):
         """Run Warp on torch's current CUDA stream (no-op on CPU)."""
         if self._is_cuda:
-            return wp.ScopedStream(wp.stream_from_torch(torch.cuda.current_stream(self.torch_device)))
+            return wp.ScopedStream(
+                wp.stream_from_torch(torch.cuda.current_stream(self.torch_device))
+            )
         return contextlib.nullcontext()
 
     # -- forward only --------------------------------------------------------------------------
@@ -188,7 +201,9 @@ class NewtonBridge:
         self._restore_scratch()
         a, b = 0, 1
         for _ in range(self.substeps):
-            self.solver.step(self._fw_states[a], self._fw_states[b], self._fw_control, None, self.dt)
+            self.solver.step(
+                self._fw_states[a], self._fw_states[b], self._fw_control, None, self.dt
+            )
             a, b = b, a
 
     def _scratch_of(self, solver) -> dict:
@@ -206,7 +221,9 @@ class NewtonBridge:
                     shape = self._base_scratch[view_name][size].shape
                     first = int(arts.numpy()[0])
                     n = int(shape[0] * shape[1] * shape[2])
-                    views[size] = scratch[array_name][int(starts[first]): int(starts[first]) + n].reshape(shape)
+                    views[size] = scratch[array_name][
+                        int(starts[first]) : int(starts[first]) + n
+                    ].reshape(shape)
                 scratch[view_name] = views
         return scratch
 
@@ -218,7 +235,9 @@ class NewtonBridge:
     def begin_rollout(self) -> None:
         """Start a new differentiable rollout; buffers of the previous one become invalid."""
         if not self.requires_grad:
-            raise RuntimeError("differentiable rollout needs a model finalized with requires_grad=True")
+            raise RuntimeError(
+                "differentiable rollout needs a model finalized with requires_grad=True"
+            )
         self.generation += 1
         self._k = 0
         self._c = 0
@@ -242,7 +261,9 @@ class NewtonBridge:
             )
             # sub-step i always reads the same state and control: those of control step i // substeps
             step = self._taped_step(buf, self._state_in(i), self._controls[i // self.substeps])
-            buf.forward = _Replay(self.device, step, lambda step=step: step(record=False), enabled=self.graphs)
+            buf.forward = _Replay(
+                self.device, step, lambda step=step: step(record=False), enabled=self.graphs
+            )
             buf.backward = _Replay(self.device, buf.tape.backward, enabled=self.graphs)
             buf.zero = _Replay(self.device, buf.tape.zero, enabled=self.graphs)
             self._steps.append(buf)
@@ -258,6 +279,7 @@ class NewtonBridge:
             else:
                 self.solver.step(state_in, buf.state_out, control, None, self.dt)
             self._restore_scratch()
+
         return step
 
     def _state_in(self, k: int) -> newton.State:

@@ -82,9 +82,10 @@ import importlib.util
 import math
 import re
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -105,6 +106,7 @@ def scenes_dir() -> Path:
     from importlib.resources import files
 
     return Path(str(files("warp_critic.scenes")))
+
 
 EFFORT_ATTR = "warp_critic:effortLimit"
 EE_ATTR = "warp_critic:endEffectorBody"
@@ -153,7 +155,9 @@ class Variant:
         """Raise :class:`FieldError` naming the offending field."""
         if not _finite(self.ee_mass) or self.ee_mass < 0.0:
             raise FieldError("ee_mass", f"must be >= 0 (got {self.ee_mass})")
-        if self.link_length is not None and (not _finite(self.link_length) or self.link_length <= 0.0):
+        if self.link_length is not None and (
+            not _finite(self.link_length) or self.link_length <= 0.0
+        ):
             raise FieldError("link_length", f"must be > 0 (got {self.link_length})")
         if not _finite(self.link_scale) or self.link_scale <= 0.0:
             raise FieldError("link_scale", f"must be > 0 (got {self.link_scale})")
@@ -198,9 +202,18 @@ class Scene:
             different when any authored value changes (see :func:`content_hash`).
     """
 
-    def __init__(self, path: Path, base: "newton.ModelBuilder", ee_body: int, tip_offset: np.ndarray,
-                 effort_limit: np.ndarray, *, defaults: dict[str, Any] | None = None,
-                 home: np.ndarray | None = None, content_hash: str = ""):
+    def __init__(
+        self,
+        path: Path,
+        base: newton.ModelBuilder,
+        ee_body: int,
+        tip_offset: np.ndarray,
+        effort_limit: np.ndarray,
+        *,
+        defaults: dict[str, Any] | None = None,
+        home: np.ndarray | None = None,
+        content_hash: str = "",
+    ):
         self.path = path
         self.name = path.stem
         self.content_hash = content_hash
@@ -222,14 +235,26 @@ class Scene:
         self.ee_body = ee_body
 
     # Arrays are handed out as copies: a Scene is cached and shared by every load_scene() caller.
-    q_lower = property(lambda self: self._arrays["q_lower"].copy(), doc="(dof,) lower joint limits [rad or m]")
-    q_upper = property(lambda self: self._arrays["q_upper"].copy(), doc="(dof,) upper joint limits [rad or m]")
-    effort_limit = property(lambda self: self._arrays["effort_limit"].copy(), doc="(dof,) efforts [N*m or N]")
-    damping = property(lambda self: self._arrays["damping"].copy(), doc="(dof,) damping [N*m*s/rad or N*s/m]")
+    q_lower = property(
+        lambda self: self._arrays["q_lower"].copy(), doc="(dof,) lower joint limits [rad or m]"
+    )
+    q_upper = property(
+        lambda self: self._arrays["q_upper"].copy(), doc="(dof,) upper joint limits [rad or m]"
+    )
+    effort_limit = property(
+        lambda self: self._arrays["effort_limit"].copy(), doc="(dof,) efforts [N*m or N]"
+    )
+    damping = property(
+        lambda self: self._arrays["damping"].copy(), doc="(dof,) damping [N*m*s/rad or N*s/m]"
+    )
     limit_ke = property(lambda self: self._arrays["limit_ke"].copy(), doc="(dof,) limit stiffness")
     limit_kd = property(lambda self: self._arrays["limit_kd"].copy(), doc="(dof,) limit damping")
-    tip_offset = property(lambda self: self._arrays["tip_offset"].copy(), doc="(3,) tip [m] in the ee frame")
-    home = property(lambda self: self._arrays["home"].copy(), doc="(dof,) home joint positions [rad or m]")
+    tip_offset = property(
+        lambda self: self._arrays["tip_offset"].copy(), doc="(3,) tip [m] in the ee frame"
+    )
+    home = property(
+        lambda self: self._arrays["home"].copy(), doc="(dof,) home joint positions [rad or m]"
+    )
 
     @property
     def defaults(self) -> dict[str, Any]:
@@ -252,14 +277,17 @@ class Scene:
         old = float(np.linalg.norm(self.tip_offset))
         if old == 0.0:
             name = "link_length" if variant.link_length is not None else "link_scale"
-            raise FieldError(name, f"does not apply to scene '{self.name}': its end-effector "
-                            f"'{self.body_names[self.ee_body]}' has a zero tip offset (no link length)")
+            raise FieldError(
+                name,
+                f"does not apply to scene '{self.name}': its end-effector "
+                f"'{self.body_names[self.ee_body]}' has a zero tip offset (no link length)",
+            )
         new = (variant.link_length if variant.link_length is not None else old) * variant.link_scale
         s = new / old
         u = self.tip_offset / old
         return s, np.eye(3) + (s - 1.0) * np.outer(u, u)
 
-    def world_builder(self, variant: Variant = Variant()) -> "newton.ModelBuilder":
+    def world_builder(self, variant: Variant = Variant()) -> newton.ModelBuilder:
         """A fresh :class:`newton.ModelBuilder` with one copy of the robot, ``variant`` applied.
 
         Raises:
@@ -271,13 +299,18 @@ class Scene:
         builder = newton.ModelBuilder()
         builder.add_builder(self._base)
         if s != 1.0:
-            _stretch_link(builder, self.ee_body, stretch, self.tip_offset / np.linalg.norm(self.tip_offset), s)
+            _stretch_link(
+                builder, self.ee_body, stretch, self.tip_offset / np.linalg.norm(self.tip_offset), s
+            )
         if variant.ee_mass > 0.0:
-            _add_point_mass(builder, self.ee_body, float(variant.ee_mass), stretch @ self.tip_offset)
+            _add_point_mass(
+                builder, self.ee_body, float(variant.ee_mass), stretch @ self.tip_offset
+            )
         return builder
 
-    def build_model(self, variants: Sequence[Variant], *, device: str = "cpu",
-                    requires_grad: bool = False) -> "newton.Model":
+    def build_model(
+        self, variants: Sequence[Variant], *, device: str = "cpu", requires_grad: bool = False
+    ) -> newton.Model:
         """A finalized model with one world per entry of ``variants`` (world ``i`` = ``variants[i]``).
 
         Args:
@@ -322,8 +355,11 @@ def _set_body_mass(builder, body: int, mass: float, com: np.ndarray, inertia: np
 
 
 def _body_mass(builder, body: int) -> tuple[float, np.ndarray, np.ndarray]:
-    return (float(builder.body_mass[body]), np.array(builder.body_com[body], dtype=np.float64),
-            np.array(builder.body_inertia[body], dtype=np.float64).reshape(3, 3))
+    return (
+        float(builder.body_mass[body]),
+        np.array(builder.body_com[body], dtype=np.float64),
+        np.array(builder.body_inertia[body], dtype=np.float64).reshape(3, 3),
+    )
 
 
 def _stretch_link(builder, body: int, stretch: np.ndarray, u: np.ndarray, s: float) -> None:
@@ -350,7 +386,9 @@ def _stretch_link(builder, body: int, stretch: np.ndarray, u: np.ndarray, s: flo
         if shape_body != body:
             continue
         x = builder.shape_transform[k]
-        builder.shape_transform[k] = wp.transform(wp.vec3(*map(float, stretch @ np.array(x.p))), x.q)
+        builder.shape_transform[k] = wp.transform(
+            wp.vec3(*map(float, stretch @ np.array(x.p))), x.q
+        )
         u_local = np.array(wp.quat_rotate_inv(x.q, wp.vec3(*map(float, u))))
         axis = int(np.argmax(np.abs(u_local)))
         kind = int(builder.shape_type[k])
@@ -419,8 +457,11 @@ def _open_stage(path: Path):
     from pxr import Sdf, Usd
 
     if Sdf.FileFormat.FindByExtension(path.suffix.lstrip(".")) is None:
-        raise _fail(path, f"not a USD file (unknown extension {path.suffix or '(none)'!r}; "
-                          "expected .usd, .usda, .usdc or .usdz)")
+        raise _fail(
+            path,
+            f"not a USD file (unknown extension {path.suffix or '(none)'!r}; "
+            "expected .usd, .usda, .usdc or .usdz)",
+        )
     try:
         stage = Usd.Stage.Open(str(path))
     except Exception as exc:  # pxr.Tf.ErrorException and friends
@@ -463,11 +504,16 @@ def _check_stage(path: Path, stage) -> tuple[object, dict[str, float]]:
     effort: dict[str, float] = {}
     for prim in joints:
         if not (prim.IsA(UsdPhysics.RevoluteJoint) or prim.IsA(UsdPhysics.PrismaticJoint)):
-            raise _fail(path, f"joint {prim.GetPath()} is a {prim.GetTypeName()}; only "
-                              "PhysicsRevoluteJoint and PhysicsPrismaticJoint are supported")
+            raise _fail(
+                path,
+                f"joint {prim.GetPath()} is a {prim.GetTypeName()}; only "
+                "PhysicsRevoluteJoint and PhysicsPrismaticJoint are supported",
+            )
         value = prim.GetAttribute(EFFORT_ATTR).Get() if prim.HasAttribute(EFFORT_ATTR) else None
         if value is None or not _finite(value) or value <= 0.0:
-            raise _fail(path, f"joint {prim.GetPath()} needs a positive {EFFORT_ATTR} (got {value})")
+            raise _fail(
+                path, f"joint {prim.GetPath()} needs a positive {EFFORT_ATTR} (got {value})"
+            )
         effort[str(prim.GetPath())] = float(value)
 
     for prim in bodies:
@@ -481,7 +527,9 @@ def _check_stage(path: Path, stage) -> tuple[object, dict[str, float]]:
         if inertia is None or not mass_api.GetDiagonalInertiaAttr().HasAuthoredValue():
             raise _fail(path, f"link {prim.GetPath()} has no physics:diagonalInertia")
         if not all(_finite(v) for v in inertia) or any(v < 0.0 for v in inertia):
-            raise _fail(path, f"link {prim.GetPath()} has negative or non-finite inertia {tuple(inertia)}")
+            raise _fail(
+                path, f"link {prim.GetPath()} has negative or non-finite inertia {tuple(inertia)}"
+            )
         if sum(inertia) <= 0.0:
             raise _fail(path, f"link {prim.GetPath()} has zero inertia")
     return roots[0], effort
@@ -491,7 +539,9 @@ def _read_root(path: Path, root) -> tuple[str, np.ndarray]:
     """The end-effector name and tip offset authored on the articulation root."""
     ee_name = root.GetAttribute(EE_ATTR).Get() if root.HasAttribute(EE_ATTR) else None
     if not ee_name or not isinstance(ee_name, str):
-        raise _fail(path, f"articulation root {root.GetPath()} lacks the string attribute {EE_ATTR}")
+        raise _fail(
+            path, f"articulation root {root.GetPath()} lacks the string attribute {EE_ATTR}"
+        )
     tip = root.GetAttribute(TIP_ATTR).Get() if root.HasAttribute(TIP_ATTR) else None
     try:
         tip = np.array([float(v) for v in tip], dtype=np.float64)
@@ -523,8 +573,9 @@ def _numbers(value) -> list[float] | None:
     return None if any(v is None for v in out) else out
 
 
-def _read_defaults(path: Path, root, q_lower: np.ndarray, q_upper: np.ndarray,
-                   joint_names: list[str]) -> tuple[dict[str, Any], np.ndarray]:
+def _read_defaults(
+    path: Path, root, q_lower: np.ndarray, q_upper: np.ndarray, joint_names: list[str]
+) -> tuple[dict[str, Any], np.ndarray]:
     """Read and validate the training-default attributes of the articulation root (module docstring)."""
     dof = len(joint_names)
     tol = 1e-6 * np.maximum(1.0, np.maximum(np.abs(q_lower), np.abs(q_upper)))
@@ -539,8 +590,11 @@ def _read_defaults(path: Path, root, q_lower: np.ndarray, q_upper: np.ndarray,
     def inside_limits(attr: str, q: list[float], what: str) -> None:
         for j, v in enumerate(q):
             if not q_lower[j] - tol[j] <= v <= q_upper[j] + tol[j]:
-                raise fail(attr, f"{what} has {joint_names[j]} = {v}, outside the joint limits "
-                                 f"[{q_lower[j]:.6g}, {q_upper[j]:.6g}]")
+                raise fail(
+                    attr,
+                    f"{what} has {joint_names[j]} = {v}, outside the joint limits "
+                    f"[{q_lower[j]:.6g}, {q_upper[j]:.6g}]",
+                )
 
     defaults: dict[str, Any] = {}
     for attr, (key, kind) in DEFAULT_ATTRS.items():
@@ -555,9 +609,12 @@ def _read_defaults(path: Path, root, q_lower: np.ndarray, q_upper: np.ndarray,
                 raise fail(attr, f"must be finite (got {values})")
             if kind == "goals":
                 if not values or len(values) % dof:
-                    raise fail(attr, f"needs G x {dof} values (G >= 1 goals of {dof} joint positions, "
-                                     f"flattened), got {len(values)}")
-                goals = [values[i:i + dof] for i in range(0, len(values), dof)]
+                    raise fail(
+                        attr,
+                        f"needs G x {dof} values (G >= 1 goals of {dof} joint positions, "
+                        f"flattened), got {len(values)}",
+                    )
+                goals = [values[i : i + dof] for i in range(0, len(values), dof)]
                 for g, goal in enumerate(goals):
                     inside_limits(attr, goal, f"goal {g}")
                 defaults[key] = goals
@@ -580,7 +637,10 @@ def _read_defaults(path: Path, root, q_lower: np.ndarray, q_upper: np.ndarray,
             raise fail(attr, f"must be finite (got {value})")
         if kind in ("count", "natural"):
             if value < (1 if kind == "count" else 0) or not value.is_integer():
-                raise fail(attr, f"must be a {'positive' if kind == 'count' else 'non-negative'} integer (got {raw!r})")
+                raise fail(
+                    attr,
+                    f"must be a {'positive' if kind == 'count' else 'non-negative'} integer (got {raw!r})",
+                )
             defaults[key] = int(value)
         else:
             if kind == "positive" and value <= 0.0:
@@ -619,7 +679,9 @@ def content_hash(path: Path, stage) -> str:
     """
     text = stage.Flatten(addSourceFileComment=False).ExportToString()
     text = text.replace(f"@{path.parent.as_posix()}/", "@./")
-    names = tuple(f" {attr} " for attr in DEFAULT_ATTRS) + tuple(f" {attr}=" for attr in DEFAULT_ATTRS)
+    names = tuple(f" {attr} " for attr in DEFAULT_ATTRS) + tuple(
+        f" {attr}=" for attr in DEFAULT_ATTRS
+    )
     text = "\n".join(line for line in text.splitlines() if not any(n in line for n in names))
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
@@ -639,8 +701,10 @@ def _load(path: Path) -> Scene:
 
     if importlib.util.find_spec("newton_usd_schemas") is None:
         # an installation problem, not a scene problem: let it surface as such
-        raise ImportError("newton's USD importer needs the 'newton-usd-schemas' package "
-                          "(pip install 'newton-usd-schemas>=0.6')")
+        raise ImportError(
+            "newton's USD importer needs the 'newton-usd-schemas' package "
+            "(pip install 'newton-usd-schemas>=0.6')"
+        )
 
     builder = newton.ModelBuilder()
     try:
@@ -651,17 +715,32 @@ def _load(path: Path) -> Scene:
     # The importer must have produced exactly one chain of 1-DoF joints.
     allowed = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
     if any(int(t) not in allowed for t in builder.joint_type):
-        raise _fail(path, "the imported articulation has joints other than revolute/prismatic "
-                          "(is a body missing a joint to the world or to its parent?)")
-    if not (builder.joint_coord_count == builder.joint_dof_count == builder.joint_count == len(effort)):
-        raise _fail(path, f"imported {builder.joint_count} joints / {builder.joint_dof_count} DoFs "
-                          f"but the file has {len(effort)} revolute/prismatic joints")
+        raise _fail(
+            path,
+            "the imported articulation has joints other than revolute/prismatic "
+            "(is a body missing a joint to the world or to its parent?)",
+        )
+    if not (
+        builder.joint_coord_count == builder.joint_dof_count == builder.joint_count == len(effort)
+    ):
+        raise _fail(
+            path,
+            f"imported {builder.joint_count} joints / {builder.joint_dof_count} DoFs "
+            f"but the file has {len(effort)} revolute/prismatic joints",
+        )
 
     labels = list(builder.body_label)
-    matches = [i for i, label in enumerate(labels) if label == ee_name or label.rsplit("/", 1)[-1] == ee_name]
+    matches = [
+        i
+        for i, label in enumerate(labels)
+        if label == ee_name or label.rsplit("/", 1)[-1] == ee_name
+    ]
     if len(matches) != 1:
-        raise _fail(path, f"{EE_ATTR} = {ee_name!r} names {len(matches)} of the bodies "
-                          f"{[label.rsplit('/', 1)[-1] for label in labels]}")
+        raise _fail(
+            path,
+            f"{EE_ATTR} = {ee_name!r} names {len(matches)} of the bodies "
+            f"{[label.rsplit('/', 1)[-1] for label in labels]}",
+        )
 
     try:
         effort_limit = np.array([effort[label] for label in builder.joint_label])
@@ -671,11 +750,24 @@ def _load(path: Path) -> Scene:
 
     joint_names = [label.rsplit("/", 1)[-1] for label in builder.joint_label]
     try:
-        defaults, home = _read_defaults(path, root, _array(builder.joint_limit_lower),
-                                        _array(builder.joint_limit_upper), joint_names)
+        defaults, home = _read_defaults(
+            path,
+            root,
+            _array(builder.joint_limit_lower),
+            _array(builder.joint_limit_upper),
+            joint_names,
+        )
     except SceneError:
         raise
     except Exception as exc:  # unexpected pxr errors on odd attributes must not escape either
         raise _fail(path, f"invalid training defaults ({_first_line(exc)})") from None
-    return Scene(path, builder, matches[0], tip, effort_limit, defaults=defaults, home=home,
-                 content_hash=digest)
+    return Scene(
+        path,
+        builder,
+        matches[0],
+        tip,
+        effort_limit,
+        defaults=defaults,
+        home=home,
+        content_hash=digest,
+    )

@@ -6,17 +6,16 @@ solver launch covers all of them. The torch/warp plumbing lives in :mod:`warp_cr
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import torch
 import warp as wp
 
 from warp_critic.core import runtime
-from warp_critic.physics.bridge import NewtonBridge
 from warp_critic.core.errors import FieldError
+from warp_critic.physics.bridge import NewtonBridge
 from warp_critic.physics.scene import Scene, Variant
-
 
 STANDARD_GRAVITY = 9.81  # m/s^2, along -z: a scene's gravity when it authors none
 
@@ -53,9 +52,18 @@ class Simulator:
             ``$WARP_CRITIC_GRAPHS`` (default on).
     """
 
-    def __init__(self, scene: Scene, variants: Sequence[Variant], *, dt: float, substeps: int = 1,
-                 device: str = "cpu", differentiable: bool = True, gravity: float = STANDARD_GRAVITY,
-                 graphs: bool | None = None):
+    def __init__(
+        self,
+        scene: Scene,
+        variants: Sequence[Variant],
+        *,
+        dt: float,
+        substeps: int = 1,
+        device: str = "cpu",
+        differentiable: bool = True,
+        gravity: float = STANDARD_GRAVITY,
+        graphs: bool | None = None,
+    ):
         if dt <= 0:
             raise FieldError("dt", f"must be > 0 (got {dt})")
         if substeps < 1:
@@ -70,18 +78,28 @@ class Simulator:
         self.control_dt = self.dt * self.substeps
         self.device = resolve_device(device)
         wp.init()
-        self.model = scene.build_model(self.variants, device=self.device, requires_grad=differentiable)
+        self.model = scene.build_model(
+            self.variants, device=self.device, requires_grad=differentiable
+        )
         if gravity < 0:
             raise FieldError("gravity", f"must be >= 0 (got {gravity})")
         self.gravity = float(gravity)
         self.model.set_gravity((0.0, 0.0, -self.gravity))
-        self.bridge = NewtonBridge(self.model, self.worlds, self.dof, self.dt, self.substeps,
-                                   graphs=runtime.graphs_from_env() if graphs is None else graphs)
+        self.bridge = NewtonBridge(
+            self.model,
+            self.worlds,
+            self.dof,
+            self.dt,
+            self.substeps,
+            graphs=runtime.graphs_from_env() if graphs is None else graphs,
+        )
         self.torch_device = self.bridge.torch_device
         tdev = self.torch_device
         self.q_lower = torch.as_tensor(np.asarray(scene.q_lower), dtype=torch.float32, device=tdev)
         self.q_upper = torch.as_tensor(np.asarray(scene.q_upper), dtype=torch.float32, device=tdev)
-        self.effort_limit = torch.as_tensor(np.asarray(scene.effort_limit), dtype=torch.float32, device=tdev)
+        self.effort_limit = torch.as_tensor(
+            np.asarray(scene.effort_limit), dtype=torch.float32, device=tdev
+        )
 
     # -- stepping --------------------------------------------------------------------------------
     def begin_rollout(self) -> None:
@@ -123,7 +141,16 @@ class Simulator:
         offsets = np.stack([self.scene.tip_offset_of(v) for v in self.variants]).astype(np.float32)
         tip_offset = wp.array(offsets, dtype=wp.vec3, device=self.model.device)
         tips = wp.zeros(self.worlds, dtype=wp.vec3, device=self.model.device)
-        wp.launch(tip_positions_kernel, dim=self.worlds,
-                  inputs=[state.body_q, self.model.body_count // self.worlds, self.scene.ee_body, tip_offset],
-                  outputs=[tips], device=self.model.device)
+        wp.launch(
+            tip_positions_kernel,
+            dim=self.worlds,
+            inputs=[
+                state.body_q,
+                self.model.body_count // self.worlds,
+                self.scene.ee_body,
+                tip_offset,
+            ],
+            outputs=[tips],
+            device=self.model.device,
+        )
         return tips.numpy()

@@ -16,13 +16,26 @@ def run_toy_stage(d: Path, s: dict) -> dict:
     from warp_critic.analysis.toy.curves import default_thetas
     from warp_critic.analysis.toy.report import run_toy
 
-    r = run_toy(d, float(s["s0"]), float(s["goal"]), iters=int(s["iters"]), theta0=float(s["theta0"]),
-                alpha=float(s["alpha"]), plain_lr=float(s["plain_lr"]),
-                thetas=default_thetas(float(s["s0"]), float(s["goal"]), int(s["grid"])), verbose=False)
+    r = run_toy(
+        d,
+        float(s["s0"]),
+        float(s["goal"]),
+        iters=int(s["iters"]),
+        theta0=float(s["theta0"]),
+        alpha=float(s["alpha"]),
+        plain_lr=float(s["plain_lr"]),
+        thetas=default_thetas(float(s["s0"]), float(s["goal"]), int(s["grid"])),
+        verbose=False,
+    )
     return {
-        "closed_form": r["closed_form"], "numerical": r["numerical"], "optimal": r["optimal"],
-        "stationary_points": {m: [[float(x), str(k)] for x, k in pts] for m, pts in r["stationary_points"].items()},
-        "paper_meta_critic_theta": r["paper_meta_critic_theta"], "iterations": r["iterations"],
+        "closed_form": r["closed_form"],
+        "numerical": r["numerical"],
+        "optimal": r["optimal"],
+        "stationary_points": {
+            m: [[float(x), str(k)] for x, k in pts] for m, pts in r["stationary_points"].items()
+        },
+        "paper_meta_critic_theta": r["paper_meta_critic_theta"],
+        "iterations": r["iterations"],
         "table_markdown": r["table_markdown"],
         "files": {k: Path(v).name for k, v in r["files"].items()},
     }
@@ -57,10 +70,18 @@ def landscape_configs(d: Path, s: dict, device: str):
 
 def _landscape_result(r: dict, prefix: str = "") -> dict:
     return {
-        "goals": r["goals"].tolist(), "goal_names": list(r["goal_names"]), "optima": r["optima"].tolist(),
-        "fractions": r["fractions"], "ours_loss_last": float(r["ours_loss"][-1]), "sup_loss_last": float(r["sup_loss"][-1]),
-        "files": {"landscape": f"{prefix}landscape.png", "exploration": f"{prefix}exploration.png",
-                  "rrd": f"{prefix}landscape.rrd", "arrays": f"{prefix}landscape.npz"},
+        "goals": r["goals"].tolist(),
+        "goal_names": list(r["goal_names"]),
+        "optima": r["optima"].tolist(),
+        "fractions": r["fractions"],
+        "ours_loss_last": float(r["ours_loss"][-1]),
+        "sup_loss_last": float(r["sup_loss"][-1]),
+        "files": {
+            "landscape": f"{prefix}landscape.png",
+            "exploration": f"{prefix}exploration.png",
+            "rrd": f"{prefix}landscape.rrd",
+            "arrays": f"{prefix}landscape.npz",
+        },
     }
 
 
@@ -74,6 +95,8 @@ def run_landscape_stage(d: Path, s: dict, device: str) -> dict:
         r = run_landscape(paper)
         rg = run_landscape(gen)
     out = _landscape_result(r)
-    out["generalising"] = {**_landscape_result(rg, f"{GENERALISING_DIR}/"),
-                           "overrides": dict(s.get("generalising") or {})}
+    out["generalising"] = {
+        **_landscape_result(rg, f"{GENERALISING_DIR}/"),
+        "overrides": dict(s.get("generalising") or {}),
+    }
     return out

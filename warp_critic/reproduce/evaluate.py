@@ -52,8 +52,10 @@ class MultiCritic(torch.nn.Module):
         self.bounds = [(a, b) for _, a, b in segments]
 
     def forward(self, q, qd, tau, g):
-        outs = [c(q[..., a:b, :], qd[..., a:b, :], tau[..., a:b, :], g[..., a:b, :])
-                for c, (a, b) in zip(self.critics, self.bounds)]
+        outs = [
+            c(q[..., a:b, :], qd[..., a:b, :], tau[..., a:b, :], g[..., a:b, :])
+            for c, (a, b) in zip(self.critics, self.bounds)
+        ]
         return torch.cat(outs, dim=-1)
 
 
@@ -88,11 +90,18 @@ def load_runs(run_dirs) -> dict[str, _Run]:
         runs[rd] = _Run(ckpt, TaskConfig.from_dict(ckpt["config"]))
     first = next(iter(runs.values()))
     for rd, r in runs.items():
-        if r.ckpt.get("scene_hash") != first.ckpt.get("scene_hash") or r.ckpt["dof"] != first.ckpt["dof"]:
-            raise UserError(f"{rd}: trained on another scene than {next(iter(runs))}; evaluate one scene at a time")
+        if (
+            r.ckpt.get("scene_hash") != first.ckpt.get("scene_hash")
+            or r.ckpt["dof"] != first.ckpt["dof"]
+        ):
+            raise UserError(
+                f"{rd}: trained on another scene than {next(iter(runs))}; evaluate one scene at a time"
+            )
         for f in SHARED_FIELDS:
             if getattr(r.cfg, f) != getattr(first.cfg, f):
-                raise UserError(f"{rd}: {f} {getattr(r.cfg, f)!r} differs from {getattr(first.cfg, f)!r} of the other runs")
+                raise UserError(
+                    f"{rd}: {f} {getattr(r.cfg, f)!r} differs from {getattr(first.cfg, f)!r} of the other runs"
+                )
     return runs
 
 
@@ -120,18 +129,27 @@ def batches(jobs: list[Job], inits: int, max_worlds: int) -> list[list[int]]:
     return out
 
 
-def evaluate(jobs: list[Job], *, inits: int, steps: int, seed: int = 1, device: str = "auto",
-             horizon: int | None = None, max_worlds: int = 4096, progress: bool = True) -> dict:
+def evaluate(
+    jobs: list[Job],
+    *,
+    inits: int,
+    steps: int,
+    seed: int = 1,
+    device: str = "auto",
+    horizon: int | None = None,
+    max_worlds: int = 4096,
+    progress: bool = True,
+) -> dict:
     """Meta-test every job; returns ``{"errors": [(G, inits) final ||q_T-g||^2 per job], "before": [...],
     "dof", "horizon", "steps", "alphas": {run_dir: alpha}, "worlds", "batches"}``."""
-    from warp_critic.learning.inner import inner_update, policy_fn
-    from warp_critic.running.loop import progress_bar
-    from warp_critic.learning.losses import final_error
     from warp_critic.evaluation.metatest import build_test_critic
+    from warp_critic.learning.inner import inner_update, policy_fn
+    from warp_critic.learning.losses import final_error
     from warp_critic.learning.networks import MLPPolicy, Normalizer
     from warp_critic.learning.rollout import rollout
     from warp_critic.physics.scene import load_scene
     from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
+    from warp_critic.running.loop import progress_bar
     from warp_critic.running.task import max_torque_tensor
 
     if not jobs:
@@ -140,7 +158,10 @@ def evaluate(jobs: list[Job], *, inits: int, steps: int, seed: int = 1, device: 
     first = next(iter(runs.values()))
     cfg0 = first.cfg
     scene = load_scene(cfg0.scene)
-    if getattr(scene, "content_hash", None) not in (None, first.ckpt.get("scene_hash")) and first.ckpt.get("scene_hash"):
+    if getattr(scene, "content_hash", None) not in (
+        None,
+        first.ckpt.get("scene_hash"),
+    ) and first.ckpt.get("scene_hash"):
         raise UserError(f"{cfg0.scene}: the scene file has changed since the runs were trained")
     if horizon is None:
         hs = {r.cfg.horizon for r in runs.values()}
@@ -156,11 +177,22 @@ def evaluate(jobs: list[Job], *, inits: int, steps: int, seed: int = 1, device: 
     try:
         for group in groups:
             variants = [jobs[i].variant for i in group for _ in range(jobs[i].G * inits)]
-            sim = Simulator(scene, variants, dt=cfg0.dt, substeps=cfg0.substeps, device=device,
-                            differentiable=False, gravity=gravity)
+            sim = Simulator(
+                scene,
+                variants,
+                dt=cfg0.dt,
+                substeps=cfg0.substeps,
+                device=device,
+                differentiable=False,
+                gravity=gravity,
+            )
             dev = sim.torch_device
-            norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg0.max_torque, scene, dev),
-                                          cfg0.qd_scale)
+            norm = Normalizer.from_limits(
+                sim.q_lower,
+                sim.q_upper,
+                max_torque_tensor(cfg0.max_torque, scene, dev),
+                cfg0.qd_scale,
+            )
             policy = MLPPolicy(norm)
             segments, rates, goals, params = [], [], [], []
             start = 0
@@ -171,7 +203,9 @@ def evaluate(jobs: list[Job], *, inits: int, steps: int, seed: int = 1, device: 
                     run.critic = critic.to(dev).requires_grad_(False)
                     run.alpha = defaults.get("alpha")
                     if not (isinstance(run.alpha, (int, float)) and run.alpha > 0):
-                        raise UserError(f"{job.run_dir}: the run stores no usable policy learning rate")
+                        raise UserError(
+                            f"{job.run_dir}: the run stores no usable policy learning rate"
+                        )
                 n = job.G * inits
                 segments.append((run.critic, start, start + n))
                 rates.append(torch.full((n,), float(run.alpha)))
@@ -182,27 +216,47 @@ def evaluate(jobs: list[Job], *, inits: int, steps: int, seed: int = 1, device: 
                 params.append(inits_cache[job.G])
                 start += n
             goal = torch.cat(goals).to(dev)
-            p = {k: torch.cat([x[k] for x in params]).to(dev).requires_grad_(True) for k in params[0]}
+            p = {
+                k: torch.cat([x[k] for x in params]).to(dev).requires_grad_(True) for k in params[0]
+            }
             q0, qd0 = sim.zeros(), sim.zeros()
             critic = MultiCritic(segments)
             untrained = rollout(sim, policy_fn(policy, p), q0, qd0, horizon)
             err0 = final_error(untrained.q[-1], goal).detach().cpu().numpy()
-            p, _ = inner_update(critic, policy, p, sim, q0, qd0, goal, horizon=horizon,
-                                alpha=PerWorldRate(torch.cat(rates).to(dev)), steps=steps, create_graph=False)
+            p, _ = inner_update(
+                critic,
+                policy,
+                p,
+                sim,
+                q0,
+                qd0,
+                goal,
+                horizon=horizon,
+                alpha=PerWorldRate(torch.cat(rates).to(dev)),
+                steps=steps,
+                create_graph=False,
+            )
             after = rollout(sim, policy_fn(policy, p), q0, qd0, horizon)
             err = final_error(after.q[-1], goal).detach().cpu().numpy()
             start = 0
             for i in group:
                 n = jobs[i].G * inits
-                errors[i] = err[start:start + n].reshape(jobs[i].G, inits).astype(np.float64)
-                before[i] = err0[start:start + n].reshape(jobs[i].G, inits).astype(np.float64)
+                errors[i] = err[start : start + n].reshape(jobs[i].G, inits).astype(np.float64)
+                before[i] = err0[start : start + n].reshape(jobs[i].G, inits).astype(np.float64)
                 start += n
             bar.update(1)
     finally:
         bar.close()
-    return {"errors": errors, "before": before, "dof": scene.dof, "horizon": horizon, "steps": steps,
-            "alphas": {rd: r.alpha for rd, r in runs.items()}, "worlds": sum(j.G * inits for j in jobs),
-            "batches": len(groups)}
+    return {
+        "errors": errors,
+        "before": before,
+        "dof": scene.dof,
+        "horizon": horizon,
+        "steps": steps,
+        "alphas": {rd: r.alpha for rd, r in runs.items()},
+        "worlds": sum(j.G * inits for j in jobs),
+        "batches": len(groups),
+    }
 
 
 def relpath(p, base: Path) -> str:

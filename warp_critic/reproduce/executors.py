@@ -28,11 +28,11 @@ import socket
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 from warp_critic.core.errors import FieldError, UserError
 
@@ -112,7 +112,9 @@ def _process_init() -> None:
     """A worker process: stop with the driver (Linux: even when the driver is SIGKILLed), then start as
     the CLI starts."""
     signal.signal(signal.SIGTERM, _worker_stop)
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a terminal's Ctrl-C reaches the driver, which stops us
+    signal.signal(
+        signal.SIGINT, signal.SIG_IGN
+    )  # a terminal's Ctrl-C reaches the driver, which stops us
     if sys.platform.startswith("linux"):
         import ctypes
 
@@ -154,13 +156,18 @@ class LocalProcesses:
         self._pool_now: ProcessPoolExecutor | None = None
         # stopping workers mid-unit (Ctrl-C) leaves the pool's queue semaphores to the tracker process,
         # which would warn about them on its own stderr: that is expected here, not a leak
-        os.environ.setdefault("PYTHONWARNINGS", "ignore::UserWarning:multiprocessing.resource_tracker")
+        os.environ.setdefault(
+            "PYTHONWARNINGS", "ignore::UserWarning:multiprocessing.resource_tracker"
+        )
 
     def _pool(self) -> ProcessPoolExecutor:
         import multiprocessing
 
-        return ProcessPoolExecutor(max_workers=self.jobs, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=_process_init)
+        return ProcessPoolExecutor(
+            max_workers=self.jobs,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=_process_init,
+        )
 
     def run(self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None]) -> None:
         try:
@@ -206,16 +213,21 @@ class LocalProcesses:
                 for u in pending:
                     tries[u.name] += 1
                     if tries[u.name] > self.retries:
-                        raise UserError(f"reproduce: unit {u.name} lost its worker process {tries[u.name]} times; "
-                                        "its stage directory is left unfinished (run again to resume)")
-                    log(f"reproduce: {u.name}: a worker process died; running it again "
-                        f"(try {tries[u.name] + 1} of {self.retries + 1})")
+                        raise UserError(
+                            f"reproduce: unit {u.name} lost its worker process {tries[u.name]} times; "
+                            "its stage directory is left unfinished (run again to resume)"
+                        )
+                    log(
+                        f"reproduce: {u.name}: a worker process died; running it again "
+                        f"(try {tries[u.name] + 1} of {self.retries + 1})"
+                    )
 
     def close(self) -> None:
         pass
 
 
 # -- Ray -------------------------------------------------------------------------------------------
+
 
 def _read_tree(folder: Path) -> dict[str, bytes]:
     """Every file under ``folder``, keyed by its path relative to ``folder.parent``."""
@@ -236,7 +248,9 @@ def _write_tree(root: Path, files: dict[str, bytes]) -> None:
         atomic_write_bytes(path, data)
 
 
-def _ray_unit(unit: Unit, inputs: dict[str, bytes], env: dict[str, str]) -> tuple[dict[str, bytes], dict, float]:
+def _ray_unit(
+    unit: Unit, inputs: dict[str, bytes], env: dict[str, str]
+) -> tuple[dict[str, bytes], dict, float]:
     """A Ray task: run ``unit`` in a private folder holding ``inputs``; return its stage directory's files."""
     os.environ.update(env)
     from warp_critic.core.runtime import init
@@ -259,7 +273,10 @@ def check_ray_address(address: str | None) -> None:
         return
     host, sep, port = address.removeprefix("ray://").rpartition(":")
     if not sep or not host or not port.isdigit():
-        raise FieldError("ray", f"{address!r}: expected auto, or HOST:PORT of the cluster's head (e.g. 10.0.0.1:6379)")
+        raise FieldError(
+            "ray",
+            f"{address!r}: expected auto, or HOST:PORT of the cluster's head (e.g. 10.0.0.1:6379)",
+        )
     try:
         with socket.create_connection((host, int(port)), timeout=3.0):
             pass
@@ -273,22 +290,29 @@ class RayExecutor:
 
     name = "ray"
 
-    def __init__(self, address: str | None, device: str, num_cpus: int | None = None, retries: int = 3):
+    def __init__(
+        self, address: str | None, device: str, num_cpus: int | None = None, retries: int = 3
+    ):
         try:
             import ray
         except ImportError:
-            raise UserError("--ray needs Ray: pip install -e \".[ray]\"") from None
+            raise UserError('--ray needs Ray: pip install -e ".[ray]"') from None
         check_ray_address(address)
         self.ray, self.retries = ray, retries
         kwargs = dict(include_dashboard=False, log_to_driver=False, configure_logging=False)
         try:
             if address in (None, "", "local"):  # a cluster of this machine alone, on loopback
-                ray.init(num_cpus=num_cpus or os.cpu_count(), _node_ip_address="127.0.0.1", **kwargs)
+                ray.init(
+                    num_cpus=num_cpus or os.cpu_count(), _node_ip_address="127.0.0.1", **kwargs
+                )
             else:
                 ray.init(address=address, **kwargs)
         except Exception as e:  # ConnectionError and Ray's own
-            raise FieldError("ray", f"{address or 'local'}: cannot start or join a Ray cluster "
-                                    f"({type(e).__name__}: {' '.join(str(e).split())[:160]})") from None
+            raise FieldError(
+                "ray",
+                f"{address or 'local'}: cannot start or join a Ray cluster "
+                f"({type(e).__name__}: {' '.join(str(e).split())[:160]})",
+            ) from None
         self.gpu = str(device).startswith("cuda")
         if self.gpu and not ray.cluster_resources().get("GPU", 0):
             ray.shutdown()
@@ -296,9 +320,17 @@ class RayExecutor:
 
     def run(self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None]) -> None:
         ray = self.ray
-        env = {k: v for k, v in os.environ.items() if k in (UNIT_FAULT_ENV, "WARP_CRITIC_TORCH_THREADS")}
-        task = ray.remote(_ray_unit).options(max_retries=self.retries, retry_exceptions=False,
-                                             num_cpus=0 if self.gpu else 1, num_gpus=1 if self.gpu else 0)
+        env = {
+            k: v
+            for k, v in os.environ.items()
+            if k in (UNIT_FAULT_ENV, "WARP_CRITIC_TORCH_THREADS")
+        }
+        task = ray.remote(_ray_unit).options(
+            max_retries=self.retries,
+            retry_exceptions=False,
+            num_cpus=0 if self.gpu else 1,
+            num_gpus=1 if self.gpu else 0,
+        )
         refs = {}
         for u in units:
             inputs = _read_tree(root / u.dir_name)  # an unfinished stage directory resumes
@@ -312,12 +344,18 @@ class RayExecutor:
             try:
                 files, result, seconds = ray.get(ready[0])
             except Exception as e:  # the unit failed for good (after Ray's retries)
-                raise UserError(f"reproduce: unit {u.name} failed on Ray ({type(e).__name__}: "
-                                f"{' '.join(str(e).split())[:200]}); run again to resume") from None
+                raise UserError(
+                    f"reproduce: unit {u.name} failed on Ray ({type(e).__name__}: "
+                    f"{' '.join(str(e).split())[:200]}); run again to resume"
+                ) from None
             stage = root / u.dir_name
             _write_tree(root, files)
-            for p in sorted(stage.rglob("*"), reverse=True):  # the task returned the whole directory:
-                rel = str(p.relative_to(root))  # what it removed (unstarted seeds, merged segments) goes
+            for p in sorted(
+                stage.rglob("*"), reverse=True
+            ):  # the task returned the whole directory:
+                rel = str(
+                    p.relative_to(root)
+                )  # what it removed (unstarted seeds, merged segments) goes
                 if p.is_file() and rel not in files and p.name != ".lock":
                     p.unlink()
             done(u, result, seconds)
@@ -338,4 +376,12 @@ def make_executor(jobs: int | None, ray: str | None, device: str):
     return InProcess()
 
 
-__all__ = ["Unit", "call_unit", "InProcess", "LocalProcesses", "RayExecutor", "make_executor", "check_ray_address"]
+__all__ = [
+    "Unit",
+    "call_unit",
+    "InProcess",
+    "LocalProcesses",
+    "RayExecutor",
+    "make_executor",
+    "check_ray_address",
+]

@@ -31,8 +31,8 @@ from warp_critic.reproduce.settings import METHODS
 
 
 def _train_goals_and_limits(run_dir: str):
-    from warp_critic.running.rundir import RunDir
     from warp_critic.physics.scene import load_scene
+    from warp_critic.running.rundir import RunDir
 
     ckpt = RunDir.open(run_dir).load_checkpoint(require=("config",))
     scene = load_scene(ckpt["config"]["scene"])
@@ -46,32 +46,60 @@ def _sample(train_goals, lo, hi, num, std, around, noise, seed):
     from warp_critic.evaluation.metatest import sample_goals
 
     gen = torch.Generator().manual_seed(int(seed))
-    return sample_goals(train_goals, int(num), float(std), list(around) if around else None, lo, hi, gen, noise)
+    return sample_goals(
+        train_goals, int(num), float(std), list(around) if around else None, lo, hi, gen, noise
+    )
 
 
 def _pool(errs: list[np.ndarray], dof: int) -> dict:
     """Pool final squared errors (one (G, K) array per seed) into a cell: MSE over joints."""
     mse = np.concatenate([e.ravel() for e in errs]) / dof
-    return {"mse_mean": float(mse.mean()), "mse_std": float(mse.std()),
-            "mse_per_seed": [float(e.mean() / dof) for e in errs], "n": int(mse.size)}
+    return {
+        "mse_mean": float(mse.mean()),
+        "mse_std": float(mse.std()),
+        "mse_per_seed": [float(e.mean() / dof) for e in errs],
+        "n": int(mse.size),
+    }
 
 
-def run_tables_stage(d: Path, s: dict, runs: dict[str, list[Path]], device: str, progress: bool = True) -> dict:
+def run_tables_stage(
+    d: Path, s: dict, runs: dict[str, list[Path]], device: str, progress: bool = True
+) -> dict:
     """``runs``: method -> per-seed run directories (KUKA)."""
     import json
 
     first = str(runs["ours"][0])
     scene, train_goals, lo, hi = _train_goals_and_limits(first)
     steps = default_steps(first)
-    columns = {"table1": [float(x) for x in s["stds"]], "table2": [float(x) for x in s["masses"]],
-               "table3": [float(x) for x in s["lengths"]]}
-    dyn_goals = _sample(train_goals, lo, hi, s["num_goals"], s["dynamics_goal_std"], s["around"], s["goal_noise"],
-                        s["seed"])
+    columns = {
+        "table1": [float(x) for x in s["stds"]],
+        "table2": [float(x) for x in s["masses"]],
+        "table3": [float(x) for x in s["lengths"]],
+    }
+    dyn_goals = _sample(
+        train_goals,
+        lo,
+        hi,
+        s["num_goals"],
+        s["dynamics_goal_std"],
+        s["around"],
+        s["goal_noise"],
+        s["seed"],
+    )
     jobs, goals_used = [], {}
     for table, values in columns.items():
         for ci, v in enumerate(values):
             if table == "table1":
-                goals = _sample(train_goals, lo, hi, s["num_goals"], v, s["around"], s["goal_noise"], int(s["seed"]) + ci)
+                goals = _sample(
+                    train_goals,
+                    lo,
+                    hi,
+                    s["num_goals"],
+                    v,
+                    s["around"],
+                    s["goal_noise"],
+                    int(s["seed"]) + ci,
+                )
                 variant = Variant()
             else:
                 goals = dyn_goals
@@ -80,11 +108,26 @@ def run_tables_stage(d: Path, s: dict, runs: dict[str, list[Path]], device: str,
             for m in METHODS:
                 for si, rd in enumerate(runs[m]):
                     jobs.append(Job((table, ci, m, si), str(rd), goals, variant))
-    r = evaluate(jobs, inits=int(s["inits"]), steps=steps, seed=int(s["seed"]), device=device,
-                 max_worlds=int(s["max_worlds"]), progress=progress)
-    raw = [{"table": j.key[0], "column": j.key[1], "method": j.key[2], "run_dir": relpath(j.run_dir, d.parent),
-            "final_sq_error": e.tolist(), "final_sq_error_untrained": b.tolist()}
-           for j, e, b in zip(jobs, r["errors"], r["before"])]
+    r = evaluate(
+        jobs,
+        inits=int(s["inits"]),
+        steps=steps,
+        seed=int(s["seed"]),
+        device=device,
+        max_worlds=int(s["max_worlds"]),
+        progress=progress,
+    )
+    raw = [
+        {
+            "table": j.key[0],
+            "column": j.key[1],
+            "method": j.key[2],
+            "run_dir": relpath(j.run_dir, d.parent),
+            "final_sq_error": e.tolist(),
+            "final_sq_error_untrained": b.tolist(),
+        }
+        for j, e, b in zip(jobs, r["errors"], r["before"])
+    ]
     (d / "errors.json").write_text(json.dumps({"goals": goals_used, "jobs": raw}) + "\n")
     cells = []
     for table, values in columns.items():
@@ -92,16 +135,34 @@ def run_tables_stage(d: Path, s: dict, runs: dict[str, list[Path]], device: str,
             for m in METHODS:
                 idx = [k for k, j in enumerate(jobs) if j.key[:3] == (table, ci, m)]
                 cell = _pool([r["errors"][k] for k in idx], r["dof"])
-                cell.update(table=table, column=ci, value=v, method=m,
-                            runs=[relpath(jobs[k].run_dir, d.parent) for k in idx],
-                            untrained_mse_mean=float(np.mean([r["before"][k].mean() for k in idx]) / r["dof"]))
+                cell.update(
+                    table=table,
+                    column=ci,
+                    value=v,
+                    method=m,
+                    runs=[relpath(jobs[k].run_dir, d.parent) for k in idx],
+                    untrained_mse_mean=float(
+                        np.mean([r["before"][k].mean() for k in idx]) / r["dof"]
+                    ),
+                )
                 cells.append(cell)
-    return {"columns": columns, "cells": cells, "dof": r["dof"], "horizon": r["horizon"], "policy_updates": steps,
-            "alphas": {relpath(k, d.parent): v for k, v in r["alphas"].items()}, "worlds": r["worlds"],
-            "batches": r["batches"], "raw_file": "errors.json", "dynamics_goals": dyn_goals.tolist()}
+    return {
+        "columns": columns,
+        "cells": cells,
+        "dof": r["dof"],
+        "horizon": r["horizon"],
+        "policy_updates": steps,
+        "alphas": {relpath(k, d.parent): v for k, v in r["alphas"].items()},
+        "worlds": r["worlds"],
+        "batches": r["batches"],
+        "raw_file": "errors.json",
+        "dynamics_goals": dyn_goals.tolist(),
+    }
 
 
-def run_maps_stage(d: Path, s: dict, runs: dict[str, list[Path]], device: str, progress: bool = True) -> dict:
+def run_maps_stage(
+    d: Path, s: dict, runs: dict[str, list[Path]], device: str, progress: bool = True
+) -> dict:
     """``runs``: method -> per-seed run directories (reacher)."""
     import json
 
@@ -111,7 +172,9 @@ def run_maps_stage(d: Path, s: dict, runs: dict[str, list[Path]], device: str, p
     n, f = int(s["grid"]), float(s["limit_fraction"])
     ax0 = np.linspace(float(lo[0]) * f, float(hi[0]) * f, n)
     ax1 = np.linspace(float(lo[1]) * f, float(hi[1]) * f, n)
-    grid = torch.tensor([[a, b] for a in ax0 for b in ax1], dtype=torch.float32)  # row-major: q1 major
+    grid = torch.tensor(
+        [[a, b] for a in ax0 for b in ax1], dtype=torch.float32
+    )  # row-major: q1 major
     masses = [float(x) for x in s["masses"]]
     lengths = [float(x) for x in s["lengths"]]
     jobs = []
@@ -121,20 +184,50 @@ def run_maps_stage(d: Path, s: dict, runs: dict[str, list[Path]], device: str, p
             for ci, v in enumerate(masses):
                 jobs.append(Job(("mass", ci, m, si), str(rd), train_goals, Variant(ee_mass=v)))
             for ci, v in enumerate(lengths):
-                jobs.append(Job(("length", ci, m, si), str(rd), train_goals, Variant(link_length=v)))
-    r = evaluate(jobs, inits=int(s["inits"]), steps=steps, seed=int(s["seed"]), device=device,
-                 max_worlds=int(s["max_worlds"]), progress=progress)
+                jobs.append(
+                    Job(("length", ci, m, si), str(rd), train_goals, Variant(link_length=v))
+                )
+    r = evaluate(
+        jobs,
+        inits=int(s["inits"]),
+        steps=steps,
+        seed=int(s["seed"]),
+        device=device,
+        max_worlds=int(s["max_worlds"]),
+        progress=progress,
+    )
     dof = r["dof"]
-    raw = [{"map": j.key[0], "column": j.key[1], "method": j.key[2], "run_dir": relpath(j.run_dir, d.parent),
-            "final_sq_error": e.tolist()} for j, e in zip(jobs, r["errors"])]
+    raw = [
+        {
+            "map": j.key[0],
+            "column": j.key[1],
+            "method": j.key[2],
+            "run_dir": relpath(j.run_dir, d.parent),
+            "final_sq_error": e.tolist(),
+        }
+        for j, e in zip(jobs, r["errors"])
+    ]
     (d / "errors.json").write_text(json.dumps({"jobs": raw}) + "\n")
-    out = {"axis_q1": ax0.tolist(), "axis_q2": ax1.tolist(), "train_goals": train_goals.tolist(),
-           "masses": masses, "lengths": lengths, "dof": dof, "horizon": r["horizon"], "policy_updates": steps,
-           "tip_offset": [float(x) for x in scene.tip_offset], "raw_file": "errors.json",
-           "goals": {}, "mass": {}, "length": {}}
+    out = {
+        "axis_q1": ax0.tolist(),
+        "axis_q2": ax1.tolist(),
+        "train_goals": train_goals.tolist(),
+        "masses": masses,
+        "lengths": lengths,
+        "dof": dof,
+        "horizon": r["horizon"],
+        "policy_updates": steps,
+        "tip_offset": [float(x) for x in scene.tip_offset],
+        "raw_file": "errors.json",
+        "goals": {},
+        "mass": {},
+        "length": {},
+    }
     for m in METHODS:
         errs = [r["errors"][k] for k, j in enumerate(jobs) if j.key[0] == "goals" and j.key[2] == m]
-        per_goal = np.stack([e.mean(1) for e in errs]).mean(0) / dof  # mean over seeds x inits, per goal
+        per_goal = (
+            np.stack([e.mean(1) for e in errs]).mean(0) / dof
+        )  # mean over seeds x inits, per goal
         out["goals"][m] = {"mse": per_goal.reshape(n, n).tolist(), **_pool(errs, dof)}
         for kind, values in (("mass", masses), ("length", lengths)):
             cells = []

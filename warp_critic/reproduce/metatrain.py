@@ -57,12 +57,21 @@ def scene_file(scene: str) -> Path:
     return scene_path(f"{scene}.usda")
 
 
-def make_config(scene: str, method: str, values: dict, seeds: list[int], out: Path, device: str, resume: bool):
+def make_config(
+    scene: str, method: str, values: dict, seeds: list[int], out: Path, device: str, resume: bool
+):
     cls = config_class(method)
     kw = dict(values)
     if method != "ours":
         kw["method"] = method
-    return cls(scene=str(scene_file(scene)), seeds=list(seeds), out=str(out), device=device, resume=resume, **kw)
+    return cls(
+        scene=str(scene_file(scene)),
+        seeds=list(seeds),
+        out=str(out),
+        device=device,
+        resume=resume,
+        **kw,
+    )
 
 
 def _clear_unstarted(run: Path, seeds: list[int]) -> bool:
@@ -71,8 +80,10 @@ def _clear_unstarted(run: Path, seeds: list[int]) -> bool:
     have = [(run / f"seed{s}" / "checkpoint.pt").is_file() for s in seeds]
     if any(have) and not all(have):
         missing = [f"seed{s}" for s, h in zip(seeds, have) if not h]
-        raise UserError(f"{run}: {', '.join(missing)} have no checkpoint while other seeds do; "
-                        "remove this stage directory to retrain it")
+        raise UserError(
+            f"{run}: {', '.join(missing)} have no checkpoint while other seeds do; "
+            "remove this stage directory to retrain it"
+        )
     if not any(have):
         for s in seeds:
             p = run / f"seed{s}"
@@ -81,8 +92,15 @@ def _clear_unstarted(run: Path, seeds: list[int]) -> bool:
     return all(have)
 
 
-def run_metatrain_stage(d: Path, scene: str, method: str, values: dict, seeds: list[int], device: str,
-                        progress: bool = True) -> dict:
+def run_metatrain_stage(
+    d: Path,
+    scene: str,
+    method: str,
+    values: dict,
+    seeds: list[int],
+    device: str,
+    progress: bool = True,
+) -> dict:
     from warp_critic.methods.ddpg import train_ddpg
     from warp_critic.methods.meta_critic import train_meta_critic
     from warp_critic.methods.ours import meta_train
@@ -106,20 +124,41 @@ def run_metatrain_stage(d: Path, scene: str, method: str, values: dict, seeds: l
             "run_dir": str(Path(r.run_dir).relative_to(d)),
             "iteration": [int(x["iteration"]) for x in rows],
             "task_loss": [float(x["task_loss"]) for x in rows],
-            "fresh_policy_loss": [[int(x["iteration"]), float(x["fresh_policy_loss"])] for x in rows
-                                  if x.get("fresh_policy_loss") is not None],
+            "fresh_policy_loss": [
+                [int(x["iteration"]), float(x["fresh_policy_loss"])]
+                for x in rows
+                if x.get("fresh_policy_loss") is not None
+            ],
             "seconds": float(sum(x.get("seconds", 0.0) for x in rows)),
         }
     first = result.seeds[0].config
-    return {"scene": scene, "method": method, "seeds": per_seed, "env_steps_per_iteration": steps_per_it,
-            "env_steps_counted": STEPS_COUNTED[method], "horizon": first.horizon,
-            "goals": first.goals, "worlds_per_goal": first.worlds_per_goal,
-            "inner_steps": getattr(first, "inner_steps", 1), "iterations": first.iterations}
+    return {
+        "scene": scene,
+        "method": method,
+        "seeds": per_seed,
+        "env_steps_per_iteration": steps_per_it,
+        "env_steps_counted": STEPS_COUNTED[method],
+        "horizon": first.horizon,
+        "goals": first.goals,
+        "worlds_per_goal": first.worlds_per_goal,
+        "inner_steps": getattr(first, "inner_steps", 1),
+        "iterations": first.iterations,
+    }
 
 
 def run_dirs(d: Path, data: dict) -> list[Path]:
     """The per-seed run directories of a complete metatrain sub-stage, in seed order."""
-    return [d / v["run_dir"] for _, v in sorted(data["result"]["seeds"].items(), key=lambda kv: int(kv[0]))]
+    return [
+        d / v["run_dir"]
+        for _, v in sorted(data["result"]["seeds"].items(), key=lambda kv: int(kv[0]))
+    ]
 
 
-__all__ = ["METHODS", "run_metatrain_stage", "run_dirs", "make_config", "check_fields_known", "scene_file"]
+__all__ = [
+    "METHODS",
+    "run_metatrain_stage",
+    "run_dirs",
+    "make_config",
+    "check_fields_known",
+    "scene_file",
+]

@@ -12,7 +12,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
-from warp_critic.reproduce.settings import METHODS, SCENES, STAGES, apply_overrides, default_settings, stage_hash
+from warp_critic.reproduce.settings import (
+    METHODS,
+    SCENES,
+    STAGES,
+    apply_overrides,
+    default_settings,
+    stage_hash,
+)
 from warp_critic.reproduce.stages import Runner, prepare_out
 
 
@@ -45,7 +52,9 @@ class ReproduceConfig:
 
         for scene in SCENES:
             for m in METHODS:
-                check_fields_known(m, settings["metatrain"][scene][m], f"--set metatrain.{scene}.{m}")
+                check_fields_known(
+                    m, settings["metatrain"][scene][m], f"--set metatrain.{scene}.{m}"
+                )
         return settings
 
     def selected(self) -> list[str]:
@@ -64,29 +73,53 @@ def plan(settings: dict) -> dict[str, dict]:
     hashes = scene_hashes()
     seeds = settings["metatrain"]["seeds"]
     p: dict[str, dict] = {}
-    p["toy"] = {"group": "toy", "settings": settings["toy"], "hash": stage_hash("toy", settings["toy"]), "depends": {}}
-    p["landscape"] = {"group": "landscape", "settings": settings["landscape"], "depends": {},
-                      "hash": stage_hash("landscape", settings["landscape"], load_point_mass_hash())}
+    p["toy"] = {
+        "group": "toy",
+        "settings": settings["toy"],
+        "hash": stage_hash("toy", settings["toy"]),
+        "depends": {},
+    }
+    p["landscape"] = {
+        "group": "landscape",
+        "settings": settings["landscape"],
+        "depends": {},
+        "hash": stage_hash("landscape", settings["landscape"], load_point_mass_hash()),
+    }
     for scene in SCENES:
         for m in METHODS:
             values = settings["metatrain"][scene][m]
             name = f"metatrain-{scene}-{m}"
-            p[name] = {"group": "metatrain", "scene": scene, "method": m, "depends": {},
-                       "settings": {"values": values, "seeds": seeds, "scene_hash": hashes[scene]},
-                       "hash": stage_hash(name, values, seeds, hashes[scene])}
+            p[name] = {
+                "group": "metatrain",
+                "scene": scene,
+                "method": m,
+                "depends": {},
+                "settings": {"values": values, "seeds": seeds, "scene_hash": hashes[scene]},
+                "hash": stage_hash(name, values, seeds, hashes[scene]),
+            }
     for group, scene in (("maps", "reacher"), ("tables", "kuka")):
-        dep = {f"metatrain-{scene}-{m}": f"metatrain-{scene}-{m}-{p[f'metatrain-{scene}-{m}']['hash']}" for m in METHODS}
-        p[group] = {"group": group, "scene": scene, "settings": settings[group], "depends": dep,
-                    "hash": stage_hash(group, settings[group], dep)}
+        dep = {
+            f"metatrain-{scene}-{m}": f"metatrain-{scene}-{m}-{p[f'metatrain-{scene}-{m}']['hash']}"
+            for m in METHODS
+        }
+        p[group] = {
+            "group": group,
+            "scene": scene,
+            "settings": settings[group],
+            "depends": dep,
+            "hash": stage_hash(group, settings[group], dep),
+        }
     return p
 
 
 # the function each stage group runs, by import path (so that any executor can run it anywhere)
-STAGE_FUNCTIONS = {"toy": "warp_critic.reproduce.analyses:run_toy_stage",
-                   "landscape": "warp_critic.reproduce.analyses:run_landscape_stage",
-                   "metatrain": "warp_critic.reproduce.metatrain:run_metatrain_stage",
-                   "maps": "warp_critic.reproduce.generalize:run_maps_stage",
-                   "tables": "warp_critic.reproduce.generalize:run_tables_stage"}
+STAGE_FUNCTIONS = {
+    "toy": "warp_critic.reproduce.analyses:run_toy_stage",
+    "landscape": "warp_critic.reproduce.analyses:run_landscape_stage",
+    "metatrain": "warp_critic.reproduce.metatrain:run_metatrain_stage",
+    "maps": "warp_critic.reproduce.generalize:run_maps_stage",
+    "tables": "warp_critic.reproduce.generalize:run_tables_stage",
+}
 
 
 def needed(rc: ReproduceConfig, stages: dict) -> list[list[str]]:
@@ -120,17 +153,30 @@ def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, 
     elif group == "landscape":
         kwargs = {"s": settings["landscape"], "device": device}
     elif group == "metatrain":
-        kwargs = {"scene": st["scene"], "method": st["method"], "values": settings["metatrain"][st["scene"]][st["method"]],
-                  "seeds": settings["metatrain"]["seeds"], "device": device, "progress": progress}
+        kwargs = {
+            "scene": st["scene"],
+            "method": st["method"],
+            "values": settings["metatrain"][st["scene"]][st["method"]],
+            "seeds": settings["metatrain"]["seeds"],
+            "device": device,
+            "progress": progress,
+        }
     else:  # maps / tables read the complete meta-training directories of their robot
         from warp_critic.reproduce.stages import read_stage
 
         runs = {}
         for dep, dep_dir in st["depends"].items():  # metatrain-<robot>-<method> -> its directory
-            runs[stages_method(dep)] = [str(p.relative_to(out)) for p in run_dirs(out / dep_dir, read_stage(out / dep_dir))]
+            runs[stages_method(dep)] = [
+                str(p.relative_to(out)) for p in run_dirs(out / dep_dir, read_stage(out / dep_dir))
+            ]
         kwargs = {"s": settings[group], "runs": runs, "device": device, "progress": progress}
-    return Unit(name=name, dir_name=dir_name, fn=STAGE_FUNCTIONS[group], kwargs=kwargs,
-                reads=tuple(st["depends"].values()))
+    return Unit(
+        name=name,
+        dir_name=dir_name,
+        fn=STAGE_FUNCTIONS[group],
+        kwargs=kwargs,
+        reads=tuple(st["depends"].values()),
+    )
 
 
 def reproduce(rc: ReproduceConfig, executor=None) -> dict:
@@ -152,23 +198,42 @@ def reproduce(rc: ReproduceConfig, executor=None) -> dict:
 
     def done(unit, result, seconds):
         st = stages[unit.name]
-        runner.finish(st["group"], unit.name, st["hash"], st["settings"], result, seconds, depends=st["depends"])
+        runner.finish(
+            st["group"],
+            unit.name,
+            st["hash"],
+            st["settings"],
+            result,
+            seconds,
+            depends=st["depends"],
+        )
 
     waves = needed(rc, stages)
-    runner.total = sum(1 for wave in waves for n in wave if runner.stage_dir(n, stages[n]["hash"]).joinpath(
-        "stage.json").exists() is False)
-    runner.log(f"reproduce: {runner.total} stage(s) to run ({executor.name}); complete ones are skipped")
+    runner.total = sum(
+        1
+        for wave in waves
+        for n in wave
+        if runner.stage_dir(n, stages[n]["hash"]).joinpath("stage.json").exists() is False
+    )
+    runner.log(
+        f"reproduce: {runner.total} stage(s) to run ({executor.name}); complete ones are skipped"
+    )
     try:
         for wave in waves:
-            units = [make_unit(n, stages[n], settings, device, rc.progress, out) for n in wave
-                     if runner.complete(stages[n]["group"], n, stages[n]["hash"]) is None]
+            units = [
+                make_unit(n, stages[n], settings, device, rc.progress, out)
+                for n in wave
+                if runner.complete(stages[n]["group"], n, stages[n]["hash"]) is None
+            ]
             executor.run(units, out, done, runner.log)
     finally:
         executor.close()
     runner.log(f"reproduce: writing the report, {(time.perf_counter() - t0) / 60:.1f} min elapsed")
     from warp_critic.reproduce.report import write_report
 
-    report = write_report(out, stages, runner.records, config=rc, device=device, wall=time.perf_counter() - t0)
+    report = write_report(
+        out, stages, runner.records, config=rc, device=device, wall=time.perf_counter() - t0
+    )
     runner.log(f"reproduce: done in {(time.perf_counter() - t0):.1f} s; report {report}")
     return {"report": report, "records": runner.records, "out": out, "plan": stages}
 

@@ -16,21 +16,28 @@ from pathlib import Path
 import numpy as np
 
 from warp_critic.evaluation.protocol import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE3
-from warp_critic.running.rundir import atomic_write_text
 from warp_critic.reproduce.settings import METHOD_LABELS, METHODS, SCENES, STAGES
 from warp_critic.reproduce.stages import STAGE_FILE, StageRecord, read_stage
+from warp_critic.running.rundir import atomic_write_text
 
 COLORS = {"ours": "tab:blue", "ddpg": "tab:orange", "meta-critic": "tab:green"}
-PAPER_TABLES = {"table1": ("std", PAPER_TABLE1, "Table 1 (new goals, `table:gen_tasks_kuka`)"),
-                "table2": ("Mass", PAPER_TABLE2, "Table 2 (end-effector mass, `table:gen_kuka_mass`)"),
-                "table3": ("length", PAPER_TABLE3, "Table 3 (end-effector link length, `table:gen_kuka_link`)")}
-PAPER_ROW = {"ours": "paper: L_critic (ours)", "ddpg": "paper: DDPG", "meta-critic": "paper: Meta Critic"}
+PAPER_TABLES = {
+    "table1": ("std", PAPER_TABLE1, "Table 1 (new goals, `table:gen_tasks_kuka`)"),
+    "table2": ("Mass", PAPER_TABLE2, "Table 2 (end-effector mass, `table:gen_kuka_mass`)"),
+    "table3": ("length", PAPER_TABLE3, "Table 3 (end-effector link length, `table:gen_kuka_link`)"),
+}
+PAPER_ROW = {
+    "ours": "paper: L_critic (ours)",
+    "ddpg": "paper: DDPG",
+    "meta-critic": "paper: Meta Critic",
+}
 MARK = "✓"
 
 
 # ------------------------------------------------------------------------------------------------
 # collecting
 # ------------------------------------------------------------------------------------------------
+
 
 def collect(out: Path, plan: dict, records: dict) -> dict[str, StageRecord | None]:
     got: dict[str, StageRecord | None] = {}
@@ -49,9 +56,13 @@ def versions() -> dict[str, str]:
     import torch
     import warp
 
-    return {"python": platform.python_version(), "warp": str(getattr(warp.config, "version", "?")),
-            "newton": str(getattr(newton, "__version__", "?")), "torch": torch.__version__,
-            "platform": platform.platform()}
+    return {
+        "python": platform.python_version(),
+        "warp": str(getattr(warp.config, "version", "?")),
+        "newton": str(getattr(newton, "__version__", "?")),
+        "torch": torch.__version__,
+        "platform": platform.platform(),
+    }
 
 
 def _rel(p: Path, out: Path) -> str:
@@ -64,6 +75,7 @@ def _rel(p: Path, out: Path) -> str:
 # ------------------------------------------------------------------------------------------------
 # figures
 # ------------------------------------------------------------------------------------------------
+
 
 def _figure(w: float, h: float):
     from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -96,18 +108,27 @@ def plot_metatrain(path: Path, scene: str, recs: dict[str, StageRecord]) -> dict
         env = (it + 1) * res["env_steps_per_iteration"]
         mean, lo, hi = y.mean(0), y.min(0), y.max(0)
         for ax, x in ((ax_it, it), (ax_env, env)):
-            ax.plot(x, mean, color=COLORS[m], label=f"{METHOD_LABELS[m]} (mean of {len(curves)} seeds)")
+            ax.plot(
+                x, mean, color=COLORS[m], label=f"{METHOD_LABELS[m]} (mean of {len(curves)} seeds)"
+            )
             ax.fill_between(x, lo, hi, color=COLORS[m], alpha=0.2)
-        summary[m] = {"final_mean": float(y[:, -1].mean()), "final_std": float(y[:, -1].std()),
-                      "final_per_seed": y[:, -1].tolist(), "iterations": int(n), "env_steps": int(env[-1]),
-                      "first_mean": float(y[:, 0].mean())}
+        summary[m] = {
+            "final_mean": float(y[:, -1].mean()),
+            "final_std": float(y[:, -1].std()),
+            "final_per_seed": y[:, -1].tolist(),
+            "iterations": int(n),
+            "env_steps": int(env[-1]),
+            "first_mean": float(y[:, 0].mean()),
+        }
     for ax, xl in ((ax_it, "outer iteration"), (ax_env, "simulated environment steps")):
         ax.set_yscale("log")
         ax.set_xlabel(xl)
         ax.set_ylabel("final squared error ||q_T - g||^2 (rad^2)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
-    ax_it.set_title(f"{scene}: training goals, vs iterations (band: min-max over seeds)", fontsize=9)
+    ax_it.set_title(
+        f"{scene}: training goals, vs iterations (band: min-max over seeds)", fontsize=9
+    )
     ax_env.set_title(f"{scene}: vs environment steps", fontsize=9)
     _save(fig, path)
     return summary
@@ -128,8 +149,14 @@ def plot_goal_maps(path: Path, res: dict) -> None:
     ext = [ax0[0] - dq0, ax0[-1] + dq0, ax1[0] - dq1, ax1[-1] + dq1]
     im = None
     for ax, m, v in zip(axes, METHODS, vals):
-        im = ax.imshow(v.T, origin="lower", extent=ext, aspect="auto", cmap="viridis",
-                       norm=LogNorm(vmin=lo, vmax=max(hi, lo * 1.0001)))
+        im = ax.imshow(
+            v.T,
+            origin="lower",
+            extent=ext,
+            aspect="auto",
+            cmap="viridis",
+            norm=LogNorm(vmin=lo, vmax=max(hi, lo * 1.0001)),
+        )
         ax.plot(tg[:, 0], tg[:, 1], "x", color="red", markersize=10, mew=2, label="training goals")
         ax.set_title(f"{METHOD_LABELS[m]}: mean MSE {res['goals'][m]['mse_mean']:.3g}", fontsize=9)
         ax.set_xlabel("goal q1 (rad)")
@@ -163,6 +190,7 @@ def plot_sweep(path: Path, res: dict, kind: str, xlabel: str, trained: float) ->
 # tables
 # ------------------------------------------------------------------------------------------------
 
+
 def _fmt(x: float) -> str:
     return f"{x:.3g}"
 
@@ -181,7 +209,11 @@ def table_markdown(table: str, res: dict, source: str) -> tuple[list[str], list[
     # the same goals and initial policies for every method: the error before any update, for scale
     untrained = [cells[(ci, METHODS[0])].get("untrained_mse_mean") for ci in range(len(values))]
     if all(u is not None for u in untrained):
-        lines.append("| this run: untrained policies (no update) | " + " | ".join(_fmt(u) for u in untrained) + " |")
+        lines.append(
+            "| this run: untrained policies (no update) | "
+            + " | ".join(_fmt(u) for u in untrained)
+            + " |"
+        )
     for m in METHODS:
         row, hits, comparable, better = [], 0, 0, 0
         for ci, v in enumerate(values):
@@ -192,11 +224,23 @@ def table_markdown(table: str, res: dict, source: str) -> tuple[list[str], list[
             comparable += ref is not None
             hits += ok
             row.append(f"{_fmt(c['mse_mean'])}({_fmt(c['mse_std'])})" + (f" {MARK}" if ok else ""))
-            out_cells.append({"table": table, "column": label, "value": v, "method": m, "mse_mean": c["mse_mean"],
-                              "mse_std": c["mse_std"], "mse_per_seed": c["mse_per_seed"], "n": c["n"],
-                              "paper": list(ref) if ref else None, "at_or_below_paper": ok if ref else None,
-                              "untrained_mse_mean": untrained[ci],
-                              "file": source, "runs": [r + "/checkpoint.pt" for r in c["runs"]]})
+            out_cells.append(
+                {
+                    "table": table,
+                    "column": label,
+                    "value": v,
+                    "method": m,
+                    "mse_mean": c["mse_mean"],
+                    "mse_std": c["mse_std"],
+                    "mse_per_seed": c["mse_per_seed"],
+                    "n": c["n"],
+                    "paper": list(ref) if ref else None,
+                    "at_or_below_paper": ok if ref else None,
+                    "untrained_mse_mean": untrained[ci],
+                    "file": source,
+                    "runs": [r + "/checkpoint.pt" for r in c["runs"]],
+                }
+            )
         lines.append(f"| this run: {METHOD_LABELS[m]} | " + " | ".join(row) + " |")
         line = f"{METHOD_LABELS[m]}: at or below the paper's value in {hits} of {comparable} comparable columns"
         if hits < comparable:
@@ -211,20 +255,27 @@ def table_markdown(table: str, res: dict, source: str) -> tuple[list[str], list[
 # the report
 # ------------------------------------------------------------------------------------------------
 
+
 def _descent_table(L: dict) -> list[str]:
     """The markdown descent-success table of one landscape run (goal, theta*, one column per method)."""
     md = ["| goal | theta* | Q_true | Q_sup | L_critic |", "|---|---|---|---|---|"]
     for gi, gname in enumerate(L["goal_names"]):
         fr = L["fractions"][gi]
-        md.append(f"| {gname} ({L['goals'][gi][0]:g},{L['goals'][gi][1]:g}) | "
-                  f"({L['optima'][gi][0]:.2f},{L['optima'][gi][1]:.2f}) | {fr['Q_true']:.2f} | {fr['Q_sup']:.2f} | "
-                  f"{fr['L_critic']:.2f} |")
+        md.append(
+            f"| {gname} ({L['goals'][gi][0]:g},{L['goals'][gi][1]:g}) | "
+            f"({L['optima'][gi][0]:.2f},{L['optima'][gi][1]:.2f}) | {fr['Q_true']:.2f} | {fr['Q_sup']:.2f} | "
+            f"{fr['L_critic']:.2f} |"
+        )
     return md + [""]
 
 
 def _unseen(L: dict, method: str) -> float:
     """Mean descent success of ``method`` over the unseen goals (nan without any)."""
-    return float(np.mean([f[method] for f in L["fractions"][1:]])) if len(L["fractions"]) > 1 else float("nan")
+    return (
+        float(np.mean([f[method] for f in L["fractions"][1:]]))
+        if len(L["fractions"]) > 1
+        else float("nan")
+    )
 
 
 def write_report(out: Path, plan: dict, records: dict, *, config, device: str, wall: float) -> Path:
@@ -233,23 +284,37 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
     md: list[str] = []
-    results: dict = {"kind": "warp-critic/reproduce-results-v1", "tables": [], "metatrain": {}, "maps": None,
-                     "toy": None, "landscape": None, "stages": {}}
+    results: dict = {
+        "kind": "warp-critic/reproduce-results-v1",
+        "tables": [],
+        "metatrain": {},
+        "maps": None,
+        "toy": None,
+        "landscape": None,
+        "stages": {},
+    }
     figures: list[tuple[str, Path, str]] = []  # (title, png, sentence)
     ver = versions()
 
-    md += ["# Reproduction: Model Based Meta Learning of Critics for Policy Gradients (ICML 2022)", "",
-           f"- command: `{config.command}`",
-           f"- device: {device}; seeds: {config.seeds} ({', '.join(map(str, range(config.seeds)))}); "
-           f"{'QUICK settings (plumbing check, not the paper setting)' if config.quick else 'paper settings'}",
-           f"- versions: python {ver['python']}, warp {ver['warp']}, newton {ver['newton']}, torch {ver['torch']} "
-           f"({ver['platform']})",
-           f"- written {time.strftime('%Y-%m-%d %H:%M:%S')}; this call took {wall:.1f} s", "",
-           "## Stages", "",
-           "Wall time: of the call that completed the stage (a stage resumed over several calls counts only the "
-           "last). Training time: the sum of the stage's iteration times over all calls (the seeds of a "
-           "meta-training run batched, so it is the whole stage's).", "",
-           "| stage | directory | this call | wall time (s) | training time, all calls (s) |", "|---|---|---|---|---|"]
+    md += [
+        "# Reproduction: Model Based Meta Learning of Critics for Policy Gradients (ICML 2022)",
+        "",
+        f"- command: `{config.command}`",
+        f"- device: {device}; seeds: {config.seeds} ({', '.join(map(str, range(config.seeds)))}); "
+        f"{'QUICK settings (plumbing check, not the paper setting)' if config.quick else 'paper settings'}",
+        f"- versions: python {ver['python']}, warp {ver['warp']}, newton {ver['newton']}, torch {ver['torch']} "
+        f"({ver['platform']})",
+        f"- written {time.strftime('%Y-%m-%d %H:%M:%S')}; this call took {wall:.1f} s",
+        "",
+        "## Stages",
+        "",
+        "Wall time: of the call that completed the stage (a stage resumed over several calls counts only the "
+        "last). Training time: the sum of the stage's iteration times over all calls (the seeds of a "
+        "meta-training run batched, so it is the whole stage's).",
+        "",
+        "| stage | directory | this call | wall time (s) | training time, all calls (s) |",
+        "|---|---|---|---|---|",
+    ]
     for name, st in plan.items():
         r = recs.get(name)
         if r is None:
@@ -259,8 +324,12 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
         seeds = r.data["result"].get("seeds") if r.group == "metatrain" else None
         train = f"{next(iter(seeds.values()))['seconds']:.1f}" if seeds else "—"
         md.append(f"| {name} | `{r.dir.name}` | {status} | {r.data['seconds']:.1f} | {train} |")
-        results["stages"][name] = {"dir": r.dir.name, "file": f"{r.dir.name}/{STAGE_FILE}", "seconds": r.data["seconds"],
-                                   "ran_this_call": r.ran}
+        results["stages"][name] = {
+            "dir": r.dir.name,
+            "file": f"{r.dir.name}/{STAGE_FILE}",
+            "seconds": r.data["seconds"],
+            "ran_this_call": r.ran,
+        }
     md.append("")
 
     # -- section 4.1: toy ------------------------------------------------------------------------
@@ -270,18 +339,27 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
         md += ["Not run (stage `toy`).", ""]
     else:
         t = r.data["result"]
-        md += [t["table_markdown"], "",
-               f"The paper derives theta = 3 (optimal) for ours and theta = 4 for supervised Q learning and the "
-               f"Meta-Critic. Our loops converge to: ours {t['numerical']['ours']:.4g}, supervised "
-               f"{t['numerical']['supervised']:.4g}, Meta-Critic {t['numerical']['meta_critic']:.4g} (closed forms "
-               f"{t['closed_form']['ours']:g}, {t['closed_form']['supervised']:g}, {t['closed_form']['meta_critic']:g}).", ""]
+        md += [
+            t["table_markdown"],
+            "",
+            f"The paper derives theta = 3 (optimal) for ours and theta = 4 for supervised Q learning and the "
+            f"Meta-Critic. Our loops converge to: ours {t['numerical']['ours']:.4g}, supervised "
+            f"{t['numerical']['supervised']:.4g}, Meta-Critic {t['numerical']['meta_critic']:.4g} (closed forms "
+            f"{t['closed_form']['ours']:g}, {t['closed_form']['supervised']:g}, {t['closed_form']['meta_critic']:g}).",
+            "",
+        ]
         for m in ("supervised", "ours", "meta_critic"):
             dst = shutil.copyfile(r.dir / t["files"][m], figs / f"appendix_toy_{m}.png")
-            sentence = (f"Appendix figure ({m}): the learned critic and its policy gradient over theta; as in the paper's "
-                        f"appendix figures, the fitted critic's gradient vanishes at theta = {t['numerical'][m]:.3g}.")
+            sentence = (
+                f"Appendix figure ({m}): the learned critic and its policy gradient over theta; as in the paper's "
+                f"appendix figures, the fitted critic's gradient vanishes at theta = {t['numerical'][m]:.3g}."
+            )
             figures.append((f"Appendix: toy {m}", Path(dst), sentence))
-        results["toy"] = {"numerical": t["numerical"], "closed_form": t["closed_form"],
-                          "file": f"{r.dir.name}/{STAGE_FILE}"}
+        results["toy"] = {
+            "numerical": t["numerical"],
+            "closed_form": t["closed_form"],
+            "file": f"{r.dir.name}/{STAGE_FILE}",
+        }
 
     # -- section 4.2: landscape -------------------------------------------------------------------
     md += ["## Section 4.2: optimisation landscapes (Figures 1, 2)", ""]
@@ -291,47 +369,88 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
     else:
         L = r.data["result"]
         G = L.get("generalising")
-        md += ["Descent success (normalised-gradient descent from every grid point ends within the tolerance of "
-               "theta*), the paper's setting (one training goal, two fixed initial states, L_critic sees the goal "
-               "as an absolute input):", ""] + _descent_table(L)
+        md += [
+            "Descent success (normalised-gradient descent from every grid point ends within the tolerance of "
+            "theta*), the paper's setting (one training goal, two fixed initial states, L_critic sees the goal "
+            "as an absolute input):",
+            "",
+        ] + _descent_table(L)
         ours_new, sup_new = _unseen(L, "L_critic"), _unseen(L, "Q_sup")
         if G is not None:
             stage_settings = r.data.get("settings") or {}
             changed = {k: v for k, v in G["overrides"].items() if stage_settings.get(k) != v}
             over = ", ".join(f"{k} = {v}" for k, v in (changed or G["overrides"]).items())
             g_ours, g_sup = _unseen(G, "L_critic"), _unseen(G, "Q_sup")
-            verdict = ("so it generalises" if g_ours > ours_new
-                       else "no better than the paper's setting here (too few iterations to learn it?)")
-            md += [f"The closest setting that generalises, the same with {over} (landscapes in "
-                   f"`{r.dir.name}/{Path(G['files']['landscape'])}`):", ""] + _descent_table(G)
-            md += [f"In the paper's setting the critic's goal input never varies during training and it only sees "
-                   f"rollouts from two fixed initial states, so nothing ties its landscape to the goal: on the unseen "
-                   f"goals L_critic's field leads to theta* from {ours_new:.0%} of the grid (Q_sup {sup_new:.0%}). "
-                   f"Feeding the goal relative to the state (q - g: the critic is then translation-equivariant, as "
-                   f"the point mass is) and training from random initial states (a continuum of relative starts "
-                   f"q_0 - g, so that the critic has to learn how theta* depends on g - q_0 instead of "
-                   f"memorising two tasks) gives {g_ours:.0%} on the unseen goals (Q_sup {g_sup:.0%}), "
-                   f"{verdict}; docs/landscape.md, \"Generalisation to unseen goals\", has the measurements.", ""]
-            results_gen = {"fractions": G["fractions"], "goal_names": G["goal_names"], "overrides": G["overrides"]}
+            verdict = (
+                "so it generalises"
+                if g_ours > ours_new
+                else "no better than the paper's setting here (too few iterations to learn it?)"
+            )
+            md += [
+                f"The closest setting that generalises, the same with {over} (landscapes in "
+                f"`{r.dir.name}/{Path(G['files']['landscape'])}`):",
+                "",
+            ] + _descent_table(G)
+            md += [
+                f"In the paper's setting the critic's goal input never varies during training and it only sees "
+                f"rollouts from two fixed initial states, so nothing ties its landscape to the goal: on the unseen "
+                f"goals L_critic's field leads to theta* from {ours_new:.0%} of the grid (Q_sup {sup_new:.0%}). "
+                f"Feeding the goal relative to the state (q - g: the critic is then translation-equivariant, as "
+                f"the point mass is) and training from random initial states (a continuum of relative starts "
+                f"q_0 - g, so that the critic has to learn how theta* depends on g - q_0 instead of "
+                f"memorising two tasks) gives {g_ours:.0%} on the unseen goals (Q_sup {g_sup:.0%}), "
+                f'{verdict}; docs/landscape.md, "Generalisation to unseen goals", has the measurements.',
+                "",
+            ]
+            results_gen = {
+                "fractions": G["fractions"],
+                "goal_names": G["goal_names"],
+                "overrides": G["overrides"],
+            }
         else:
             results_gen = None
-        claim = "as in the paper" if ours_new > sup_new else "NOT as in the paper (L_critic does not beat Q_sup here)"
+        claim = (
+            "as in the paper"
+            if ours_new > sup_new
+            else "NOT as in the paper (L_critic does not beat Q_sup here)"
+        )
         d1 = shutil.copyfile(r.dir / "landscape.png", figs / "fig1_landscape.png")
         d2 = shutil.copyfile(r.dir / "exploration.png", figs / "fig2_exploration.png")
-        figures.append(("Figure 1: landscapes", Path(d1),
-                        f"Figure 1: Q_true, Q_sup and L_critic over the policy parameters for the training goal and two "
-                        f"unseen goals; on the unseen goals L_critic's field leads to theta* from {ours_new:.0%} of the "
-                        f"grid vs Q_sup's {sup_new:.0%}, {claim}."))
+        figures.append(
+            (
+                "Figure 1: landscapes",
+                Path(d1),
+                f"Figure 1: Q_true, Q_sup and L_critic over the policy parameters for the training goal and two "
+                f"unseen goals; on the unseen goals L_critic's field leads to theta* from {ours_new:.0%} of the "
+                f"grid vs Q_sup's {sup_new:.0%}, {claim}.",
+            )
+        )
         if G is not None:
-            d1g = shutil.copyfile(r.dir / G["files"]["landscape"], figs / "fig1_landscape_generalising.png")
-            figures.append(("Figure 1: landscapes, generalising setting", Path(d1g),
-                            f"Figure 1 in the closest setting that generalises ({over}): on the unseen goals "
-                            f"L_critic's field leads to theta* from {g_ours:.0%} of the grid vs Q_sup's {g_sup:.0%}."))
-        figures.append(("Figure 2: exploration", Path(d2),
-                        "Figure 2: the updated policy parameters theta_new visited during meta-training (dark to light "
-                        "over the iterations), the paper's 'sampling the parameter space' figure."))
-        results["landscape"] = {"fractions": L["fractions"], "goal_names": L["goal_names"],
-                                "generalising": results_gen, "file": f"{r.dir.name}/{STAGE_FILE}"}
+            d1g = shutil.copyfile(
+                r.dir / G["files"]["landscape"], figs / "fig1_landscape_generalising.png"
+            )
+            figures.append(
+                (
+                    "Figure 1: landscapes, generalising setting",
+                    Path(d1g),
+                    f"Figure 1 in the closest setting that generalises ({over}): on the unseen goals "
+                    f"L_critic's field leads to theta* from {g_ours:.0%} of the grid vs Q_sup's {g_sup:.0%}.",
+                )
+            )
+        figures.append(
+            (
+                "Figure 2: exploration",
+                Path(d2),
+                "Figure 2: the updated policy parameters theta_new visited during meta-training (dark to light "
+                "over the iterations), the paper's 'sampling the parameter space' figure.",
+            )
+        )
+        results["landscape"] = {
+            "fractions": L["fractions"],
+            "goal_names": L["goal_names"],
+            "generalising": results_gen,
+            "file": f"{r.dir.name}/{STAGE_FILE}",
+        }
 
     # -- Figure 3: meta-training --------------------------------------------------------------------
     md += ["## Figure 3: meta-training (reacher, KUKA)", ""]
@@ -343,23 +462,35 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
             continue
         png = figs / f"fig3_metatrain_{scene}.png"
         summary = plot_metatrain(png, scene, got)
-        md += [f"### {scene}", "", "| method | iterations | env steps | env steps counted | final ||q_T-g||^2 mean(std) over seeds | first iteration |",
-               "|---|---|---|---|---|---|"]
+        md += [
+            f"### {scene}",
+            "",
+            "| method | iterations | env steps | env steps counted | final ||q_T-g||^2 mean(std) over seeds | first iteration |",
+            "|---|---|---|---|---|---|",
+        ]
         for m, s in summary.items():
             res = got[m].data["result"]
-            md.append(f"| {METHOD_LABELS[m]} | {s['iterations']} | {s['env_steps']} | {res['env_steps_counted']} | "
-                      f"{_fmt(s['final_mean'])}({_fmt(s['final_std'])}) | {_fmt(s['first_mean'])} |")
-            results["metatrain"][f"{scene}/{m}"] = {**s, "file": f"{got[m].dir.name}/{STAGE_FILE}",
-                                                    "runs": [f"{got[m].dir.name}/{v['run_dir']}/metrics.jsonl"
-                                                             for v in res["seeds"].values()]}
+            md.append(
+                f"| {METHOD_LABELS[m]} | {s['iterations']} | {s['env_steps']} | {res['env_steps_counted']} | "
+                f"{_fmt(s['final_mean'])}({_fmt(s['final_std'])}) | {_fmt(s['first_mean'])} |"
+            )
+            results["metatrain"][f"{scene}/{m}"] = {
+                **s,
+                "file": f"{got[m].dir.name}/{STAGE_FILE}",
+                "runs": [
+                    f"{got[m].dir.name}/{v['run_dir']}/metrics.jsonl" for v in res["seeds"].values()
+                ],
+            }
         md.append("")
         if "ours" in summary and len(summary) == 3:
             best = min(summary, key=lambda m: summary[m]["final_mean"])
             spread = {m: s["final_std"] for m, s in summary.items()}
-            sentence = (f"Figure 3 ({scene}): final error vs iterations and environment steps; the paper reports ours as "
-                        f"the most sample-efficient and least seed-sensitive. Here the lowest final error is "
-                        f"{METHOD_LABELS[best]}'s ({'as' if best == 'ours' else 'NOT as'} in the paper) and the smallest "
-                        f"spread over seeds is {METHOD_LABELS[min(spread, key=spread.get)]}'s.")
+            sentence = (
+                f"Figure 3 ({scene}): final error vs iterations and environment steps; the paper reports ours as "
+                f"the most sample-efficient and least seed-sensitive. Here the lowest final error is "
+                f"{METHOD_LABELS[best]}'s ({'as' if best == 'ours' else 'NOT as'} in the paper) and the smallest "
+                f"spread over seeds is {METHOD_LABELS[min(spread, key=spread.get)]}'s."
+            )
         else:
             sentence = f"Figure 3 ({scene}): training curves of the methods that ran."
         figures.append((f"Figure 3: meta-training {scene}", png, sentence))
@@ -371,43 +502,77 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
         md += ["Not run (stage `maps`).", ""]
     else:
         M = r.data["result"]
-        p4, p5, p6 = figs / "fig4_reacher_goals.png", figs / "fig5_reacher_mass.png", figs / "fig6_reacher_length.png"
+        p4, p5, p6 = (
+            figs / "fig4_reacher_goals.png",
+            figs / "fig5_reacher_mass.png",
+            figs / "fig6_reacher_length.png",
+        )
         plot_goal_maps(p4, M)
         tip = float(np.linalg.norm(M["tip_offset"]))
         plot_sweep(p5, M, "mass", "mass added at the link-2 tip (kg); link 1 unchanged", 0.0)
         plot_sweep(p6, M, "length", "link-2 length (m); link 1 unchanged", tip)
         gm = {m: M["goals"][m]["mse_mean"] for m in METHODS}
         best = min(gm, key=gm.get)
-        md += [f"Goal grid: {len(M['axis_q1'])} x {len(M['axis_q2'])} goals over the joint limits, "
-               f"{M['policy_updates']} policy update(s), horizon {M['horizon']}; mean MSE over the grid: "
-               + ", ".join(f"{METHOD_LABELS[m]} {_fmt(v)}" for m, v in gm.items()) + ".", "",
-               "Dynamics: our `Variant` changes only the end-effector link (link 2 of the reacher): its tip mass and "
-               "its length. The paper's Figures 5 and 6 are 2-D grids over links 1 AND 2; link 1 would need a per-world "
-               "mass/length change of a non-end-effector link in `Scene.build_model` (warp_critic/physics/scene.py), which the "
-               "library does not offer, so Figures 5 and 6 here are 1-D sweeps over link 2 at the four training goals.", ""]
+        md += [
+            f"Goal grid: {len(M['axis_q1'])} x {len(M['axis_q2'])} goals over the joint limits, "
+            f"{M['policy_updates']} policy update(s), horizon {M['horizon']}; mean MSE over the grid: "
+            + ", ".join(f"{METHOD_LABELS[m]} {_fmt(v)}" for m, v in gm.items())
+            + ".",
+            "",
+            "Dynamics: our `Variant` changes only the end-effector link (link 2 of the reacher): its tip mass and "
+            "its length. The paper's Figures 5 and 6 are 2-D grids over links 1 AND 2; link 1 would need a per-world "
+            "mass/length change of a non-end-effector link in `Scene.build_model` (warp_critic/physics/scene.py), which the "
+            "library does not offer, so Figures 5 and 6 here are 1-D sweeps over link 2 at the four training goals.",
+            "",
+        ]
         for kind, unit in (("mass", "added kg"), ("length", "m")):
-            md += [f"| {kind} ({unit}) | " + " | ".join(f"{c['value']:g}" for c in M[kind]["ours"]) + " |",
-                   "|---" * (len(M[kind]["ours"]) + 1) + "|"]
+            md += [
+                f"| {kind} ({unit}) | "
+                + " | ".join(f"{c['value']:g}" for c in M[kind]["ours"])
+                + " |",
+                "|---" * (len(M[kind]["ours"]) + 1) + "|",
+            ]
             for m in METHODS:
-                md.append(f"| {METHOD_LABELS[m]} | " + " | ".join(f"{_fmt(c['mse_mean'])}({_fmt(c['mse_std'])})"
-                                                                  for c in M[kind][m]) + " |")
+                md.append(
+                    f"| {METHOD_LABELS[m]} | "
+                    + " | ".join(f"{_fmt(c['mse_mean'])}({_fmt(c['mse_std'])})" for c in M[kind][m])
+                    + " |"
+                )
             md.append("")
-        figures.append(("Figure 4: reacher new goals", p4,
-                        f"Figure 4: MSE per new goal over the reacher's joint space (red crosses: training goals); the "
-                        f"paper shows ours generalising over the whole space and the baselines not; here the lowest grid "
-                        f"mean is {METHOD_LABELS[best]}'s ({'as' if best == 'ours' else 'NOT as'} in the paper)."))
+        figures.append(
+            (
+                "Figure 4: reacher new goals",
+                p4,
+                f"Figure 4: MSE per new goal over the reacher's joint space (red crosses: training goals); the "
+                f"paper shows ours generalising over the whole space and the baselines not; here the lowest grid "
+                f"mean is {METHOD_LABELS[best]}'s ({'as' if best == 'ours' else 'NOT as'} in the paper).",
+            )
+        )
         for fig_no, kind, png in ((5, "mass", p5), (6, "length", p6)):
             avg = {m: float(np.mean([c["mse_mean"] for c in M[kind][m]])) for m in METHODS}
             b = min(avg, key=avg.get)
-            figures.append((f"Figure {fig_no}: reacher {kind}", png,
-                            f"Figure {fig_no}: MSE at the training goals vs the link-2 {kind} (1-D, see above; the paper's "
-                            f"figure is a 2-D grid over both links); lowest average: {METHOD_LABELS[b]} "
-                            f"({'as' if b == 'ours' else 'NOT as'} in the paper)."))
-        results["maps"] = {"goals_mse_mean": gm, "mass": M["mass"], "length": M["length"],
-                           "file": f"{r.dir.name}/{STAGE_FILE}", "raw_file": f"{r.dir.name}/{M['raw_file']}"}
+            figures.append(
+                (
+                    f"Figure {fig_no}: reacher {kind}",
+                    png,
+                    f"Figure {fig_no}: MSE at the training goals vs the link-2 {kind} (1-D, see above; the paper's "
+                    f"figure is a 2-D grid over both links); lowest average: {METHOD_LABELS[b]} "
+                    f"({'as' if b == 'ours' else 'NOT as'} in the paper).",
+                )
+            )
+        results["maps"] = {
+            "goals_mse_mean": gm,
+            "mass": M["mass"],
+            "length": M["length"],
+            "file": f"{r.dir.name}/{STAGE_FILE}",
+            "raw_file": f"{r.dir.name}/{M['raw_file']}",
+        }
 
     # -- Tables 1-3 -------------------------------------------------------------------------------
-    md += ["## Tables 1-3: KUKA generalisation (MSE over the joints, mean(std) over seeds x goals x inits)", ""]
+    md += [
+        "## Tables 1-3: KUKA generalisation (MSE over the joints, mean(std) over seeds x goals x inits)",
+        "",
+    ]
     r = recs.get("tables")
     if r is None:
         md += ["Not run (stage `tables`).", ""]
@@ -415,22 +580,34 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
         T = r.data["result"]
         src = f"{r.dir.name}/{STAGE_FILE}"
         if config.quick:
-            md += ["QUICK settings: a handful of training iterations on short rollouts; these numbers check the "
-                   "plumbing and say nothing about the paper's claims.", ""]
-        md += [f"Cells marked {MARK} are at or below the paper's value for the same method. Protocol: "
-               f"{T['cells'][0]['n'] // max(1, len(T['cells'][0]['mse_per_seed']))} policies (goals x inits) per seed and "
-               f"cell, {len(T['cells'][0]['mse_per_seed'])} seeds, {T['policy_updates']} policy update(s) with each "
-               f"run's critic, horizon {T['horizon']}, the same goals and initialisations for the three methods; "
-               f"all {T['worlds']} worlds in {T['batches']} batched model(s). Raw errors: `{r.dir.name}/{T['raw_file']}`.", ""]
+            md += [
+                "QUICK settings: a handful of training iterations on short rollouts; these numbers check the "
+                "plumbing and say nothing about the paper's claims.",
+                "",
+            ]
+        md += [
+            f"Cells marked {MARK} are at or below the paper's value for the same method. Protocol: "
+            f"{T['cells'][0]['n'] // max(1, len(T['cells'][0]['mse_per_seed']))} policies (goals x inits) per seed and "
+            f"cell, {len(T['cells'][0]['mse_per_seed'])} seeds, {T['policy_updates']} policy update(s) with each "
+            f"run's critic, horizon {T['horizon']}, the same goals and initialisations for the three methods; "
+            f"all {T['worlds']} worlds in {T['batches']} batched model(s). Raw errors: `{r.dir.name}/{T['raw_file']}`.",
+            "",
+        ]
         for table in ("table1", "table2", "table3"):
             lines, cells, summary = table_markdown(table, T, src)
             md += [f"### {PAPER_TABLES[table][2]}", ""]
             if table == "table2":
-                md += ["Our column is the mass ADDED at the end-effector tip (0 = as trained); the paper's column is "
-                       "the end-effector mass with training at 3.12 kg, so the columns are not the same quantity.", ""]
+                md += [
+                    "Our column is the mass ADDED at the end-effector tip (0 = as trained); the paper's column is "
+                    "the end-effector mass with training at 3.12 kg, so the columns are not the same quantity.",
+                    "",
+                ]
             if table == "table3":
-                md += ["Our column SETS the end-effector link length (tip distance of link 7); the paper's training "
-                       "value is 'length=0'.", ""]
+                md += [
+                    "Our column SETS the end-effector link length (tip distance of link 7); the paper's training "
+                    "value is 'length=0'.",
+                    "",
+                ]
             md += lines + [""] + [f"- {s}." for s in summary] + [""]
             results["tables"] += cells
 
@@ -438,7 +615,9 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
     for title, png, sentence in figures:
         md += [f"### {title}", "", f"![{title}]({_rel(png, out)})", "", sentence, ""]
     results["figures"] = [{"title": t, "file": _rel(p, out), "sentence": s} for t, p, s in figures]
-    results.update(command=config.command, device=device, seeds=config.seeds, quick=config.quick, versions=ver)
+    results.update(
+        command=config.command, device=device, seeds=config.seeds, quick=config.quick, versions=ver
+    )
     text = "\n".join(md) + "\n"
     atomic_write_text(out / "results.json", json.dumps(results, indent=1) + "\n")
     atomic_write_text(out / "REPORT.md", text)
@@ -454,8 +633,12 @@ def write_recording(path: Path, text: str, figures: list[tuple[str, Path, str]])
 
     names = [f"figures/{Path(p).stem}" for _, p, _ in figures]
     views = [rrb.Spatial2DView(origin=n, name=t) for n, (t, _, _) in zip(names, figures)]
-    blueprint = rrb.Blueprint(rrb.Tabs(rrb.TextDocumentView(origin="report", name="REPORT.md"),
-                                       rrb.Grid(*views, name="figures") if views else rrb.Grid(name="figures")))
+    blueprint = rrb.Blueprint(
+        rrb.Tabs(
+            rrb.TextDocumentView(origin="report", name="REPORT.md"),
+            rrb.Grid(*views, name="figures") if views else rrb.Grid(name="figures"),
+        )
+    )
     tmp = path.with_name(f".{path.name}.tmp")
     rec = Recorder(tmp, application_id="warp-critic-reproduce", blueprint=blueprint)
     try:

@@ -47,18 +47,37 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
     for scene, name in (("reacher", "reacher"), ("kuka", "kuka-table1")):
         ours = preset(name)
         task = {k: ours[k] for k in TASK_FIELDS if k in ours}
-        per = {"ours": ours,
-               "ddpg": {**preset("ddpg"), **task, "inner_steps": ours.get("inner_steps", 1)},
-               "meta-critic": {**preset("meta-critic"), **task, "inner_steps": ours.get("inner_steps", 1)}}
+        per = {
+            "ours": ours,
+            "ddpg": {**preset("ddpg"), **task, "inner_steps": ours.get("inner_steps", 1)},
+            "meta-critic": {
+                **preset("meta-critic"),
+                **task,
+                "inner_steps": ours.get("inner_steps", 1),
+            },
+        }
         for m in METHODS:
             per[m].pop("method", None)
             per[m]["record_every"] = 50
-            if quick:  # plumbing only: a handful of iterations on short rollouts with small networks
-                per[m].update(iterations=6, horizon=10, worlds_per_goal=2, critic_hidden=32,
-                              checkpoint_every=3, record_every=3)
+            if (
+                quick
+            ):  # plumbing only: a handful of iterations on short rollouts with small networks
+                per[m].update(
+                    iterations=6,
+                    horizon=10,
+                    worlds_per_goal=2,
+                    critic_hidden=32,
+                    checkpoint_every=3,
+                    record_every=3,
+                )
                 if m != "ours":  # and one alpha search (at the last checkpoint) instead of two
-                    per[m].update(updates_per_iteration=4, warmup_iterations=1, batch_size=16, actor_hidden=16,
-                                  checkpoint_every=6)
+                    per[m].update(
+                        updates_per_iteration=4,
+                        warmup_iterations=1,
+                        batch_size=16,
+                        actor_hidden=16,
+                        checkpoint_every=6,
+                    )
         out[scene] = per
     out["seeds"] = seeds
     return out
@@ -73,29 +92,79 @@ def default_settings(quick: bool, seeds: int) -> dict[str, dict]:
     """The settings of every stage for ``--quick`` or the paper, with seeds ``0 .. seeds-1``."""
     seed_list = list(range(seeds))
     s: dict[str, dict] = {
-        "toy": {"s0": -6.0, "goal": 0.0, "iters": 500, "theta0": 0.1, "alpha": 0.5, "plain_lr": 0.05, "grid": 400},
-        "landscape": {"iterations": 300, "grid": 21, "range": 5.0, "seed": 0, "horizon": 20, "dt": 0.05,
-                      "substeps": 1, "alpha": 1.0, "lr": 1e-3, "inits_per_state": 4, "goal": [1.0, 1.0],
-                      "test_goals": [[-1.5, 0.5], [0.5, -1.5]], "init_states": [[0.0, 0.0], [-0.5, 0.5]],
-                      "sup_alpha": 0.05, "sup_fit_steps": 10, "sup_reward": "terminal", "tolerance": 0.5,
-                      "ours_goal_input": "absolute", "train_goals": [], "goal_std": 0.0, "start_std": 0.0,
-                      # the closest setting that generalises to unseen goals (docs/landscape.md): the same
-                      # with these values; the stage runs both
-                      "generalising": {"ours_goal_input": "relative", "train_goals": [], "goal_std": 0.0,
-                                       "start_std": 1.0}},
+        "toy": {
+            "s0": -6.0,
+            "goal": 0.0,
+            "iters": 500,
+            "theta0": 0.1,
+            "alpha": 0.5,
+            "plain_lr": 0.05,
+            "grid": 400,
+        },
+        "landscape": {
+            "iterations": 300,
+            "grid": 21,
+            "range": 5.0,
+            "seed": 0,
+            "horizon": 20,
+            "dt": 0.05,
+            "substeps": 1,
+            "alpha": 1.0,
+            "lr": 1e-3,
+            "inits_per_state": 4,
+            "goal": [1.0, 1.0],
+            "test_goals": [[-1.5, 0.5], [0.5, -1.5]],
+            "init_states": [[0.0, 0.0], [-0.5, 0.5]],
+            "sup_alpha": 0.05,
+            "sup_fit_steps": 10,
+            "sup_reward": "terminal",
+            "tolerance": 0.5,
+            "ours_goal_input": "absolute",
+            "train_goals": [],
+            "goal_std": 0.0,
+            "start_std": 0.0,
+            # the closest setting that generalises to unseen goals (docs/landscape.md): the same
+            # with these values; the stage runs both
+            "generalising": {
+                "ours_goal_input": "relative",
+                "train_goals": [],
+                "goal_std": 0.0,
+                "start_std": 1.0,
+            },
+        },
         "metatrain": _metatrain(quick, seed_list),
-        "tables": {"stds": [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0],
-                   "masses": [float(m) for m in range(10)],
-                   "lengths": [0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0],
-                   "goal_noise": "per-joint", "around": [0, 1], "num_goals": 10, "inits": 5,
-                   "dynamics_goal_std": 0.1, "seed": 1, "max_worlds": 4096},
-        "maps": {"grid": 15, "limit_fraction": 0.95, "masses": [0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0],
-                 "lengths": [0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0], "inits": 5, "seed": 1, "max_worlds": 4096},
+        "tables": {
+            "stds": [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0],
+            "masses": [float(m) for m in range(10)],
+            "lengths": [0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0],
+            "goal_noise": "per-joint",
+            "around": [0, 1],
+            "num_goals": 10,
+            "inits": 5,
+            "dynamics_goal_std": 0.1,
+            "seed": 1,
+            "max_worlds": 4096,
+        },
+        "maps": {
+            "grid": 15,
+            "limit_fraction": 0.95,
+            "masses": [0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0],
+            "lengths": [0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0],
+            "inits": 5,
+            "seed": 1,
+            "max_worlds": 4096,
+        },
     }
     if quick:
         s["toy"].update(iters=100, grid=60)
         s["landscape"].update(iterations=12, grid=7, inits_per_state=2, sup_fit_steps=2)
-        s["tables"].update(stds=[0.1, 0.5, 1.0], masses=[0.0, 4.0, 9.0], lengths=[0.2, 1.0, 2.0], num_goals=3, inits=2)
+        s["tables"].update(
+            stds=[0.1, 0.5, 1.0],
+            masses=[0.0, 4.0, 9.0],
+            lengths=[0.2, 1.0, 2.0],
+            num_goals=3,
+            inits=2,
+        )
         s["maps"].update(grid=4, masses=[0.0, 2.0, 4.0], lengths=[0.5, 1.0, 1.5], inits=2)
     return s
 
@@ -120,7 +189,9 @@ def apply_overrides(settings: dict, overrides: list[str] | None) -> dict:
         for i, k in enumerate(keys[:-1]):
             if not isinstance(node, dict) or k not in node:
                 known = ", ".join(sorted(node)) if isinstance(node, dict) else "nothing"
-                raise FieldError("set", f"{item!r}: unknown key {'.'.join(keys[:i + 1])!r} (known: {known})")
+                raise FieldError(
+                    "set", f"{item!r}: unknown key {'.'.join(keys[: i + 1])!r} (known: {known})"
+                )
             node = node[k]
         last = keys[-1]
         if not isinstance(node, dict) or (last not in node and len(keys) < 4):

@@ -14,9 +14,10 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from warp_critic.core.errors import FieldError, UserError
 from warp_critic.running.rundir import atomic_write_text, check_output_dir
@@ -32,7 +33,10 @@ def prepare_out(out: Path) -> Path:
     if out.exists() and not out.is_dir():
         raise FieldError("out", f"{out}: is a file, not a directory")
     if out.is_dir() and any(out.iterdir()) and not (out / MARKER).is_file():
-        raise FieldError("out", f"{out}: is not empty and not a reproduce output (no {MARKER}); not writing into it")
+        raise FieldError(
+            "out",
+            f"{out}: is not empty and not a reproduce output (no {MARKER}); not writing into it",
+        )
     try:
         check_output_dir(out, "")
     except UserError as e:
@@ -42,7 +46,9 @@ def prepare_out(out: Path) -> Path:
     except OSError as e:
         raise FieldError("out", f"{out}: cannot create ({e.strerror or e})") from None
     if not (out / MARKER).is_file():
-        atomic_write_text(out / MARKER, json.dumps({"kind": "warp-critic/reproduce-output-v1"}) + "\n")
+        atomic_write_text(
+            out / MARKER, json.dumps({"kind": "warp-critic/reproduce-output-v1"}) + "\n"
+        )
     return out
 
 
@@ -73,7 +79,9 @@ class Runner:
 
     out: Path
     total: int = 0  # stages to run in this call (set once the complete ones are known)
-    log: Callable[[str], None] = field(default=lambda s: (sys.stderr.write(s + "\n"), sys.stderr.flush()))
+    log: Callable[[str], None] = field(
+        default=lambda s: (sys.stderr.write(s + "\n"), sys.stderr.flush())
+    )
     records: dict[str, StageRecord] = field(default_factory=dict)
     t0: float = field(default_factory=time.perf_counter)
     done: int = 0  # stages that ran to completion in this call
@@ -92,20 +100,38 @@ class Runner:
         self.records[name] = rec
         return rec
 
-    def finish(self, group: str, name: str, h: str, settings: Any, result: dict, seconds: float,
-               depends: dict[str, str] | None = None) -> StageRecord:
+    def finish(
+        self,
+        group: str,
+        name: str,
+        h: str,
+        settings: Any,
+        result: dict,
+        seconds: float,
+        depends: dict[str, str] | None = None,
+    ) -> StageRecord:
         """Record a stage that ran: ``stage.json`` is written last, atomically (then it is complete)."""
         d = self.stage_dir(name, h)
-        data = {"kind": STAGE_KIND, "stage": name, "group": group, "hash": h, "settings": settings,
-                "depends": depends or {}, "seconds": seconds,
-                "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "result": result}
+        data = {
+            "kind": STAGE_KIND,
+            "stage": name,
+            "group": group,
+            "hash": h,
+            "settings": settings,
+            "depends": depends or {},
+            "seconds": seconds,
+            "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+            "result": result,
+        }
         atomic_write_text(d / STAGE_FILE, json.dumps(data, indent=1, default=_jsonable) + "\n")
         rec = StageRecord(group, name, d, read_stage(d), ran=True, seconds_this_call=seconds)
         self.records[name] = rec
         self.done += 1
         minutes = (time.perf_counter() - self.t0) / 60
-        self.log(f"reproduce: {name} done in {seconds / 60:.1f} min ({self.done} of {self.total} stages of this "
-                 f"call, {minutes:.1f} min elapsed)")
+        self.log(
+            f"reproduce: {name} done in {seconds / 60:.1f} min ({self.done} of {self.total} stages of this "
+            f"call, {minutes:.1f} min elapsed)"
+        )
         return rec
 
 

@@ -19,16 +19,25 @@ from __future__ import annotations
 import contextlib
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import torch
 
 from warp_critic.core.errors import DivergenceError, FieldError, UserError
-from warp_critic.running.rundir import RunDir, _fault_point
 from warp_critic.core.runtime import restore_rng, seed_everything, set_threads
-from warp_critic.running.task import RUNTIME_FIELDS, Task, TaskConfig, build_task, check_fields, check_memory, load_task_scene
+from warp_critic.running.rundir import RunDir, _fault_point
+from warp_critic.running.task import (
+    RUNTIME_FIELDS,
+    Task,
+    TaskConfig,
+    build_task,
+    check_fields,
+    check_memory,
+    load_task_scene,
+)
 
 
 class Interrupted(KeyboardInterrupt):
@@ -55,13 +64,15 @@ class TrainResult:
     metrics: list[dict] = field(default_factory=list)
     model: Any = None  # the critic (ours) or the agent (baselines)
     config: TaskConfig | None = None
-    seeds: list["TrainResult"] = field(default_factory=list)  # every seed's result (a batched run)
+    seeds: list[TrainResult] = field(default_factory=list)  # every seed's result (a batched run)
 
 
 Callback = Callable[[IterationInfo], None]
 
 
-def config_differences(saved: TaskConfig, requested: TaskConfig, given: set[str] | None) -> list[tuple[str, Any, Any]]:
+def config_differences(
+    saved: TaskConfig, requested: TaskConfig, given: set[str] | None
+) -> list[tuple[str, Any, Any]]:
     """Settings of ``requested`` that contradict the saved run (runtime fields excepted).
 
     ``given``: the fields the user set explicitly (the CLI knows); ``None`` = every field that differs
@@ -75,10 +86,16 @@ def config_differences(saved: TaskConfig, requested: TaskConfig, given: set[str]
         if given is not None:
             if f.name not in given:
                 continue
-        elif value is None or value == (f.default if not callable(f.default_factory) else f.default_factory()):
+        elif value is None or value == (
+            f.default if not callable(f.default_factory) else f.default_factory()
+        ):
             continue
         old = getattr(saved, f.name, None)
-        if value != old and not (isinstance(value, (int, float)) and isinstance(old, (int, float)) and float(value) == float(old)):
+        if value != old and not (
+            isinstance(value, (int, float))
+            and isinstance(old, (int, float))
+            and float(value) == float(old)
+        ):
             diffs.append((f.name, old, value))
     return diffs
 
@@ -92,20 +109,26 @@ class ResumeMismatch(UserError):
 
     def render(self, name) -> str:
         listed = "; ".join(f"{name(f)} {old!r} -> {new!r}" for f, old, new in self.diffs)
-        return (f"resume: run directory {self.run_dir} was trained with other settings ({listed}); "
-                f"its saved settings hold on resume")
+        return (
+            f"resume: run directory {self.run_dir} was trained with other settings ({listed}); "
+            f"its saved settings hold on resume"
+        )
 
 
 class SeedRun:
     """One seed's share of a session: its config, run directory, checkpoint, generator and files."""
 
     def __init__(self, cfg: TaskConfig, given: set[str] | None, require: tuple[str, ...] = ()):
-        self.require = ("config", "iteration", "method", "rng_state", "torch_rng_state") + tuple(require)
+        self.require = ("config", "iteration", "method", "rng_state", "torch_rng_state") + tuple(
+            require
+        )
         self.ckpt: dict | None = None
         self.rundir: RunDir | None = None
         self.cfg = self._resume_config(cfg, given) if cfg.resume else cfg
         self.gen: torch.Generator | None = None
-        self.global_rng: torch.Tensor | None = None  # torch's global RNG state after this seed's set-up
+        self.global_rng: torch.Tensor | None = (
+            None  # torch's global RNG state after this seed's set-up
+        )
         self.history: list[dict] = []
         self.metrics_file = None
         self.recorder = None
@@ -120,8 +143,11 @@ class SeedRun:
         cfg = self.cfg
         if self.ckpt is not None:
             if self.ckpt.get("scene_hash") and scene_hash and self.ckpt["scene_hash"] != scene_hash:
-                raise FieldError("scene", f"{cfg.scene} differs in content from the scene the run in "
-                                          f"{cfg.out} was trained on")
+                raise FieldError(
+                    "scene",
+                    f"{cfg.scene} differs in content from the scene the run in "
+                    f"{cfg.out} was trained on",
+                )
             self.rundir.lock()
         else:
             self.rundir = RunDir.create(cfg.out, cfg.method)
@@ -134,25 +160,39 @@ class SeedRun:
         self.rundir = RunDir.open(requested.out)
         ckpt = self.rundir.load_checkpoint(require=self.require)
         if ckpt["method"] != requested.method:
-            raise UserError(f"run directory {requested.out}: holds a {ckpt['method']} run, not {requested.method}")
+            raise UserError(
+                f"run directory {requested.out}: holds a {ckpt['method']} run, not {requested.method}"
+            )
         try:
             saved = cls.from_dict(ckpt["config"])
             check_fields(saved)
         except (TypeError, UserError) as e:
-            raise UserError(f"run directory {requested.out}: its checkpoint holds an unusable config ({e})") from None
+            raise UserError(
+                f"run directory {requested.out}: its checkpoint holds an unusable config ({e})"
+            ) from None
         diffs = config_differences(saved, requested, given)
         if diffs:
             raise ResumeMismatch(requested.out, diffs)
         done = ckpt["iteration"] + 1
         asked = given is None or "iterations" in given
-        iterations = requested.iterations if asked and requested.iterations is not None else saved.iterations
+        iterations = (
+            requested.iterations if asked and requested.iterations is not None else saved.iterations
+        )
         if iterations < done:
-            raise FieldError("iterations", f"may only grow on resume: the run in {requested.out} has "
-                                           f"{done} iterations done (got {iterations})")
+            raise FieldError(
+                "iterations",
+                f"may only grow on resume: the run in {requested.out} has "
+                f"{done} iterations done (got {iterations})",
+            )
         if not Path(requested.scene).is_file():
             raise FieldError("scene", f"{requested.scene}: no such scene file")
         # a moved or copied run directory records where it now is; the scene is the one given now
-        saved.iterations, saved.resume, saved.device, saved.out = iterations, True, requested.device, requested.out
+        saved.iterations, saved.resume, saved.device, saved.out = (
+            iterations,
+            True,
+            requested.device,
+            requested.out,
+        )
         saved.scene, saved.seeds = requested.scene, None
         if requested.cpu_threads is not None:
             saved.cpu_threads = requested.cpu_threads
@@ -179,8 +219,14 @@ class Session:
     """One run of one method, for one seed or several seeds sharing one simulator (see the module
     docstring). With ``S`` seeds the task holds ``S`` copies of the ``G x K`` worlds, seed-major."""
 
-    def __init__(self, cfg: TaskConfig, *, differentiable: bool, given: set[str] | None = None,
-                 require: tuple[str, ...] = ()):
+    def __init__(
+        self,
+        cfg: TaskConfig,
+        *,
+        differentiable: bool,
+        given: set[str] | None = None,
+        require: tuple[str, ...] = (),
+    ):
         """``require``: the checkpoint entries the method reads on resume (checked up front)."""
         check_fields(cfg)
         self.runs: list[SeedRun] = []
@@ -189,8 +235,10 @@ class Session:
                 self.runs.append(SeedRun(c, given, require))
             starts = {r.start for r in self.runs}
             if len(starts) > 1:
-                raise UserError("resume: the seeds' run directories are at different iterations "
-                                f"({', '.join(f'{r.cfg.out}: {r.start}' for r in self.runs)}); resume them one by one")
+                raise UserError(
+                    "resume: the seeds' run directories are at different iterations "
+                    f"({', '.join(f'{r.cfg.out}: {r.start}' for r in self.runs)}); resume them one by one"
+                )
             scene = None
             for r in self.runs:
                 scene = load_task_scene(r.cfg)
@@ -199,7 +247,9 @@ class Session:
                 check_memory(self.runs[0].cfg, scene.dof, copies=len(self.runs))
             for r in self.runs:
                 r.claim(self.scene_hash)
-            self.task: Task = build_task(self.runs[0].cfg, scene, differentiable=differentiable, copies=len(self.runs))
+            self.task: Task = build_task(
+                self.runs[0].cfg, scene, differentiable=differentiable, copies=len(self.runs)
+            )
         except BaseException:
             self.close(failed=True)
             raise
@@ -231,8 +281,10 @@ class Session:
         try:
             yield
         except (KeyError, RuntimeError, ValueError, TypeError, IndexError, AttributeError) as e:
-            raise UserError(f"{self.runs[i].rundir.checkpoint_path}: its states do not fit this {self.cfg.method} "
-                            f"run ({type(e).__name__}: {' '.join(str(e).split())[:160]})") from None
+            raise UserError(
+                f"{self.runs[i].rundir.checkpoint_path}: its states do not fit this {self.cfg.method} "
+                f"run ({type(e).__name__}: {' '.join(str(e).split())[:160]})"
+            ) from None
 
     def restore(self, i: int = 0) -> dict | None:
         """Seed ``i``'s checkpoint to load the method's states from (RNG restored), or ``None``."""
@@ -246,17 +298,33 @@ class Session:
     def _checkpoint(self, run: SeedRun, iteration: int, state: dict) -> None:
         scene = self.task.scene
         torch_rng = run.global_rng if run.global_rng is not None else torch.get_rng_state()
-        run.rundir.save_checkpoint({
-            "method": run.cfg.method, "scene": scene.name, "scene_path": str(run.cfg.scene),
-            "scene_hash": self.scene_hash, "dof": scene.dof, "config": run.cfg.to_dict(),
-            "iteration": iteration, "rng_state": run.gen.get_state(), "torch_rng_state": torch_rng, **state,
-            "metrics": _plain(run.history[-1]) if run.history else {},
-        })
+        run.rundir.save_checkpoint(
+            {
+                "method": run.cfg.method,
+                "scene": scene.name,
+                "scene_path": str(run.cfg.scene),
+                "scene_hash": self.scene_hash,
+                "dof": scene.dof,
+                "config": run.cfg.to_dict(),
+                "iteration": iteration,
+                "rng_state": run.gen.get_state(),
+                "torch_rng_state": torch_rng,
+                **state,
+                "metrics": _plain(run.history[-1]) if run.history else {},
+            }
+        )
         run.last_checkpoint = iteration
 
-    def run(self, step: Callable[[int], tuple[list[dict], Any]], state: Callable[[int], dict], *,
-            callbacks: list[Callback] | None = None, progress: bool = True, record: bool = True,
-            describe: Callable[[dict], str] = lambda row: f"task {row['task_loss']:.4f}") -> TrainResult:
+    def run(
+        self,
+        step: Callable[[int], tuple[list[dict], Any]],
+        state: Callable[[int], dict],
+        *,
+        callbacks: list[Callback] | None = None,
+        progress: bool = True,
+        record: bool = True,
+        describe: Callable[[dict], str] = lambda row: f"task {row['task_loss']:.4f}",
+    ) -> TrainResult:
         """Iterate ``step`` from the resume point to the last iteration.
 
         ``step(it)`` returns one metrics row per seed and the iteration's result (trajectories over
@@ -278,9 +346,16 @@ class Session:
 
                     r.rundir.merge_recording()  # a segment left by a killed process
                     r.recorder = TrainingRecorder(
-                        r.rundir.segment_path(), task.sim, task.goals, r.history, record_every=cfg.record_every,
-                        last_iteration=cfg.iterations - 1, method=cfg.method,
-                        recording_id=r.rundir.marker().get("run_id"), world_offset=i * task.Wc)
+                        r.rundir.segment_path(),
+                        task.sim,
+                        task.goals,
+                        r.history,
+                        record_every=cfg.record_every,
+                        last_iteration=cfg.iterations - 1,
+                        method=cfg.method,
+                        recording_id=r.rundir.marker().get("run_id"),
+                        world_offset=i * task.Wc,
+                    )
                 r.metrics_file = r.rundir.open_metrics(r.history)
             bar = progress_bar(cfg.iterations, self.start, enabled=progress)
             for it in range(self.start, cfg.iterations):
@@ -288,7 +363,11 @@ class Session:
                 try:
                     rows, result = step(it)
                 except DivergenceError as e:
-                    err = DivergenceError(f"iteration {it}: {e} -- stopped; {self._kept()}", world=e.world, step=e.step)
+                    err = DivergenceError(
+                        f"iteration {it}: {e} -- stopped; {self._kept()}",
+                        world=e.world,
+                        step=e.step,
+                    )
                     err.checkpoint = self.runs[0].last_checkpoint
                     raise err from None
                 seconds = time.perf_counter() - t0
@@ -300,10 +379,14 @@ class Session:
                     r.metrics_file.flush()
                     _fault_point("metrics-row")
                     info = IterationInfo(it, row, result, task.goal_index_of(i))
-                    for cb in ([r.recorder] if r.recorder is not None else []) + (callbacks if i == 0 else []):
+                    for cb in ([r.recorder] if r.recorder is not None else []) + (
+                        callbacks if i == 0 else []
+                    ):
                         cb(info)
                     if checkpoint_now:
-                        if r.recorder is not None:  # on disk before the checkpoint: a crash loses nothing it covers
+                        if (
+                            r.recorder is not None
+                        ):  # on disk before the checkpoint: a crash loses nothing it covers
                             r.recorder.flush()
                         self._checkpoint(r, it, state(i))
                 bar.set_description_str(f"{describe(rows[0])} {seconds:.2f}s/it", refresh=False)
@@ -311,7 +394,9 @@ class Session:
         except KeyboardInterrupt as e:
             if isinstance(e, Interrupted):
                 raise
-            raise Interrupted(f"interrupted; {self._kept()}", self.runs[0].last_checkpoint) from None
+            raise Interrupted(
+                f"interrupted; {self._kept()}", self.runs[0].last_checkpoint
+            ) from None
         finally:
             if bar is not None:
                 bar.close()
@@ -334,11 +419,13 @@ class Session:
         if done == {None}:
             return f"no checkpoint was written yet in the {len(self.runs)} seed run directories under {where}"
         if len(done) == 1:
-            return (f"the checkpoints of iteration {done.pop()} in the {len(self.runs)} seed run directories "
-                    f"under {where} are kept")
+            return (
+                f"the checkpoints of iteration {done.pop()} in the {len(self.runs)} seed run directories "
+                f"under {where} are kept"
+            )
         return "; ".join(r.kept() for r in self.runs)
 
-    def __enter__(self) -> "Session":
+    def __enter__(self) -> Session:
         return self
 
     def __exit__(self, exc_type, exc, tb) -> None:
@@ -356,7 +443,11 @@ class Session:
 
 
 def _plain(row: dict) -> dict:
-    return {k: v for k, v in row.items() if isinstance(v, (int, float, str, list, dict, bool, type(None)))}
+    return {
+        k: v
+        for k, v in row.items()
+        if isinstance(v, (int, float, str, list, dict, bool, type(None)))
+    }
 
 
 def _json_line(row: dict) -> str:
@@ -368,6 +459,7 @@ def _json_line(row: dict) -> str:
 # ------------------------------------------------------------------------------------------------
 # progress
 # ------------------------------------------------------------------------------------------------
+
 
 class _Lines:
     """A file for tqdm that turns its carriage-return refreshes into whole lines (logs, CI)."""
@@ -389,6 +481,15 @@ def progress_bar(total: int, start: int = 0, enabled: bool = True, desc: str | N
     from tqdm import tqdm
 
     tty = sys.stderr.isatty()
-    return tqdm(total=total, initial=start, disable=not enabled, desc=desc or "", dynamic_ncols=tty, ascii=not tty,
-                file=sys.stderr if tty else _Lines(sys.stderr), mininterval=0.1 if tty else 5.0,
-                leave=True, bar_format="[{bar:24}] {n_fmt}/{total_fmt} {desc} [{elapsed}<{remaining}]")
+    return tqdm(
+        total=total,
+        initial=start,
+        disable=not enabled,
+        desc=desc or "",
+        dynamic_ncols=tty,
+        ascii=not tty,
+        file=sys.stderr if tty else _Lines(sys.stderr),
+        mininterval=0.1 if tty else 5.0,
+        leave=True,
+        bar_format="[{bar:24}] {n_fmt}/{total_fmt} {desc} [{elapsed}<{remaining}]",
+    )

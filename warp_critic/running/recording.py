@@ -9,8 +9,8 @@ Timelines: ``iteration`` (outer/training iterations), ``step`` (simulation steps
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 import rerun as rr
@@ -26,8 +26,13 @@ class Recorder:
         blueprint: optional layout sent with the recording.
     """
 
-    def __init__(self, path: str | Path, application_id: str = "warp-critic", blueprint=None,
-                 recording_id: str | None = None):
+    def __init__(
+        self,
+        path: str | Path,
+        application_id: str = "warp-critic",
+        blueprint=None,
+        recording_id: str | None = None,
+    ):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         # segments of one run (a resumed run records each segment) share the run's recording id, so
@@ -65,34 +70,68 @@ class Recorder:
         """An ``(H, W, 3|4)`` uint8 image."""
         self.stream.log(entity, rr.Image(np.asarray(rgb)), static=static)
 
-    def tensor(self, entity: str, array: np.ndarray, dim_names: Sequence[str] | None = None,
-               static: bool = False) -> None:
+    def tensor(
+        self,
+        entity: str,
+        array: np.ndarray,
+        dim_names: Sequence[str] | None = None,
+        static: bool = False,
+    ) -> None:
         self.stream.log(entity, rr.Tensor(np.asarray(array), dim_names=dim_names), static=static)
 
-    def arrows2d(self, entity: str, origins: np.ndarray, vectors: np.ndarray,
-                 colors: np.ndarray | None = None, static: bool = False) -> None:
-        self.stream.log(entity, rr.Arrows2D(origins=np.asarray(origins), vectors=np.asarray(vectors),
-                                            colors=colors), static=static)
+    def arrows2d(
+        self,
+        entity: str,
+        origins: np.ndarray,
+        vectors: np.ndarray,
+        colors: np.ndarray | None = None,
+        static: bool = False,
+    ) -> None:
+        self.stream.log(
+            entity,
+            rr.Arrows2D(origins=np.asarray(origins), vectors=np.asarray(vectors), colors=colors),
+            static=static,
+        )
 
-    def points2d(self, entity: str, positions: np.ndarray, colors=None, radii=None,
-                 static: bool = False) -> None:
-        self.stream.log(entity, rr.Points2D(np.asarray(positions), colors=colors, radii=radii),
-                        static=static)
+    def points2d(
+        self, entity: str, positions: np.ndarray, colors=None, radii=None, static: bool = False
+    ) -> None:
+        self.stream.log(
+            entity, rr.Points2D(np.asarray(positions), colors=colors, radii=radii), static=static
+        )
 
     def points3d(self, entity: str, positions: np.ndarray, colors=None, radii=None) -> None:
         self.stream.log(entity, rr.Points3D(np.asarray(positions), colors=colors, radii=radii))
 
-    def line_strips3d(self, entity: str, strips: Sequence[np.ndarray], colors=None, radii=None) -> None:
-        self.stream.log(entity, rr.LineStrips3D([np.asarray(s) for s in strips], colors=colors, radii=radii))
+    def line_strips3d(
+        self, entity: str, strips: Sequence[np.ndarray], colors=None, radii=None
+    ) -> None:
+        self.stream.log(
+            entity, rr.LineStrips3D([np.asarray(s) for s in strips], colors=colors, radii=radii)
+        )
 
     def transform(self, entity: str, translation: np.ndarray, quat_xyzw: np.ndarray) -> None:
         """A rigid transform (metres, unit quaternion in x, y, z, w order)."""
-        self.stream.log(entity, rr.Transform3D(translation=np.asarray(translation, dtype=np.float32),
-                                               quaternion=rr.Quaternion(xyzw=np.asarray(quat_xyzw, dtype=np.float32))))
+        self.stream.log(
+            entity,
+            rr.Transform3D(
+                translation=np.asarray(translation, dtype=np.float32),
+                quaternion=rr.Quaternion(xyzw=np.asarray(quat_xyzw, dtype=np.float32)),
+            ),
+        )
 
-    def static_box(self, entity: str, half_size: Sequence[float], center=(0.0, 0.0, 0.0), color=None) -> None:
-        self.stream.log(entity, rr.Boxes3D(half_sizes=[list(half_size)], centers=[list(center)],
-                                           colors=None if color is None else [list(color)]), static=True)
+    def static_box(
+        self, entity: str, half_size: Sequence[float], center=(0.0, 0.0, 0.0), color=None
+    ) -> None:
+        self.stream.log(
+            entity,
+            rr.Boxes3D(
+                half_sizes=[list(half_size)],
+                centers=[list(center)],
+                colors=None if color is None else [list(color)],
+            ),
+            static=True,
+        )
 
     def text(self, entity: str, text: str, static: bool = True) -> None:
         self.stream.log(entity, rr.TextDocument(text, media_type="text/markdown"), static=static)
@@ -105,7 +144,7 @@ class Recorder:
             self.stream.disconnect()
             self._closed = True
 
-    def __enter__(self) -> "Recorder":
+    def __enter__(self) -> Recorder:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -120,8 +159,18 @@ def read_entity_paths(path: str | Path) -> set[str]:
     return {str(p) for p in schema.entity_paths()}
 
 
-_GOAL_COLORS = [(230, 25, 75), (60, 180, 75), (0, 130, 200), (245, 130, 48), (145, 30, 180),
-                (70, 240, 240), (240, 50, 230), (210, 245, 60), (128, 128, 0), (0, 0, 128)]
+_GOAL_COLORS = [
+    (230, 25, 75),
+    (60, 180, 75),
+    (0, 130, 200),
+    (245, 130, 48),
+    (145, 30, 180),
+    (70, 240, 240),
+    (240, 50, 230),
+    (210, 245, 60),
+    (128, 128, 0),
+    (0, 0, 128),
+]
 
 
 class TrainingRecorder:
@@ -142,11 +191,23 @@ class TrainingRecorder:
         last_iteration: index of the final iteration (always recorded).
     """
 
-    def __init__(self, path, sim, goals, history=(), record_every: int = 50, last_iteration: int | None = None,
-                 method: str = "ours", recording_id: str | None = None, world_offset: int = 0):
+    def __init__(
+        self,
+        path,
+        sim,
+        goals,
+        history=(),
+        record_every: int = 50,
+        last_iteration: int | None = None,
+        method: str = "ours",
+        recording_id: str | None = None,
+        world_offset: int = 0,
+    ):
         self.sim, self.goals = sim, goals
         self.record_every, self.last_iteration = record_every, last_iteration
-        self.world_offset = world_offset  # this run's first world in ``sim`` (runs of several seeds share one)
+        self.world_offset = (
+            world_offset  # this run's first world in ``sim`` (runs of several seeds share one)
+        )
         G = goals.shape[0]
         blueprint = rrb.Blueprint(
             rrb.Horizontal(
@@ -154,14 +215,22 @@ class TrainingRecorder:
                     rrb.TimeSeriesView(origin="/train/task_loss", name="task loss per goal"),
                     rrb.TimeSeriesView(origin="/train/policy", name="policy parameters"),
                 ),
-                rrb.Spatial3DView(origin="/rollout", name="rollouts (before / after the inner update)"),
+                rrb.Spatial3DView(
+                    origin="/rollout", name="rollouts (before / after the inner update)"
+                ),
             ),
             collapse_panels=True,
         )
-        self.rec = Recorder(path, application_id=f"warp-critic {method} {sim.scene.name}", blueprint=blueprint,
-                            recording_id=recording_id)
+        self.rec = Recorder(
+            path,
+            application_id=f"warp-critic {method} {sim.scene.name}",
+            blueprint=blueprint,
+            recording_id=recording_id,
+        )
         for i in range(G):
-            self.rec.series_style(f"train/task_loss/goal{i}", f"goal {i}", _GOAL_COLORS[i % len(_GOAL_COLORS)])
+            self.rec.series_style(
+                f"train/task_loss/goal{i}", f"goal {i}", _GOAL_COLORS[i % len(_GOAL_COLORS)]
+            )
         self.rec.series_style("train/task_loss/mean", "mean")
         self.rec.series_style("train/task_loss_before/mean", "untrained policies")
         for row in history:
@@ -191,8 +260,14 @@ class TrainingRecorder:
                 self.rec.scalar(f"train/policy/theta{j}", float(flat[j]))
         it = info.iteration
         if it == 0 or (it + 1) % self.record_every == 0 or it == self.last_iteration:
-            worlds = [int(np.nonzero(info.goal_index.cpu().numpy() == g)[0][0]) for g in range(self.goals.shape[0])]
-            for label, traj in (("before", getattr(res, "before", None)), ("after", getattr(res, "after", None))):
+            worlds = [
+                int(np.nonzero(info.goal_index.cpu().numpy() == g)[0][0])
+                for g in range(self.goals.shape[0])
+            ]
+            for label, traj in (
+                ("before", getattr(res, "before", None)),
+                ("after", getattr(res, "after", None)),
+            ):
                 if traj is not None:
                     self.log_rollout(f"rollout/{label}/it{it}", traj.q, worlds)
 
@@ -202,7 +277,9 @@ class TrainingRecorder:
         poses = np.stack([self.sim.body_poses(q[t]) for t in range(T1)])  # (T+1, W, B, 7)
         tips = np.stack([self.sim.tip_positions(q[t]) for t in range(T1)])  # (T+1, W, 3)
         for gi, w in enumerate(worlds):
-            self.stream_static_strip(f"{prefix}/goal{gi}/tip_path", tips[:, w], _GOAL_COLORS[gi % len(_GOAL_COLORS)])
+            self.stream_static_strip(
+                f"{prefix}/goal{gi}/tip_path", tips[:, w], _GOAL_COLORS[gi % len(_GOAL_COLORS)]
+            )
         for gi, w in enumerate(worlds):
             color = _GOAL_COLORS[gi % len(_GOAL_COLORS)]
             for b in range(poses.shape[2]):
@@ -210,8 +287,12 @@ class TrainingRecorder:
             for t in range(T1):
                 self.rec.set_time("step", t)
                 for b in range(poses.shape[2]):
-                    self.rec.transform(f"{prefix}/goal{gi}/body{b}", poses[t, w, b, :3], poses[t, w, b, 3:])
-                self.rec.line_strips3d(f"{prefix}/goal{gi}/skeleton", [poses[t, w, :, :3]], colors=[color])
+                    self.rec.transform(
+                        f"{prefix}/goal{gi}/body{b}", poses[t, w, b, :3], poses[t, w, b, 3:]
+                    )
+                self.rec.line_strips3d(
+                    f"{prefix}/goal{gi}/skeleton", [poses[t, w, :, :3]], colors=[color]
+                )
         self.rec.reset_time()
 
     def flush(self) -> None:

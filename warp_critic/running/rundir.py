@@ -33,8 +33,8 @@ import sys
 import tempfile
 import time
 import uuid
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Iterable
 
 import torch
 
@@ -121,6 +121,7 @@ def atomic_torch_save(obj, path: Path) -> None:
 # output locations
 # ------------------------------------------------------------------------------------------------
 
+
 def _writable_dir(path: Path, what: str) -> None:
     """``path`` exists as a directory we can write into, or can be created."""
     probe = Path(path)
@@ -155,7 +156,9 @@ def check_output_file(path: str | Path, what: str = "output") -> Path:
         except (OSError, ValueError, UnicodeDecodeError):
             old = None
         if not (isinstance(old, dict) and old.get("kind", "").startswith("warp-critic/")):
-            raise UserError(f"{what} {path}: exists and is not a warp-critic result; not overwriting it")
+            raise UserError(
+                f"{what} {path}: exists and is not a warp-critic result; not overwriting it"
+            )
     _writable_dir(path.parent, what)
     return path
 
@@ -168,6 +171,7 @@ def write_result(path: Path, result: dict) -> None:
 # ------------------------------------------------------------------------------------------------
 # the run directory
 # ------------------------------------------------------------------------------------------------
+
 
 def _pid_alive(pid: int) -> bool:
     try:
@@ -189,7 +193,7 @@ class RunDir:
 
     # -- claiming ---------------------------------------------------------------------------------
     @classmethod
-    def create(cls, path: str | Path, method: str) -> "RunDir":
+    def create(cls, path: str | Path, method: str) -> RunDir:
         """Claim ``path`` for a new run (it must not exist, or be empty). Locks it."""
         rd = cls(path)
         p = rd.path
@@ -198,7 +202,9 @@ class RunDir:
         if p.is_dir() and any(p.iterdir()):
             if (p / MARKER).is_file() or (p / "checkpoint.pt").is_file():
                 raise RunExistsError(f"run directory {p}: already holds a run")
-            raise UserError(f"run directory {p}: is not empty and not a warp-critic run; not writing into it")
+            raise UserError(
+                f"run directory {p}: is not empty and not a warp-critic run; not writing into it"
+            )
         _writable_dir(p, "run directory")
         rd._created = []  # the folders this run made, deepest first (removed again if it fails early)
         probe = p
@@ -210,16 +216,22 @@ class RunDir:
         except OSError as e:
             raise UserError(f"run directory {p}: cannot create ({e.strerror or e})") from None
         rd.lock()
-        atomic_write_text(p / MARKER, json.dumps({"kind": RUN_KIND, "method": method, "run_id": uuid.uuid4().hex}))
+        atomic_write_text(
+            p / MARKER, json.dumps({"kind": RUN_KIND, "method": method, "run_id": uuid.uuid4().hex})
+        )
         return rd
 
     @classmethod
-    def open(cls, path: str | Path) -> "RunDir":
+    def open(cls, path: str | Path) -> RunDir:
         """An existing run directory of ours (read-only until :meth:`lock`)."""
         rd = cls(path)
         p = rd.path
         if not p.is_dir():
-            raise UserError(f"{p}: run directory not found" if not p.exists() else f"{p}: is a file, not a run directory")
+            raise UserError(
+                f"{p}: run directory not found"
+                if not p.exists()
+                else f"{p}: is a file, not a run directory"
+            )
         if not (p / MARKER).is_file() and not (p / "checkpoint.pt").is_file():
             raise UserError(f"{p}: no checkpoint.pt: not a warp-critic run directory")
         return rd
@@ -267,16 +279,24 @@ class RunDir:
                     owner = {}
                 pid, host = owner.get("pid"), owner.get("host")
                 if isinstance(pid, int) and host == me["host"] and not _pid_alive(pid):
-                    warn(f"run directory {self.path}: taking over the lock of process {pid}, which is no longer running")
+                    warn(
+                        f"run directory {self.path}: taking over the lock of process {pid}, which is no longer running"
+                    )
                     with contextlib.suppress(OSError):
                         path.unlink()
                     continue
                 if not owner:  # unreadable: being written right now, or garbage
-                    raise UserError(f"run directory {self.path}: is locked ({LOCK} exists; delete it if no process uses the run)")
-                raise UserError(f"run directory {self.path}: in use by process {pid} on {host} "
-                                f"(its {LOCK}; delete it if that process is gone)")
+                    raise UserError(
+                        f"run directory {self.path}: is locked ({LOCK} exists; delete it if no process uses the run)"
+                    ) from None
+                raise UserError(
+                    f"run directory {self.path}: in use by process {pid} on {host} "
+                    f"(its {LOCK}; delete it if that process is gone)"
+                ) from None
             except OSError as e:
-                raise UserError(f"run directory {self.path}: cannot lock ({e.strerror or e})") from None
+                raise UserError(
+                    f"run directory {self.path}: cannot lock ({e.strerror or e})"
+                ) from None
             with os.fdopen(fd, "w") as f:
                 f.write(json.dumps(me))
             self._locked = True
@@ -326,7 +346,11 @@ class RunDir:
                 if i == len(lines) - 1:
                     break  # the last line of a killed run
                 raise UserError(f"{path}: line {i + 1} is not JSON") from None
-            if isinstance(row, dict) and isinstance(row.get("iteration"), int) and row["iteration"] < upto:
+            if (
+                isinstance(row, dict)
+                and isinstance(row.get("iteration"), int)
+                and row["iteration"] < upto
+            ):
                 rows.append(row)
         return rows
 
@@ -354,14 +378,22 @@ class RunDir:
         seg = self.segment_path()
         if not seg.exists():
             return
-        sources = [str(p) for p in (self.recording_path, seg) if p.exists() and p.stat().st_size > 0]
+        sources = [
+            str(p) for p in (self.recording_path, seg) if p.exists() and p.stat().st_size > 0
+        ]
         if sources:
             with _atomic(self.recording_path) as tmp:
-                proc = subprocess.run([sys.executable, "-m", "rerun_cli", "rrd", "merge", *sources, "-o", str(tmp)],
-                                      capture_output=True, text=True, env={**os.environ, "RUST_LOG": "error"})
+                proc = subprocess.run(
+                    [sys.executable, "-m", "rerun_cli", "rrd", "merge", *sources, "-o", str(tmp)],
+                    capture_output=True,
+                    text=True,
+                    env={**os.environ, "RUST_LOG": "error"},
+                )
                 if proc.returncode != 0:
-                    raise UserError(f"{self.recording_path}: cannot merge the recording segment "
-                                    f"({(proc.stderr.strip().splitlines() or ['rerun rrd merge failed'])[-1]})")
+                    raise UserError(
+                        f"{self.recording_path}: cannot merge the recording segment "
+                        f"({(proc.stderr.strip().splitlines() or ['rerun rrd merge failed'])[-1]})"
+                    )
         seg.unlink()
 
 
@@ -374,8 +406,11 @@ def load_checkpoint_file(path: str | Path, require: Iterable[str] = ()) -> dict:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as e:  # corrupt, not a torch file, or objects that need code to load
         text = str(e).lower()
-        reason = "it holds objects that need code to load (refused)" if "unsupported global" in text \
+        reason = (
+            "it holds objects that need code to load (refused)"
+            if "unsupported global" in text
             else f"not a readable checkpoint ({type(e).__name__})"
+        )
         raise UserError(f"{path}: {reason}") from None
     if not isinstance(ckpt, dict) or ckpt.get("kind") != CHECKPOINT_KIND:
         raise UserError(f"{path}: not a warp-critic checkpoint")

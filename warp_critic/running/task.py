@@ -27,19 +27,38 @@ from typing import Any
 import torch
 
 from warp_critic.core.errors import FieldError
-from warp_critic.learning.networks import Normalizer
 from warp_critic.core.runtime import MAX_SEED, check_threads
+from warp_critic.learning.networks import Normalizer
 from warp_critic.physics.scene import Scene, Variant, load_scene
 from warp_critic.physics.simulator import STANDARD_GRAVITY
 
 # Used for a field that neither the user nor the scene sets.
-GENERIC_DEFAULTS: dict[str, Any] = dict(horizon=50, dt=0.01, substeps=1, qd_scale=5.0, alpha=1e-3, lr=3e-3,
-                                        gravity=STANDARD_GRAVITY, start_std=0.0, home_starts=0, iterations=300,
-                                        inner_steps=1, critic_input="full")
+GENERIC_DEFAULTS: dict[str, Any] = dict(
+    horizon=50,
+    dt=0.01,
+    substeps=1,
+    qd_scale=5.0,
+    alpha=1e-3,
+    lr=3e-3,
+    gravity=STANDARD_GRAVITY,
+    start_std=0.0,
+    home_starts=0,
+    iterations=300,
+    inner_steps=1,
+    critic_input="full",
+)
 DEVICES = ("auto", "cpu", "cuda")
 # Fields that say where/how a run executes, not what it computes: they may change on --resume.
-RUNTIME_FIELDS = ("out", "device", "resume", "cpu_threads", "checkpoint_every", "record_every", "iterations",
-                  "seeds")
+RUNTIME_FIELDS = (
+    "out",
+    "device",
+    "resume",
+    "cpu_threads",
+    "checkpoint_every",
+    "record_every",
+    "iterations",
+    "seeds",
+)
 
 
 def spec(default, help: str, *, gt=None, ge=None, le=None, lt=None, cap=None, choices=None):
@@ -49,7 +68,14 @@ def spec(default, help: str, *, gt=None, ge=None, le=None, lt=None, cap=None, ch
     beyond which a value can only be a typo (it would not fit in memory or time).
     """
     meta = {"help": help}
-    for key, value in (("gt", gt), ("ge", ge), ("le", le), ("lt", lt), ("cap", cap), ("choices", choices)):
+    for key, value in (
+        ("gt", gt),
+        ("ge", ge),
+        ("le", le),
+        ("lt", lt),
+        ("cap", cap),
+        ("choices", choices),
+    ):
         if value is not None:
             meta[key] = value
     if isinstance(default, list):
@@ -77,7 +103,11 @@ def check_fields(cfg) -> None:
         if value is None:
             continue
         hint = hints[f.name]
-        base = next((a for a in typing.get_args(hint) if a is not type(None)), hint) if typing.get_args(hint) else hint
+        base = (
+            next((a for a in typing.get_args(hint) if a is not type(None)), hint)
+            if typing.get_args(hint)
+            else hint
+        )
         if typing.get_origin(base) is list:
             values = [x for g in value for x in (g if isinstance(g, list) else [g])]
         else:
@@ -94,7 +124,9 @@ def _check_value(name: str, x, meta) -> None:
     if not isinstance(x, (int, float)) or not math.isfinite(x):
         raise FieldError(name, f"must be a finite number (got {x!r})")
     if "cap" in meta and x > meta["cap"]:
-        raise FieldError(name, f"must be <= {meta['cap']} (got {x!r}; larger values cannot be meant)")
+        raise FieldError(
+            name, f"must be <= {meta['cap']} (got {x!r}; larger values cannot be meant)"
+        )
     lo = ("gt", meta["gt"]) if "gt" in meta else ("ge", meta["ge"]) if "ge" in meta else None
     hi = ("lt", meta["lt"]) if "lt" in meta else ("le", meta["le"]) if "le" in meta else None
     ok_lo = lo is None or (x > lo[1] if lo[0] == "gt" else x >= lo[1])
@@ -102,8 +134,11 @@ def _check_value(name: str, x, meta) -> None:
     if ok_lo and ok_hi:
         return
     if lo and hi:
-        raise FieldError(name, f"must be in {'(' if lo[0] == 'gt' else '['}{lo[1]}, {hi[1]}"
-                               f"{')' if hi[0] == 'lt' else ']'} (got {x!r})")
+        raise FieldError(
+            name,
+            f"must be in {'(' if lo[0] == 'gt' else '['}{lo[1]}, {hi[1]}"
+            f"{')' if hi[0] == 'lt' else ']'} (got {x!r})",
+        )
     key, bound = lo if lo else hi
     word = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}[key]
     raise FieldError(name, f"must be {word} {bound} (got {x!r})")
@@ -114,39 +149,82 @@ class TaskConfig(SerializableConfig):
     """The task and run settings every method shares. ``None`` = the scene's default."""
 
     scene: str = spec("scenes/kuka.usda", "USD scene file")
-    goals: list[list[float]] | None = spec(None, "training goals in joint space: inline '0.1,0.2;0.3,0.4' or a .json/.txt file (one goal per line); default: the scene's")
+    goals: list[list[float]] | None = spec(
+        None,
+        "training goals in joint space: inline '0.1,0.2;0.3,0.4' or a .json/.txt file (one goal per line); default: the scene's",
+    )
     iterations: int = spec(300, "outer iterations (critic updates)", gt=0, cap=10**8)
     horizon: int | None = spec(None, "control steps per rollout", gt=0, cap=10**6)
     dt: float | None = spec(None, "physics time step (s)", gt=0, cap=1.0)
     substeps: int | None = spec(None, "physics steps per control step", gt=0, cap=10**4)
     worlds_per_goal: int = spec(4, "policy initialisations per goal (parallel worlds)", gt=0)
-    start_std: float | None = spec(None, "std (rad) of random initial joint positions around the home pose, drawn per world and iteration (0 = always start at home, as at meta-test); default: the scene's, else 0", ge=0, cap=100)
-    home_starts: int | None = spec(None, "with a start std: this many of each goal's worlds still start at the home pose (as at meta-test) every iteration; default: the scene's, else 0", ge=0)
-    max_torque: list[float] | None = spec(None, "per-joint torque bound of the policy (N·m), comma-separated or one value", gt=0)
+    start_std: float | None = spec(
+        None,
+        "std (rad) of random initial joint positions around the home pose, drawn per world and iteration (0 = always start at home, as at meta-test); default: the scene's, else 0",
+        ge=0,
+        cap=100,
+    )
+    home_starts: int | None = spec(
+        None,
+        "with a start std: this many of each goal's worlds still start at the home pose (as at meta-test) every iteration; default: the scene's, else 0",
+        ge=0,
+    )
+    max_torque: list[float] | None = spec(
+        None, "per-joint torque bound of the policy (N·m), comma-separated or one value", gt=0
+    )
     qd_scale: float | None = spec(None, "velocity normalisation (rad/s)", gt=0)
-    gravity: float | None = spec(None, "gravity along -z (m/s^2); 0 = a perfectly gravity-compensated robot (the iiwa's torque mode, the kuka default)", ge=0, cap=1000)
+    gravity: float | None = spec(
+        None,
+        "gravity along -z (m/s^2); 0 = a perfectly gravity-compensated robot (the iiwa's torque mode, the kuka default)",
+        ge=0,
+        cap=1000,
+    )
     ee_mass: float = spec(0.0, "mass added at the end-effector during training (kg)", ge=0, cap=1e4)
-    link_length: float | None = spec(None, "set the end-effector link length during training (m)", gt=0, cap=100)
-    link_scale: float = spec(1.0, "scale the end-effector link length during training", gt=0, cap=100)
+    link_length: float | None = spec(
+        None, "set the end-effector link length during training (m)", gt=0, cap=100
+    )
+    link_scale: float = spec(
+        1.0, "scale the end-effector link length during training", gt=0, cap=100
+    )
     seed: int = spec(0, "random seed (fixes everything on CPU)", ge=0, le=MAX_SEED)
-    seeds: list[int] | None = spec(None, "train these seeds at once in one process and one simulator (comma-separated, e.g. 0,1,2,3,4); each seed gets its own run directory OUT/seed<k> with exactly the results of a single-seed run", ge=0, le=MAX_SEED)
+    seeds: list[int] | None = spec(
+        None,
+        "train these seeds at once in one process and one simulator (comma-separated, e.g. 0,1,2,3,4); each seed gets its own run directory OUT/seed<k> with exactly the results of a single-seed run",
+        ge=0,
+        le=MAX_SEED,
+    )
     device: str = spec("auto", "cpu, cuda or auto (cuda when present)")
-    cpu_threads: int | None = spec(None, "torch CPU threads while training (0 = torch's default; default: $WARP_CRITIC_TORCH_THREADS or 1: small networks run fastest on one)")
+    cpu_threads: int | None = spec(
+        None,
+        "torch CPU threads while training (0 = torch's default; default: $WARP_CRITIC_TORCH_THREADS or 1: small networks run fastest on one)",
+    )
     out: str | None = spec(None, "run directory (default runs/<scene>-<method>)")
     checkpoint_every: int = spec(10, "write a checkpoint every N iterations", gt=0)
     record_every: int = spec(50, "record rollouts every N iterations", gt=0)
-    resume: bool = spec(False, "continue the run in the run directory from its last checkpoint (the run's saved settings hold; only the iterations may grow)")
+    resume: bool = spec(
+        False,
+        "continue the run in the run directory from its last checkpoint (the run's saved settings hold; only the iterations may grow)",
+    )
 
     method = "task"  # overridden by each method's config
     # fields a scene's content may set (a method adds its own, e.g. ours the inner/outer learning rates)
-    scene_fields = ("goals", "horizon", "dt", "substeps", "max_torque", "qd_scale", "gravity", "start_std",
-                    "home_starts")
+    scene_fields = (
+        "goals",
+        "horizon",
+        "dt",
+        "substeps",
+        "max_torque",
+        "qd_scale",
+        "gravity",
+        "start_std",
+        "home_starts",
+    )
 
     # -- defaults and checks -------------------------------------------------------------------
     def default_out(self) -> str:
         return f"runs/{Path(self.scene).stem}-{self.method}"
 
-    def fill_defaults(self, scene: Scene) -> "TaskConfig":
+    def fill_defaults(self, scene: Scene) -> TaskConfig:
         """Fill ``None`` fields from the scene's content, then the generic defaults."""
         authored = dict(getattr(scene, "defaults", {}) or {})
         for name in self.scene_fields:
@@ -157,8 +235,11 @@ class TaskConfig(SerializableConfig):
             elif name in GENERIC_DEFAULTS:
                 setattr(self, name, GENERIC_DEFAULTS[name])
         if self.goals is None:
-            raise FieldError("goals", f"the scene {scene.path} carries no training goals "
-                                      "(warp_critic:goals); give them explicitly")
+            raise FieldError(
+                "goals",
+                f"the scene {scene.path} carries no training goals "
+                "(warp_critic:goals); give them explicitly",
+            )
         if self.max_torque is None:  # the joints' own effort limits
             self.max_torque = [float(x) for x in scene.effort_limit]
         if self.out is None:
@@ -173,12 +254,17 @@ class TaskConfig(SerializableConfig):
         if self.cpu_threads is not None:
             check_threads(self.cpu_threads)
         if self.home_starts > self.worlds_per_goal:
-            raise FieldError("home_starts", f"must be at most worlds_per_goal {self.worlds_per_goal} "
-                                            f"(got {self.home_starts})")
+            raise FieldError(
+                "home_starts",
+                f"must be at most worlds_per_goal {self.worlds_per_goal} (got {self.home_starts})",
+            )
         if scene is not None:
             dof = scene.dof
             if self.max_torque is not None and len(self.max_torque) not in (1, dof):
-                raise FieldError("max_torque", f"needs 1 or {dof} values for {scene.name} (got {len(self.max_torque)})")
+                raise FieldError(
+                    "max_torque",
+                    f"needs 1 or {dof} values for {scene.name} (got {len(self.max_torque)})",
+                )
             if self.goals is not None:
                 goals_tensor(self.goals, scene)
             check_memory(self, dof)
@@ -188,15 +274,20 @@ class TaskConfig(SerializableConfig):
 # goals, torque bounds, memory
 # ------------------------------------------------------------------------------------------------
 
+
 def goals_tensor(goals, scene: Scene, device="cpu", name: str = "goals") -> torch.Tensor:
     """Validate goals against the scene (shape, finiteness, joint limits) -> ``(G, dof)`` rad."""
     try:
         g = torch.tensor(goals, dtype=torch.float32)
     except (TypeError, ValueError):
-        raise FieldError(name, "expected a list of goals, each a list of numbers (rows of equal length)") from None
+        raise FieldError(
+            name, "expected a list of goals, each a list of numbers (rows of equal length)"
+        ) from None
     if g.ndim != 2 or g.shape[0] == 0 or g.shape[1] != scene.dof:
         got = list(g.shape)[-1] if g.ndim == 2 else list(g.shape)
-        raise FieldError(name, f"each goal needs {scene.dof} joint values for {scene.name} (got {got})")
+        raise FieldError(
+            name, f"each goal needs {scene.dof} joint values for {scene.name} (got {got})"
+        )
     if not bool(torch.isfinite(g).all()):
         raise FieldError(name, "goals must be finite numbers")
     lo = torch.as_tensor(scene.q_lower, dtype=torch.float32)
@@ -204,8 +295,11 @@ def goals_tensor(goals, scene: Scene, device="cpu", name: str = "goals") -> torc
     outside = (g < lo) | (g > hi)
     if bool(outside.any()):
         i, j = (int(x) for x in torch.nonzero(outside)[0])
-        raise FieldError(name, f"goal {i} joint {j} = {g[i, j]:.3f} is outside the joint limits "
-                               f"[{lo[j]:.3f}, {hi[j]:.3f}] of {scene.name}")
+        raise FieldError(
+            name,
+            f"goal {i} joint {j} = {g[i, j]:.3f} is outside the joint limits "
+            f"[{lo[j]:.3f}, {hi[j]:.3f}] of {scene.name}",
+        )
     return g.to(device)
 
 
@@ -215,7 +309,9 @@ def max_torque_tensor(max_torque: list[float], scene: Scene, device="cpu") -> to
     if t.numel() == 1:
         t = t.expand(scene.dof).clone()
     if t.numel() != scene.dof:
-        raise FieldError("max_torque", f"needs 1 or {scene.dof} values for {scene.name} (got {t.numel()})")
+        raise FieldError(
+            "max_torque", f"needs 1 or {scene.dof} values for {scene.name} (got {t.numel()})"
+        )
     return torch.minimum(t, torch.as_tensor(scene.effort_limit, dtype=torch.float32)).to(device)
 
 
@@ -232,7 +328,9 @@ def available_memory() -> int:
     return total
 
 
-def estimate_memory(worlds: int, dof: int, horizon: int, substeps: int, graph_steps: int = 1) -> int:
+def estimate_memory(
+    worlds: int, dof: int, horizon: int, substeps: int, graph_steps: int = 1
+) -> int:
     """A coarse upper estimate (bytes) of a run's peak memory.
 
     Per world and physics step the differentiable model keeps its own state and Featherstone scratch
@@ -250,21 +348,37 @@ def check_memory(cfg: TaskConfig, dof: int, graph_steps: int = 1, copies: int = 
     if not all(isinstance(v, int) for v in (cfg.horizon, cfg.substeps)):
         return
     goals = (len(cfg.goals) if cfg.goals else 1) * copies
-    need = estimate_memory(goals * cfg.worlds_per_goal, dof, cfg.horizon, cfg.substeps,
-                           max(graph_steps, getattr(cfg, "inner_steps", 1) + 1))
+    need = estimate_memory(
+        goals * cfg.worlds_per_goal,
+        dof,
+        cfg.horizon,
+        cfg.substeps,
+        max(graph_steps, getattr(cfg, "inner_steps", 1) + 1),
+    )
     have = available_memory()
     if need > 0.8 * have:
         inner = getattr(cfg, "inner_steps", 1)
-        culprit = max((("worlds_per_goal", cfg.worlds_per_goal / 64), ("horizon", cfg.horizon / 1000),
-                       ("substeps", cfg.substeps / 100), ("inner_steps", inner / 100)), key=lambda kv: kv[1])[0]
-        raise FieldError(culprit, f"{goals} goals x {cfg.worlds_per_goal} worlds, horizon {cfg.horizon} x "
-                                            f"{cfg.substeps} substeps, {getattr(cfg, 'inner_steps', 1)} inner steps need about {need / 2**30:.1f} GiB, more than "
-                                            f"80% of the {have / 2**30:.1f} GiB available")
+        culprit = max(
+            (
+                ("worlds_per_goal", cfg.worlds_per_goal / 64),
+                ("horizon", cfg.horizon / 1000),
+                ("substeps", cfg.substeps / 100),
+                ("inner_steps", inner / 100),
+            ),
+            key=lambda kv: kv[1],
+        )[0]
+        raise FieldError(
+            culprit,
+            f"{goals} goals x {cfg.worlds_per_goal} worlds, horizon {cfg.horizon} x "
+            f"{cfg.substeps} substeps, {getattr(cfg, 'inner_steps', 1)} inner steps need about {need / 2**30:.1f} GiB, more than "
+            f"80% of the {have / 2**30:.1f} GiB available",
+        )
 
 
 # ------------------------------------------------------------------------------------------------
 # the worlds
 # ------------------------------------------------------------------------------------------------
+
 
 @dataclass
 class Task:
@@ -319,12 +433,16 @@ class Task:
         if not self.cfg.start_std:
             return home
         away = (slot >= self.cfg.home_starts).float().unsqueeze(1)
-        noise = torch.randn(self.Wc, self.scene.dof, generator=gen).to(self.device) * self.cfg.start_std * away
+        noise = (
+            torch.randn(self.Wc, self.scene.dof, generator=gen).to(self.device)
+            * self.cfg.start_std
+            * away
+        )
         return torch.clamp(home + noise, 0.95 * self.sim.q_lower, 0.95 * self.sim.q_upper)
 
     def per_goal(self, per_world: torch.Tensor) -> torch.Tensor:
         """``(Wc,) -> (G,)`` mean over each goal's worlds (one copy's worlds)."""
-        idx = self.goal_index[:per_world.shape[0]]
+        idx = self.goal_index[: per_world.shape[0]]
         return torch.zeros(self.G, device=per_world.device).index_add_(0, idx, per_world) / self.K
 
 
@@ -344,12 +462,33 @@ def build_task(cfg: TaskConfig, scene: Scene, *, differentiable: bool, copies: i
     variant = Variant(ee_mass=cfg.ee_mass, link_length=cfg.link_length, link_scale=cfg.link_scale)
     goals = goals_tensor(cfg.goals, scene)
     G, K = goals.shape[0], cfg.worlds_per_goal
-    sim = Simulator(scene, [variant] * (copies * G * K), dt=cfg.dt, substeps=cfg.substeps, device=cfg.device,
-                    differentiable=differentiable, gravity=cfg.gravity)
+    sim = Simulator(
+        scene,
+        [variant] * (copies * G * K),
+        dt=cfg.dt,
+        substeps=cfg.substeps,
+        device=cfg.device,
+        differentiable=differentiable,
+        gravity=cfg.gravity,
+    )
     dev = sim.torch_device
     goal_index = torch.arange(G, device=dev).repeat_interleave(K).repeat(copies)
     slot = torch.arange(K, device=dev).repeat(G * copies)
-    norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale)
-    home = torch.as_tensor(getattr(scene, "home", [0.0] * scene.dof), dtype=torch.float32, device=dev)
-    return Task(cfg=cfg, scene=scene, goals=goals, sim=sim, goal_index=goal_index, slot=slot,
-                goal=goals.to(dev)[goal_index], norm=norm, home=home.expand(copies * G * K, -1).clone(), S=copies)
+    norm = Normalizer.from_limits(
+        sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale
+    )
+    home = torch.as_tensor(
+        getattr(scene, "home", [0.0] * scene.dof), dtype=torch.float32, device=dev
+    )
+    return Task(
+        cfg=cfg,
+        scene=scene,
+        goals=goals,
+        sim=sim,
+        goal_index=goal_index,
+        slot=slot,
+        goal=goals.to(dev)[goal_index],
+        norm=norm,
+        home=home.expand(copies * G * K, -1).clone(),
+        S=copies,
+    )

@@ -10,11 +10,10 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from warp_critic.analysis.landscape.problem import constant_force
 from warp_critic.learning.inner import policy_fn
 from warp_critic.learning.losses import critic_loss
 from warp_critic.learning.rollout import rollout
-
-from warp_critic.analysis.landscape.problem import constant_force
 
 METHODS = ("Q_true", "Q_sup", "L_critic")
 
@@ -26,7 +25,9 @@ def memory_bytes(grid: int, horizon: int, substeps: int) -> float:
     return float(grid) ** 2 * horizon * (12 + 4 * substeps) * 1024.0
 
 
-def compute_landscapes(cfg, eval_sim, grad_sim, critic, qsup, goals: np.ndarray, q0_eval: np.ndarray):
+def compute_landscapes(
+    cfg, eval_sim, grad_sim, critic, qsup, goals: np.ndarray, q0_eval: np.ndarray
+):
     """Axis ``(n,)``, values ``(G, 3, n, n)`` and gradients ``(G, 3, n, n, 2)`` indexed ``[goal, method, i1, i2]``
     (methods as :data:`METHODS`); ``critic`` and ``qsup`` are loss modules ``C(q, qd, a, g)``."""
     n = cfg.grid
@@ -37,10 +38,24 @@ def compute_landscapes(cfg, eval_sim, grad_sim, critic, qsup, goals: np.ndarray,
     P = n * n
     q0 = torch.tensor(q0_eval, dtype=torch.float32, device=dev).expand(P, -1).contiguous()
     qd0 = torch.zeros_like(q0)
-    data = rollout(eval_sim, policy_fn(constant_force, {"theta": theta}), q0, qd0, cfg.horizon, differentiable=False)
+    data = rollout(
+        eval_sim,
+        policy_fn(constant_force, {"theta": theta}),
+        q0,
+        qd0,
+        cfg.horizon,
+        differentiable=False,
+    )
     # Q_true gradient through the differentiable model (the goal enters only through the cost)
     th = theta.clone().requires_grad_(True)
-    diff = rollout(grad_sim, policy_fn(constant_force, {"theta": th}), q0, qd0, cfg.horizon, differentiable=True)
+    diff = rollout(
+        grad_sim,
+        policy_fn(constant_force, {"theta": th}),
+        q0,
+        qd0,
+        cfg.horizon,
+        differentiable=True,
+    )
     qT = diff.q[-1]
     jac = []
     for j in range(2):  # dq_T/dtheta rows: q_T(theta) per axis
@@ -53,11 +68,15 @@ def compute_landscapes(cfg, eval_sim, grad_sim, critic, qsup, goals: np.ndarray,
     for gi, g in enumerate(goals):
         gt = torch.tensor(g, dtype=torch.float32, device=dev).expand(P, -1)
         err = qT_data - gt
-        values[gi, 0] = (err ** 2).sum(-1).reshape(n, n).cpu().numpy()
-        grads[gi, 0] = (2 * torch.einsum("pj,pjk->pk", qT.detach() - gt, jac)).reshape(n, n, 2).cpu().numpy()
+        values[gi, 0] = (err**2).sum(-1).reshape(n, n).cpu().numpy()
+        grads[gi, 0] = (
+            (2 * torch.einsum("pj,pjk->pk", qT.detach() - gt, jac)).reshape(n, n, 2).cpu().numpy()
+        )
         for mi, net in ((1, qsup), (2, critic)):
             params = {"theta": theta.clone().requires_grad_(True)}
-            v = critic_loss(net, constant_force, params, data, gt)  # sum_t C(s_t, theta, g), states as data
+            v = critic_loss(
+                net, constant_force, params, data, gt
+            )  # sum_t C(s_t, theta, g), states as data
             (gr,) = torch.autograd.grad(v.sum(), params["theta"])
             values[gi, mi] = v.detach().reshape(n, n).cpu().numpy()
             grads[gi, mi] = gr.reshape(n, n, 2).cpu().numpy()
@@ -76,12 +95,17 @@ def _bilinear(field: np.ndarray, axis: np.ndarray, pts: np.ndarray) -> np.ndarra
     f = u - i
     i0, i1 = i[:, 0], i[:, 1]
     f0, f1 = f[:, :1], f[:, 1:]
-    return ((1 - f0) * (1 - f1) * field[i0, i1] + f0 * (1 - f1) * field[i0 + 1, i1]
-            + (1 - f0) * f1 * field[i0, i1 + 1] + f0 * f1 * field[i0 + 1, i1 + 1])
+    return (
+        (1 - f0) * (1 - f1) * field[i0, i1]
+        + f0 * (1 - f1) * field[i0 + 1, i1]
+        + (1 - f0) * f1 * field[i0, i1 + 1]
+        + f0 * f1 * field[i0 + 1, i1 + 1]
+    )
 
 
-def descend(field: np.ndarray, axis: np.ndarray, starts: np.ndarray, steps: int = 300,
-            decay: float = 0.98) -> np.ndarray:
+def descend(
+    field: np.ndarray, axis: np.ndarray, starts: np.ndarray, steps: int = 300, decay: float = 0.98
+) -> np.ndarray:
     """Normalised-gradient descent on the interpolated ``field`` from ``starts (P, 2)``; final points."""
     h = axis[1] - axis[0]
     lo, hi = axis[0], axis[-1]
@@ -90,7 +114,7 @@ def descend(field: np.ndarray, axis: np.ndarray, starts: np.ndarray, steps: int 
         g = _bilinear(field, axis, x)
         norm = np.linalg.norm(g, axis=1, keepdims=True)
         d = np.where(norm > 1e-12, g / np.maximum(norm, 1e-12), 0.0)
-        x = np.clip(x - h * decay ** k * d, lo, hi)
+        x = np.clip(x - h * decay**k * d, lo, hi)
     return x
 
 

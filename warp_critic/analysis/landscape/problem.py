@@ -17,7 +17,9 @@ def default_scene():
     return scene_path(SCENE)
 
 
-def constant_force(params: dict[str, torch.Tensor], q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
+def constant_force(
+    params: dict[str, torch.Tensor], q: torch.Tensor, qd: torch.Tensor
+) -> torch.Tensor:
     """The policy family ``a_t = theta``: ``params['theta'] (W, 2)``; ``q, qd`` ``(W, 2)`` or ``(T, W, 2)``."""
     return params["theta"].expand(q.shape)
 

@@ -14,22 +14,22 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from warp_critic.methods.replay import ReplayBuffer, rewards
+from warp_critic.analysis.landscape.problem import GoalRelative, constant_force
 from warp_critic.core.errors import DivergenceError
 from warp_critic.learning.inner import policy_fn
 from warp_critic.learning.losses import critic_loss, td_loss
 from warp_critic.learning.networks import Critic, Normalizer
 from warp_critic.learning.outer import meta_loss
 from warp_critic.learning.rollout import rollout
-
-from warp_critic.analysis.landscape.problem import GoalRelative, constant_force
+from warp_critic.methods.replay import ReplayBuffer, rewards
 
 
 def make_critic(sim, cfg, seed: int) -> Critic:
     """The paper's critic network for the point mass, initialised from ``torch.manual_seed(seed)``."""
     torch.manual_seed(seed)
-    norm = Normalizer.from_limits(sim.q_lower, sim.q_upper,
-                                  torch.full((2,), cfg.range, device=sim.torch_device), cfg.qd_scale)
+    norm = Normalizer.from_limits(
+        sim.q_lower, sim.q_upper, torch.full((2,), cfg.range, device=sim.torch_device), cfg.qd_scale
+    )
     return Critic(2, norm).to(sim.torch_device)
 
 
@@ -84,10 +84,22 @@ def train_ours(cfg, sim, q0, goal, gen, log=print):
     for it in range(cfg.iterations):
         theta = _random_forces(W, cfg, gen, q0.device).requires_grad_(True)
         q0_it, goals = sample_tasks(cfg, q0, goal, gen)
-        res = meta_loss(critic, constant_force, {"theta": theta}, sim, q0_it, qd0, goals,
-                        horizon=cfg.horizon, alpha=cfg.alpha, inner_steps=1)
+        res = meta_loss(
+            critic,
+            constant_force,
+            {"theta": theta},
+            sim,
+            q0_it,
+            qd0,
+            goals,
+            horizon=cfg.horizon,
+            alpha=cfg.alpha,
+            inner_steps=1,
+        )
         if not torch.isfinite(res.loss):
-            raise DivergenceError(f"meta-training diverged at iteration {it} (lower --alpha or --lr)")
+            raise DivergenceError(
+                f"meta-training diverged at iteration {it} (lower --alpha or --lr)"
+            )
         opt.zero_grad()
         res.loss.backward()
         opt.step()
@@ -133,7 +145,9 @@ def train_sup(cfg, sim, q0, goal, gen, log=print):
     for it in range(cfg.iterations):
         params = {"theta": theta}
         q0_it, goals = sample_tasks(cfg, q0, goal, gen)
-        tr = rollout(sim, policy_fn(constant_force, params), q0_it, qd0, cfg.horizon, differentiable=False)
+        tr = rollout(
+            sim, policy_fn(constant_force, params), q0_it, qd0, cfg.horizon, differentiable=False
+        )
         cost, done = sup_costs(tr, goals, cfg.sup_reward)
         buf.add_trajectory(tr, goals, cost, done)
         target_net.load_state_dict(net.state_dict())
@@ -141,13 +155,21 @@ def train_sup(cfg, sim, q0, goal, gen, log=print):
             b = buf.sample(min(cfg.sup_batch, buf.size), gen)
             with torch.no_grad():
                 q_next = target(b["q2"], b["qd2"], b["tau"], b["goal"])
-            td = td_loss(qsup(b["q"], b["qd"], b["tau"], b["goal"]), b["reward"], b["done"], q_next, gamma=1.0)
+            td = td_loss(
+                qsup(b["q"], b["qd"], b["tau"], b["goal"]),
+                b["reward"],
+                b["done"],
+                q_next,
+                gamma=1.0,
+            )
             opt.zero_grad()
             td.backward()
             opt.step()
         td_losses.append(float(td.detach()))
         params = {"theta": theta.clone().requires_grad_(True)}
-        (g,) = torch.autograd.grad(critic_loss(qsup, constant_force, params, tr, goals).sum(), params["theta"])
+        (g,) = torch.autograd.grad(
+            critic_loss(qsup, constant_force, params, tr, goals).sum(), params["theta"]
+        )
         theta = (theta - cfg.sup_alpha * g).clamp(-cfg.range, cfg.range).detach()
         thetas.append(theta.cpu().numpy())
         if _progress(cfg, it):

@@ -23,7 +23,9 @@ def closed_form(s0: float, g: float) -> dict[str, float]:
     }
 
 
-def closed_form_critic_params(s0: float, g: float, thetas, alpha: float = ALPHA) -> dict[str, np.ndarray]:
+def closed_form_critic_params(
+    s0: float, g: float, thetas, alpha: float = ALPHA
+) -> dict[str, np.ndarray]:
     """Converged critic parameters on the rollout of ``pi_theta``, in closed form, for each ``theta``.
 
     ``supervised``: ``phi* = s_2^2 r_2 / ((s_1^2 - s_2^2)^2 + s_2^4)``; ``ours``:
@@ -35,11 +37,16 @@ def closed_form_critic_params(s0: float, g: float, thetas, alpha: float = ALPHA)
     r2 = (s2 - g) ** 2
     c = s0 + s1 + 2 * th
     with np.errstate(divide="ignore", invalid="ignore"):
-        den = (s1 ** 2 - s2 ** 2) ** 2 + s2 ** 4
-        phi_sup = np.where(den > 0, s2 ** 2 * r2 / np.where(den > 0, den, 1.0), np.nan)
+        den = (s1**2 - s2**2) ** 2 + s2**4
+        phi_sup = np.where(den > 0, s2**2 * r2 / np.where(den > 0, den, 1.0), np.nan)
         phi_ours = np.where(c != 0, (s2 - g) / (4 * alpha * np.where(c != 0, c, 1.0)), np.nan)
         beta = np.where((phi_sup != 0) & (c != 0), 1.0 / (4 * alpha) - phi_sup, np.nan)
-    return {"supervised": phi_sup, "ours": phi_ours, "meta_critic_phi": phi_sup, "meta_critic_beta": beta}
+    return {
+        "supervised": phi_sup,
+        "ours": phi_ours,
+        "meta_critic_phi": phi_sup,
+        "meta_critic_beta": beta,
+    }
 
 
 def fixed_points(s0: float, g: float) -> dict[str, list[dict]]:
@@ -61,20 +68,50 @@ def fixed_points(s0: float, g: float) -> dict[str, list[dict]]:
         return out
 
     return {
-        "supervised": dedup([
-            {"theta": a, "kind": "attracting", "why": "c = s0 + s1 + 2 theta = 0 (minimiser of the fitted Q)"},
-            {"theta": opt, "kind": "degenerate", "why": "r2 = 0 => phi* = 0 (optimal)"},
-            {"theta": z, "kind": "degenerate", "why": "s2 = 0 => phi* = 0"},
-        ]),
-        "ours": dedup([
-            {"theta": opt, "kind": "attracting", "why": "L_task = 0 after one inner step (optimal)"},
-            {"theta": a, "kind": "degenerate", "why": "c = 0: inner gradient is 0 for every phi"},
-        ]),
-        "meta_critic": dedup([
-            {"theta": a, "kind": "attracting", "why": "c = 0 (updated policy minimises the TD critic)"},
-            {"theta": opt, "kind": "degenerate", "why": "phi* = 0 (r2 = 0): l flat in beta; fixed only with beta = 0"},
-            {"theta": z, "kind": "degenerate", "why": "phi* = 0 (s2 = 0): l flat in beta; fixed only with beta = 0"},
-        ]),
+        "supervised": dedup(
+            [
+                {
+                    "theta": a,
+                    "kind": "attracting",
+                    "why": "c = s0 + s1 + 2 theta = 0 (minimiser of the fitted Q)",
+                },
+                {"theta": opt, "kind": "degenerate", "why": "r2 = 0 => phi* = 0 (optimal)"},
+                {"theta": z, "kind": "degenerate", "why": "s2 = 0 => phi* = 0"},
+            ]
+        ),
+        "ours": dedup(
+            [
+                {
+                    "theta": opt,
+                    "kind": "attracting",
+                    "why": "L_task = 0 after one inner step (optimal)",
+                },
+                {
+                    "theta": a,
+                    "kind": "degenerate",
+                    "why": "c = 0: inner gradient is 0 for every phi",
+                },
+            ]
+        ),
+        "meta_critic": dedup(
+            [
+                {
+                    "theta": a,
+                    "kind": "attracting",
+                    "why": "c = 0 (updated policy minimises the TD critic)",
+                },
+                {
+                    "theta": opt,
+                    "kind": "degenerate",
+                    "why": "phi* = 0 (r2 = 0): l flat in beta; fixed only with beta = 0",
+                },
+                {
+                    "theta": z,
+                    "kind": "degenerate",
+                    "why": "phi* = 0 (s2 = 0): l flat in beta; fixed only with beta = 0",
+                },
+            ]
+        ),
     }
 
 

@@ -9,7 +9,15 @@ import torch
 
 from warp_critic.analysis.toy.fit import gradient
 from warp_critic.analysis.toy.loops import fit_meta_critic, fit_ours, fit_td, loop
-from warp_critic.analysis.toy.problem import ALPHA, METHODS, T, as_tensor, critic_objective, data_rollout, terminal_cost
+from warp_critic.analysis.toy.problem import (
+    ALPHA,
+    METHODS,
+    T,
+    as_tensor,
+    critic_objective,
+    data_rollout,
+    terminal_cost,
+)
 
 CURVE_KEYS = {  # method -> (value key, gradient key)
     "supervised": ("supervised_Q", "supervised_dQ"),
@@ -38,8 +46,9 @@ def default_thetas(s0: float, g: float, n: int = 400) -> np.ndarray:
     return th
 
 
-def converged_critics(s0: float, g: float, alpha: float = ALPHA, theta0: float = 0.1,
-                      iters: int = 500) -> dict[str, tuple[float, float]]:
+def converged_critics(
+    s0: float, g: float, alpha: float = ALPHA, theta0: float = 0.1, iters: int = 500
+) -> dict[str, tuple[float, float]]:
     """``{method: (phi, beta)}`` the loops converge to from ``theta0`` (``beta = 0`` but for the Meta-Critic)."""
     out = {}
     for m in METHODS:
@@ -48,8 +57,13 @@ def converged_critics(s0: float, g: float, alpha: float = ALPHA, theta0: float =
     return out
 
 
-def curves(s0: float = -6.0, g: float = 0.0, thetas=None, alpha: float = ALPHA,
-           converged: dict | None = None) -> dict[str, np.ndarray]:
+def curves(
+    s0: float = -6.0,
+    g: float = 0.0,
+    thetas=None,
+    alpha: float = ALPHA,
+    converged: dict | None = None,
+) -> dict[str, np.ndarray]:
     """Critic landscapes over a grid of ``theta`` (the appendix figures).
 
     For every grid ``theta`` the rollout of ``pi_theta`` is taken and each critic is trained to convergence on
@@ -93,13 +107,25 @@ def curves(s0: float = -6.0, g: float = 0.0, thetas=None, alpha: float = ALPHA,
     fixed = {m: torch.full_like(th, float(sum(converged[m]))) for m in METHODS}
 
     out = {
-        "theta": th, "Q_true": r2, "dQ_true": 4 * (states[T] - g), "c": c,
-        "supervised_phi": phi_sup, "supervised_Q": value(phi_sup), "supervised_dQ": grad(phi_sup),
-        "ours_phi": phi_ours, "ours_L": value(phi_ours), "ours_dL": grad(phi_ours),
-        "meta_critic_phi": phi_sup, "meta_critic_beta": beta,
-        "meta_critic_Q": value(phi_sup + beta), "meta_critic_dQ": grad(phi_sup + beta),
-        "supervised_Q_fixed": value(fixed["supervised"]), "supervised_dQ_fixed": grad(fixed["supervised"]),
-        "ours_L_fixed": value(fixed["ours"]), "ours_dL_fixed": grad(fixed["ours"]),
-        "meta_critic_Q_fixed": value(fixed["meta_critic"]), "meta_critic_dQ_fixed": grad(fixed["meta_critic"]),
+        "theta": th,
+        "Q_true": r2,
+        "dQ_true": 4 * (states[T] - g),
+        "c": c,
+        "supervised_phi": phi_sup,
+        "supervised_Q": value(phi_sup),
+        "supervised_dQ": grad(phi_sup),
+        "ours_phi": phi_ours,
+        "ours_L": value(phi_ours),
+        "ours_dL": grad(phi_ours),
+        "meta_critic_phi": phi_sup,
+        "meta_critic_beta": beta,
+        "meta_critic_Q": value(phi_sup + beta),
+        "meta_critic_dQ": grad(phi_sup + beta),
+        "supervised_Q_fixed": value(fixed["supervised"]),
+        "supervised_dQ_fixed": grad(fixed["supervised"]),
+        "ours_L_fixed": value(fixed["ours"]),
+        "ours_dL_fixed": grad(fixed["ours"]),
+        "meta_critic_Q_fixed": value(fixed["meta_critic"]),
+        "meta_critic_dQ_fixed": grad(fixed["meta_critic"]),
     }
     return {k: v.detach().numpy().copy() for k, v in out.items()}

@@ -7,7 +7,7 @@ for the critic fits (:func:`fit`) and for the curvature-normalised supervised po
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 import torch
 
@@ -35,10 +35,14 @@ def newton_step(loss_fn: Objective, p: torch.Tensor) -> torch.Tensor | None:
     if curv is None:
         return None
     ok = curv > 0
-    return torch.where(ok, grad.detach() / torch.where(ok, curv, torch.ones_like(curv)), torch.zeros_like(curv))
+    return torch.where(
+        ok, grad.detach() / torch.where(ok, curv, torch.ones_like(curv)), torch.zeros_like(curv)
+    )
 
 
-def fit(loss_fn: Objective, p0: torch.Tensor, max_steps: int = 5, rtol: float = 1e-12) -> torch.Tensor:
+def fit(
+    loss_fn: Objective, p0: torch.Tensor, max_steps: int = 5, rtol: float = 1e-12
+) -> torch.Tensor:
     """Minimise ``loss_fn`` elementwise over ``p`` by Newton steps, until the step is below
     ``rtol * (1 + |p|)`` (this also repairs the rounding of a first step taken from a far-away ``p0``).
     Elements where the loss is flat keep their value."""

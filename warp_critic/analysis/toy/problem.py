@@ -53,13 +53,20 @@ def critic(phi: torch.Tensor, s: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
     return phi * (s + a) ** 2
 
 
-def critic_objective(phi: torch.Tensor, states: list[torch.Tensor], theta: torch.Tensor) -> torch.Tensor:
+def critic_objective(
+    phi: torch.Tensor, states: list[torch.Tensor], theta: torch.Tensor
+) -> torch.Tensor:
     """``sum_{t=0}^{T-1} Q_phi(s_t, pi_theta(s_t))`` with the given (data) states."""
     return sum(critic(phi, states[t], theta) for t in range(T))
 
 
-def td_error(phi: torch.Tensor, states: list[torch.Tensor], theta: torch.Tensor, g: float,
-             gamma: float = GAMMA) -> torch.Tensor:
+def td_error(
+    phi: torch.Tensor,
+    states: list[torch.Tensor],
+    theta: torch.Tensor,
+    g: float,
+    gamma: float = GAMMA,
+) -> torch.Tensor:
     """Supervised TD loss ``delta`` of eq. (2) on one rollout (states, actions and rewards are data).
 
     ``delta = sum_{t=0}^{T-1} (Q(s_t, a_t) - (r_t + gamma * V_{t+1}))^2`` with ``V_{t+1} = Q(s_{t+1}, a_{t+1})``
@@ -73,8 +80,9 @@ def td_error(phi: torch.Tensor, states: list[torch.Tensor], theta: torch.Tensor,
     return delta
 
 
-def inner_step(theta: torch.Tensor, states: list[torch.Tensor], coef: torch.Tensor,
-               alpha: float) -> torch.Tensor:
+def inner_step(
+    theta: torch.Tensor, states: list[torch.Tensor], coef: torch.Tensor, alpha: float
+) -> torch.Tensor:
     """``theta - alpha * grad_theta sum_t coef (s_t + theta)^2`` (states as data), differentiable in ``coef``."""
     th = theta.detach().clone().requires_grad_(True)
     obj = critic_objective(coef, states, th)
@@ -82,16 +90,27 @@ def inner_step(theta: torch.Tensor, states: list[torch.Tensor], coef: torch.Tens
     return th.detach() - alpha * grad
 
 
-def task_loss_after_inner_step(phi: torch.Tensor, theta: torch.Tensor, states: list[torch.Tensor],
-                               s0: torch.Tensor, g: float, alpha: float = ALPHA) -> torch.Tensor:
+def task_loss_after_inner_step(
+    phi: torch.Tensor,
+    theta: torch.Tensor,
+    states: list[torch.Tensor],
+    s0: torch.Tensor,
+    g: float,
+    alpha: float = ALPHA,
+) -> torch.Tensor:
     """Our outer objective: ``L_task = (s_2^new - g)^2`` for ``theta_new(phi)`` rolled out through the model."""
     theta_new = inner_step(theta, states, phi, alpha)
     new_states = rollout(s0, theta_new)
     return sum(reward(new_states[t], t, g) for t in range(T + 1))
 
 
-def meta_critic_loss(beta: torch.Tensor, phi: torch.Tensor, theta: torch.Tensor,
-                     states: list[torch.Tensor], alpha: float = ALPHA) -> torch.Tensor:
+def meta_critic_loss(
+    beta: torch.Tensor,
+    phi: torch.Tensor,
+    theta: torch.Tensor,
+    states: list[torch.Tensor],
+    alpha: float = ALPHA,
+) -> torch.Tensor:
     """Meta-Critic objective ``l(beta) = sum_t Q_phi(s_t, pi_{theta_new(beta)}(s_t))`` (states, phi as data)."""
     theta_new = inner_step(theta, states, phi.detach() + beta, alpha)
     return critic_objective(phi.detach(), states, theta_new)

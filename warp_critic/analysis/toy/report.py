@@ -24,14 +24,18 @@ MIN_ABS_S0 = 1e-6
 MAX_ITERS = 1_000_000
 
 
-def check_settings(*, s0: float, goal: float, theta0: float, alpha: float, plain_lr: float, iters: int,
-                   grid: int) -> None:
+def check_settings(
+    *, s0: float, goal: float, theta0: float, alpha: float, plain_lr: float, iters: int, grid: int
+) -> None:
     """Validate the settings of :func:`run_toy` before any work (:class:`~warp_critic.core.errors.FieldError`)."""
     s0 = checks.number("s0", s0, max_abs=MAX_ABS)
     if abs(s0) < MIN_ABS_S0:
-        raise checks.FieldError("s0", f"must be non-zero (|s0| >= {MIN_ABS_S0:g}), got {s0!r}: at s0 = 0 the "
-                                      "supervised fixed point theta = 0 has all critic features (s_t + a_t)^2 = 0 "
-                                      "and the TD fit is undefined there")
+        raise checks.FieldError(
+            "s0",
+            f"must be non-zero (|s0| >= {MIN_ABS_S0:g}), got {s0!r}: at s0 = 0 the "
+            "supervised fixed point theta = 0 has all critic features (s_t + a_t)^2 = 0 "
+            "and the TD fit is undefined there",
+        )
     checks.number("goal", goal, max_abs=MAX_ABS)
     checks.number("theta0", theta0, max_abs=MAX_ABS)
     checks.number("alpha", alpha, positive=True, hi=MAX_ABS)
@@ -68,15 +72,29 @@ def _plot_method(path: Path, method: str, cv: dict, result: dict, s0: float, g: 
     fig = Figure(figsize=(7.0, 6.5), dpi=110)
     FigureCanvasAgg(fig)
     ax_v, ax_g = fig.subplots(2, 1, sharex=True)
-    crit = r"$\sum_{t=0}^{1} \mathcal{L}_{critic}(s_t,\theta) + r_2$" if method == "ours" \
+    crit = (
+        r"$\sum_{t=0}^{1} \mathcal{L}_{critic}(s_t,\theta) + r_2$"
+        if method == "ours"
         else r"$\sum_{t=0}^{1} Q(s_t,\theta) + r_2$"
+    )
     ax_v.plot(th, cv["Q_true"], color="k", lw=2, label=r"$Q_{true} = r_2 = (s_0+2\theta-g)^2$")
     # break the line at the pole of our critic (phi* ~ 1/c where c = s0 + s1 + 2 theta changes sign)
     cut = np.flatnonzero(np.sign(cv["c"][:-1]) * np.sign(cv["c"][1:]) < 0) + 1
-    ax_v.plot(np.insert(th, cut, np.nan), np.insert(cv[vkey], cut, np.nan), color="C0", lw=2,
-              label=crit + r", critic fitted at each $\theta$")
-    ax_v.plot(th, cv[vkey + "_fixed"], color="C0", ls="--", lw=1,
-              label="critic frozen at the loop's converged value")
+    ax_v.plot(
+        np.insert(th, cut, np.nan),
+        np.insert(cv[vkey], cut, np.nan),
+        color="C0",
+        lw=2,
+        label=crit + r", critic fitted at each $\theta$",
+    )
+    ax_v.plot(
+        th,
+        cv[vkey + "_fixed"],
+        color="C0",
+        ls="--",
+        lw=1,
+        label="critic frozen at the loop's converged value",
+    )
     ax_v.set_ylim(*_robust_ylim(cv["Q_true"], cv[vkey]))
     ax_v.set_ylabel("value (cost)")
     ax_v.legend(fontsize=7, loc="upper center")
@@ -84,18 +102,43 @@ def _plot_method(path: Path, method: str, cv: dict, result: dict, s0: float, g: 
 
     ax_g.plot(th, cv["dQ_true"], color="k", lw=2, label=r"$dQ_{true}/d\theta$")
     coef = r"(\phi+\beta)" if method == "meta_critic" else r"\phi"
-    ax_g.plot(th, cv[gkey], color="C1", lw=2,
-              label=r"policy gradient $2\," + coef + r"\,(s_0+s_1+2\theta)$, critic fitted at each $\theta$")
-    ax_g.plot(th, cv[gkey + "_fixed"], color="C1", ls="--", lw=1, label="with the converged critic frozen")
+    ax_g.plot(
+        th,
+        cv[gkey],
+        color="C1",
+        lw=2,
+        label=r"policy gradient $2\,"
+        + coef
+        + r"\,(s_0+s_1+2\theta)$, critic fitted at each $\theta$",
+    )
+    ax_g.plot(
+        th, cv[gkey + "_fixed"], color="C1", ls="--", lw=1, label="with the converged critic frozen"
+    )
     ax_g.axhline(0.0, color="0.5", lw=0.8)
     for j, (x, kind) in enumerate(result["stationary_points"][method]):
-        ax_g.plot([x], [0.0], marker="o" if kind == "sign change" else "D", ms=8, mfc="none", mec="C3", mew=2)
-        ax_g.annotate(f"{x:.3g} ({kind})", (x, 0.0), textcoords="offset points",
-                      xytext=(6, 10 if j % 2 == 0 else -16), fontsize=8, color="C3")
+        ax_g.plot(
+            [x],
+            [0.0],
+            marker="o" if kind == "sign change" else "D",
+            ms=8,
+            mfc="none",
+            mec="C3",
+            mew=2,
+        )
+        ax_g.annotate(
+            f"{x:.3g} ({kind})",
+            (x, 0.0),
+            textcoords="offset points",
+            xytext=(6, 10 if j % 2 == 0 else -16),
+            fontsize=8,
+            color="C3",
+        )
     opt = result["optimal"]
     for ax in (ax_v, ax_g):
         ax.axvline(opt, color="g", ls=":", lw=1.2, label=r"optimal $\theta^*$")
-        ax.axvline(result["numerical"][method], color="C3", ls="-.", lw=1.0, label="loop converged to")
+        ax.axvline(
+            result["numerical"][method], color="C3", ls="-.", lw=1.0, label="loop converged to"
+        )
     ax_g.set_ylim(*_robust_ylim(cv["dQ_true"], cv[gkey]))
     ax_g.set_xlabel(r"policy parameter $\theta$")
     ax_g.set_ylabel(r"$d/d\theta$")
@@ -109,11 +152,17 @@ def _blueprint():
 
     cols = []
     for m in METHODS:
-        cols.append(rrb.Vertical(
-            rrb.TimeSeriesView(origin=f"/toy/{m}/value", name=f"{m}: value vs theta_index"),
-            rrb.TimeSeriesView(origin=f"/toy/{m}/gradient", name=f"{m}: d/dtheta vs theta_index"),
-            rrb.TimeSeriesView(origin=f"/toy/{m}/trace", name=f"{m}: learning trace (timeline 'iteration')"),
-        ))
+        cols.append(
+            rrb.Vertical(
+                rrb.TimeSeriesView(origin=f"/toy/{m}/value", name=f"{m}: value vs theta_index"),
+                rrb.TimeSeriesView(
+                    origin=f"/toy/{m}/gradient", name=f"{m}: d/dtheta vs theta_index"
+                ),
+                rrb.TimeSeriesView(
+                    origin=f"/toy/{m}/trace", name=f"{m}: learning trace (timeline 'iteration')"
+                ),
+            )
+        )
     return rrb.Blueprint(rrb.Horizontal(*cols), rrb.TimePanel(timeline="theta_index"))
 
 
@@ -129,8 +178,12 @@ def _record(rec, cv: dict, traces: dict, result: dict) -> None:
         vkey, gkey = CURVE_KEYS[m]
         for grp, true_name in (("value", "Q_true"), ("gradient", "dQ_true")):
             rec.series_style(f"toy/{m}/{grp}/{true_name}", true_name, colors["true"])
-            rec.series_style(f"toy/{m}/{grp}/critic", "critic (fitted at each theta)", colors["critic"])
-            rec.series_style(f"toy/{m}/{grp}/critic_fixed", "critic (frozen at convergence)", colors["fixed"])
+            rec.series_style(
+                f"toy/{m}/{grp}/critic", "critic (fitted at each theta)", colors["critic"]
+            )
+            rec.series_style(
+                f"toy/{m}/{grp}/critic_fixed", "critic (frozen at convergence)", colors["fixed"]
+            )
     rec.series_style("toy/grid/theta", "theta at theta_index")
     for i, th in enumerate(cv["theta"]):
         rec.set_time("theta_index", i)
@@ -138,9 +191,11 @@ def _record(rec, cv: dict, traces: dict, result: dict) -> None:
         for m in METHODS:
             vkey, gkey = CURVE_KEYS[m]
             vals = {
-                f"toy/{m}/value/Q_true": cv["Q_true"][i], f"toy/{m}/value/critic": cv[vkey][i],
+                f"toy/{m}/value/Q_true": cv["Q_true"][i],
+                f"toy/{m}/value/critic": cv[vkey][i],
                 f"toy/{m}/value/critic_fixed": cv[vkey + "_fixed"][i],
-                f"toy/{m}/gradient/dQ_true": cv["dQ_true"][i], f"toy/{m}/gradient/critic": cv[gkey][i],
+                f"toy/{m}/gradient/dQ_true": cv["dQ_true"][i],
+                f"toy/{m}/gradient/critic": cv[gkey][i],
                 f"toy/{m}/gradient/critic_fixed": cv[gkey + "_fixed"][i],
             }
             for ent, v in vals.items():
@@ -161,18 +216,40 @@ def _record(rec, cv: dict, traces: dict, result: dict) -> None:
 def _format_table(result: dict) -> tuple[str, str]:
     rows = [("method", "closed-form theta", "numerical theta", "optimal theta")]
     for m in METHODS:
-        rows.append((m, f"{result['closed_form'][m]:.6g}", f"{result['numerical'][m]:.6g}",
-                     f"{result['optimal']:.6g}"))
+        rows.append(
+            (
+                m,
+                f"{result['closed_form'][m]:.6g}",
+                f"{result['numerical'][m]:.6g}",
+                f"{result['optimal']:.6g}",
+            )
+        )
     widths = [max(len(r[i]) for r in rows) for i in range(4)]
     text = "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths)) for r in rows)
-    md = "| " + " | ".join(rows[0]) + " |\n|" + "---|" * 4 + "\n" + \
-        "\n".join("| " + " | ".join(r) + " |" for r in rows[1:])
+    md = (
+        "| "
+        + " | ".join(rows[0])
+        + " |\n|"
+        + "---|" * 4
+        + "\n"
+        + "\n".join("| " + " | ".join(r) + " |" for r in rows[1:])
+    )
     return text, md
 
 
-def run_toy(out_dir: Path, s0: float = -6.0, g: float = 0.0, recorder_factory=None, *,
-            iters: int = 500, theta0: float = 0.1, alpha: float = ALPHA, plain_lr: float = 0.05,
-            thetas=None, verbose: bool = True) -> dict:
+def run_toy(
+    out_dir: Path,
+    s0: float = -6.0,
+    g: float = 0.0,
+    recorder_factory=None,
+    *,
+    iters: int = 500,
+    theta0: float = 0.1,
+    alpha: float = ALPHA,
+    plain_lr: float = 0.05,
+    thetas=None,
+    verbose: bool = True,
+) -> dict:
     """Run the whole analysis: loops, closed forms, curves, init sweep; write figures and a recording.
 
     Writes ``out_dir/toy.rrd`` and ``out_dir/toy_{supervised,ours,meta_critic}.png``; prints a table
@@ -187,7 +264,9 @@ def run_toy(out_dir: Path, s0: float = -6.0, g: float = 0.0, recorder_factory=No
     """
     if thetas is None:
         thetas = default_thetas(s0, g)
-    check_settings(s0=s0, goal=g, theta0=theta0, alpha=alpha, plain_lr=plain_lr, iters=iters, grid=len(thetas))
+    check_settings(
+        s0=s0, goal=g, theta0=theta0, alpha=alpha, plain_lr=plain_lr, iters=iters, grid=len(thetas)
+    )
     out_dir = checks.out_dir("out", out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     cf = closed_form(s0, g)
@@ -201,14 +280,20 @@ def run_toy(out_dir: Path, s0: float = -6.0, g: float = 0.0, recorder_factory=No
     cv = curves(s0, g, thetas, alpha, converged=converged)
 
     result: dict = {
-        "s0": float(s0), "g": float(g),
+        "s0": float(s0),
+        "g": float(g),
         "closed_form": cf,
         "numerical": {"supervised": th_s, "ours": th_o, "meta_critic": th_m},
-        "critic_params": {"supervised": {"phi": phi_s}, "ours": {"phi": phi_o},
-                          "meta_critic": {"phi": phi_m, "beta": beta_m}},
+        "critic_params": {
+            "supervised": {"phi": phi_s},
+            "ours": {"phi": phi_o},
+            "meta_critic": {"phi": phi_m, "beta": beta_m},
+        },
         "iterations": {m: len(tr["theta"]) - 1 for m, tr in traces.items()},
         "optimal": cf["optimal"],
-        "stationary_points": {m: stationary_points(cv["theta"], cv[CURVE_KEYS[m][1]]) for m in METHODS},
+        "stationary_points": {
+            m: stationary_points(cv["theta"], cv[CURVE_KEYS[m][1]]) for m in METHODS
+        },
         "paper_meta_critic_theta": paper_meta_critic_theta(s0),
         "init_sweep": init_sweep(s0, g, iters=min(iters, 200), alpha=alpha, plain_lr=plain_lr),
     }
@@ -231,18 +316,29 @@ def run_toy(out_dir: Path, s0: float = -6.0, g: float = 0.0, recorder_factory=No
     if verbose:
         print(f"1-D toy example (s0={s0:g}, g={g:g}, T={T}, gamma={GAMMA:g}, alpha={alpha:g})")
         print(text)
-        print("stationary points of the policy gradient (critic fitted at each theta): " + "; ".join(
-            f"{m}: " + ", ".join(f"{x:.4g} ({k})" for x, k in result["stationary_points"][m])
-            for m in METHODS))
-        print(f"paper's printed Meta-Critic formula gives theta = {result['paper_meta_critic_theta']:.4g} "
-              f"(not a fixed point; the loop converges to {th_m:.4g})")
+        print(
+            "stationary points of the policy gradient (critic fitted at each theta): "
+            + "; ".join(
+                f"{m}: " + ", ".join(f"{x:.4g} ({k})" for x, k in result["stationary_points"][m])
+                for m in METHODS
+            )
+        )
+        print(
+            f"paper's printed Meta-Critic formula gives theta = {result['paper_meta_critic_theta']:.4g} "
+            f"(not a fixed point; the loop converges to {th_m:.4g})"
+        )
         n_sweep = min(iters, 200)
-        print(f"init sweep, at most {n_sweep} iterations (theta0 -> theta; '(~fixed point, kind)' when "
-              "not within 1e-6 of a listed fixed point):")
+        print(
+            f"init sweep, at most {n_sweep} iterations (theta0 -> theta; '(~fixed point, kind)' when "
+            "not within 1e-6 of a listed fixed point):"
+        )
         for variant in dict.fromkeys(r["variant"] for r in result["init_sweep"]):
-            cells = [f"{r['theta0']:.3g}->{r['theta']:.4g}" + ("" if r["distance"] < 1e-6 else
-                                                             f"(~{r['nearest']:.3g},{r['kind']})")
-                     for r in result["init_sweep"] if r["variant"] == variant]
+            cells = [
+                f"{r['theta0']:.3g}->{r['theta']:.4g}"
+                + ("" if r["distance"] < 1e-6 else f"(~{r['nearest']:.3g},{r['kind']})")
+                for r in result["init_sweep"]
+                if r["variant"] == variant
+            ]
             print(f"  {variant:<20} " + "  ".join(cells))
         print(f"wrote {rrd} and {', '.join(str(files[m]) for m in METHODS)}")
     return result

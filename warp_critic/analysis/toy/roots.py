@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 
-def stationary_points(thetas, grad, rtol: float = 1e-6, vertex_rtol: float = 0.1) -> list[tuple[float, str]]:
+def stationary_points(
+    thetas, grad, rtol: float = 1e-6, vertex_rtol: float = 0.1
+) -> list[tuple[float, str]]:
     """Zeros of a gradient sampled on a grid: ``[(theta, kind), ...]`` sorted by ``theta``.
 
     * ``'sign change'``: neighbouring samples with opposite signs; the root is located by linear
@@ -35,22 +37,26 @@ def stationary_points(thetas, grad, rtol: float = 1e-6, vertex_rtol: float = 0.1
             j = i
             while j + 1 < n and sgn[j + 1] == 0:
                 j += 1
-            k = i + int(np.argmin(np.abs(gr[i:j + 1])))
+            k = i + int(np.argmin(np.abs(gr[i : j + 1])))
             left = sgn[i - 1] if i > 0 else 0
             right = sgn[j + 1] if j + 1 < n else 0
             if i > 0 and j + 1 < n:
                 kind = "sign change" if left * right < 0 else "touch"
                 x_k = float(th[k])
-                if kind == "touch" and 0 < k < n - 1:  # refine by the vertex of the parabola around the minimum
-                    xs = th[k - 1:k + 2] - th[k]
-                    a, b, _ = np.polyfit(xs, gr[k - 1:k + 2], 2)
+                if (
+                    kind == "touch" and 0 < k < n - 1
+                ):  # refine by the vertex of the parabola around the minimum
+                    xs = th[k - 1 : k + 2] - th[k]
+                    a, b, _ = np.polyfit(xs, gr[k - 1 : k + 2], 2)
                     if a != 0.0 and xs[0] <= -b / (2 * a) <= xs[2]:
                         x_k = float(th[k] - b / (2 * a))
                 out.append((x_k, kind))
             i = j + 1
             continue
         if i + 1 < n and sgn[i] * sgn[i + 1] < 0:
-            out.append((float(th[i] - gr[i] * (th[i + 1] - th[i]) / (gr[i + 1] - gr[i])), "sign change"))
+            out.append(
+                (float(th[i] - gr[i] * (th[i + 1] - th[i]) / (gr[i + 1] - gr[i])), "sign change")
+            )
         i += 1
     absg = np.abs(gr)
     last = -10
@@ -59,8 +65,8 @@ def stationary_points(thetas, grad, rtol: float = 1e-6, vertex_rtol: float = 0.1
             continue
         if absg[k] > absg[k - 1] or absg[k] > absg[k + 1] or k - last <= 2:
             continue
-        x = th[k - 1:k + 2] - th[k]
-        a, b, c = np.polyfit(x, gr[k - 1:k + 2], 2)
+        x = th[k - 1 : k + 2] - th[k]
+        a, b, c = np.polyfit(x, gr[k - 1 : k + 2], 2)
         if a == 0.0:
             continue
         xv = -b / (2 * a)
