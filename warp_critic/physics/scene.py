@@ -56,19 +56,7 @@ Layout: a :class:`newton.Model` built by :meth:`Scene.build_model` holds one new
 (``joint_q``/``joint_qd``/``joint_f`` reshape to ``(worlds, dof)``), because every world of a
 scene has the same topology and ``joint_coord_count == joint_dof_count == dof``.
 
-Variants change one link, the end-effector link ``e`` (tip ``p`` in its frame), consistently:
-
-1. Link length: with old length ``L = |p|``, new length ``L' = (link_length or L) * link_scale``,
-   ``s = L'/L`` and unit direction ``u = p/L``, the link's mass distribution is stretched by
-   ``S = I + (s-1) u u^T`` at constant mass: tip ``p -> S p = s p``; centre of mass ``c -> S c``
-   (its component along ``u`` scales by ``s``); the second moment about the COM,
-   ``Sigma = tr(I_c)/2 * 1 - I_c``, becomes ``S Sigma S^T`` and ``I_c' = tr(Sigma') * 1 - Sigma'``
-   (a thin rod along ``u`` thus gets ``s^2`` times its transverse inertia, as a rod of the same
-   mass and length ``s L`` has). Positions on the link (child-joint origins, visual shapes) map by
-   ``S`` too; capsules/cylinders/boxes aligned with ``u`` are lengthened by ``s``.
-2. Tip mass: a point mass ``m_a`` at the (new) tip ``p``: ``M' = M + m_a``,
-   ``c' = (M c + m_a p)/M'`` and, by the parallel-axis theorem,
-   ``I' = I_c + M (|d|^2 1 - d d^T) + m_a (|r|^2 1 - r r^T)`` with ``d = c - c'``, ``r = p - c'``.
+Variants (:mod:`warp_critic.physics.variants`) change one link; see that module for the rules.
 
 All user mistakes raise :class:`~warp_critic.core.errors.SceneError` (bad scene file) or
 :class:`~warp_critic.core.errors.UserError` (bad variant value) with a one-line message.
@@ -83,13 +71,13 @@ import math
 import re
 import threading
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from warp_critic.core.errors import FieldError, SceneError, UserError
+from warp_critic.core.errors import SceneError, UserError
+from warp_critic.physics.variants import Variant, apply_variant, is_finite, length_map
 
 if TYPE_CHECKING:
     import newton
@@ -130,48 +118,6 @@ DEFAULT_ATTRS: dict[str, tuple[str, str]] = {
     "warp_critic:homeStarts": ("home_starts", "natural"),
 }
 CRITIC_INPUT_CHOICES = ("full", "relative")
-
-
-# ------------------------------------------------------------------------------------------------
-# Variants
-# ------------------------------------------------------------------------------------------------
-
-
-@dataclass(frozen=True)
-class Variant:
-    """A change of the robot's end-effector link (see the module docstring for the exact rules).
-
-    Attributes:
-        ee_mass: point mass [kg] ADDED at the end-effector tip (>= 0).
-        link_length: if not None, SET the end-effector link length ``|tip offset|`` [m] (> 0).
-        link_scale: multiply the end-effector link length (> 0); applied after ``link_length``.
-    """
-
-    ee_mass: float = 0.0
-    link_length: float | None = None
-    link_scale: float = 1.0
-
-    def validate(self) -> None:
-        """Raise :class:`FieldError` naming the offending field."""
-        if not _finite(self.ee_mass) or self.ee_mass < 0.0:
-            raise FieldError("ee_mass", f"must be >= 0 (got {self.ee_mass})")
-        if self.link_length is not None and (
-            not _finite(self.link_length) or self.link_length <= 0.0
-        ):
-            raise FieldError("link_length", f"must be > 0 (got {self.link_length})")
-        if not _finite(self.link_scale) or self.link_scale <= 0.0:
-            raise FieldError("link_scale", f"must be > 0 (got {self.link_scale})")
-
-    @property
-    def changes_length(self) -> bool:
-        return self.link_length is not None or self.link_scale != 1.0
-
-
-def _finite(x) -> bool:
-    try:
-        return math.isfinite(float(x))
-    except (TypeError, ValueError):
-        return False
 
 
 # ------------------------------------------------------------------------------------------------
@@ -270,22 +216,8 @@ class Scene:
         return self._length_map(variant)[1] @ self.tip_offset
 
     def _length_map(self, variant: Variant) -> tuple[float, np.ndarray]:
-        """(s, S): the length ratio and the stretch matrix ``I + (s-1) u u^T`` of ``variant``."""
-        variant.validate()
-        if not variant.changes_length:
-            return 1.0, np.eye(3)
-        old = float(np.linalg.norm(self.tip_offset))
-        if old == 0.0:
-            name = "link_length" if variant.link_length is not None else "link_scale"
-            raise FieldError(
-                name,
-                f"does not apply to scene '{self.name}': its end-effector "
-                f"'{self.body_names[self.ee_body]}' has a zero tip offset (no link length)",
-            )
-        new = (variant.link_length if variant.link_length is not None else old) * variant.link_scale
-        s = new / old
-        u = self.tip_offset / old
-        return s, np.eye(3) + (s - 1.0) * np.outer(u, u)
+        """(s, S): the length ratio and the stretch matrix of ``variant`` (see :mod:`.variants`)."""
+        return length_map(variant, self.tip_offset, self.name, self.body_names[self.ee_body])
 
     def world_builder(self, variant: Variant = Variant()) -> newton.ModelBuilder:
         """A fresh :class:`newton.ModelBuilder` with one copy of the robot, ``variant`` applied.
@@ -298,14 +230,7 @@ class Scene:
         s, stretch = self._length_map(variant)
         builder = newton.ModelBuilder()
         builder.add_builder(self._base)
-        if s != 1.0:
-            _stretch_link(
-                builder, self.ee_body, stretch, self.tip_offset / np.linalg.norm(self.tip_offset), s
-            )
-        if variant.ee_mass > 0.0:
-            _add_point_mass(
-                builder, self.ee_body, float(variant.ee_mass), stretch @ self.tip_offset
-            )
+        apply_variant(builder, self.ee_body, self.tip_offset, variant, s, stretch)
         return builder
 
     def build_model(
@@ -336,86 +261,6 @@ class Scene:
 
 def _array(values) -> np.ndarray:
     return np.array(values, dtype=np.float64)
-
-
-# ------------------------------------------------------------------------------------------------
-# Variant mechanics on a builder (python lists, before finalize)
-# ------------------------------------------------------------------------------------------------
-
-
-def _set_body_mass(builder, body: int, mass: float, com: np.ndarray, inertia: np.ndarray) -> None:
-    """Replace one body's mass properties (entries are reassigned: they may be shared)."""
-    import warp as wp
-
-    builder.body_mass[body] = float(mass)
-    builder.body_inv_mass[body] = 1.0 / float(mass)
-    builder.body_com[body] = wp.vec3(*map(float, com))
-    builder.body_inertia[body] = wp.mat33(*map(float, inertia.reshape(-1)))
-    builder.body_inv_inertia[body] = wp.mat33(*map(float, np.linalg.inv(inertia).reshape(-1)))
-
-
-def _body_mass(builder, body: int) -> tuple[float, np.ndarray, np.ndarray]:
-    return (
-        float(builder.body_mass[body]),
-        np.array(builder.body_com[body], dtype=np.float64),
-        np.array(builder.body_inertia[body], dtype=np.float64).reshape(3, 3),
-    )
-
-
-def _stretch_link(builder, body: int, stretch: np.ndarray, u: np.ndarray, s: float) -> None:
-    """Stretch ``body``'s mass distribution and attachments by ``stretch`` (module docstring, 1.)."""
-    import newton
-    import warp as wp
-
-    mass, com, inertia = _body_mass(builder, body)
-    second_moment = np.trace(inertia) / 2.0 * np.eye(3) - inertia
-    second_moment = stretch @ second_moment @ stretch.T
-    inertia = np.trace(second_moment) * np.eye(3) - second_moment
-    _set_body_mass(builder, body, mass, stretch @ com, inertia)
-
-    for j, parent in enumerate(builder.joint_parent):
-        if parent == body:
-            x = builder.joint_X_p[j]
-            builder.joint_X_p[j] = wp.transform(wp.vec3(*map(float, stretch @ np.array(x.p))), x.q)
-
-    # Visual shapes (zero density, so no effect on the dynamics): move them with the link, and
-    # lengthen boxes (half extents) and capsules/cylinders (half height, along their z axis)
-    # whose axis is the link direction.
-    axial = (int(newton.GeoType.CAPSULE), int(newton.GeoType.CYLINDER))
-    for k, shape_body in enumerate(builder.shape_body):
-        if shape_body != body:
-            continue
-        x = builder.shape_transform[k]
-        builder.shape_transform[k] = wp.transform(
-            wp.vec3(*map(float, stretch @ np.array(x.p))), x.q
-        )
-        u_local = np.array(wp.quat_rotate_inv(x.q, wp.vec3(*map(float, u))))
-        axis = int(np.argmax(np.abs(u_local)))
-        kind = int(builder.shape_type[k])
-        if abs(u_local[axis]) < 1.0 - 1e-6:
-            continue  # not aligned with the link: keep its size
-        if kind == int(newton.GeoType.BOX):
-            index = axis
-        elif kind in axial and axis == 2:
-            index = 1
-        else:
-            continue
-        scale = list(builder.shape_scale[k])
-        scale[index] *= s
-        builder.shape_scale[k] = tuple(scale)
-
-
-def _add_point_mass(builder, body: int, added: float, point: np.ndarray) -> None:
-    """Add a point mass ``added`` [kg] at ``point`` (body frame) to ``body`` (module docstring, 2.)."""
-    mass, com, inertia = _body_mass(builder, body)
-    new_mass = mass + added
-    new_com = (mass * com + added * point) / new_mass
-
-    def shift(m: float, r: np.ndarray) -> np.ndarray:
-        return m * (float(r @ r) * np.eye(3) - np.outer(r, r))
-
-    inertia = inertia + shift(mass, com - new_com) + shift(added, point - new_com)
-    _set_body_mass(builder, body, new_mass, new_com, inertia)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -510,7 +355,7 @@ def _check_stage(path: Path, stage) -> tuple[object, dict[str, float]]:
                 "PhysicsRevoluteJoint and PhysicsPrismaticJoint are supported",
             )
         value = prim.GetAttribute(EFFORT_ATTR).Get() if prim.HasAttribute(EFFORT_ATTR) else None
-        if value is None or not _finite(value) or value <= 0.0:
+        if value is None or not is_finite(value) or value <= 0.0:
             raise _fail(
                 path, f"joint {prim.GetPath()} needs a positive {EFFORT_ATTR} (got {value})"
             )
@@ -521,12 +366,12 @@ def _check_stage(path: Path, stage) -> tuple[object, dict[str, float]]:
         mass = mass_api.GetMassAttr().Get() if prim.HasAPI(UsdPhysics.MassAPI) else None
         if mass is None or not prim.GetAttribute("physics:mass").HasAuthoredValue():
             raise _fail(path, f"link {prim.GetPath()} has no physics:mass (MassAPI)")
-        if not _finite(mass) or mass <= 0.0:
+        if not is_finite(mass) or mass <= 0.0:
             raise _fail(path, f"link {prim.GetPath()} has non-positive mass {mass} kg")
         inertia = mass_api.GetDiagonalInertiaAttr().Get()
         if inertia is None or not mass_api.GetDiagonalInertiaAttr().HasAuthoredValue():
             raise _fail(path, f"link {prim.GetPath()} has no physics:diagonalInertia")
-        if not all(_finite(v) for v in inertia) or any(v < 0.0 for v in inertia):
+        if not all(is_finite(v) for v in inertia) or any(v < 0.0 for v in inertia):
             raise _fail(
                 path, f"link {prim.GetPath()} has negative or non-finite inertia {tuple(inertia)}"
             )
