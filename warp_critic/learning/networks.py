@@ -32,10 +32,11 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from warp_critic.physics.schema import CRITIC_INPUTS  # a scene may name its critic's layout
+
 PolicyParams = dict[str, torch.Tensor]
 
 POLICY_INIT_SCHEMES = ("fresh", "fixed", "persistent")
-CRITIC_INPUTS = ("full", "relative")
 
 
 @dataclass(frozen=True)

@@ -70,6 +70,7 @@ from warp_critic.methods.replay import (
     ReplayBuffer,
     rewards,
 )
+from warp_critic.physics import schema
 from warp_critic.physics.simulator import Simulator
 from warp_critic.running.loop import Callback, Session, TrainResult
 from warp_critic.running.task import TaskConfig, spec
@@ -157,7 +158,9 @@ class BaselineConfig(TaskConfig):
     )
     inner_steps: int | None = spec(
         None,
-        "meta-test's default number of fresh-policy updates with -Q (default: the scene's, as meta-train's inner steps, else 1)",
+        "meta-test's default number of fresh-policy updates with -Q (default: the scene's, as meta-train's inner steps, else "
+        + schema.fallback_text("inner_steps")
+        + ")",
         gt=0,
         cap=10**4,
     )

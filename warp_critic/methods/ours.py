@@ -16,7 +16,6 @@ import torch
 
 from warp_critic.core.errors import DivergenceError, FieldError
 from warp_critic.learning.networks import (
-    CRITIC_INPUTS,
     POLICY_INIT_SCHEMES,
     Critic,
     MLPPolicy,
@@ -24,6 +23,8 @@ from warp_critic.learning.networks import (
     detach_params,
 )
 from warp_critic.learning.outer import meta_loss
+from warp_critic.physics import schema
+from warp_critic.physics.schema import CRITIC_INPUTS
 from warp_critic.running.loop import Callback, Session, TrainResult
 from warp_critic.running.task import TaskConfig, spec
 
@@ -34,7 +35,8 @@ class TrainConfig(TaskConfig):
 
     iterations: int | None = spec(
         None,
-        "outer iterations (critic updates); default: the scene's (the reported runs), else 300",
+        "outer iterations (critic updates); default: the scene's (the reported runs), else "
+        + schema.fallback_text("iterations"),
         gt=0,
         cap=10**8,
     )
@@ -49,7 +51,9 @@ class TrainConfig(TaskConfig):
     )
     inner_steps: int | None = spec(
         None,
-        "inner critic-gradient steps per outer iteration; default: the scene's, else 1 (the paper's Algorithm 2)",
+        "inner critic-gradient steps per outer iteration; default: the scene's, else "
+        + schema.fallback_text("inner_steps")
+        + " (the paper's Algorithm 2)",
         gt=0,
         cap=10**4,
     )
@@ -66,7 +70,8 @@ class TrainConfig(TaskConfig):
     )
     critic_input: str | None = spec(
         None,
-        "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant); default: the scene's, else full",
+        "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant); default: the scene's, else "
+        + schema.fallback_text("critic_input"),
         choices=CRITIC_INPUTS,
     )
     critic_hidden: int = spec(400, "critic hidden units (2 ELU layers)", gt=0, cap=8192)
@@ -79,13 +84,7 @@ class TrainConfig(TaskConfig):
     clip_grad: float = spec(10.0, "clip the critic's gradient norm (0 = off)", ge=0)
 
     method = "ours"
-    scene_fields = TaskConfig.scene_fields + (
-        "alpha",
-        "lr",
-        "iterations",
-        "inner_steps",
-        "critic_input",
-    )
+    scene_fields = TaskConfig.scene_fields + schema.keys("meta-train")
 
     def default_out(self) -> str:
         return f"runs/{Path(self.scene).stem}-meta"

@@ -41,6 +41,7 @@ __all__ = [
     "Attribute",
     "RuleError",
     "attribute",
+    "fallback_text",
     "fallbacks",
     "keys",
     "markdown_table",
@@ -149,6 +150,12 @@ def fallbacks() -> dict[str, Any]:
         for a in ATTRIBUTES
         if a.default not in (REQUIRED, EFFORT_LIMITS, ZEROS) and a.scope != "scene"
     }
+
+
+def fallback_text(key: str) -> str:
+    """``key``'s default as help texts write it (``0``, ``300``, ``full``)."""
+    value = attribute(key).default
+    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 # ------------------------------------------------------------------------------------------------

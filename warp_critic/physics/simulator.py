@@ -16,8 +16,7 @@ from warp_critic.core import runtime
 from warp_critic.core.errors import FieldError
 from warp_critic.physics.bridge import NewtonBridge
 from warp_critic.physics.scene import Scene, Variant
-
-STANDARD_GRAVITY = 9.81  # m/s^2, along -z: a scene's gravity when it authors none
+from warp_critic.physics.schema import STANDARD_GRAVITY  # a scene's gravity when it authors none
 
 
 def resolve_device(device: str) -> str:

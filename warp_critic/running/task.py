@@ -29,24 +29,11 @@ import torch
 from warp_critic.core.errors import FieldError
 from warp_critic.core.runtime import MAX_SEED, check_threads
 from warp_critic.learning.networks import Normalizer
+from warp_critic.physics import schema
 from warp_critic.physics.scene import Scene, Variant, load_scene
-from warp_critic.physics.simulator import STANDARD_GRAVITY
 
-# Used for a field that neither the user nor the scene sets.
-GENERIC_DEFAULTS: dict[str, Any] = dict(
-    horizon=50,
-    dt=0.01,
-    substeps=1,
-    qd_scale=5.0,
-    alpha=1e-3,
-    lr=3e-3,
-    gravity=STANDARD_GRAVITY,
-    start_std=0.0,
-    home_starts=0,
-    iterations=300,
-    inner_steps=1,
-    critic_input="full",
-)
+# Used for a field that neither the user nor the scene sets (the scene schema's defaults).
+GENERIC_DEFAULTS: dict[str, Any] = schema.fallbacks()
 DEVICES = ("auto", "cpu", "cuda")
 # Fields that say where/how a run executes, not what it computes: they may change on --resume.
 RUNTIME_FIELDS = (
@@ -160,13 +147,15 @@ class TaskConfig(SerializableConfig):
     worlds_per_goal: int = spec(4, "policy initialisations per goal (parallel worlds)", gt=0)
     start_std: float | None = spec(
         None,
-        "std (rad) of random initial joint positions around the home pose, drawn per world and iteration (0 = always start at home, as at meta-test); default: the scene's, else 0",
+        "std (rad) of random initial joint positions around the home pose, drawn per world and iteration (0 = always start at home, as at meta-test); default: the scene's, else "
+        + schema.fallback_text("start_std"),
         ge=0,
         cap=100,
     )
     home_starts: int | None = spec(
         None,
-        "with a start std: this many of each goal's worlds still start at the home pose (as at meta-test) every iteration; default: the scene's, else 0",
+        "with a start std: this many of each goal's worlds still start at the home pose (as at meta-test) every iteration; default: the scene's, else "
+        + schema.fallback_text("home_starts"),
         ge=0,
     )
     max_torque: list[float] | None = spec(
@@ -208,17 +197,7 @@ class TaskConfig(SerializableConfig):
 
     method = "task"  # overridden by each method's config
     # fields a scene's content may set (a method adds its own, e.g. ours the inner/outer learning rates)
-    scene_fields = (
-        "goals",
-        "horizon",
-        "dt",
-        "substeps",
-        "max_torque",
-        "qd_scale",
-        "gravity",
-        "start_std",
-        "home_starts",
-    )
+    scene_fields: tuple[str, ...] = schema.keys("task")
 
     # -- defaults and checks -------------------------------------------------------------------
     def default_out(self) -> str:
