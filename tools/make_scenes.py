@@ -26,39 +26,18 @@ Conventions of the written USD (all SI: metres, kilograms, seconds; ``upAxis = Z
 * Mass properties: ``physics:mass``, ``physics:centerOfMass`` (link frame) and the full inertia
   tensor about the centre of mass, diagonalised with numpy and stored as ``physics:diagonalInertia``
   plus ``physics:principalAxes`` (quaternion q with I = R(q) diag(d) R(q)^T).
-* Custom data: ``warp_critic:effortLimit`` (float, N*m or N) on every joint;
-  ``warp_critic:endEffectorBody`` (string, the end-effector link's prim name) and
-  ``warp_critic:tipOffset`` (float3, m, in that link's frame) on the articulation root.
-* Training defaults of the scene (:class:`Defaults`), also custom attributes of the articulation
-  root, so that they travel with the file's content, not its name (``warp_critic.physics.scene`` reads them
-  into ``Scene.defaults`` / ``Scene.home``). Real numbers are DOUBLES so that they read back as the
-  exact Python floats of the table (a float32 would turn 0.0025 into 0.0024999999441206455):
-
-  ====================================  =========  ==============================================
-  attribute                             type       meaning
-  ====================================  =========  ==============================================
-  ``warp_critic:goals``                 double[]   G training goals in joint space (rad or m),
-                                                   G x dof flattened row-major
-  ``warp_critic:horizon``               int        control steps per rollout
-  ``warp_critic:dt``                    double     physics time step (s)
-  ``warp_critic:substeps``              int        physics steps per control step
-  ``warp_critic:maxTorque``             double[]   policy torque bound per joint (N*m or N),
-                                                   dof values (or 1 for all joints)
-  ``warp_critic:qdScale``               double     velocity normalisation (rad/s or m/s)
-  ``warp_critic:alpha``                 double     inner learning rate (policy update)
-  ``warp_critic:lr``                    double     outer learning rate (Adam on the critic)
-  ``warp_critic:gravity``               double     gravity along -z (m/s^2)
-  ``warp_critic:homePose``              double[]   home (start) joint positions, dof values
-  ``warp_critic:iterations``            int        outer iterations of meta-training (optional)
-  ``warp_critic:innerSteps``            int        inner critic-gradient steps (optional)
-  ``warp_critic:criticInput``           string     critic input layout, full or relative (optional)
-  ``warp_critic:startStd``              double     std (rad) of random training start states (optional)
-  ``warp_critic:homeStarts``            int        worlds per goal kept at home with startStd (optional)
-  ====================================  =========  ==============================================
-
-  The optional ones hold the settings of the runs this project reports for the robot (the paper's
-  setting as reproduced; ``warp_critic.evaluation.presets``), so that ``warp-critic meta-train scenes/kuka.usda``
-  on its defaults is the reported configuration.
+* Custom data (the format: ``warp_critic/physics/schema.py``): ``warp_critic:effortLimit``
+  (float, N*m or N) on every joint; ``warp_critic:endEffectorBody`` (string, the end-effector
+  link's prim name) and ``warp_critic:tipOffset`` (float3, m, in that link's frame) on the
+  articulation root.
+* Training defaults of the scene (``Robot.defaults``, keyed as the schema's ``ATTRIBUTES``): custom
+  attributes of the articulation root, so that they travel with the file's content, not its name.
+  Each is written with the schema's USD type and checked with the schema's rule, the rule the
+  loader applies. Real numbers are DOUBLES so that they read back as the exact Python floats of the
+  table (a float32 would turn 0.0025 into 0.0024999999441206455). The optional schedule
+  (``iterations``, ``inner_steps``, ``critic_input``, ``start_std``, ``home_starts``) holds the
+  settings of the runs this project reports for the robot, so that ``warp-critic meta-train
+  scenes/kuka.usda`` on its defaults is the reported configuration.
 * Visual geometry (capsules/spheres/cylinders) has NO ``CollisionAPI``: newton loads it as
   zero-density visual shapes, so it never changes the authored mass properties.
 """
@@ -69,9 +48,12 @@ import math
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdPhysics
+
+from warp_critic.physics import schema
 
 # ================================================================================================
 # THE TABLE. Units: m, kg, kg*m^2, rad, N*m (N for prismatic), N*m*s/rad (N*s/m).
@@ -124,28 +106,6 @@ class Joint:
 
 
 @dataclass(frozen=True)
-class Defaults:
-    """Training defaults of a scene, written as ``warp_critic:*`` attributes of the root (see above)."""
-
-    goals: tuple[tuple[float, ...], ...]  # G x dof, rad or m
-    horizon: int  # control steps per rollout
-    dt: float  # s
-    substeps: int  # physics steps per control step
-    max_torque: tuple[float, ...]  # N*m or N, dof values (or 1)
-    qd_scale: float  # rad/s
-    alpha: float  # inner learning rate
-    lr: float  # outer learning rate
-    gravity: float  # m/s^2 along -z
-    home: tuple[float, ...] | None = None  # rad or m; None = zeros
-    # the reported training schedule (None: not authored, the generic defaults apply)
-    iterations: int | None = None
-    inner_steps: int | None = None
-    critic_input: str | None = None
-    start_std: float | None = None
-    home_starts: int | None = None
-
-
-@dataclass(frozen=True)
 class Robot:
     links: tuple[Link, ...]
     joints: tuple[Joint, ...]
@@ -155,7 +115,8 @@ class Robot:
     limit_kd: float
     base_visual: tuple[float, float] | None = None  # (radius, height) of a static base cylinder
     point_visual: dict[str, float] = field(default_factory=dict)  # link -> sphere radius
-    defaults: Defaults | None = None  # training defaults (None: none authored)
+    # training defaults, keyed as warp_critic.physics.schema.ATTRIBUTES ({}: none authored)
+    defaults: dict[str, Any] = field(default_factory=dict)
 
 
 ROBOTS: dict[str, Robot] = {
@@ -200,7 +161,7 @@ ROBOTS: dict[str, Robot] = {
         limit_ke=1000.0,
         limit_kd=10.0,
         point_visual={"mass": 0.05},
-        defaults=Defaults(
+        defaults=dict(
             goals=((1.0, 1.0),),
             horizon=20,
             dt=0.05,
@@ -210,6 +171,7 @@ ROBOTS: dict[str, Robot] = {
             alpha=1e-3,
             lr=3e-3,
             gravity=9.81,
+            home=(0.0, 0.0),
         ),
     ),
     # diff_robot_data/2link_robot.urdf
@@ -253,7 +215,7 @@ ROBOTS: dict[str, Robot] = {
         base_visual=(0.05, 0.15),
         # Goals in joint space (rad), four per robot as in the paper's section 5 (the paper does not
         # list its goals; these are spread over the workspace, well inside the limits).
-        defaults=Defaults(
+        defaults=dict(
             goals=((1.0, 0.5), (-1.0, -0.5), (0.5, -1.0), (-0.5, 1.0)),
             horizon=50,
             dt=0.01,
@@ -263,6 +225,7 @@ ROBOTS: dict[str, Robot] = {
             alpha=3e-4,
             lr=1e-3,
             gravity=9.81,
+            home=(0.0, 0.0),
             # reported (RESULTS.md): 3 inner steps at alpha 3e-4, 400 iterations
             iterations=400,
             inner_steps=3,
@@ -346,7 +309,7 @@ ROBOTS: dict[str, Robot] = {
         # 0.5 N·m·s/rad damping rather than its inertia: 1 N·m gives it 2 rad/s (the earlier 0.1 N·m
         # allowed only 0.2 rad/s, i.e. 0.1 rad in a 0.5 s rollout). Gravity 0: a perfectly
         # gravity-compensated robot (the iiwa's torque mode).
-        defaults=Defaults(
+        defaults=dict(
             goals=(
                 (0.5, 0.4, 0.0, -0.8, 0.0, 0.5, 0.0),
                 (-0.5, 0.6, 0.3, -0.6, 0.0, 0.3, 0.0),
@@ -361,6 +324,7 @@ ROBOTS: dict[str, Robot] = {
             alpha=3e-4,
             lr=3e-3,
             gravity=0.0,
+            home=(0.0,) * 7,
             # reported against the paper's Table 1 (RESULTS.md): the goal-relative critic,
             # random starts 0.4 rad with 2 of 4 worlds per goal at home, 3 inner steps
             iterations=3000,
@@ -482,42 +446,23 @@ COLORS = [(0.9, 0.45, 0.1), (0.7, 0.7, 0.7)]
 
 
 def write_defaults(name: str, robot: Robot, prim: Usd.Prim) -> None:
-    """Author ``robot.defaults`` as the ``warp_critic:*`` training-default attributes of ``prim``."""
-    d, dof = robot.defaults, len(robot.joints)
-    home = d.home if d.home is not None else (0.0,) * dof
-    assert d.goals and all(len(g) == dof for g in d.goals), f"{name}: goals need {dof} values each"
-    assert len(d.max_torque) in (1, dof) and len(home) == dof, f"{name}: maxTorque/homePose length"
-    for q in (*d.goals, home):
-        assert all(j.lower <= v <= j.upper for v, j in zip(q, robot.joints)), (
-            f"{name}: {q} outside the limits"
-        )
-    double, double_array, int_ = (
-        Sdf.ValueTypeNames.Double,
-        Sdf.ValueTypeNames.DoubleArray,
-        Sdf.ValueTypeNames.Int,
-    )
-    values = {
-        "goals": (double_array, [float(v) for g in d.goals for v in g]),
-        "horizon": (int_, int(d.horizon)),
-        "dt": (double, float(d.dt)),
-        "substeps": (int_, int(d.substeps)),
-        "maxTorque": (double_array, [float(v) for v in d.max_torque]),
-        "qdScale": (double, float(d.qd_scale)),
-        "alpha": (double, float(d.alpha)),
-        "lr": (double, float(d.lr)),
-        "gravity": (double, float(d.gravity)),
-        "homePose": (double_array, [float(v) for v in home]),
-    }
-    optional = {
-        "iterations": (int_, d.iterations),
-        "innerSteps": (int_, d.inner_steps),
-        "criticInput": (Sdf.ValueTypeNames.String, d.critic_input),
-        "startStd": (double, None if d.start_std is None else float(d.start_std)),
-        "homeStarts": (int_, d.home_starts),
-    }
-    values.update({k: v for k, v in optional.items() if v[1] is not None})
-    for attr, (type_name, value) in values.items():
-        prim.CreateAttribute(f"warp_critic:{attr}", type_name, custom=True).Set(value)
+    """Author ``robot.defaults`` as the schema's training-default attributes of ``prim``, each
+    checked first with the rule the loader applies."""
+    unknown = set(robot.defaults) - {a.key for a in schema.ATTRIBUTES}
+    assert not unknown, f"{name}: defaults {sorted(unknown)} are not in the scene schema"
+    lower = [j.lower for j in robot.joints]
+    upper = [j.upper for j in robot.joints]
+    joint_names = [j.name for j in robot.joints]
+    for attr in schema.ATTRIBUTES:
+        if attr.key not in robot.defaults:
+            continue
+        value = schema.to_usd(attr, robot.defaults[attr.key])
+        try:
+            schema.parse(attr, value, lower, upper, joint_names)
+        except schema.RuleError as exc:
+            raise ValueError(f"{name}: {attr.usd} {exc}") from None
+        type_name = Sdf.ValueTypeNames.Find(attr.type)
+        prim.CreateAttribute(attr.usd, type_name, custom=True).Set(value)
 
 
 def write_robot(name: str, robot: Robot, path: Path) -> None:
@@ -532,14 +477,13 @@ def write_robot(name: str, robot: Robot, path: Path) -> None:
     root = UsdGeom.Xform.Define(stage, f"/{name}")
     stage.SetDefaultPrim(root.GetPrim())
     UsdPhysics.ArticulationRootAPI.Apply(root.GetPrim())
-    root.GetPrim().CreateAttribute(
-        "warp_critic:endEffectorBody", Sdf.ValueTypeNames.String, custom=True
-    ).Set(robot.ee)
-    root.GetPrim().CreateAttribute(
-        "warp_critic:tipOffset", Sdf.ValueTypeNames.Float3, custom=True
-    ).Set(Gf.Vec3f(*map(float, robot.tip)))
-    if robot.defaults is not None:
-        write_defaults(name, robot, root.GetPrim())
+    root.GetPrim().CreateAttribute(schema.EE_ATTR, Sdf.ValueTypeNames.String, custom=True).Set(
+        robot.ee
+    )
+    root.GetPrim().CreateAttribute(schema.TIP_ATTR, Sdf.ValueTypeNames.Float3, custom=True).Set(
+        Gf.Vec3f(*map(float, robot.tip))
+    )
+    write_defaults(name, robot, root.GetPrim())
 
     if robot.base_visual is not None:  # static (not a rigid body): drawn only
         radius, height = robot.base_visual
@@ -637,7 +581,7 @@ def write_robot(name: str, robot: Robot, path: Path) -> None:
         prim.CreateAttribute("newton:limitDamping", Sdf.ValueTypeNames.Float).Set(
             robot.limit_kd * gain_scale
         )
-        prim.CreateAttribute("warp_critic:effortLimit", Sdf.ValueTypeNames.Float, custom=True).Set(
+        prim.CreateAttribute(schema.EFFORT_ATTR, Sdf.ValueTypeNames.Float, custom=True).Set(
             joint.effort
         )
 
