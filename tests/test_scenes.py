@@ -7,6 +7,7 @@ acceleration is evaluated at the start state); a largish ``dt`` keeps float32 ca
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import subprocess
@@ -21,6 +22,7 @@ import warp as wp
 from conftest import ROOT, SCENES
 
 from warp_critic.core.errors import SceneError, UserError
+from warp_critic.physics import schema
 from warp_critic.physics.scene import Variant, load_scene
 
 DT = 1e-2  # s; any dt gives the same qdd (see the module docstring)
@@ -553,8 +555,7 @@ def test_bad_scene_files_on_the_command_line_exit_2_with_one_line(case, tmp_path
 # ------------------------------------------------------------------------------------------------
 
 DEFAULT_LINE = re.compile(
-    r"^\s*custom \S+ warp_critic:(goals|horizon|dt|substeps|maxTorque|qdScale|alpha|lr|gravity"
-    r"|homePose|iterations|innerSteps|criticInput|startStd|homeStarts) = .*\n",
+    r"^\s*custom \S+ (" + "|".join(re.escape(a.usd) for a in schema.ATTRIBUTES) + r") = .*\n",
     re.M,
 )
 
@@ -671,7 +672,7 @@ def test_content_hash_changes_with_any_value_and_ignores_the_folder_of_assets(tm
 def test_scene_without_default_attributes_loads_with_empty_defaults(tmp_path):
     text = (SCENES / "reacher.usda").read_text()
     stripped = DEFAULT_LINE.sub("", text)
-    assert len(text.splitlines()) - len(stripped.splitlines()) == 15
+    assert len(text.splitlines()) - len(stripped.splitlines()) == len(schema.ATTRIBUTES) == 15
     path = tmp_path / "plain.usda"
     path.write_text(stripped)
     scene = load_scene(path)
@@ -744,3 +745,124 @@ def test_bad_default_attributes_raise_one_line_scene_error(case, tmp_path):
 def test_one_torque_bound_for_all_joints_is_accepted(tmp_path):
     path = _edited_reacher(tmp_path, _set_root("warp_critic:maxTorque", [7.5]), "one_torque.usda")
     assert load_scene(path).defaults["max_torque"] == [7.5]
+
+
+# ------------------------------------------------------------------------------------------------
+# 6. One schema: the loader, the writer, the scenes and the README agree
+# ------------------------------------------------------------------------------------------------
+
+
+def _make_scenes_tool():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("make_scenes", ROOT / "tools" / "make_scenes.py")
+    tool = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = tool  # its dataclasses look their module up
+    spec.loader.exec_module(tool)
+    return tool
+
+
+def test_readme_attribute_table_is_the_schema():
+    readme = (ROOT / "README.md").read_text()
+    assert _make_scenes_tool().readme_with_table(readme) == readme, (
+        "README.md's attribute table differs from warp_critic/physics/schema.py: "
+        "run python tools/make_scenes.py --readme"
+    )
+    for attr in schema.ATTRIBUTES:
+        assert f"| `{attr.usd}` | {attr.type} | `{attr.key}` " in readme, attr.usd
+
+
+def test_shipped_scenes_author_only_schema_attributes_with_its_types():
+    known = {a.usd: a.type for a in schema.ATTRIBUTES}
+    known.update({schema.EE_ATTR: "string", schema.TIP_ATTR: "float3", schema.EFFORT_ATTR: "float"})
+    for name in ("point_mass", "reacher", "kuka"):
+        authored = re.findall(
+            r"custom (\S+) (warp_critic:\w+) =", (SCENES / f"{name}.usda").read_text()
+        )
+        assert authored and all(known.get(attr) == kind for kind, attr in authored), (
+            name,
+            authored,
+        )
+    # the writer takes its keys from the schema: an unknown one is refused
+    tool = _make_scenes_tool()
+    robot = tool.ROBOTS["reacher"]
+    bad = tool.Robot(**{**robot.__dict__, "defaults": {**robot.defaults, "horizn": 5}})
+    with pytest.raises(AssertionError, match="horizn"):
+        tool.write_defaults("reacher", bad, None)
+    far = tool.Robot(**{**robot.__dict__, "defaults": {**robot.defaults, "goals": ((0.0, 4.0),)}})
+    with pytest.raises(ValueError, match="goal 0 has interArm = 4.0"):
+        tool.write_defaults("reacher", far, None)
+
+
+def test_edited_scene_file_is_read_again_in_the_same_process(tmp_path):
+    path = tmp_path / "robot.usda"
+    text = (SCENES / "reacher.usda").read_text()
+    path.write_text(text)
+    before = load_scene(path)
+    path.write_text(text.replace("warp_critic:horizon = 50", "warp_critic:horizon = 7"))
+    after = load_scene(path)
+    assert (before.defaults["horizon"], after.defaults["horizon"]) == (50, 7)
+
+
+# Prints the content hashes of three copies of an instanced scene, loaded one after the other.
+_HASH_SCRIPT = """
+import json, shutil, sys
+from pathlib import Path
+from warp_critic.physics.scene import load_scene
+src, out = Path(sys.argv[1]), Path(sys.argv[2])
+hashes = []
+for k in range(3):
+    shutil.copy(src, out / f"copy{k}.usda")
+    hashes.append(load_scene(out / f"copy{k}.usda").content_hash)
+print(json.dumps(hashes))
+"""
+
+# The same for Newton's own instanced asset, through the hash function alone (newton's loader
+# refuses its fixed root joint).
+_NEWTON_HASH_SCRIPT = """
+import json, sys
+from pathlib import Path
+from pxr import Usd
+from warp_critic.physics.scene_hash import content_hash
+path = Path(sys.argv[1])
+print(json.dumps([content_hash(path, Usd.Stage.Open(str(path))) for _ in range(3)]))
+"""
+
+
+def _instanced(stage):
+    """Three links get a visual child that instances its own prototype (a class prim)."""
+    from pxr import UsdGeom
+
+    for k, link in enumerate(("base", "arm1", "arm2")):
+        stage.CreateClassPrim(f"/decor_{k}")
+        UsdGeom.Sphere.Define(stage, f"/decor_{k}/ball").CreateRadiusAttr(0.01 * (k + 1))
+        prim = stage.DefinePrim(f"/reacher/{link}/decor")
+        prim.GetReferences().AddInternalReference(f"/decor_{k}")
+        prim.SetInstanceable(True)
+
+
+def _run_json(script: str, *args) -> list[str]:
+    done = subprocess.run(
+        [sys.executable, "-c", script, *map(str, args)], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def test_instanced_scene_hashes_the_same_in_every_process(tmp_path):
+    """USD numbers instance prototypes in a new order per stage; the hash must not see it."""
+    source = _edited_reacher(tmp_path, _instanced, "instanced.usda")
+    hashes = []
+    for run in ("a", "b"):
+        (tmp_path / run).mkdir()
+        hashes += _run_json(_HASH_SCRIPT, source, tmp_path / run)
+    assert len(set(hashes)) == 1, hashes
+    plain = load_scene(SCENES / "reacher.usda").content_hash
+    assert hashes[0] == load_scene(source).content_hash != plain
+
+
+def test_newton_instanced_asset_hashes_the_same_in_every_process():
+    asset = Path(newton.__file__).parent / "examples" / "assets" / "cartpole_single_pendulum.usda"
+    assert "instanceable = true" in asset.read_text()
+    hashes = _run_json(_NEWTON_HASH_SCRIPT, asset) + _run_json(_NEWTON_HASH_SCRIPT, asset)
+    assert len(set(hashes)) == 1, hashes

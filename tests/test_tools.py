@@ -510,7 +510,8 @@ def test_presets_are_the_reported_settings_keyed_by_config_fields():
     assert set(PRESETS) == set(DESCRIPTIONS) == set(SCENES) == set(EVALUATIONS)
     train_fields = {f.name for f in dataclasses.fields(TrainConfig)}
     baseline_fields = {f.name for f in dataclasses.fields(BaselineConfig)}
-    for name, settings in PRESETS.items():
+    for name in PRESETS:
+        settings = preset(name)
         fields = baseline_fields if "method" in settings else train_fields
         assert set(settings) <= fields, (name, set(settings) - fields)
         assert DESCRIPTIONS[name] and "\n" not in DESCRIPTIONS[name]
@@ -521,6 +522,30 @@ def test_presets_are_the_reported_settings_keyed_by_config_fields():
     p = preset("kuka-table1")
     p["iterations"] = 1
     assert preset("kuka-table1")["iterations"] == 3000
+
+
+def test_scene_presets_take_their_values_from_the_scene(tmp_path, monkeypatch):
+    """A meta-training preset names settings; the numbers are the scene's (one place to edit)."""
+    import warp_critic.physics.scene as scene_module
+    from warp_critic.evaluation.presets import PRESETS, SCENES, FromScene, preset
+    from warp_critic.physics.scene import load_scene
+
+    for name, entry in PRESETS.items():
+        if isinstance(entry, FromScene):
+            defaults = load_scene(ROOT / "scenes" / f"{SCENES[name]}.usda").defaults
+            assert preset(name) == {key: defaults[key] for key in entry.keys}
+    # an edited scene changes the preset with it, and a scene lacking a setting is refused
+    text = (ROOT / "scenes" / "kuka.usda").read_text()
+    (tmp_path / "kuka.usda").write_text(
+        text.replace("warp_critic:iterations = 3000", "warp_critic:iterations = 77")
+    )
+    monkeypatch.setattr(scene_module, "scenes_dir", lambda: tmp_path)
+    assert preset("kuka-table1")["iterations"] == 77
+    (tmp_path / "kuka.usda").write_text(
+        "\n".join(line for line in text.splitlines() if "warp_critic:lr " not in line)
+    )
+    with pytest.raises(FieldError, match="kuka-table1: the scene .* authors no lr"):
+        preset("kuka-table1")
 
 
 def test_unknown_preset_lists_the_known_ones():

@@ -1,7 +1,8 @@
 #!/usr/bin/env python
 """Regenerate ``scenes/*.usda`` from the one table of numbers below.
 
-Usage: ``python tools/make_scenes.py [OUT_DIR]`` (default: ``scenes/`` next to this folder).
+Usage: ``python tools/make_scenes.py [OUT_DIR]`` (default: ``scenes/`` next to this folder);
+``python tools/make_scenes.py --readme`` rewrites the README's attribute table from the schema.
 
 Every number of every robot lives in :data:`ROBOTS` (plus the few shared constants above it), so a
 change to a robot is one edit here followed by a re-run. The reacher and the KUKA iiwa7 copy the
@@ -588,8 +589,26 @@ def write_robot(name: str, robot: Robot, path: Path) -> None:
     stage.GetRootLayer().Save()
 
 
+README_BEGIN, README_END = "<!-- scene-schema:begin -->", "<!-- scene-schema:end -->"
+
+
+def readme_with_table(text: str) -> str:
+    """``text`` (the README) with the block between the markers replaced by the schema's table."""
+    head, begin, rest = text.partition(README_BEGIN)
+    _, end, tail = rest.partition(README_END)
+    if not begin or not end:
+        raise ValueError(f"the README has no {README_BEGIN} ... {README_END} block")
+    return f"{head}{README_BEGIN}\n{schema.markdown_table()}\n{README_END}{tail}"
+
+
 def main(argv: list[str]) -> int:
-    out_dir = Path(argv[1]) if len(argv) > 1 else Path(__file__).resolve().parent.parent / "scenes"
+    root = Path(__file__).resolve().parent.parent
+    if argv[1:] == ["--readme"]:
+        readme = root / "README.md"
+        readme.write_text(readme_with_table(readme.read_text()))
+        print(f"wrote the attribute table of {readme}")
+        return 0
+    out_dir = Path(argv[1]) if len(argv) > 1 else root / "scenes"
     out_dir.mkdir(parents=True, exist_ok=True)
     for name, robot in ROBOTS.items():
         path = out_dir / f"{name}.usda"

@@ -1,10 +1,12 @@
 """Named settings behind the reported numbers (README.md, RESULTS.md).
 
 :data:`PRESETS` maps a name to config values keyed by config **field names** (of
-:class:`warp_critic.config.TrainConfig` for meta-training presets, of
+:class:`warp_critic.methods.ours.TrainConfig` for meta-training presets, of
 :class:`warp_critic.methods.baseline.BaselineConfig` for the baselines); everything not named is the
-scene default. :data:`DESCRIPTIONS` says in one line what each preset is and what it scored,
-:data:`SCENES` which scene it was measured on (``None``: any scene).
+scene default. A meta-training preset is a :class:`FromScene`: it names the settings of a reported
+run, and their values are the ones its scene (:data:`SCENES`) authors, so the numbers live in one
+place (``tools/make_scenes.py``, written into ``scenes/*.usda``). :data:`DESCRIPTIONS` says in one
+line what each preset is and what it scored.
 
 :data:`EVALUATIONS` holds the meta-test protocol each preset's numbers were reported with, keyed by
 :class:`warp_critic.evaluation.protocol.ProtocolConfig` field names.
@@ -20,22 +22,25 @@ meta-test), and 3000 iterations sharpen it near them (RESULTS.md, "KUKA against 
 from __future__ import annotations
 
 import copy
+from dataclasses import dataclass
 from typing import Any
 
 from warp_critic.core.errors import FieldError
 
-PRESETS: dict[str, dict[str, Any]] = {
-    # meta-training (TrainConfig fields)
-    "reacher": {"iterations": 400, "inner_steps": 3, "alpha": 3e-4},
-    "kuka-table1": {
-        "critic_input": "relative",
-        "start_std": 0.4,
-        "home_starts": 2,
-        "iterations": 3000,
-        "inner_steps": 3,
-        "alpha": 3e-4,
-        "lr": 3e-3,
-    },
+
+@dataclass(frozen=True)
+class FromScene:
+    """Settings (config field names) whose values are the ones the preset's scene authors."""
+
+    keys: tuple[str, ...]
+
+
+PRESETS: dict[str, FromScene | dict[str, Any]] = {
+    # meta-training (TrainConfig fields), values from the scene
+    "reacher": FromScene(("iterations", "inner_steps", "alpha")),
+    "kuka-table1": FromScene(
+        ("critic_input", "start_std", "home_starts", "iterations", "inner_steps", "alpha", "lr")
+    ),
     # baselines (BaselineConfig fields): the published DDPG / Meta-Critic settings, 300 iterations
     "ddpg": {"method": "ddpg", "iterations": 300},
     "meta-critic": {"method": "meta-critic", "iterations": 300},
@@ -96,15 +101,31 @@ EVALUATIONS: dict[str, dict[str, Any]] = {
 }
 
 
-def _lookup(table: dict[str, dict[str, Any]], name: str) -> dict[str, Any]:
+def _lookup(table: dict[str, Any], name: str) -> Any:
     if name not in table:
         raise FieldError("preset", f"unknown preset {name!r}; known: {', '.join(sorted(table))}")
     return copy.deepcopy(table[name])
 
 
 def preset(name: str) -> dict[str, Any]:
-    """A copy of preset ``name``'s settings (config field -> value); unknown names raise ``FieldError``."""
-    return _lookup(PRESETS, name)
+    """A copy of preset ``name``'s settings (config field -> value); unknown names raise ``FieldError``.
+
+    A :class:`FromScene` preset reads its values from ``scenes/<SCENES[name]>.usda``; a scene that
+    lacks one of them raises ``FieldError`` naming the setting.
+    """
+    entry = _lookup(PRESETS, name)
+    if not isinstance(entry, FromScene):
+        return entry
+    from warp_critic.physics.scene import load_scene, scenes_dir
+
+    scene = load_scene(scenes_dir() / f"{SCENES[name]}.usda")
+    defaults = scene.defaults
+    missing = [key for key in entry.keys if key not in defaults]
+    if missing:
+        raise FieldError(
+            "preset", f"{name}: the scene {scene.path} authors no {', '.join(missing)}"
+        )
+    return {key: defaults[key] for key in entry.keys}
 
 
 def evaluation(name: str) -> dict[str, Any]:

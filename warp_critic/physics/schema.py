@@ -282,11 +282,12 @@ def to_usd(attr: Attribute, value: Any) -> Any:
 def markdown_table() -> str:
     """The attribute table as the README shows it (a test keeps the README equal to this)."""
     lines = [
-        "| attribute | type | key | rule | default | meaning |",
+        "| attribute | type | key / flag | rule | default | meaning |",
         "|---|---|---|---|---|---|",
     ]
     for a in ATTRIBUTES:
         default = a.default if isinstance(a.default, str) else repr(a.default)
-        key = f"`{a.key}`" + (" (`Scene.home`)" if a.scope == "scene" else "")
+        flag = "`Scene.home`" if a.scope == "scene" else f"`--{a.key.replace('_', '-')}`"
+        key = f"`{a.key}` / {flag}"
         lines.append(f"| `{a.usd}` | {a.type} | {key} | {RULES[a.rule]} | {default} | {a.doc} |")
     return "\n".join(lines)

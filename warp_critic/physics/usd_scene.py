@@ -40,6 +40,10 @@ def _open_stage(path: Path):
         )
     try:
         stage = Usd.Stage.Open(str(path))
+        if stage is not None:
+            # USD keeps layers that are still referenced in memory and Open reuses them: read
+            # again what changed on disk since (a file edited while this process runs)
+            stage.Reload()
     except Exception as exc:  # pxr.Tf.ErrorException and friends
         raise _fail(path, f"not a readable USD file ({_first_line(exc)})") from None
     if stage is None:
