@@ -197,7 +197,7 @@ class TaskConfig(SerializableConfig):
 
     method = "task"  # overridden by each method's config
     # fields a scene's content may set (a method adds its own, e.g. ours the inner/outer learning rates)
-    scene_fields: tuple[str, ...] = schema.keys("task")
+    scene_fields = schema.keys("task")
 
     # -- defaults and checks -------------------------------------------------------------------
     def default_out(self) -> str:
