@@ -213,7 +213,7 @@ def test_generator_reproduces_committed_scenes(tmp_path):
         capture_output=True,
     )
     for name in ("point_mass", "reacher", "kuka"):
-        assert (tmp_path / f"{name}.usda").read_text() == (SCENES / f"{name}.usda").read_text(), (
+        assert (tmp_path / f"{name}.usda").read_bytes() == (SCENES / f"{name}.usda").read_bytes(), (
             f"scenes/{name}.usda is stale: run python tools/make_scenes.py"
         )
 
