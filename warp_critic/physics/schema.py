@@ -29,7 +29,10 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import numpy as np
 
 __all__ = [
     "ATTRIBUTES",
@@ -182,17 +185,18 @@ def _numbers(value) -> list[float] | None:
     if isinstance(value, (str, bytes)) or value is None:
         return None
     try:
-        out = [_number(v) for v in value]
+        items = list(value)
     except TypeError:
         return None
-    return None if any(v is None for v in out) else out
+    out = [_number(v) for v in items]
+    return [v for v in out if v is not None] if all(v is not None for v in out) else None
 
 
 def parse(
     attr: Attribute,
     raw: Any,
-    lower: Sequence[float],
-    upper: Sequence[float],
+    lower: Sequence[float] | np.ndarray,
+    upper: Sequence[float] | np.ndarray,
     joint_names: Sequence[str],
 ) -> Any:
     """Check ``raw`` (as read from the file) against ``attr.rule``; return the ``Scene.defaults`` value.

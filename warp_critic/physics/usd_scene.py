@@ -122,9 +122,9 @@ def _read_root(path: Path, root) -> tuple[str, np.ndarray]:
         raise _fail(
             path, f"articulation root {root.GetPath()} lacks the string attribute {EE_ATTR}"
         )
-    tip = root.GetAttribute(TIP_ATTR).Get() if root.HasAttribute(TIP_ATTR) else None
+    raw = root.GetAttribute(TIP_ATTR).Get() if root.HasAttribute(TIP_ATTR) else None
     try:
-        tip = np.array([float(v) for v in tip], dtype=np.float64)
+        tip = np.array([float(v) for v in (() if raw is None else raw)], dtype=np.float64)
     except (TypeError, ValueError):
         tip = None
     if tip is None or tip.shape != (3,) or not np.isfinite(tip).all():
