@@ -24,7 +24,6 @@ from warp_critic.learning.networks import (
 )
 from warp_critic.learning.outer import meta_loss
 from warp_critic.physics import schema
-from warp_critic.physics.schema import CRITIC_INPUTS
 from warp_critic.running.loop import Callback, Session, TrainResult
 from warp_critic.running.task import TaskConfig, spec
 
@@ -72,7 +71,7 @@ class TrainConfig(TaskConfig):
         None,
         "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant); default: the scene's, else "
         + schema.fallback_text("critic_input"),
-        choices=CRITIC_INPUTS,
+        choices=schema.CRITIC_INPUTS,
     )
     critic_hidden: int = spec(400, "critic hidden units (2 ELU layers)", gt=0, cap=8192)
     running_weight: float = spec(
