@@ -7,6 +7,7 @@ acceleration is evaluated at the start state); a largish ``dt`` keeps float32 ca
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import re
@@ -783,15 +784,16 @@ def test_shipped_scenes_author_only_schema_attributes_with_its_types():
             name,
             authored,
         )
-    # the writer takes its keys from the schema: an unknown one is refused
-    tool = _make_scenes_tool()
-    robot = tool.ROBOTS["reacher"]
-    bad = tool.Robot(**{**robot.__dict__, "defaults": {**robot.defaults, "horizn": 5}})
+    # the writer takes its keys from the schema, and checks values with its rules
+    from warp_critic.physics.scene_writer import write_defaults
+
+    robot = _make_scenes_tool().ROBOTS["reacher"]
+    bad = dataclasses.replace(robot, defaults={**robot.defaults, "horizn": 5})
     with pytest.raises(AssertionError, match="horizn"):
-        tool.write_defaults("reacher", bad, None)
-    far = tool.Robot(**{**robot.__dict__, "defaults": {**robot.defaults, "goals": ((0.0, 4.0),)}})
+        write_defaults("reacher", bad, None)
+    far = dataclasses.replace(robot, defaults={**robot.defaults, "goals": ((0.0, 4.0),)})
     with pytest.raises(ValueError, match="goal 0 has interArm = 4.0"):
-        tool.write_defaults("reacher", far, None)
+        write_defaults("reacher", far, None)
 
 
 def test_edited_scene_file_is_read_again_in_the_same_process(tmp_path):
