@@ -13,8 +13,8 @@ fixed-base articulation:
 Training defaults travel with the scene's CONTENT (not its file name): the optional attributes of
 the articulation root in :data:`ATTRIBUTES`, one row each (USD name, ``Scene.defaults`` key = config
 field, USD type, rule, the default when the scene authors none, meaning). The loader
-(:mod:`warp_critic.physics.usd_scene`) validates them with :func:`parse`, the writer authors them
-with :func:`to_usd`, the task config falls back to :func:`fallbacks`, and the README's table is
+(:mod:`warp_critic.physics.usd_scene`) validates them with :func:`parse`, the writer
+(:mod:`warp_critic.physics.scene_writer`) authors them with :func:`to_usd`, the task config falls back to :func:`fallbacks`, and the README's table is
 :func:`markdown_table`. Real numbers may be ``double`` or ``float`` (the generated scenes use double
 so that 0.0025 reads back as exactly 0.0025).
 
