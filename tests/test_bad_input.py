@@ -155,7 +155,7 @@ def world(tmp_path, base, monkeypatch):
     monkeypatch.chdir(t)  # default output locations (runs/...) land here too
     monkeypatch.delenv("WARP_CRITIC_TORCH_THREADS", raising=False)
     monkeypatch.delenv("WARP_CRITIC_GRAPHS", raising=False)
-    return SimpleNamespace(
+    w = SimpleNamespace(
         t=t,
         run=t / "run",
         ddpg=t / "ddpg",
@@ -163,7 +163,11 @@ def world(tmp_path, base, monkeypatch):
         new=t / "new_out",
         goals=goals,
         marker=t / "code-ran",
+        cleanups=[],
     )
+    yield w
+    for cleanup in reversed(w.cleanups):
+        cleanup()
 
 
 def snapshot(root: Path) -> tuple[dict[str, str], set[str]]:
@@ -297,6 +301,171 @@ def copy_result(w):
     shutil.copy(w.run / "metatest.json", w.t / "prev.json")
 
 
+def hold_lock(run: str):
+    """A live process holds the run directory's OS lock (this test process, through its own file lock)."""
+
+    def setup(w):
+        from filelock import FileLock
+
+        d = getattr(w, run) if hasattr(w, run) else w.t / run
+        lock = FileLock(str(d / ".lock"), timeout=0)
+        lock.acquire()
+        w.lock_pid = os.getpid()
+        (d / ".lock").write_text(
+            json.dumps({"pid": w.lock_pid, "host": socket.gethostname(), "started": 0.0})
+        )
+
+        def release():
+            with contextlib.suppress(OSError):
+                (d / ".lock").unlink()
+            lock.release()
+
+        w.cleanups.append(release)
+
+    return setup
+
+
+def huge_pid_lock(w):
+    (w.run / ".lock").write_text(
+        json.dumps({"pid": 10**20 - 1, "host": socket.gethostname(), "started": 0})
+    )
+
+
+def asymmetric_scene(w):
+    """A reacher whose first joint moves in [30, 90] degrees (home inside)."""
+    text = Path(REACHER).read_text()
+    assert text.count("float physics:lowerLimit = -170") == 2
+    text = text.replace("float physics:lowerLimit = -170", "float physics:lowerLimit = 30", 1)
+    text = text.replace("float physics:upperLimit = 170", "float physics:upperLimit = 90", 1)
+    text = text.replace("warp_critic:homePose = [0, 0]", "warp_critic:homePose = [1, 0]")
+    goals = "warp_critic:goals = [1, 0.5, -1, -0.5, 0.5, -1, -0.5, 1]"
+    assert goals in text
+    text = text.replace(goals, "warp_critic:goals = [1, 0.5, 1.2, -0.5]")
+    (w.t / "asym.usda").write_text(text)
+
+
+def checkpoint_of_another_scene(w):
+    """run/checkpoint.pt replaced by the checkpoint of a run on another scene (changed/reacher.usda)."""
+    from warp_critic.methods.ours import TrainConfig, meta_train
+
+    other = w.t / "other"
+    meta_train(
+        TrainConfig(
+            scene=str(w.t / "changed" / "reacher.usda"),
+            iterations=2,
+            horizon=3,
+            worlds_per_goal=1,
+            device="cpu",
+            out=str(other),
+        ),
+        progress=False,
+    )
+    shutil.copy(other / "checkpoint.pt", w.run / "checkpoint.pt")
+    shutil.rmtree(other)
+
+
+def garbage_recording(w):
+    (w.run / "recording.rrd").write_bytes(b"\x00not a rerun recording\xff" * 40)
+
+
+def kept_aside(w):
+    aside = [p for p in w.run.iterdir() if p.name.startswith("recording.") and "bad" in p.name]
+    assert len(aside) == 1 and aside[0].read_bytes() == b"\x00not a rerun recording\xff" * 40
+    assert (w.run / "recording.rrd").stat().st_size > 0
+    assert not (w.run / "recording.segment.rrd").exists()
+
+
+def metrics_first_row(row: dict):
+    def setup(w):
+        lines = (w.run / "metrics.jsonl").read_text().splitlines(keepends=True)
+        (w.run / "metrics.jsonl").write_text(json.dumps(row) + "\n" + "".join(lines[1:]))
+
+    return setup
+
+
+def relative_scene(w, cwd_scene: str | None = None):
+    """The run as trained from the repository root (scene recorded as ``scenes/reacher.usda``)."""
+    path = w.run / "checkpoint.pt"
+    ckpt = torch.load(path, weights_only=False)
+    ckpt["config"]["scene"] = "scenes/reacher.usda"
+    ckpt.pop("scene_file", None)
+    torch.save(ckpt, path)
+    config = json.loads((w.run / "config.json").read_text())
+    config["scene"] = "scenes/reacher.usda"
+    config.pop("scene_file", None)
+    (w.run / "config.json").write_text(json.dumps(config))
+    if cwd_scene is not None:
+        (w.t / "scenes").mkdir()
+        (w.t / "scenes" / "reacher.usda").write_text(cwd_scene)
+
+
+def other_scene_in_cwd(w):
+    relative_scene(w, (w.t / "changed" / "reacher.usda").read_text())
+
+
+def reproduce_output(w):
+    """A reproduce output ``rep/`` (marker, results.json, a stage directory with its stage.json)."""
+    rep = w.t / "rep"
+    (rep / "stagedir").mkdir(parents=True)
+    (rep / ".warp-critic-reproduce").write_text('{"kind": "warp-critic/reproduce-output-v1"}\n')
+    (rep / "results.json").write_text('{"kind": "warp-critic/metatest-v1"}\n')
+    (rep / "stagedir" / "stage.json").write_text('{"kind": "warp-critic/metatest-v1"}\n')
+
+
+def empty_stage_results(w):
+    """A reproduce output whose reacher meta-training stages are complete but hold ``"result": {}``."""
+    from warp_critic.reproduce.pipeline import ReproduceConfig, plan
+    from warp_critic.reproduce.stages import MARKER, STAGE_KIND
+
+    rep = w.t / "rep"
+    rep.mkdir()
+    (rep / MARKER).write_text('{"kind": "warp-critic/reproduce-output-v1"}\n')
+    st = plan(ReproduceConfig(out=rep, quick=True, seeds=2).validate())
+    for name, stage in st.items():
+        if name.startswith("metatrain-reacher-"):
+            d = rep / f"{name}-{stage['hash']}"
+            d.mkdir()
+            (d / "stage.json").write_text(
+                json.dumps({"kind": STAGE_KIND, "stage": name, "seconds": 1.0, "result": {}})
+            )
+
+
+def http_server(w):
+    """A plain HTTP server on loopback (not a Ray head)."""
+    import http.server
+    import threading
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    w.port = server.server_address[1]
+    w.cleanups.append(server.shutdown)
+
+
+def disk_full_on(name_part: str):
+    """Writes of files whose name holds ``name_part`` fail as on a full disk (after a partial write)."""
+
+    def patch(monkeypatch, w):
+        import errno
+
+        from warp_critic.running import rundir
+
+        real = rundir._write_bytes
+
+        def write(path, data):
+            if name_part in Path(path).name:
+                real(path, data[:10])
+                raise OSError(errno.ENOSPC, "No space left on device")
+            real(path, data)
+
+        monkeypatch.setattr(rundir, "_write_bytes", write)
+
+    return patch
+
+
+def live_run_kept(w):
+    assert (w.run / ".lock").is_file() and not (w.run / "metatest2.json").exists()
+
+
 # ------------------------------------------------------------------------------------------------
 # checks after a successful case
 # ------------------------------------------------------------------------------------------------
@@ -354,6 +523,12 @@ class Case:
     warns: int = 0  # exit 0: this many "warp-critic: warning:" lines
     check: Callable | None = None
     seconds: float = 30.0  # must finish within
+    not_says: tuple[
+        str, ...
+    ] = ()  # never in the error line (e.g. a flag the command does not have)
+    patch: Callable | None = (
+        None  # patch(monkeypatch, w): faults the file system cannot make on demand
+    )
 
 
 def C(cls: str, name: str, argv: list[str], *, marks=(), **kw):
@@ -823,15 +998,19 @@ CASES = [
     C("c05", "meta-train-over-a-run", [*MT, "--out", "{run}"], says=("run", "--resume")),
     C("c05", "ddpg-over-a-run", [*DDPG, "--out", "{ddpg}"], says=("ddpg", "--resume")),
     C("c05", "ddpg-over-our-run", [*DDPG, "--out", "{run}"], says=("run",)),
-    # 6. locks
+    # 6. locks (an OS file lock: held while its process lives; the .lock file only names the holder)
+    C("c06", "live-lock", RESUME, setup=hold_lock("run"), says=("process {lock_pid}",)),
     C(
         "c06",
-        "live-lock-parent",
+        "stale-lock-pid-1-taken-over",
         RESUME,
-        setup=write_lock("run", os.getppid),
-        says=("process {lock_pid}",),
+        code=0,
+        setup=write_lock("run", lambda: 1),
+        warns=1,
+        says=("process 1 ", "taking over"),
+        changes=("run/",),
+        check=lambda w: (run_written("run", 3)(w), lock_released(w)),
     ),
-    C("c06", "live-lock-pid-1", RESUME, setup=write_lock("run", lambda: 1), says=("process 1 ",)),
     C(
         "c06",
         "lock-of-another-host",
@@ -839,14 +1018,18 @@ CASES = [
         setup=write_lock("run", dead_pid, lambda: "another-host.example"),
         says=("another-host.example",),
     ),
-    C("c06", "garbage-lock", RESUME, setup=garbage_lock, says=("locked",)),
     C(
         "c06",
-        "ddpg-live-lock",
-        RESUME_DDPG,
-        setup=write_lock("ddpg", os.getppid),
-        says=("process {lock_pid}",),
+        "garbage-lock-taken-over",
+        RESUME,
+        code=0,
+        setup=garbage_lock,
+        warns=1,
+        says=("taking over",),
+        changes=("run/",),
+        check=run_written("run", 3),
     ),
+    C("c06", "ddpg-live-lock", RESUME_DDPG, setup=hold_lock("ddpg"), says=("process {lock_pid}",)),
     C(
         "c06",
         "dead-lock-taken-over",
@@ -1178,6 +1361,315 @@ CASES = [
         code=0,
         check=result_written("x.json"),
     ),
+    # 13. reproduce --set: every setting of every stage checked before the first stage runs
+    *[
+        C(
+            "c13",
+            f"set-{key}-{value}",
+            ["reproduce", "--quick", "--only", only, "--set", f"{key}={value}", "--out", "{new}"],
+            says=("--set", key, shown),
+            seconds=10,
+        )
+        for only, key, value, shown in (
+            ("toy", "toy.iters", "abc", "abc"),
+            ("toy", "toy.iters", "NaN", "nan"),
+            ("toy", "toy.iters", "1e400", "inf"),
+            ("toy", "toy.grid", "1000000000000", "1000000000000"),
+            ("toy", "toy.s0", "[1]", "[1]"),
+            ("toy", "maps.grid", "0", "0"),
+            ("toy", "maps.limit_fraction", "5", "5"),
+            ("toy", "maps.masses", "[-1]", "-1"),
+            ("toy", "landscape.grid", "-3", "-3"),
+            ("toy", "tables.around", "[7]", "7"),
+            ("toy", "tables.stds", "[]", "[]"),
+            ("toy", "metatrain.seeds", "[-1]", "-1"),
+            ("toy", "metatrain.seeds", "[]", "[]"),
+            ("toy", "metatrain.kuka.ddpg.horizon", "0", "0"),
+            ("toy", "metatrain.reacher.ours.goals", "[[9,9]]", "goals"),
+            ("toy", "metatrain.reacher.ours.max_torque", "[1e9]", "1000000000"),
+        )
+    ],
+    *[
+        C(
+            "c13",
+            f"set-metatrain-{key}",
+            [
+                "reproduce",
+                "--quick",
+                "--only",
+                "toy",
+                "--set",
+                f'metatrain.reacher.ours.{key}="x"',
+                "--out",
+                "{new}",
+            ],
+            says=("--set", f"metatrain.reacher.ours.{key}", "may not be set"),
+            seconds=10,
+        )
+        for key in ("out", "scene", "resume", "device", "seed", "seeds")
+    ],
+    C(
+        "c13",
+        "set-tables-goal-noise-before-training",
+        [
+            "reproduce",
+            "--quick",
+            "--seeds",
+            "1",
+            "--only",
+            "tables",
+            "--set",
+            "tables.goal_noise=bogus",
+            "--out",
+            "{new}",
+        ],
+        says=("--set", "tables.goal_noise", "bogus"),
+        not_says=("--goal-noise",),
+        seconds=10,
+    ),
+    C(
+        "c13",
+        "seeds-and-set-metatrain-seeds-disagree",
+        [
+            "reproduce",
+            "--quick",
+            "--seeds",
+            "3",
+            "--only",
+            "toy",
+            "--set",
+            "metatrain.seeds=[5]",
+            "--out",
+            "{new}",
+        ],
+        says=("--seeds", "metatrain.seeds"),
+        seconds=10,
+    ),
+    C(
+        "c13",
+        "jobs-huge",
+        [
+            "reproduce",
+            "--quick",
+            "--only",
+            "toy",
+            "--jobs",
+            "99999999999999999999",
+            "--out",
+            "{new}",
+        ],
+        says=("--jobs",),
+        seconds=10,
+    ),
+    C(
+        "c13",
+        "jobs-zero",
+        ["reproduce", "--quick", "--only", "toy", "--jobs", "0", "--out", "{new}"],
+        says=("--jobs",),
+        seconds=10,
+    ),
+    # 14. a directory that holds a live lock, or a reproduce output, belongs to its owner
+    C("c14", "meta-test-next-to-a-live-run", TEST, setup=hold_lock("run"), says=("run", "in use")),
+    C(
+        "c14",
+        "meta-test-out-inside-a-live-run",
+        [*TEST, "--out", "{run}/metatest2.json"],
+        setup=hold_lock("run"),
+        says=("run", "in use"),
+    ),
+    C(
+        "c14",
+        "meta-test-of-a-live-run-writes-elsewhere",
+        [*TEST, "--out", "{t}/x.json"],
+        setup=hold_lock("run"),
+        code=0,
+        check=lambda w: (result_written("x.json")(w), live_run_kept(w)),
+    ),
+    C(
+        "c14",
+        "meta-train-inside-a-live-run",
+        [*MT, "--out", "{run}/sub"],
+        setup=hold_lock("run"),
+        says=("run", "in use"),
+    ),
+    C(
+        "c14",
+        "reproduce-inside-a-live-run",
+        ["reproduce", "--quick", "--only", "toy", "--out", "{run}/rep"],
+        setup=hold_lock("run"),
+        says=("run", "in use"),
+        seconds=10,
+    ),
+    C(
+        "c14",
+        "meta-test-out-replaces-stage-json",
+        [*TEST, "--out", "{t}/rep/stagedir/stage.json"],
+        setup=reproduce_output,
+        says=("rep", "reproduce"),
+    ),
+    C(
+        "c14",
+        "meta-test-out-replaces-results-json",
+        [*TEST, "--out", "{t}/rep/results.json"],
+        setup=reproduce_output,
+        says=("rep", "reproduce"),
+    ),
+    C(
+        "c14",
+        "meta-train-inside-a-reproduce-output",
+        [*MT, "--out", "{t}/rep/mine"],
+        setup=reproduce_output,
+        says=("rep", "reproduce"),
+    ),
+    C(
+        "c14",
+        "toy-inside-a-reproduce-output",
+        ["analyze", "toy", "--iters", "5", "--grid", "5", "--out", "{t}/rep/toy"],
+        setup=reproduce_output,
+        says=("rep", "reproduce"),
+    ),
+    # 15. numbers that were silently wrong
+    C(
+        "c15",
+        "max-torque-above-the-effort-limit",
+        NEW(*MT, "--max-torque", "1000"),
+        says=("--max-torque", "1000", "20"),
+    ),
+    C(
+        "c15",
+        "ddpg-max-torque-above-the-effort-limit",
+        NEW(*DDPG, "--max-torque", "5,21"),
+        says=("--max-torque", "21", "20"),
+    ),
+    C(
+        "c15",
+        "resume-a-checkpoint-of-another-run",
+        [
+            "meta-train",
+            "{t}/changed/reacher.usda",
+            "--resume",
+            "--out",
+            "{run}",
+            "--device",
+            "cpu",
+            "--iterations",
+            "3",
+        ],
+        setup=checkpoint_of_another_scene,
+        says=("checkpoint.pt", "another run"),
+    ),
+    C(
+        "c15",
+        "asymmetric-limits-start-std",
+        ["meta-train", "{t}/asym.usda", *TINY, "--goals", "1.0,0.3", "--start-std", "2"]
+        + ["--out", "{new}"],
+        setup=asymmetric_scene,
+        code=0,
+        check=run_written("new_out", 1),
+    ),
+    # 16. nothing lost
+    C(
+        "c16",
+        "garbage-recording-resume",
+        RESUME,
+        code=0,
+        setup=garbage_recording,
+        warns=1,
+        says=("recording.rrd", "kept"),
+        changes=("run/",),
+        check=kept_aside,
+    ),
+    # 17. edited or odd files, full disks: one line, never a traceback
+    C(
+        "c17",
+        "stage-json-with-empty-result",
+        ["reproduce", "--quick", "--only", "maps", "--out", "{t}/rep", "--device", "cpu"],
+        setup=empty_stage_results,
+        says=("stage.json",),
+        seconds=15,
+    ),
+    C(
+        "c17",
+        "metrics-row-without-task-loss",
+        RESUME,
+        setup=metrics_first_row({"iteration": 0}),
+        says=("metrics.jsonl", "line 1", "task_loss"),
+    ),
+    C(
+        "c17",
+        "metrics-row-task-loss-a-string",
+        RESUME,
+        setup=metrics_first_row({"iteration": 0, "task_loss": "low"}),
+        says=("metrics.jsonl", "line 1", "task_loss"),
+    ),
+    C(
+        "c17",
+        "lock-naming-a-huge-pid",
+        RESUME,
+        code=0,
+        setup=huge_pid_lock,
+        warns=1,
+        says=("taking over",),
+        changes=("run/",),
+        check=run_written("run", 3),
+    ),
+    C("c17", "out-not-utf8", [*MT, "--out", "{t}/bad\udcffname"], says=("--out", "UTF-8")),
+    C(
+        "c17",
+        "meta-test-out-not-utf8",
+        [*TEST, "--out", "{t}/bad\udcff.json"],
+        says=("--out", "UTF-8"),
+    ),
+    C(
+        "c17",
+        "disk-full-checkpoint-resume",
+        RESUME,
+        patch=disk_full_on("checkpoint.pt"),
+        code=1,
+        says=("checkpoint.pt", "space"),
+        changes=("run/",),
+        check=lambda w: torch.load(w.run / "checkpoint.pt", weights_only=False)["iteration"] == 1,
+    ),
+    C(
+        "c17",
+        "disk-full-png",
+        NEW("analyze", "toy", "--iters", "5", "--grid", "5"),
+        patch=disk_full_on(".png"),
+        code=1,
+        says=("png", "space"),
+        changes=("new_out",),
+    ),
+    # 18. errors that pointed the wrong way
+    C(
+        "c18",
+        "meta-test-scene-recorded-relative-elsewhere",
+        TEST,
+        setup=relative_scene,
+        code=0,
+        warns=1,
+        says=("scenes/reacher.usda", "same content"),
+        changes=("run/metatest.json",),
+        check=result_written("run/metatest.json"),
+    ),
+    C(
+        "c18",
+        "meta-test-other-scene-of-that-name-in-cwd",
+        TEST,
+        setup=other_scene_in_cwd,
+        code=0,
+        warns=1,
+        says=("scenes/reacher.usda", "same content"),
+        changes=("run/metatest.json",),
+        check=result_written("run/metatest.json"),
+    ),
+    C(
+        "c18",
+        "ray-address-of-a-plain-http-server",
+        ["reproduce", "--quick", "--only", "toy", "--ray", "127.0.0.1:{port}", "--out", "{new}"],
+        setup=http_server,
+        says=("--ray", "127.0.0.1:{port}", "not a Ray"),
+        seconds=10,
+    ),
     # the analyses (being refactored elsewhere)
     C("ana", "toy-s0-nan", NEW("analyze", "toy", "--s0", "nan"), says=("--s0", "nan")),
     C("ana", "toy-iters-0", NEW("analyze", "toy", "--iters", "0"), says=("--iters",)),
@@ -1219,6 +1711,8 @@ def test_bad_input(case: Case, world, capfd, monkeypatch):
         monkeypatch.setenv(key, value)
     if case.setup is not None:
         case.setup(w)
+    if case.patch is not None:
+        case.patch(monkeypatch, w)
     names = dict(
         R=REACHER,
         t=w.t,
@@ -1227,6 +1721,7 @@ def test_bad_input(case: Case, world, capfd, monkeypatch):
         user=w.user,
         new=w.new,
         lock_pid=getattr(w, "lock_pid", None),
+        port=getattr(w, "port", None),
     )
     argv = [a.format(**names) for a in case.argv]
     says = [s.format(**names) for s in case.says]
@@ -1248,12 +1743,21 @@ def test_bad_input(case: Case, world, capfd, monkeypatch):
         assert len(lines) == 1 and lines[0].startswith("warp-critic: error: "), lines
         for s in says:
             assert s in lines[0], (s, lines[0])
+        for s in case.not_says:
+            assert s not in lines[0], (s, lines[0])
         # nothing written, nothing created (not even an empty directory), nothing removed
         assert after_files == files and after_dirs == dirs, (
             sorted(set(after_files) ^ set(files)),
             sorted(after_dirs ^ dirs),
             [p for p in files if after_files.get(p) != files[p]],
         )
+    elif case.code == 1:  # a failure of the machine (a full disk): one line, only `changes` touched
+        assert len(lines) == 1 and lines[0].startswith("warp-critic: error: "), lines
+        for s in says:
+            assert s in lines[0], (s, lines[0])
+        kept = {p: h for p, h in files.items() if not p.startswith(case.changes)}
+        assert {p: after_files.get(p) for p in kept} == kept
+        assert not [p for p in after_files if p.endswith(".lock") and p not in files], after_files
     else:
         assert len(lines) == case.warns and all(
             x.startswith("warp-critic: warning: ") for x in lines
@@ -1266,7 +1770,7 @@ def test_bad_input(case: Case, world, capfd, monkeypatch):
         assert {p: after_files.get(p) for p in kept} == kept, [
             p for p in kept if after_files.get(p) != kept[p]
         ]
-        assert not [p for p in after_files if p.endswith(".lock")], after_files
+        assert not [p for p in after_files if p.endswith(".lock") and p not in files], after_files
     if case.check is not None:
         case.check(w)
 
@@ -1275,7 +1779,7 @@ def test_table_covers_every_class():
     classes = {}
     for p in CASES:
         classes.setdefault(p.id.split("-")[0], []).append(p.id)
-    assert sorted(classes) == ["ana", *[f"c{i:02d}" for i in range(1, 13)]]
+    assert sorted(classes) == ["ana", *[f"c{i:02d}" for i in range(1, 19)]]
     assert all(len(v) >= 3 for v in classes.values()), {k: len(v) for k, v in classes.items()}
     assert len(CASES) >= 70
     assert len({p.id for p in CASES}) == len(CASES)

@@ -2,16 +2,18 @@
 
 Every user mistake ends in one line ``warp-critic: error: ...`` and exit code 2, never a traceback.
 A diverged run ends in one line naming the iteration, exit code 1, with its last good checkpoint kept.
-Ctrl-C and SIGTERM stop a run the same way (exit 130), with a message that says what was kept.
+A full disk is one line and exit code 1. Ctrl-C and SIGTERM stop a command the same way at any moment
+(exit 130, one line; a run says what it kept): :mod:`warp_critic.cli.signals`.
 Nothing below this module imports it back.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import os
-import signal
 import sys
+from pathlib import Path
 
 from warp_critic import __version__
 from warp_critic.cli.flags import (
@@ -21,10 +23,11 @@ from warp_critic.cli.flags import (
     flag_of,
     user_message,
 )
-from warp_critic.core.errors import DivergenceError, UserError
+from warp_critic.core.errors import DivergenceError, FieldError, UserError
 
 EXIT_USER_ERROR = 2
 EXIT_DIVERGED = 1
+EXIT_FAILED = 1  # the machine failed (a full disk), not the user's input
 EXIT_INTERRUPTED = 130
 POSITIONAL = ("scene", "run_dir", "method")
 
@@ -38,6 +41,7 @@ def cmd_meta_train(args: argparse.Namespace) -> int:
     from warp_critic.methods.ours import TrainConfig, meta_train
 
     cfg, given = dataclass_from_args(TrainConfig, args)
+    _not_owned(cfg.out or cfg.default_out(), "--out")
     result = meta_train(cfg, given=given)
     last = result.metrics[-1] if result.metrics else {}
     print(f"run directory: {result.run_dir}")
@@ -53,6 +57,10 @@ def cmd_meta_test(args: argparse.Namespace) -> int:
     from warp_critic.evaluation.metatest import TestConfig, meta_test
 
     tc, _ = dataclass_from_args(TestConfig, args)
+    if tc.out:
+        _not_owned(tc.out, "--out")
+    else:
+        _not_owned(Path(tc.run_dir) / "metatest.json", "result (give --out)")
     result = meta_test(tc)
     print(f"results: {result['output']}")
     return 0
@@ -64,6 +72,7 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     from warp_critic.methods.meta_critic import train_meta_critic
 
     cfg, given = dataclass_from_args(BaselineConfig, args)
+    _not_owned(cfg.out or cfg.default_out(), "--out")
     train = train_ddpg if cfg.method == "ddpg" else train_meta_critic
     result = train(cfg, given=given)
     last = result.metrics[-1] if result.metrics else {}
@@ -80,6 +89,13 @@ def cmd_baseline(args: argparse.Namespace) -> int:
     print(f"recording: rerun {result.run_dir / 'recording.rrd'}")
     print(f"meta-test: warp-critic meta-test {result.run_dir}")
     return 0
+
+
+def _not_owned(path, what: str) -> None:
+    """Commands other than reproduce write nowhere in a reproduce output or a locked folder."""
+    from warp_critic.running.locks import check_not_owned
+
+    check_not_owned(path, what)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -158,57 +174,93 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _terminate(signum, frame):  # SIGTERM stops a run exactly as Ctrl-C does
-    raise KeyboardInterrupt
-
-
 def main(argv: list[str] | None = None) -> int:
+    """The ``warp-critic`` command; ``argv`` given: called in-process (signal handlers restored after)."""
+    from warp_critic.cli import signals
+
+    previous = signals.install() if _main_thread() else None
+    said = False
+    try:
+        code, said = _run(argv, in_process=argv is not None)
+        return code
+    finally:
+        if previous is not None:
+            if argv is not None:
+                signals.restore(previous)
+            else:  # the console script: a signal while the interpreter shuts down is one line too
+                signals.exiting(said)
+
+
+def _run(argv: list[str] | None, in_process: bool) -> tuple[int, bool]:
+    """``(exit code, whether a line about an interruption was written)``."""
+    from warp_critic.cli import signals
+
+    if in_process:
+        signals.running()
     os.environ.setdefault("WARP_CRITIC_CLI", "1")
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):
         parser.print_help()
-        return EXIT_USER_ERROR
-    previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
-    try:
-        from warp_critic.core.runtime import init
-        from warp_critic.running.loop import Interrupted, ResumeMismatch
-        from warp_critic.running.rundir import RunExistsError
+        return EXIT_USER_ERROR, False
+    from warp_critic.core.runtime import init
+    from warp_critic.running.loop import Interrupted, ResumeMismatch
+    from warp_critic.running.rundir import DiskFullError, RunExistsError
 
-        try:
-            init()
-            return int(args.func(args) or 0)
-        except ResumeMismatch as e:
-            sys.stderr.write(f"warp-critic: error: {e.render(flag_of)}\n")
-            return EXIT_USER_ERROR
-        except RunExistsError as e:
-            sys.stderr.write(
-                f"warp-critic: error: {e} (continue it with --resume, or choose another --out)\n"
-            )
-            return EXIT_USER_ERROR
-        except UserError as e:
-            sys.stderr.write(f"warp-critic: error: {user_message(e, POSITIONAL)}\n")
-            return EXIT_USER_ERROR
-        except DivergenceError as e:
-            hint = " (continue with --resume)" if getattr(e, "checkpoint", None) is not None else ""
-            sys.stderr.write(f"warp-critic: diverged: {e}{hint}\n")
-            return EXIT_DIVERGED
-        except Interrupted as e:
-            hint = " (continue with --resume)" if e.checkpoint is not None else ""
-            sys.stderr.write(f"warp-critic: {e}{hint}\n")
-            return EXIT_INTERRUPTED
-        except KeyboardInterrupt:
-            sys.stderr.write("warp-critic: interrupted\n")
-            return EXIT_INTERRUPTED
-        except OSError as e:
-            if e.filename is None:
-                raise
-            # a path the system refuses (too long, a loop of links, a full disk, ...): name it, one line
-            sys.stderr.write(f"warp-critic: error: {e.filename}: {e.strerror or e}\n")
-            return EXIT_USER_ERROR
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+    try:
+        check_utf8(args)
+        init()
+        signals.running()
+        return int(args.func(args) or 0), False
+    except ResumeMismatch as e:
+        sys.stderr.write(f"warp-critic: error: {e.render(flag_of)}\n")
+        return EXIT_USER_ERROR, False
+    except RunExistsError as e:
+        sys.stderr.write(
+            f"warp-critic: error: {e} (continue it with --resume, or choose another --out)\n"
+        )
+        return EXIT_USER_ERROR, False
+    except DiskFullError as e:
+        sys.stderr.write(f"warp-critic: error: {e}\n")
+        return EXIT_FAILED, False
+    except UserError as e:
+        sys.stderr.write(f"warp-critic: error: {user_message(e, POSITIONAL)}\n")
+        return EXIT_USER_ERROR, False
+    except DivergenceError as e:
+        hint = " (continue with --resume)" if getattr(e, "checkpoint", None) is not None else ""
+        sys.stderr.write(f"warp-critic: diverged: {e}{hint}\n")
+        return EXIT_DIVERGED, False
+    except Interrupted as e:
+        hint = " (continue with --resume)" if e.checkpoint is not None else ""
+        sys.stderr.write(f"warp-critic: {e}{hint}\n")
+        return EXIT_INTERRUPTED, True
+    except KeyboardInterrupt:
+        sys.stderr.write("warp-critic: interrupted\n")
+        return EXIT_INTERRUPTED, True
+    except OSError as e:
+        full = e.errno in (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC))
+        if e.filename is None and not full:
+            raise
+        # a path the system refuses (too long, a loop of links, ...) or a full disk: one line
+        where = f"{e.filename}: " if e.filename is not None else ""
+        sys.stderr.write(f"warp-critic: error: {where}{e.strerror or e}\n")
+        return (EXIT_FAILED if full else EXIT_USER_ERROR), False
+
+
+def check_utf8(args: argparse.Namespace) -> None:
+    """Every text argument must be valid UTF-8: a name with a stray byte cannot be written into
+    config.json or printed, so it is refused before anything is made."""
+    for name, value in vars(args).items():
+        for v in value if isinstance(value, list) else [value]:
+            if isinstance(v, (str, os.PathLike)):
+                try:
+                    str(v).encode("utf-8")
+                except UnicodeEncodeError as e:
+                    raise FieldError(
+                        name,
+                        f"{str(v).encode('utf-8', 'backslashreplace').decode()}: not valid UTF-8 "
+                        f"(byte {e.object[e.start : e.end].encode('utf-8', 'surrogateescape')!r})",
+                    ) from None
 
 
 def _main_thread() -> bool:

@@ -127,6 +127,7 @@ def config_from_args(args: argparse.Namespace):
         device=args.device,
         overrides=list(args.overrides or []),
         command=command_line(args),
+        seeds_given=args.seeds is not None,
     )
 
 

@@ -22,6 +22,9 @@ class FieldError(UserError):
         super().__init__(f"{field}: {problem}")
         self.field, self.problem = field, problem
 
+    def __reduce__(self):  # a worker process's error reaches the driver whole (Ray, --jobs)
+        return (type(self), (self.field, self.problem))
+
 
 class SceneError(UserError):
     """A scene file that cannot be used (missing, not USD, no articulation, bad joint, ...)."""

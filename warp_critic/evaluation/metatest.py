@@ -32,9 +32,9 @@ from warp_critic.learning.inner import inner_update, policy_fn
 from warp_critic.learning.losses import final_error
 from warp_critic.learning.networks import Critic, MLPPolicy, Normalizer
 from warp_critic.learning.rollout import rollout
-from warp_critic.physics.scene import load_scene
 from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
 from warp_critic.running.rundir import RunDir, check_output_file, write_result
+from warp_critic.running.scenefile import find_run_scene
 from warp_critic.running.task import (
     SerializableConfig,
     TaskConfig,
@@ -43,6 +43,7 @@ from warp_critic.running.task import (
     check_fields,
     estimate_memory,
     goals_tensor,
+    inside_limits,
     spec,
 )
 
@@ -161,7 +162,7 @@ def sample_goals(
     gen: torch.Generator,
     noise: str = "per-joint",
 ) -> torch.Tensor:
-    """``num`` goals around training goals (cycled), clipped into the limits.
+    """``num`` goals around training goals (cycled), clipped into the middle 98% of the limits.
 
     The paper (Table 1) samples new goals "at a distance of N(0, std)" around the training goals,
     which reads two ways: ``per-joint`` (default) draws ``N(g_i, std^2 I)``, so a 7-dof goal moves by
@@ -182,7 +183,8 @@ def sample_goals(
         offset = (
             offset / offset.norm(dim=1, keepdim=True) * (torch.randn(num, 1, generator=gen) * std)
         )
-    return torch.clamp(centres + offset, lower * 0.98, upper * 0.98)
+    lo, hi = inside_limits(lower, upper, 0.98)
+    return torch.clamp(centres + offset, lo, hi)
 
 
 @dataclass
@@ -216,7 +218,7 @@ def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
         check_fields(cfg)
     except (TypeError, UserError) as e:
         raise UserError(f"{tc.run_dir}: checkpoint holds an unusable config ({e})") from None
-    scene = load_scene(cfg.scene)
+    scene = find_run_scene(ckpt, tc.run_dir)  # by its content, wherever it is now
     if scene.name != ckpt["scene"] or scene.dof != ckpt["dof"]:
         raise UserError(
             f"{tc.run_dir}: checkpoint is for scene {ckpt['scene']} ({ckpt['dof']} dof), "

@@ -21,12 +21,11 @@ complete one, and a restarted driver skips exactly the units that finished.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import os
 import signal
-import socket
 import sys
-import tempfile
 import time
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
@@ -37,6 +36,8 @@ from pathlib import Path
 from warp_critic.core.errors import FieldError, UserError
 
 UNIT_FAULT_ENV = "WARP_CRITIC_UNIT_FAULT"  # tests: "<unit name>:<marker file>" kills its first try
+MAX_JOBS = 1024
+WORKER_GRACE = 5.0  # s a worker whose driver died has to close its run before it exits
 
 
 @dataclass(frozen=True)
@@ -108,9 +109,28 @@ def _worker_stop(signum, frame) -> None:
     os._exit(128 + signum)
 
 
+def _watch_parent(sentinel: int) -> None:
+    """A worker's watchdog thread: when the driver dies by any cause (its end of the spawn pipe
+    closes; SIGKILL included), stop the unit as SIGTERM does and exit after a grace period even if
+    the pool's loop is blocked on its pipe."""
+    from multiprocessing.connection import wait
+
+    wait([sentinel])
+    with contextlib.suppress(OSError):
+        os.kill(os.getpid(), signal.SIGTERM)
+    time.sleep(WORKER_GRACE)
+    os._exit(128 + signal.SIGTERM)
+
+
 def _process_init() -> None:
-    """A worker process: stop with the driver (Linux: even when the driver is SIGKILLed), then start as
-    the CLI starts."""
+    """A worker process: stop with the driver (its death is watched on the spawn pipe, and on Linux
+    also signalled by PDEATHSIG), then start as the CLI starts."""
+    import multiprocessing
+    import threading
+
+    parent = multiprocessing.parent_process()
+    if parent is not None and getattr(parent, "sentinel", None) is not None:
+        threading.Thread(target=_watch_parent, args=(parent.sentinel,), daemon=True).start()
     signal.signal(signal.SIGTERM, _worker_stop)
     signal.signal(
         signal.SIGINT, signal.SIG_IGN
@@ -144,14 +164,19 @@ def _process_unit(unit: Unit, root: str) -> tuple[dict, float]:
         _IN_UNIT = False
 
 
+def check_jobs(jobs) -> int:
+    if isinstance(jobs, bool) or not isinstance(jobs, int) or not 1 <= jobs <= MAX_JOBS:
+        raise FieldError("jobs", f"must be an integer in 1..{MAX_JOBS} (got {jobs!r})")
+    return jobs
+
+
 class LocalProcesses:
     """``jobs`` worker processes on this machine (spawned fresh: no state shared with the driver)."""
 
     name = "local processes"
 
     def __init__(self, jobs: int, retries: int = 2):
-        if isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 1:
-            raise FieldError("jobs", f"must be an integer >= 1 (got {jobs!r})")
+        check_jobs(jobs)
         self.jobs, self.retries = jobs, retries
         self._pool_now: ProcessPoolExecutor | None = None
         # stopping workers mid-unit (Ctrl-C) leaves the pool's queue semaphores to the tracker process,
@@ -226,149 +251,13 @@ class LocalProcesses:
         pass
 
 
-# -- Ray -------------------------------------------------------------------------------------------
-
-
-def _read_tree(folder: Path) -> dict[str, bytes]:
-    """Every file under ``folder``, keyed by its path relative to ``folder.parent``."""
-    out = {}
-    if folder.is_dir():
-        for p in sorted(folder.rglob("*")):
-            if p.is_file() and not p.name.endswith(".tmp") and p.name != ".lock":
-                out[str(p.relative_to(folder.parent))] = p.read_bytes()
-    return out
-
-
-def _write_tree(root: Path, files: dict[str, bytes]) -> None:
-    from warp_critic.running.rundir import atomic_write_bytes
-
-    for rel, data in files.items():
-        path = root / rel
-        path.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_bytes(path, data)
-
-
-def _ray_unit(
-    unit: Unit, inputs: dict[str, bytes], env: dict[str, str]
-) -> tuple[dict[str, bytes], dict, float]:
-    """A Ray task: run ``unit`` in a private folder holding ``inputs``; return its stage directory's files."""
-    os.environ.update(env)
-    from warp_critic.core.runtime import init
-
-    init()
-    with tempfile.TemporaryDirectory(prefix="warp-critic-unit-") as tmp:
-        root = Path(tmp)
-        for rel, data in inputs.items():
-            (root / rel).parent.mkdir(parents=True, exist_ok=True)
-            (root / rel).write_bytes(data)
-        t = time.perf_counter()
-        result = call_unit(_quiet(unit), root)
-        seconds = time.perf_counter() - t
-        return _read_tree(root / unit.dir_name), result, seconds
-
-
-def check_ray_address(address: str | None) -> None:
-    """A reachable ``HOST:PORT`` (or ``auto``, or none for a local cluster), checked before anything starts."""
-    if address in (None, "", "auto", "local"):
-        return
-    host, sep, port = address.removeprefix("ray://").rpartition(":")
-    if not sep or not host or not port.isdigit():
-        raise FieldError(
-            "ray",
-            f"{address!r}: expected auto, or HOST:PORT of the cluster's head (e.g. 10.0.0.1:6379)",
-        )
-    try:
-        with socket.create_connection((host, int(port)), timeout=3.0):
-            pass
-    except (OSError, ValueError) as e:
-        raise FieldError("ray", f"{address}: cannot reach the Ray cluster's head ({e})") from None
-
-
-class RayExecutor:
-    """One Ray task per unit (``address``: ``None`` starts a local cluster, ``auto`` joins the running
-    one, ``HOST:PORT`` the head at that address)."""
-
-    name = "ray"
-
-    def __init__(
-        self, address: str | None, device: str, num_cpus: int | None = None, retries: int = 3
-    ):
-        try:
-            import ray
-        except ImportError:
-            raise UserError('--ray needs Ray: pip install -e ".[ray]"') from None
-        check_ray_address(address)
-        self.ray, self.retries = ray, retries
-        kwargs = dict(include_dashboard=False, log_to_driver=False, configure_logging=False)
-        try:
-            if address in (None, "", "local"):  # a cluster of this machine alone, on loopback
-                ray.init(
-                    num_cpus=num_cpus or os.cpu_count(), _node_ip_address="127.0.0.1", **kwargs
-                )
-            else:
-                ray.init(address=address, **kwargs)
-        except Exception as e:  # ConnectionError and Ray's own
-            raise FieldError(
-                "ray",
-                f"{address or 'local'}: cannot start or join a Ray cluster "
-                f"({type(e).__name__}: {' '.join(str(e).split())[:160]})",
-            ) from None
-        self.gpu = str(device).startswith("cuda")
-        if self.gpu and not ray.cluster_resources().get("GPU", 0):
-            ray.shutdown()
-            raise FieldError("device", f"{device}: the Ray cluster has no GPU")
-
-    def run(self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None]) -> None:
-        ray = self.ray
-        env = {
-            k: v
-            for k, v in os.environ.items()
-            if k in (UNIT_FAULT_ENV, "WARP_CRITIC_TORCH_THREADS")
-        }
-        task = ray.remote(_ray_unit).options(
-            max_retries=self.retries,
-            retry_exceptions=False,
-            num_cpus=0 if self.gpu else 1,
-            num_gpus=1 if self.gpu else 0,
-        )
-        refs = {}
-        for u in units:
-            inputs = _read_tree(root / u.dir_name)  # an unfinished stage directory resumes
-            for d in u.reads:
-                inputs.update(_read_tree(root / d))
-            log(f"reproduce: {u.name}: submitted to Ray ({u.dir_name}, {len(inputs)} input files)")
-            refs[task.remote(u, inputs, env)] = u
-        while refs:
-            ready, _ = ray.wait(list(refs), num_returns=1)
-            u = refs.pop(ready[0])
-            try:
-                files, result, seconds = ray.get(ready[0])
-            except Exception as e:  # the unit failed for good (after Ray's retries)
-                raise UserError(
-                    f"reproduce: unit {u.name} failed on Ray ({type(e).__name__}: "
-                    f"{' '.join(str(e).split())[:200]}); run again to resume"
-                ) from None
-            stage = root / u.dir_name
-            _write_tree(root, files)
-            for p in sorted(
-                stage.rglob("*"), reverse=True
-            ):  # the task returned the whole directory:
-                rel = str(
-                    p.relative_to(root)
-                )  # what it removed (unstarted seeds, merged segments) goes
-                if p.is_file() and rel not in files and p.name != ".lock":
-                    p.unlink()
-            done(u, result, seconds)
-
-    def close(self) -> None:
-        self.ray.shutdown()
-
-
 def make_executor(jobs: int | None, ray: str | None, device: str):
     """The executor the flags ask for (checked before any work)."""
     if jobs is not None and ray is not None:
         raise FieldError("jobs", "and --ray exclude each other")
     if ray is not None:
+        from warp_critic.reproduce.on_ray import RayExecutor
+
         return RayExecutor(None if ray == "local" else ray, device)
     if jobs is not None:
         local = LocalProcesses(jobs)  # checks jobs
@@ -384,4 +273,13 @@ __all__ = [
     "RayExecutor",
     "make_executor",
     "check_ray_address",
+    "check_jobs",
+    "unit_failure",
 ]
+
+# the Ray executor lives in its own module; its names stay importable from here
+from warp_critic.reproduce.on_ray import (  # noqa: E402
+    RayExecutor,
+    check_ray_address,
+    unit_failure,
+)

@@ -28,6 +28,7 @@ import torch
 from warp_critic.physics.scene import Variant
 from warp_critic.reproduce.evaluate import Job, default_steps, evaluate, relpath
 from warp_critic.reproduce.settings import METHODS
+from warp_critic.running.task import inside_limits
 
 
 def _train_goals_and_limits(run_dir: str):
@@ -170,8 +171,11 @@ def run_maps_stage(
     scene, train_goals, lo, hi = _train_goals_and_limits(first)
     steps = default_steps(first)
     n, f = int(s["grid"]), float(s["limit_fraction"])
-    ax0 = np.linspace(float(lo[0]) * f, float(hi[0]) * f, n)
-    ax1 = np.linspace(float(lo[1]) * f, float(hi[1]) * f, n)
+    (lo0, lo1), (hi0, hi1) = (
+        inside_limits(lo.double(), hi.double(), f)[k].tolist() for k in (0, 1)
+    )
+    ax0 = np.linspace(lo0, hi0, n)
+    ax1 = np.linspace(lo1, hi1, n)
     grid = torch.tensor(
         [[a, b] for a in ax0 for b in ax1], dtype=torch.float32
     )  # row-major: q1 major

@@ -20,7 +20,7 @@ from warp_critic.reproduce.settings import (
     default_settings,
     stage_hash,
 )
-from warp_critic.reproduce.stages import Runner, prepare_out
+from warp_critic.reproduce.stages import Runner, claim_out, read_stage
 
 
 @dataclass
@@ -33,6 +33,7 @@ class ReproduceConfig:
     overrides: list[str] = field(default_factory=list)  # STAGE.KEY=VALUE
     progress: bool = True
     command: str = ""  # the command line, for the report
+    seeds_given: bool = False  # --seeds was given (then metatrain.seeds may not contradict it)
 
     def validate(self) -> dict:
         """Check everything before any work; returns the settings. Raises a one-line :class:`UserError`."""
@@ -47,14 +48,17 @@ class ReproduceConfig:
             raise UserError(f"--only: give one or more of {', '.join(STAGES)}")
         if self.device not in ("auto", "cpu", "cuda") and not str(self.device).startswith("cuda:"):
             raise UserError(f"--device: must be cpu, cuda or auto (got {self.device!r})")
-        settings = apply_overrides(default_settings(self.quick, self.seeds), self.overrides)
-        from warp_critic.reproduce.metatrain import check_fields_known
+        defaults = default_settings(self.quick, self.seeds)
+        settings = apply_overrides(defaults, self.overrides)
+        seeds = settings["metatrain"]["seeds"]
+        if self.seeds_given and seeds != defaults["metatrain"]["seeds"]:
+            raise FieldError(
+                "seeds",
+                f"{self.seeds} and --set metatrain.seeds={seeds} disagree; give one of them",
+            )
+        from warp_critic.reproduce.validate import check_all
 
-        for scene in SCENES:
-            for m in METHODS:
-                check_fields_known(
-                    m, settings["metatrain"][scene][m], f"--set metatrain.{scene}.{m}"
-                )
+        check_all(settings, defaults)  # every setting of every stage, before any work
         return settings
 
     def selected(self) -> list[str]:
@@ -187,11 +191,17 @@ def reproduce(rc: ReproduceConfig, executor=None) -> dict:
     from warp_critic.reproduce.executors import InProcess
 
     settings = rc.validate()
-    out = prepare_out(Path(rc.out))
+    out, lock = claim_out(Path(rc.out))
+    try:
+        return _reproduce(rc, settings, out, executor or InProcess())
+    finally:
+        lock.release()
+
+
+def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict:
     from warp_critic.physics.simulator import resolve_device
 
     device = resolve_device(rc.device)
-    executor = executor or InProcess()
     runner = Runner(out)
     t0 = time.perf_counter()
     stages = plan(settings)
@@ -213,7 +223,7 @@ def reproduce(rc: ReproduceConfig, executor=None) -> dict:
         1
         for wave in waves
         for n in wave
-        if runner.stage_dir(n, stages[n]["hash"]).joinpath("stage.json").exists() is False
+        if read_stage(runner.stage_dir(n, stages[n]["hash"])) is None
     )
     runner.log(
         f"reproduce: {runner.total} stage(s) to run ({executor.name}); complete ones are skipped"

@@ -18,7 +18,7 @@ import numpy as np
 from warp_critic.evaluation.protocol import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE3
 from warp_critic.reproduce.settings import METHOD_LABELS, METHODS, SCENES, STAGES
 from warp_critic.reproduce.stages import STAGE_FILE, StageRecord, read_stage
-from warp_critic.running.rundir import atomic_write_text
+from warp_critic.running.rundir import atomic_write_text, save_figure
 
 COLORS = {"ours": "tab:blue", "ddpg": "tab:orange", "meta-critic": "tab:green"}
 PAPER_TABLES = {
@@ -88,7 +88,7 @@ def _figure(w: float, h: float):
 
 def _save(fig, path: Path) -> Path:
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path, dpi=90)
     return path
 
 
@@ -163,7 +163,7 @@ def plot_goal_maps(path: Path, res: dict) -> None:
         ax.set_ylabel("goal q2 (rad)")
     axes[0].legend(fontsize=7, loc="upper right")
     fig.colorbar(im, ax=list(axes), label="MSE over seeds x inits (rad^2)")
-    fig.savefig(path, dpi=90)
+    save_figure(fig, path, dpi=90)
 
 
 def plot_sweep(path: Path, res: dict, kind: str, xlabel: str, trained: float) -> None:
@@ -295,12 +295,13 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
     }
     figures: list[tuple[str, Path, str]] = []  # (title, png, sentence)
     ver = versions()
+    seeds = seeds_trained(plan)
 
     md += [
         "# Reproduction: Model Based Meta Learning of Critics for Policy Gradients (ICML 2022)",
         "",
         f"- command: `{config.command}`",
-        f"- device: {device}; seeds: {config.seeds} ({', '.join(map(str, range(config.seeds)))}); "
+        f"- device: {device}; seeds: {len(seeds)} ({', '.join(map(str, seeds))}); "
         f"{'QUICK settings (plumbing check, not the paper setting)' if config.quick else 'paper settings'}",
         f"- versions: python {ver['python']}, warp {ver['warp']}, newton {ver['newton']}, torch {ver['torch']} "
         f"({ver['platform']})",
@@ -616,13 +617,18 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
         md += [f"### {title}", "", f"![{title}]({_rel(png, out)})", "", sentence, ""]
     results["figures"] = [{"title": t, "file": _rel(p, out), "sentence": s} for t, p, s in figures]
     results.update(
-        command=config.command, device=device, seeds=config.seeds, quick=config.quick, versions=ver
+        command=config.command, device=device, seeds=seeds, quick=config.quick, versions=ver
     )
     text = "\n".join(md) + "\n"
     atomic_write_text(out / "results.json", json.dumps(results, indent=1) + "\n")
     atomic_write_text(out / "REPORT.md", text)
     write_recording(out / "report.rrd", text, figures)
     return out / "REPORT.md"
+
+
+def seeds_trained(plan: dict) -> list[int]:
+    """The meta-training seeds of a plan (``metatrain.seeds``, which ``--set`` may have changed)."""
+    return next(list(st["settings"]["seeds"]) for st in plan.values() if st["group"] == "metatrain")
 
 
 def write_recording(path: Path, text: str, figures: list[tuple[str, Path, str]]) -> None:
@@ -654,4 +660,4 @@ def write_recording(path: Path, text: str, figures: list[tuple[str, Path, str]])
     tmp.replace(path)
 
 
-__all__ = ["write_report", "STAGES"]
+__all__ = ["write_report", "seeds_trained", "STAGES"]

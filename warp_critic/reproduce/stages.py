@@ -7,6 +7,7 @@ changes the hash, so only the stages that depend on it run again, into new direc
 directories are never touched.
 
 The output folder carries :data:`MARKER`; a non-empty folder without it is refused (it is not ours).
+One driver at a time: the folder's OS lock (``.lock``) is held while a driver works in it.
 """
 
 from __future__ import annotations
@@ -20,23 +21,32 @@ from pathlib import Path
 from typing import Any
 
 from warp_critic.core.errors import FieldError, UserError
+from warp_critic.running.locks import LOCK, REPRODUCE_MARKER, FolderLock, check_not_owned
 from warp_critic.running.rundir import atomic_write_text, check_output_dir
 
-MARKER = ".warp-critic-reproduce"
+MARKER = REPRODUCE_MARKER
 STAGE_FILE = "stage.json"
 STAGE_KIND = "warp-critic/reproduce-stage-v1"
 
 
 def prepare_out(out: Path) -> Path:
     """Check ``out`` (before any work) and mark it as a reproduce output; returns it."""
+    out, lock = claim_out(out)
+    lock.release()
+    return out
+
+
+def claim_out(out: Path) -> tuple[Path, FolderLock]:
+    """Check ``out`` (before any work), lock it (one reproduce driver per output folder: a second
+    one is refused while the first lives) and mark it as a reproduce output."""
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise FieldError("out", f"{out}: is a file, not a directory")
-    if out.is_dir() and any(out.iterdir()) and not (out / MARKER).is_file():
-        raise FieldError(
-            "out",
-            f"{out}: is not empty and not a reproduce output (no {MARKER}); not writing into it",
-        )
+    try:
+        check_not_owned(out, "", reproduce_ok=True)  # not inside a live run or another output
+    except UserError as e:
+        raise FieldError("out", str(e).strip()) from None
+    _check_ours(out)
     try:
         check_output_dir(out, "")
     except UserError as e:
@@ -45,11 +55,30 @@ def prepare_out(out: Path) -> Path:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise FieldError("out", f"{out}: cannot create ({e.strerror or e})") from None
-    if not (out / MARKER).is_file():
-        atomic_write_text(
-            out / MARKER, json.dumps({"kind": "warp-critic/reproduce-output-v1"}) + "\n"
-        )
-    return out
+    lock = FolderLock(out, "reproduce output")
+    try:
+        lock.acquire()
+    except UserError as e:
+        raise FieldError("out", str(e).removeprefix("reproduce output ")) from None
+    try:
+        _check_ours(out)  # again, under the lock
+        if not (out / MARKER).is_file():
+            atomic_write_text(
+                out / MARKER, json.dumps({"kind": "warp-critic/reproduce-output-v1"}) + "\n"
+            )
+    except BaseException:
+        lock.release()
+        raise
+    return out, lock
+
+
+def _check_ours(out: Path) -> None:
+    if out.is_dir() and not (out / MARKER).is_file():
+        if any(p.name != LOCK for p in out.iterdir()):
+            raise FieldError(
+                "out",
+                f"{out}: is not empty and not a reproduce output (no {MARKER}); not writing into it",
+            )
 
 
 def read_stage(d: Path) -> dict | None:
@@ -59,6 +88,42 @@ def read_stage(d: Path) -> dict | None:
     except (OSError, ValueError, UnicodeDecodeError):
         return None
     return data if isinstance(data, dict) and data.get("kind") == STAGE_KIND else None
+
+
+#: what the report and the stages that read a stage take from its result: key -> JSON type
+RESULT_KEYS = {
+    "toy": {"closed_form": dict, "numerical": dict, "table_markdown": str, "files": dict},
+    "landscape": {"goals": list, "fractions": (list, dict), "files": dict, "generalising": dict},
+    "metatrain": {"seeds": dict, "iterations": int, "env_steps_per_iteration": int},
+    "maps": {"axis_q1": list, "axis_q2": list, "goals": dict, "mass": dict, "length": dict},
+    "tables": {"columns": dict, "cells": list, "dof": int},
+}
+
+
+def stage_problem(group: str, data: dict) -> str | None:
+    """What makes a complete stage's ``stage.json`` unusable (edited or damaged), or ``None``."""
+    if not isinstance(data.get("seconds"), (int, float)):
+        return "no number of seconds"
+    result = data.get("result")
+    if not isinstance(result, dict):
+        return "no result"
+    for key, kind in RESULT_KEYS.get(group, {}).items():
+        if not isinstance(result.get(key), kind):
+            return f"its result has no {key}"
+    if group == "metatrain":
+        if not result["seeds"]:
+            return "its result has no seeds"
+        for seed, v in result["seeds"].items():
+            ok = (
+                isinstance(v, dict)
+                and isinstance(v.get("run_dir"), str)
+                and isinstance(v.get("iteration"), list)
+                and isinstance(v.get("task_loss"), list)
+                and isinstance(v.get("seconds"), (int, float))
+            )
+            if not ok or not str(seed).lstrip("-").isdigit():
+                return f"its result for seed {seed} is incomplete"
+    return None
 
 
 @dataclass
@@ -95,6 +160,11 @@ class Runner:
         data = read_stage(d)
         if data is None:
             return None
+        problem = stage_problem(group, data)
+        if problem is not None:
+            raise UserError(
+                f"{d / STAGE_FILE}: edited or damaged ({problem}); remove it to run the stage again"
+            )
         self.log(f"reproduce: {name}: complete, skipped ({d.name})")
         rec = StageRecord(group, name, d, data, ran=False)
         self.records[name] = rec

@@ -107,6 +107,9 @@ class ResumeMismatch(UserError):
         self.run_dir, self.diffs = run_dir, diffs
         super().__init__(self.render(name))
 
+    def __reduce__(self):  # a worker process's error reaches the driver whole
+        return (type(self), (self.run_dir, self.diffs))
+
     def render(self, name) -> str:
         listed = "; ".join(f"{name(f)} {old!r} -> {new!r}" for f, old, new in self.diffs)
         return (
@@ -132,6 +135,7 @@ class SeedRun:
         self.history: list[dict] = []
         self.metrics_file = None
         self.recorder = None
+        self.run_id: str | None = None
         self.last_checkpoint = self.ckpt["iteration"] if self.ckpt is not None else None
 
     @property
@@ -151,7 +155,7 @@ class SeedRun:
             self.rundir.lock()
         else:
             self.rundir = RunDir.create(cfg.out, cfg.method)
-        self.rundir.ensure_marker(cfg.method)
+        self.run_id = self.rundir.ensure_marker(cfg.method).get("run_id")
 
     def _resume_config(self, requested: TaskConfig, given: set[str] | None) -> TaskConfig:
         cls = type(requested)
@@ -159,6 +163,7 @@ class SeedRun:
             requested.out = requested.default_out()
         self.rundir = RunDir.open(requested.out)
         ckpt = self.rundir.load_checkpoint(require=self.require)
+        _same_run(self.rundir, ckpt)
         if ckpt["method"] != requested.method:
             raise UserError(
                 f"run directory {requested.out}: holds a {ckpt['method']} run, not {requested.method}"
@@ -203,6 +208,26 @@ class SeedRun:
         if self.last_checkpoint is None:
             return f"no checkpoint was written yet in {self.rundir.path}"
         return f"the checkpoint of iteration {self.last_checkpoint} in {self.rundir.path} is kept"
+
+
+def _same_run(rundir: RunDir, ckpt: dict) -> None:
+    """The checkpoint belongs to the run whose files lie next to it (a checkpoint copied in from
+    another run would resume with that run's state and mix both runs' metrics)."""
+    mine = rundir.marker().get("run_id")
+    theirs = ckpt.get("run_id")
+    saved = rundir.saved_config()
+    other = (
+        mine and theirs and mine != theirs
+    ) or (  # checkpoints without a run id: the scene content recorded next to it
+        saved.get("scene_hash")
+        and ckpt.get("scene_hash")
+        and saved["scene_hash"] != ckpt["scene_hash"]
+    )
+    if other:
+        raise UserError(
+            f"run directory {rundir.path}: its checkpoint.pt belongs to another run (not the one "
+            "whose config.json and metrics.jsonl lie next to it); not resuming it"
+        )
 
 
 def seed_configs(cfg: TaskConfig) -> list[TaskConfig]:
@@ -303,7 +328,9 @@ class Session:
                 "method": run.cfg.method,
                 "scene": scene.name,
                 "scene_path": str(run.cfg.scene),
+                "scene_file": _absolute(run.cfg.scene),
                 "scene_hash": self.scene_hash,
+                "run_id": run.run_id,
                 "dof": scene.dof,
                 "config": run.cfg.to_dict(),
                 "iteration": iteration,
@@ -340,7 +367,13 @@ class Session:
         try:
             for i, r in enumerate(self.runs):
                 r.history = r.rundir.read_metrics(upto=self.start)
-                r.rundir.save_config(r.cfg.to_dict())
+                r.rundir.save_config(
+                    {
+                        **r.cfg.to_dict(),
+                        "scene_file": _absolute(r.cfg.scene),
+                        "scene_hash": self.scene_hash,
+                    }
+                )
                 if record:
                     from warp_critic.running.recording import TrainingRecorder
 
@@ -440,6 +473,10 @@ class Session:
                 r.rundir.abandon()
             else:
                 r.rundir.unlock()
+
+
+def _absolute(path) -> str:
+    return str(Path(path).resolve())
 
 
 def _plain(row: dict) -> dict:

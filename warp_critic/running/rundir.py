@@ -14,8 +14,9 @@ Rules:
 
 * A new run claims a directory that does not exist, is empty, or is a finished/aborted run of ours
   started anew is refused: anything else (someone's files) is never overwritten.
-* One process at a time: :meth:`RunDir.lock` refuses a directory locked by a live process at once; a
-  lock left by a dead process on this host is taken over with a warning.
+* One process at a time: :meth:`RunDir.lock` takes the directory's OS file lock
+  (:class:`~warp_critic.running.locks.FolderLock`), which dies with its process; a directory locked by a
+  live process is refused at once.
 * Every write is atomic (temporary file in the same directory, then ``os.replace``); a failed
   write removes its temporary file.
 * Checkpoints are loaded with ``torch.load(weights_only=True)``: a file that needs code to unpickle
@@ -25,13 +26,11 @@ Rules:
 from __future__ import annotations
 
 import contextlib
+import errno
+import io
 import json
 import os
-import socket
-import subprocess
-import sys
 import tempfile
-import time
 import uuid
 from collections.abc import Iterable
 from pathlib import Path
@@ -39,9 +38,9 @@ from pathlib import Path
 import torch
 
 from warp_critic.core.errors import UserError, warn
+from warp_critic.running.locks import FolderLock
 
 MARKER = ".warp-critic-run"
-LOCK = ".lock"
 RUN_KIND = "warp-critic/run-v1"
 CHECKPOINT_KIND = "warp-critic/checkpoint-v1"
 RUN_FILES = ("config.json", "checkpoint.pt", "metrics.jsonl", "recording.rrd", MARKER)
@@ -51,6 +50,14 @@ SEGMENT = "recording.segment.rrd"
 
 class RunExistsError(UserError):
     """A new run was asked for in a directory that holds one (the CLI suggests resuming it)."""
+
+
+class DiskFullError(UserError):
+    """A write failed because the device is full (or the quota is used up): not the user's input,
+    but one line all the same (the CLI exits 1)."""
+
+
+FULL = (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -96,25 +103,43 @@ def _atomic(path: Path):
         raise
 
 
-def _write_atomically(path: Path, write) -> None:
-    """``write(tmp)`` fills a temporary file that then replaces ``path``; a failure is one line."""
+def _write_bytes(path: Path, data: bytes) -> None:
+    """The one place a result file's bytes reach the disk (the full-disk tests fail it here)."""
+    with open(path, "wb") as f:
+        f.write(data)
+
+
+def _write_atomically(path: Path, data: bytes) -> None:
+    """``data`` into a temporary file that then replaces ``path``; a failure is one line."""
     try:
         with _atomic(path) as tmp:
-            write(tmp)
+            _write_bytes(tmp, data)
     except OSError as e:
-        raise UserError(f"{path}: cannot write ({e.strerror or e})") from None
+        cls = DiskFullError if e.errno in FULL else UserError
+        raise cls(f"{path}: cannot write ({e.strerror or e})") from None
 
 
 def atomic_write_text(path: Path, text: str) -> None:
-    _write_atomically(path, lambda tmp: tmp.write_text(text))
+    _write_atomically(path, text.encode())
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:
-    _write_atomically(path, lambda tmp: tmp.write_bytes(data))
+    _write_atomically(path, data)
 
 
 def atomic_torch_save(obj, path: Path) -> None:
-    _write_atomically(path, lambda tmp: torch.save(obj, tmp))
+    """``torch.save`` to memory, then to disk atomically (a full disk is an ``OSError`` here, where
+    ``torch.save`` to a path would hide it in a ``RuntimeError``)."""
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    _write_atomically(path, buf.getvalue())
+
+
+def save_figure(fig, path: Path, **kwargs) -> None:
+    """A matplotlib figure as PNG at ``path``, atomically (``kwargs`` go to ``savefig``)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", **kwargs)
+    _write_atomically(Path(path), buf.getvalue())
 
 
 # ------------------------------------------------------------------------------------------------
@@ -173,22 +198,12 @@ def write_result(path: Path, result: dict) -> None:
 # ------------------------------------------------------------------------------------------------
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 class RunDir:
     """A run directory. Use :meth:`create` for a new run, :meth:`open` for an existing one."""
 
     def __init__(self, path: str | Path):
         self.path = Path(path)
-        self._locked = False
+        self._lock = FolderLock(self.path, "run directory")
         self._created: list[Path] = []
 
     # -- claiming ---------------------------------------------------------------------------------
@@ -266,55 +281,26 @@ class RunDir:
 
     # -- locking ----------------------------------------------------------------------------------
     def lock(self) -> None:
-        """Take the directory's lock or refuse at once (a dead owner's lock is taken over)."""
-        path = self.path / LOCK
-        me = {"pid": os.getpid(), "host": socket.gethostname(), "started": time.time()}
-        for _ in range(2):
-            try:
-                fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-            except FileExistsError:
-                try:
-                    owner = json.loads(path.read_text())
-                except (OSError, ValueError, UnicodeDecodeError):
-                    owner = {}
-                pid, host = owner.get("pid"), owner.get("host")
-                if isinstance(pid, int) and host == me["host"] and not _pid_alive(pid):
-                    warn(
-                        f"run directory {self.path}: taking over the lock of process {pid}, which is no longer running"
-                    )
-                    with contextlib.suppress(OSError):
-                        path.unlink()
-                    continue
-                if not owner:  # unreadable: being written right now, or garbage
-                    raise UserError(
-                        f"run directory {self.path}: is locked ({LOCK} exists; delete it if no process uses the run)"
-                    ) from None
-                raise UserError(
-                    f"run directory {self.path}: in use by process {pid} on {host} "
-                    f"(its {LOCK}; delete it if that process is gone)"
-                ) from None
-            except OSError as e:
-                raise UserError(
-                    f"run directory {self.path}: cannot lock ({e.strerror or e})"
-                ) from None
-            with os.fdopen(fd, "w") as f:
-                f.write(json.dumps(me))
-            self._locked = True
-            for stale in self.path.glob(".*.tmp"):  # half-written files of a killed process
-                with contextlib.suppress(OSError):
-                    stale.unlink()
-            return
-        raise UserError(f"run directory {self.path}: cannot take over its lock")
+        """Take the directory's OS lock or refuse at once (a lock file nobody holds is taken over)."""
+        self._lock.acquire()
+        for stale in self.path.glob(".*.tmp"):  # half-written files of a killed process
+            with contextlib.suppress(OSError):
+                stale.unlink()
 
     def unlock(self) -> None:
-        if self._locked:
-            with contextlib.suppress(OSError):
-                (self.path / LOCK).unlink()
-            self._locked = False
+        self._lock.release()
 
     # -- config -----------------------------------------------------------------------------------
     def save_config(self, config: dict) -> None:
         atomic_write_text(self.path / "config.json", json.dumps(config, indent=2))
+
+    def saved_config(self) -> dict:
+        """``config.json`` as written by :meth:`save_config`, or ``{}`` (missing or unreadable)."""
+        try:
+            config = json.loads((self.path / "config.json").read_text())
+        except (OSError, ValueError, UnicodeDecodeError):
+            return {}
+        return config if isinstance(config, dict) else {}
 
     # -- checkpoints ------------------------------------------------------------------------------
     @property
@@ -346,12 +332,12 @@ class RunDir:
                 if i == len(lines) - 1:
                     break  # the last line of a killed run
                 raise UserError(f"{path}: line {i + 1} is not JSON") from None
-            if (
-                isinstance(row, dict)
-                and isinstance(row.get("iteration"), int)
-                and row["iteration"] < upto
-            ):
-                rows.append(row)
+            if isinstance(row, dict) and isinstance(row.get("iteration"), int):
+                if row["iteration"] < upto:
+                    _check_row(row, f"{path}: line {i + 1}")
+                    rows.append(row)
+            else:
+                raise UserError(f"{path}: line {i + 1} is not a metrics row (no integer iteration)")
         return rows
 
     def open_metrics(self, history: list[dict]):
@@ -370,31 +356,23 @@ class RunDir:
         return self.path / SEGMENT
 
     def merge_recording(self) -> None:
-        """Fold a segment (closed, or cut short by a killed process) into ``recording.rrd``.
+        """Fold a segment (closed, or cut short by a killed process) into ``recording.rrd``; nothing
+        unmerged is ever deleted (:func:`warp_critic.running.segments.merge_segment`)."""
+        from warp_critic.running.segments import merge_segment
 
-        ``rerun rrd merge`` keeps everything readable of a file without footer, so a killed segment
-        loses at most its last, unwritten chunk; the merged file always verifies.
-        """
-        seg = self.segment_path()
-        if not seg.exists():
-            return
-        sources = [
-            str(p) for p in (self.recording_path, seg) if p.exists() and p.stat().st_size > 0
-        ]
-        if sources:
-            with _atomic(self.recording_path) as tmp:
-                proc = subprocess.run(
-                    [sys.executable, "-m", "rerun_cli", "rrd", "merge", *sources, "-o", str(tmp)],
-                    capture_output=True,
-                    text=True,
-                    env={**os.environ, "RUST_LOG": "error"},
-                )
-                if proc.returncode != 0:
-                    raise UserError(
-                        f"{self.recording_path}: cannot merge the recording segment "
-                        f"({(proc.stderr.strip().splitlines() or ['rerun rrd merge failed'])[-1]})"
-                    )
-        seg.unlink()
+        merge_segment(self.recording_path, self.segment_path())
+
+
+def _check_row(row: dict, where: str) -> None:
+    """A metrics row read back must hold a numeric ``task_loss`` (a resumed run reports and plots it)."""
+    loss = row.get("task_loss")
+    if isinstance(loss, bool) or not isinstance(loss, (int, float)):
+        raise UserError(f"{where}: task_loss must be a number (got {loss!r})")
+    for key, value in row.items():
+        if key in ("seconds", "iteration") and (
+            isinstance(value, bool) or not isinstance(value, (int, float))
+        ):
+            raise UserError(f"{where}: {key} must be a number (got {value!r})")
 
 
 def load_checkpoint_file(path: str | Path, require: Iterable[str] = ()) -> dict:

@@ -244,6 +244,8 @@ class TaskConfig(SerializableConfig):
                     "max_torque",
                     f"needs 1 or {dof} values for {scene.name} (got {len(self.max_torque)})",
                 )
+            if self.max_torque is not None and len(self.max_torque) in (1, dof):
+                max_torque_tensor(self.max_torque, scene)
             if self.goals is not None:
                 goals_tensor(self.goals, scene)
             check_memory(self, dof)
@@ -282,8 +284,17 @@ def goals_tensor(goals, scene: Scene, device="cpu", name: str = "goals") -> torc
     return g.to(device)
 
 
+def inside_limits(lower, upper, fraction: float):
+    """The bounds of the middle ``fraction`` of each joint's range ``[lower, upper]``:
+    ``mid -/+ fraction * half``, inside the limits whatever their signs (for limits symmetric about 0
+    exactly ``fraction * lower`` and ``fraction * upper``)."""
+    mid, half = (upper + lower) / 2, (upper - lower) / 2
+    return mid - fraction * half, mid + fraction * half
+
+
 def max_torque_tensor(max_torque: list[float], scene: Scene, device="cpu") -> torch.Tensor:
-    """Per-joint torque bound ``(dof,)``, clipped to the joints' effort limits."""
+    """Per-joint torque bound ``(dof,)``; a bound above a joint's effort limit is refused (the
+    policy could not apply it, and the run would record a number it did not use)."""
     t = torch.tensor(max_torque, dtype=torch.float32)
     if t.numel() == 1:
         t = t.expand(scene.dof).clone()
@@ -291,7 +302,16 @@ def max_torque_tensor(max_torque: list[float], scene: Scene, device="cpu") -> to
         raise FieldError(
             "max_torque", f"needs 1 or {scene.dof} values for {scene.name} (got {t.numel()})"
         )
-    return torch.minimum(t, torch.as_tensor(scene.effort_limit, dtype=torch.float32)).to(device)
+    limit = torch.as_tensor(scene.effort_limit, dtype=torch.float32)
+    over = torch.nonzero(t > limit).flatten()
+    if over.numel():
+        j = int(over[0])
+        raise FieldError(
+            "max_torque",
+            f"{float(t[j]):g} N·m for joint {j} is above its effort limit {float(limit[j]):g} N·m "
+            f"in {scene.name} (give at most the effort limits)",
+        )
+    return torch.minimum(t, limit).to(device)
 
 
 def available_memory() -> int:
@@ -407,7 +427,7 @@ class Task:
 
     def start_states(self, gen: torch.Generator, i: int = 0) -> torch.Tensor:
         """``(Wc, dof)`` initial joint positions of copy ``i``: home, plus ``N(0, start_std^2)`` inside
-        95% of the limits for all but the first ``home_starts`` worlds of each goal."""
+        the middle 95% of the limits for all but the first ``home_starts`` worlds of each goal."""
         home, slot = self.home[self.copy(i)], self.slot[self.copy(i)]
         if not self.cfg.start_std:
             return home
@@ -417,7 +437,8 @@ class Task:
             * self.cfg.start_std
             * away
         )
-        return torch.clamp(home + noise, 0.95 * self.sim.q_lower, 0.95 * self.sim.q_upper)
+        lo, hi = inside_limits(self.sim.q_lower, self.sim.q_upper, 0.95)
+        return torch.clamp(home + noise, lo, hi)
 
     def per_goal(self, per_world: torch.Tensor) -> torch.Tensor:
         """``(Wc,) -> (G,)`` mean over each goal's worlds (one copy's worlds)."""

@@ -8,6 +8,7 @@ import numpy as np
 
 from warp_critic.analysis.landscape.fields import METHODS
 from warp_critic.analysis.landscape.problem import analytic_optimum
+from warp_critic.running.rundir import save_figure
 
 
 def _colormap(values: np.ndarray) -> np.ndarray:
@@ -137,7 +138,7 @@ def write_figures(
             ax.set_xlabel("theta_1 (N)")
             ax.set_ylabel("theta_2 (N)")
     fig.tight_layout()
-    fig.savefig(out / "landscape.png", dpi=90)
+    save_figure(fig, out / "landscape.png", dpi=90)
 
     fig = Figure(figsize=(6, 6))
     ax = fig.subplots()
@@ -169,4 +170,4 @@ def write_figures(
     )
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(out / "exploration.png", dpi=90)
+    save_figure(fig, out / "exploration.png", dpi=90)

@@ -15,6 +15,7 @@ from warp_critic.analysis.toy.curves import BYTES_PER_POINT, CURVE_KEYS, curves,
 from warp_critic.analysis.toy.loops import init_sweep, run_meta_critic, run_ours, run_supervised
 from warp_critic.analysis.toy.problem import ALPHA, GAMMA, METHODS, T
 from warp_critic.analysis.toy.roots import stationary_points
+from warp_critic.running.rundir import save_figure
 
 MAX_ABS = 1e6
 """Largest ``|s0|``, ``|g|``, ``|theta0|``: the fits use ``s^8`` (TD curvature squared), which stays far from
@@ -144,7 +145,7 @@ def _plot_method(path: Path, method: str, cv: dict, result: dict, s0: float, g: 
     ax_g.set_ylabel(r"$d/d\theta$")
     ax_g.legend(fontsize=7, loc="upper left")
     fig.subplots_adjust(left=0.1, right=0.97, top=0.94, bottom=0.08, hspace=0.08)
-    fig.savefig(path)
+    save_figure(fig, path)
 
 
 def _blueprint():

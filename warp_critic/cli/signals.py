@@ -1,0 +1,74 @@
+"""Ctrl-C and SIGTERM at any moment of a command: one line, exit code 130.
+
+The handlers are installed first thing in :func:`warp_critic.cli.main.main`, before the heavy imports
+(torch, Warp, USD), and stay installed until the process ends. What a signal does depends on the phase:
+
+* ``starting`` (imports, Warp start-up; nothing written yet): exit at once. Raising into an import
+  that runs inside C++ (torch's, pybind11) would abort the process instead;
+* ``running`` (the command): raise ``KeyboardInterrupt``, so that a run closes its files, releases its
+  lock and says what it kept (the command's own one line); a second signal meanwhile is ignored;
+* ``exiting`` (after the command, while the interpreter shuts down): exit at once.
+
+This module imports only the standard library.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+
+EXIT_INTERRUPTED = 130
+SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+_phase = "off"
+_said = False  # the command already wrote its line about the interruption
+
+
+def _handler(signum, frame) -> None:
+    global _phase
+    if _phase == "running":
+        _phase = "stopping"
+        raise KeyboardInterrupt
+    if _phase == "stopping":
+        return  # the first signal's clean-up is under way
+    stop_now()
+
+
+def stop_now() -> None:
+    """Write the one line (unless the command wrote it) and exit 130 without clean-up."""
+    if not _said:
+        try:
+            os.write(2, b"warp-critic: interrupted\n")
+        except OSError:
+            pass
+    os._exit(EXIT_INTERRUPTED)
+
+
+def install() -> dict:
+    """Install the handlers (phase ``starting``); returns the previous ones for :func:`restore`."""
+    global _phase, _said
+    _phase, _said = "starting", False
+    return {s: signal.signal(s, _handler) for s in SIGNALS}
+
+
+def running() -> None:
+    """The command starts: a signal now raises ``KeyboardInterrupt``."""
+    global _phase
+    _phase = "running"
+
+
+def exiting(said: bool) -> None:
+    """The command is over (``said``: it wrote its line about an interruption)."""
+    global _phase, _said
+    _phase, _said = "exiting", _said or said
+
+
+def restore(previous: dict) -> None:
+    """Put the previous handlers back (an in-process call of ``main`` leaves nothing behind)."""
+    global _phase
+    _phase = "off"
+    for s, h in previous.items():
+        signal.signal(s, h)
+
+
+__all__ = ["EXIT_INTERRUPTED", "install", "running", "exiting", "restore", "stop_now"]

@@ -1,0 +1,206 @@
+"""Every setting of every reproduce stage, checked before the first stage runs.
+
+One pass over the whole settings tree (defaults with the ``--set`` overrides applied): each value
+must have its default's type, then each stage's values their ranges -- by the same checks the
+stage's own command uses (``analyze toy``, ``analyze landscape``, the meta-train and baseline
+configs against their scenes), plus the ranges of the maps and tables. A problem is one
+:class:`~warp_critic.core.errors.FieldError` of ``--set`` that names the key and the value,
+``--set tables.goal_noise="bogus": must be one of per-joint, distance``; never a flag of another
+command. Keys that reproduce sets itself (``out``, ``scene``, ``resume``, ``device``, ``seed``,
+``seeds`` of a meta-training) are refused.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+from warp_critic.core.errors import FieldError
+
+#: meta-training keys reproduce sets itself: where the run goes, on what, resumed or not, its seeds
+RESERVED = ("out", "scene", "resume", "device", "seed", "seeds")
+MAX_GRID = 1000  # maps: grid x grid goals per run, seed and init
+MAX_SEEDS = 1000
+
+
+def show(value) -> str:
+    if isinstance(value, float) and not math.isfinite(value):
+        return repr(value)
+    try:
+        return json.dumps(value, allow_nan=True)
+    except (TypeError, ValueError):
+        return repr(value)
+
+
+def bad(key: str, value, problem: str) -> FieldError:
+    return FieldError("set", f"{key}={show(value)}: {problem}")
+
+
+# -- types ------------------------------------------------------------------------------------------
+
+
+def check_types(value, default, key: str) -> None:
+    """``value`` has the JSON type of ``default`` (recursively; ``None`` defaults take anything)."""
+    if default is None:
+        return
+    if isinstance(default, bool):
+        ok = isinstance(value, bool)
+        want = "true or false"
+    elif isinstance(default, int):
+        ok = isinstance(value, int) and not isinstance(value, bool)
+        want = "an integer"
+    elif isinstance(default, float):
+        ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+        want = "a number"
+        if ok and not math.isfinite(value):
+            raise bad(key, value, "must be a finite number")
+    elif isinstance(default, str):
+        ok, want = isinstance(value, str), "a string"
+    elif isinstance(default, list):
+        ok, want = isinstance(value, list), "a list"
+        if ok and default:
+            for v in value:
+                check_types(v, default[0], key)
+    elif isinstance(default, dict):
+        ok, want = isinstance(value, dict), "a table of settings"
+        if ok:
+            for k in value:
+                if k in default:
+                    check_types(value[k], default[k], f"{key}.{k}")
+    else:
+        return
+    if not ok:
+        raise bad(key, value, f"must be {want}")
+
+
+def number(key: str, v, *, lo=None, hi=None, open_lo=False, integer=False) -> None:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise bad(key, v, "must be a finite number")
+    if integer and not isinstance(v, int):
+        raise bad(key, v, "must be an integer")
+    if lo is not None and (v <= lo if open_lo else v < lo):
+        raise bad(key, v, f"must be {'>' if open_lo else '>='} {lo}")
+    if hi is not None and v > hi:
+        raise bad(key, v, f"must be <= {hi}")
+
+
+def numbers(key: str, values, **kw) -> None:
+    if not isinstance(values, list) or not values:
+        raise bad(key, values, "must be a non-empty list of numbers")
+    for v in values:
+        number(key, v, **kw)
+
+
+# -- the stages -------------------------------------------------------------------------------------
+
+
+def _as_set(stage: str, values: dict, e: FieldError) -> FieldError:
+    key = f"{stage}.{e.field}"
+    return bad(key, values.get(e.field, "?"), e.problem)
+
+
+def check_toy(s: dict) -> None:
+    from warp_critic.analysis.toy.report import check_settings
+
+    try:
+        check_settings(
+            **{k: s[k] for k in ("s0", "goal", "theta0", "alpha", "plain_lr")},
+            iters=s["iters"],
+            grid=s["grid"],
+        )
+    except FieldError as e:
+        raise _as_set("toy", s, e) from None
+
+
+def check_landscape(s: dict) -> None:
+    from pathlib import Path
+
+    from warp_critic.reproduce.analyses import landscape_configs
+
+    try:
+        landscape_configs(Path("unused"), s, "cpu")
+    except FieldError as e:
+        over = s.get("generalising") or {}
+        stage = "landscape.generalising" if e.field in over else "landscape"
+        raise _as_set(stage, over if e.field in over else s, e) from None
+
+
+def check_metatrain(m: dict) -> dict[str, int]:
+    """Every method x robot config against its scene; returns each robot's number of training goals."""
+    from warp_critic.core.runtime import MAX_SEED
+    from warp_critic.reproduce.metatrain import check_fields_known, make_config
+    from warp_critic.reproduce.settings import METHODS, SCENES
+    from warp_critic.running.task import check_memory, load_task_scene
+
+    seeds = m["seeds"]
+    if not isinstance(seeds, list) or not seeds or len(seeds) > MAX_SEEDS:
+        raise bad("metatrain.seeds", seeds, f"must be a list of 1 to {MAX_SEEDS} seeds")
+    for s in seeds:
+        number("metatrain.seeds", s, lo=0, hi=MAX_SEED, integer=True)
+    if len(set(seeds)) != len(seeds):
+        raise bad("metatrain.seeds", seeds, "must be distinct")
+    goals = {}
+    for scene in SCENES:
+        for method in METHODS:
+            where = f"metatrain.{scene}.{method}"
+            values = m[scene][method]
+            for k in RESERVED:
+                if k in values:
+                    raise bad(f"{where}.{k}", values[k], "may not be set (reproduce sets it)")
+            check_fields_known(method, values, f"--set {where}")
+            try:
+                cfg = make_config(scene, method, values, seeds, "unused", "cpu", False)
+                cfg.seeds = None
+                robot = load_task_scene(cfg)  # fills cfg's defaults from the scene, checks it
+                check_memory(cfg, robot.dof, copies=len(seeds))
+            except FieldError as e:
+                raise _as_set(where, values, e) from None
+            except TypeError as e:  # a value of a type the config cannot take
+                raise FieldError("set", f"{where}: {e}") from None
+            if method == "ours":
+                goals[scene] = len(cfg.goals)
+    return goals
+
+
+def _common(stage: str, s: dict) -> None:
+    number(f"{stage}.inits", s["inits"], lo=1, hi=10**6, integer=True)
+    number(f"{stage}.seed", s["seed"], lo=0, hi=2**32 - 1, integer=True)
+    number(f"{stage}.max_worlds", s["max_worlds"], lo=1, hi=10**8, integer=True)
+    numbers(f"{stage}.masses", s["masses"], lo=0, hi=1e4)
+    numbers(f"{stage}.lengths", s["lengths"], lo=0, open_lo=True, hi=100)
+
+
+def check_tables(s: dict, train_goals: int) -> None:
+    from warp_critic.evaluation.metatest import GOAL_NOISE
+
+    _common("tables", s)
+    numbers("tables.stds", s["stds"], lo=0, hi=100)
+    number("tables.dynamics_goal_std", s["dynamics_goal_std"], lo=0, hi=100)
+    number("tables.num_goals", s["num_goals"], lo=1, hi=10**6, integer=True)
+    if s["goal_noise"] not in GOAL_NOISE:
+        raise bad("tables.goal_noise", s["goal_noise"], f"must be one of {', '.join(GOAL_NOISE)}")
+    around = s["around"]
+    if not isinstance(around, list):
+        raise bad("tables.around", around, "must be a list of training-goal indices")
+    for i in around:
+        number("tables.around", i, lo=0, hi=train_goals - 1, integer=True)
+
+
+def check_maps(s: dict) -> None:
+    _common("maps", s)
+    number("maps.grid", s["grid"], lo=1, hi=MAX_GRID, integer=True)
+    number("maps.limit_fraction", s["limit_fraction"], lo=0, open_lo=True, hi=1)
+
+
+def check_all(settings: dict, defaults: dict) -> None:
+    """The whole settings tree (see the module docstring); raises a one-line :class:`FieldError`."""
+    for stage, values in settings.items():
+        check_types(values, defaults[stage], stage)
+    check_toy(settings["toy"])
+    check_landscape(settings["landscape"])
+    goals = check_metatrain(settings["metatrain"])
+    check_tables(settings["tables"], goals["kuka"])
+    check_maps(settings["maps"])
+
+
+__all__ = ["RESERVED", "check_all", "show"]

@@ -1,0 +1,69 @@
+"""Finding the scene a saved run was trained on, by its content.
+
+A run records its scene's absolute path (``scene_file``) and content hash (``scene_hash``); runs made
+before that record the path as it was given (relative to where training ran). The scene is looked
+for, in order, at the recorded absolute path, at the path as given, next to the shipped scenes (same
+file name), and among all shipped scenes; the first file whose content hash is the run's is used.
+A file found elsewhere than recorded is named in a one-line warning.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from warp_critic.core.errors import SceneError, UserError, warn
+from warp_critic.physics.scene import Scene, load_scene, scenes_dir
+
+
+def _candidates(recorded: list[str]) -> list[Path]:
+    out: list[Path] = []
+    for r in recorded:
+        out.append(Path(r))
+    shipped = scenes_dir()
+    for r in recorded:
+        out.append(shipped / Path(r).name)
+    out += sorted(shipped.glob("*.usda"))
+    seen, unique = set(), []
+    for p in out:
+        key = str(p.absolute())
+        if key not in seen:
+            seen.add(key)
+            unique.append(p)
+    return unique
+
+
+def find_run_scene(ckpt: dict, run_dir) -> Scene:
+    """The scene of the run whose checkpoint is ``ckpt`` (see the module docstring)."""
+    given = str(ckpt["config"]["scene"])
+    recorded = [r for r in (ckpt.get("scene_file"), given) if r]
+    want = ckpt.get("scene_hash")
+    if not want:  # a run that recorded no content hash: the path as recorded
+        return load_scene(recorded[0])
+    first = Path(recorded[0])
+    for p in _candidates(recorded):
+        if not p.is_file():
+            continue
+        try:
+            scene = load_scene(str(p))
+        except SceneError:
+            continue
+        if scene.content_hash == want:
+            if p.absolute() != first.absolute():
+                why = "has other content" if first.is_file() else "is not found"
+                warn(
+                    f"{run_dir}: its scene {given} {why} here; using {p}: it has the same content "
+                    "as the scene the run was trained on"
+                )
+            return scene
+    if first.is_file():
+        raise UserError(
+            f"{run_dir}: the scene file {given} has changed since the run was trained "
+            f"(and no scene in {scenes_dir()} has its content)"
+        )
+    raise UserError(
+        f"{run_dir}: the scene file {given} is not found "
+        f"(nor a scene with its content in {scenes_dir()})"
+    )
+
+
+__all__ = ["find_run_scene"]
