@@ -271,19 +271,19 @@ def test_a_full_disk_while_warp_builds_its_kernels_is_one_line(tmp_path):
 
 
 def test_a_full_disk_while_saving_a_checkpoint_leaves_the_old_one(tmp_path, monkeypatch):
-    from warp_critic.core.errors import UserError
-    from warp_critic.running.rundir import atomic_torch_save
+    from warp_critic.running import rundir
+    from warp_critic.running.rundir import DiskFullError, atomic_torch_save
 
     path = tmp_path / "checkpoint.pt"
     atomic_torch_save({"iteration": 1}, path)
     before = path.read_bytes()
 
-    def full(obj, f, *a, **k):
-        Path(f).write_bytes(b"partial")
+    def full(target, data):
+        Path(target).write_bytes(data[:7])
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(torch, "save", full)
-    with pytest.raises(UserError, match="space"):
+    monkeypatch.setattr(rundir, "_write_bytes", full)
+    with pytest.raises(DiskFullError, match="space"):
         atomic_torch_save({"iteration": 2}, path)
     assert path.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == [path.name]
 
