@@ -20,7 +20,7 @@ from warp_critic.reproduce.settings import (
     default_settings,
     stage_hash,
 )
-from warp_critic.reproduce.stages import Runner, claim_out, read_stage
+from warp_critic.reproduce.stages import Runner, claim_out, read_complete
 
 
 @dataclass
@@ -223,7 +223,7 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
         1
         for wave in waves
         for n in wave
-        if read_stage(runner.stage_dir(n, stages[n]["hash"])) is None
+        if read_complete(runner.stage_dir(n, stages[n]["hash"]), stages[n]["group"]) is None
     )
     runner.log(
         f"reproduce: {runner.total} stage(s) to run ({executor.name}); complete ones are skipped"

@@ -90,6 +90,18 @@ def read_stage(d: Path) -> dict | None:
     return data if isinstance(data, dict) and data.get("kind") == STAGE_KIND else None
 
 
+def read_complete(d: Path, group: str) -> dict | None:
+    """The ``stage.json`` of a complete stage of ``group``, ``None`` when the stage is not complete;
+    a ``stage.json`` edited or damaged so that it cannot be used is a one-line :class:`UserError`."""
+    data = read_stage(d)
+    problem = None if data is None else stage_problem(group, data)
+    if problem is not None:
+        raise UserError(
+            f"{Path(d) / STAGE_FILE}: edited or damaged ({problem}); remove it to run the stage again"
+        )
+    return data
+
+
 #: what the report and the stages that read a stage take from its result: key -> JSON type
 RESULT_KEYS = {
     "toy": {"closed_form": dict, "numerical": dict, "table_markdown": str, "files": dict},
@@ -157,14 +169,9 @@ class Runner:
     def complete(self, group: str, name: str, h: str) -> StageRecord | None:
         """The record of a stage already complete in ``out`` (skipped), or ``None``."""
         d = self.stage_dir(name, h)
-        data = read_stage(d)
+        data = read_complete(d, group)
         if data is None:
             return None
-        problem = stage_problem(group, data)
-        if problem is not None:
-            raise UserError(
-                f"{d / STAGE_FILE}: edited or damaged ({problem}); remove it to run the stage again"
-            )
         self.log(f"reproduce: {name}: complete, skipped ({d.name})")
         rec = StageRecord(group, name, d, data, ran=False)
         self.records[name] = rec
