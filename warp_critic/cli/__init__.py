@@ -1,0 +1,14 @@
+"""The ``warp-critic`` command line.
+
+In the ``warp-critic`` process itself (the console script), importing this package installs the
+Ctrl-C / SIGTERM handlers (:mod:`warp_critic.cli.signals`, standard library only) before anything
+else is imported, so that a signal at any moment of start-up is one line and exit code 130.
+"""
+
+import os as _os
+import sys as _sys
+
+if _sys.argv and _os.path.basename(_sys.argv[0]) == "warp-critic":
+    from warp_critic.cli import signals as _signals
+
+    _signals.install()

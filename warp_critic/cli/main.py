@@ -9,11 +9,17 @@ Nothing below this module imports it back.
 
 from __future__ import annotations
 
-import argparse
-import errno
-import os
 import sys
-from pathlib import Path
+
+if __name__ == "__main__":  # python -m warp_critic.cli.main: the handlers before the imports
+    from warp_critic.cli import signals as _signals
+
+    _signals.install()
+
+import argparse  # noqa: E402
+import errno  # noqa: E402
+import os  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 from warp_critic import __version__
 from warp_critic.cli.flags import (

@@ -45,8 +45,11 @@ def stop_now() -> None:
 
 
 def install() -> dict:
-    """Install the handlers (phase ``starting``); returns the previous ones for :func:`restore`."""
+    """Install the handlers (phase ``starting``); returns the previous ones for :func:`restore`
+    (none when they were installed already, first thing in the process)."""
     global _phase, _said
+    if _phase in ("starting", "running", "stopping") and signal.getsignal(SIGNALS[0]) is _handler:
+        return {}
     _phase, _said = "starting", False
     return {s: signal.signal(s, _handler) for s in SIGNALS}
 
