@@ -59,12 +59,21 @@ def integer(field: str, value, lo: int, hi: int | None = None) -> int:
 def out_dir(field: str, path) -> Path:
     """An output folder that is a folder (or can be made one) we can write into."""
     from warp_critic.core.errors import UserError
-    from warp_critic.running.locks import check_not_owned
     from warp_critic.running.rundir import check_output_dir
 
     try:
-        check_not_owned(path, "output")  # not inside a reproduce output or a locked run
         return check_output_dir(path)
+    except UserError as e:
+        raise FieldError(field, str(e).removeprefix("output ")) from None
+
+
+def not_owned(field: str, path) -> None:
+    """For the ``analyze`` commands: ``path`` is not inside a reproduce output or a locked run."""
+    from warp_critic.core.errors import UserError
+    from warp_critic.running.locks import check_not_owned
+
+    try:
+        check_not_owned(path, "output")
     except UserError as e:
         raise FieldError(field, str(e).removeprefix("output ")) from None
 

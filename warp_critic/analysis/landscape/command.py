@@ -231,6 +231,7 @@ def config_from_args(args: argparse.Namespace) -> LandscapeConfig:
             goal_std=args.goal_std,
             start_std=args.start_std,
         )
+        checks.not_owned("out", args.out)
         return cfg.validate()
 
 

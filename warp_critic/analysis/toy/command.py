@@ -91,6 +91,7 @@ def run_from_args(args: argparse.Namespace) -> int:
             iters=args.iters,
             grid=args.grid,
         )
+        checks.not_owned("out", args.out)
         out = checks.out_dir("out", args.out)
     run_toy(
         out,
