@@ -85,9 +85,14 @@ def _clear_unstarted(run: Path, seeds: list[int]) -> bool:
             "remove this stage directory to retrain it"
         )
     if not any(have):
+        from warp_critic.running.locks import holder
+
         for s in seeds:
             p = run / f"seed{s}"
             if p.is_dir():
+                owner = holder(p)
+                if owner is not None:  # never remove what a live process works in
+                    raise UserError(f"{p}: in use by process {owner.get('pid')}; not removing it")
                 shutil.rmtree(p)
     return all(have)
 
