@@ -375,6 +375,16 @@ def kept_aside(w):
     assert not (w.run / "recording.segment.rrd").exists()
 
 
+def garbage_segment(w):
+    (w.run / "recording.segment.rrd").write_bytes(b"\x00not a rerun segment\xff" * 40)
+
+
+def segment_kept_aside(w):
+    aside = [p for p in w.run.iterdir() if p.name.startswith("recording.segment.bad")]
+    assert len(aside) == 1 and aside[0].read_bytes() == b"\x00not a rerun segment\xff" * 40
+    assert (w.run / "recording.rrd").stat().st_size > 0
+
+
 def metrics_first_row(row: dict):
     def setup(w):
         lines = (w.run / "metrics.jsonl").read_text().splitlines(keepends=True)
@@ -1582,6 +1592,28 @@ CASES = [
         says=("recording.rrd", "kept"),
         changes=("run/",),
         check=kept_aside,
+    ),
+    C(
+        "c16",
+        "ddpg-garbage-recording-resume",
+        RESUME_DDPG,
+        code=0,
+        setup=lambda w: garbage_recording(SimpleNamespace(run=w.ddpg)),
+        warns=1,
+        says=("recording.rrd", "kept"),
+        changes=("ddpg/",),
+        check=lambda w: kept_aside(SimpleNamespace(run=w.ddpg)),
+    ),
+    C(
+        "c16",
+        "garbage-segment-of-a-killed-process",
+        RESUME,
+        code=0,
+        setup=garbage_segment,
+        warns=1,
+        says=("recording.segment.rrd", "kept"),
+        changes=("run/",),
+        check=segment_kept_aside,
     ),
     # 17. edited or odd files, full disks: one line, never a traceback
     C(

@@ -16,6 +16,7 @@ from warp_critic.evaluation.metatest import TestConfig, meta_test
 from warp_critic.methods import ours as train
 from warp_critic.methods.ours import TrainConfig
 from warp_critic.physics import bridge
+from warp_critic.physics.scene import load_scene
 from warp_critic.running.recording import read_entity_paths
 from warp_critic.running.rundir import load_checkpoint
 
@@ -334,7 +335,9 @@ def test_meta_test_bad_run_dirs(tmp_path, capsys, finished_run, copy_of):
 
     out = copy_of(finished_run)
     ckpt = torch.load(out / "checkpoint.pt", weights_only=False)
-    ckpt["config"]["scene"] = KUKA  # a checkpoint from another scene
+    # a checkpoint that names another scene, by path and content (the scene is found by content)
+    ckpt["config"]["scene"] = ckpt["scene_file"] = KUKA
+    ckpt["scene_hash"] = load_scene(KUKA).content_hash
     torch.save(ckpt, out / "checkpoint.pt")
     assert main(["meta-test", str(out), "--device", "cpu"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

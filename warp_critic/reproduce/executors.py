@@ -270,16 +270,6 @@ __all__ = [
     "call_unit",
     "InProcess",
     "LocalProcesses",
-    "RayExecutor",
     "make_executor",
-    "check_ray_address",
     "check_jobs",
-    "unit_failure",
 ]
-
-# the Ray executor lives in its own module; its names stay importable from here
-from warp_critic.reproduce.on_ray import (  # noqa: E402
-    RayExecutor,
-    check_ray_address,
-    unit_failure,
-)
