@@ -6,6 +6,7 @@ the same semi-implicit Euler integrator, damping and gravity, in float64 where i
 
 from __future__ import annotations
 
+import functools
 from pathlib import Path
 
 import pytest
@@ -57,10 +58,10 @@ def test_open_loop_gradient_matches_paper_model_on_long_rollout(kuka_sim):
     taus = (torch.randn(H, 2, 7, generator=gen) * scale).requires_grad_()
     wq, wqd = torch.randn(H, 2, 7, generator=gen), torch.randn(H, 2, 7, generator=gen)
 
-    sim.begin_rollout()
+    ro = sim.begin_rollout()
     q, qd, loss = q0, qd0, 0.0
     for t in range(H):
-        q, qd = sim.step(q, qd, taus[t])
+        q, qd = ro.step(q, qd, taus[t])
         loss = loss + (q * wq[t]).sum() + 0.1 * (qd * wqd[t]).sum()
     grads = torch.autograd.grad(loss, [taus, q0, qd0])
     motion = (q - q0).abs().max().item()
@@ -124,11 +125,10 @@ def test_gradient_matches_finite_differences():
     goal = torch.tensor([[0.7, -0.4]])
 
     def loss_of(t, differentiable):
-        if differentiable:
-            sim.begin_rollout()
+        step = sim.begin_rollout().step if differentiable else sim.step
         q, qd = sim.zeros(), sim.zeros()
         for k in range(t.shape[0]):
-            q, qd = sim.step(q, qd, t[k])
+            q, qd = step(q, qd, t[k])
         return ((q - goal) ** 2).sum()
 
     t = taus.clone().requires_grad_()
@@ -147,8 +147,7 @@ def test_forward_only_matches_differentiable_path(kuka_sim):
     q0 = torch.rand(2, 7) * 0.2
     with torch.no_grad():
         q_a, qd_a = sim.step(q0, torch.zeros(2, 7), tau)
-    sim.begin_rollout()
-    q_b, qd_b = sim.step(q0, torch.zeros(2, 7), tau.clone().requires_grad_())
+    q_b, qd_b = sim.begin_rollout().step(q0, torch.zeros(2, 7), tau.clone().requires_grad_())
     assert torch.equal(q_a, q_b.detach()) and torch.equal(qd_a, qd_b.detach())
 
 
@@ -172,12 +171,21 @@ def test_non_finite_state_is_reported_with_world_and_step(kuka_sim):
 def test_reused_buffers_refuse_stale_backward(kuka_sim):
     sim = kuka_sim
     tau = torch.ones(2, 7, requires_grad=True)
-    sim.begin_rollout()
-    q, _ = sim.step(sim.zeros(), sim.zeros(), tau)
-    sim.begin_rollout()  # a newer rollout overwrites the buffers
-    sim.step(sim.zeros(), sim.zeros(), tau)
+    old = sim.begin_rollout()
+    q, _ = old.step(sim.zeros(), sim.zeros(), tau)
+    sim.begin_rollout().step(
+        sim.zeros(), sim.zeros(), tau
+    )  # a newer rollout overwrites the buffers
     with pytest.raises(RuntimeError, match="reused"):
         q.sum().backward()
+    with pytest.raises(RuntimeError, match="newer rollout"):
+        old.step(q.detach(), sim.zeros(), tau)
+
+
+def test_differentiable_step_needs_a_rollout(kuka_sim):
+    tau = torch.ones(2, 7, requires_grad=True)
+    with pytest.raises(RuntimeError, match="begin_rollout"):
+        kuka_sim.step(kuka_sim.zeros(), kuka_sim.zeros(), tau)
 
 
 def test_model_free_simulator_has_no_gradient_path():
@@ -249,16 +257,47 @@ def test_graph_replay_is_bitwise_the_direct_path():
                 for t in range(len(taus)):
                     q_fw, qd_fw = sim.step(q_fw, qd_fw, taus[t])
             q0g, taus_g = q0.clone().requires_grad_(), taus.clone().requires_grad_()
-            sim.begin_rollout()
             q, qd = q0g, qd0
-            for t in range(len(taus)):
-                q, qd = sim.step(q, qd, taus_g[t])
+            with sim.begin_rollout() as ro:
+                for t in range(len(taus)):
+                    q, qd = ro.step(q, qd, taus_g[t])
             ((q**2).sum() + (qd**3).sum()).backward()
             out += [q_fw, qd_fw, q.detach(), qd.detach(), q0g.grad, taus_g.grad]
         results.append(out)
     assert (
         sims[1].bridge._fw_run.graph is not None
-        and sims[1].bridge._steps[0].backward.graph is not None
+        and sims[1].bridge._controls[0].backward.graph is not None
     )
+    for a, b in zip(*results):
+        assert torch.equal(a, b)
+
+
+def test_policy_rollout_replay_is_bitwise_the_direct_path():
+    """A 50-step closed-loop KUKA rollout (the paper's policy MLP): values, and gradients w.r.t. the
+    policy parameters and the start state, equal with graph replay and with direct launches.
+
+    Equality, not a tolerance: replay runs the same kernels on the same memory in the same order,
+    and the policy stays in torch (no change of floating-point order). The third rollout of each
+    kind is compared: the first runs direct, the second captures, the third replays.
+    """
+    scene = load_scene(ROOT / "scenes" / "kuka.usda")
+    gen = torch.Generator().manual_seed(4)
+    params = init_policy(2, 14, 7, generator=gen, out_scale=2.0)
+    limit = torch.tensor([40.0, 40.0, 20.0, 20.0, 5.0, 3.0, 1.0])
+    q0 = (torch.rand(2, 7, generator=gen) - 0.5) * 0.6
+    results = []
+    for graphs in (False, True):
+        sim = Simulator(scene, [Variant()] * 2, dt=0.0025, substeps=4, device="cpu", graphs=graphs)
+        norm = Normalizer.from_limits(sim.q_lower, sim.q_upper, limit, 5.0)
+        for _ in range(3):
+            p = {k: v.clone().requires_grad_() for k, v in params.items()}
+            q0g = q0.clone().requires_grad_()
+            policy = functools.partial(policy_action, p, norm)
+            fw = rollout(sim, policy, q0, sim.zeros(), 50)
+            traj = rollout(sim, policy, q0g, sim.zeros(), 50, differentiable=True)
+            loss = (traj.q[-1] ** 2).sum() + (traj.qd**2).mean()
+            grads = torch.autograd.grad(loss, [q0g, *p.values()])
+        assert (traj.q[-1] - traj.q[0]).abs().max() > 0.1, "the test needs motion"
+        results.append([fw.q, fw.qd, fw.tau, traj.q.detach(), traj.qd.detach(), *grads])
     for a, b in zip(*results):
         assert torch.equal(a, b)

@@ -45,10 +45,10 @@ def bench_newton(
     qd0 = torch.zeros(worlds, 7, device=dev)
 
     def run():
-        sim.begin_rollout()
+        ro = sim.begin_rollout()
         q, qd, loss = q0, qd0, 0.0
         for t in range(horizon):
-            q, qd = sim.step(q, qd, tau[t])
+            q, qd = ro.step(q, qd, tau[t])
             loss = loss + (w[t] * q).sum()
         loss.backward()
         if dev.type == "cuda":

@@ -1,49 +1,78 @@
-"""Benchmark: seconds per meta-train outer iteration: graph replay vs direct launches, 1 seed vs seeds batched.
+"""Benchmark: seconds per meta-train outer iteration (KUKA, preset ``kuka-table1``), side by side.
 
 Runs the KUKA at the report's settings (preset ``kuka-table1``: 4 goals x 4 worlds, horizon 50 x 4
 physics sub-steps, 3 inner steps) for a few iterations with one seed and with ``--seeds`` batched in
-one process, each with the simulator's captured-graph replay on and off (``$WARP_CRITIC_GRAPHS``),
-side by side in one run (this shared machine's speed swings 2-3x between runs), and prints
-s/iteration and the gains. ``--profile`` adds where the time goes (cProfile of extra short runs,
-grouped: Warp kernels incl. graph replay, Warp launch overhead, Newton's Python, torch's backward
-engine, torch ops, other Python; read as proportions: profiling slows Python-heavy parts more).
+one process, with the simulator's captured-graph replay on and off (``$WARP_CRITIC_GRAPHS``), and
+prints s/iteration and the gains. Every measurement is a fresh process; the configurations are
+interleaved and each is measured ``--repeats`` times, keeping the fastest (this shared machine's
+speed swings 2-3x between runs: compare only numbers of one run).
 
-Usage: ``python tools/bench_speed.py [--scene scenes/kuka.usda] [--iterations 6] [--seeds 0,1,2,3,4]
-[--preset kuka-table1] [--device cpu] [--profile]``. Took 41 s on the 2-core CPU machine (without --profile).
+``--against COMMIT`` measures the same configurations (graph replay on) on another commit too, in
+the same run, interleaved: a temporary ``git worktree`` of COMMIT gets a temporary virtual
+environment that shares this interpreter's packages and installs only that checkout (``pip install
+--no-deps -e``, because ``warp_critic.kernels`` is mapped from the top-level ``kernels/`` folder);
+the same measuring code then runs there and imports that checkout's package. Both are removed after.
+
+``--profile`` adds where the time of the steady-state iterations goes (cProfile own time of the
+iterations after the untimed ones, grouped: Warp kernels incl. graph replay, the rest of Warp's
+Python, Newton's Python, torch's backward engine, torch ops, other Python; plus the functions in
+``warp/`` with the most own time). Read as proportions: profiling slows Python-heavy parts more.
+
+Usage: ``python tools/bench_speed.py [--scene scenes/kuka.usda] [--iterations 8] [--seeds 0,1,2,3,4]
+[--preset kuka-table1] [--device cpu] [--repeats 1] [--against COMMIT] [--profile]``.
 """
 
 from __future__ import annotations
 
 import argparse
-import cProfile
+import contextlib
+import json
 import os
-import pstats
+import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from warp_critic.core import runtime
-
 ROOT = Path(__file__).resolve().parents[1]
-WARMUP = 2  # iterations not timed
+WARMUP = 2  # iterations not timed: the first compiles and allocates, the second captures graphs
+GRAPHS_ENV = "WARP_CRITIC_GRAPHS"
 
 
-def categorise(stats: pstats.Stats) -> dict[str, float]:
-    """Own time (s) grouped by where it is spent."""
-    groups = {
-        "warp kernels": 0.0,
-        "warp launch overhead": 0.0,
-        "newton python": 0.0,
-        "torch backward engine": 0.0,
-        "torch ops": 0.0,
-        "other python": 0.0,
-    }
-    for (filename, _, name), (_, _, tottime, _, _) in stats.stats.items():
+# -- the measuring side: runs in a fresh process, on whichever checkout its interpreter imports ----
+def _imports():
+    """``(runtime, preset, TrainConfig, meta_train)`` of the layered package or the older flat one."""
+    try:
+        from warp_critic.core import runtime
+        from warp_critic.evaluation.presets import preset
+        from warp_critic.methods.ours import TrainConfig, meta_train
+    except ImportError:  # before the layer folders (e.g. 4268102)
+        from warp_critic import runtime
+        from warp_critic.presets import preset
+        from warp_critic.train import TrainConfig, meta_train
+    return runtime, preset, TrainConfig, meta_train
+
+
+def categorise(stats) -> tuple[dict[str, float], list[tuple[str, float]]]:
+    """Own time (s) grouped by where it is spent, and the top functions inside ``warp/``."""
+    groups = dict.fromkeys(
+        (
+            "warp kernels",
+            "warp python",
+            "newton python",
+            "torch backward engine",
+            "torch ops",
+            "other python",
+        ),
+        0.0,
+    )
+    in_warp = []
+    for (filename, line, name), (_, _, tottime, _, _) in stats.stats.items():
         if "warp/" in filename and name in ("invoke", "capture_launch"):
             groups["warp kernels"] += tottime
         elif "warp/" in filename:
-            groups["warp launch overhead"] += tottime
+            groups["warp python"] += tottime
+            in_warp.append((f"{filename.split('warp/')[-1]}:{line}({name})", tottime))
         elif "newton/" in filename:
             groups["newton python"] += tottime
         elif "run_backward" in name or "torch/autograd" in filename:
@@ -52,128 +81,185 @@ def categorise(stats: pstats.Stats) -> dict[str, float]:
             groups["torch ops"] += tottime
         else:
             groups["other python"] += tottime
-    return groups
+    return groups, sorted(in_warp, key=lambda x: -x[1])[:8]
 
 
-def run(
-    scene: str,
-    preset: dict,
-    seeds: list[int],
-    iterations: int,
-    device: str,
-    graphs: bool,
-    profile: bool,
-):
-    """Meta-train ``iterations`` outer iterations; returns (s/iteration after the first, wall s, breakdown)."""
-    from warp_critic.methods.ours import TrainConfig, meta_train
+def measure(job: dict) -> dict:
+    """Meta-train ``job['iterations']`` iterations; s/iteration after the untimed ones."""
+    import cProfile
+    import pstats
 
-    os.environ[runtime.GRAPHS_ENV] = "1" if graphs else "0"
+    os.environ[GRAPHS_ENV] = "1" if job["graphs"] else "0"
+    runtime, preset, TrainConfig, meta_train = _imports()
+    import warp_critic
+
+    runtime.init()
+    settings = preset(job["preset"])
+    settings.pop("iterations", None)
+    seeds = job["seeds"]
+    prof = cProfile.Profile() if job["profile"] else None
+
+    def start_profile(info) -> None:  # after the untimed iterations
+        if prof is not None and info.iteration == WARMUP - 1:
+            prof.enable()
+
     with tempfile.TemporaryDirectory(prefix="bench-speed-") as tmp:
-        out = Path(tmp)
         cfg = TrainConfig(
-            scene=scene,
-            **{**preset, "iterations": iterations},
-            device=device,
-            out=str(out / "run"),
+            scene=job["scene"],
+            **{**settings, "iterations": job["iterations"]},
+            device=job["device"],
+            out=str(Path(tmp) / "run"),
             seed=seeds[0],
             seeds=seeds if len(seeds) > 1 else None,
             checkpoint_every=10**6,
             record_every=10**6,
         )
-        prof = cProfile.Profile() if profile else None
         t0 = time.perf_counter()
-        if prof:
-            prof.enable()
-        result = meta_train(cfg, progress=False, record=False)
-        if prof:
-            prof.disable()
+        result = meta_train(cfg, callbacks=[start_profile], progress=False, record=False)
         wall = time.perf_counter() - t0
-        # not timed: the first iteration compiles and allocates, the second captures the graphs
-        per_it = [r["seconds"] for r in result.metrics][WARMUP:]
-        groups = categorise(pstats.Stats(prof)) if prof else {}
-        return sum(per_it) / len(per_it), wall, groups
+    if prof is not None:
+        prof.disable()
+    per_it = [r["seconds"] for r in result.metrics][WARMUP:]
+    out = {"per_it": sum(per_it) / len(per_it), "wall": wall, "package": warp_critic.__file__}
+    if prof is not None:
+        out["groups"], out["in_warp"] = categorise(pstats.Stats(prof))
+    return out
+
+
+# -- the driving side ------------------------------------------------------------------------------
+def run_job(python: str, job: dict) -> dict:
+    """One measurement in a fresh process of ``python`` (its own checkout's package)."""
+    proc = subprocess.run(
+        [python, str(Path(__file__).resolve()), "--worker", json.dumps(job)],
+        capture_output=True,
+        text=True,
+        cwd=tempfile.gettempdir(),  # never import a package from the current directory
+    )
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
+    if proc.returncode != 0 or not lines:
+        raise RuntimeError(f"measurement failed ({python}):\n{proc.stderr[-3000:]}")
+    return json.loads(lines[-1])
+
+
+@contextlib.contextmanager
+def other_checkout(commit: str):
+    """``(python, root)`` of a temporary checkout of ``commit`` with its own editable install."""
+    tmp = Path(tempfile.mkdtemp(prefix="bench-against-"))
+    root, venv = tmp / "checkout", tmp / "venv"
+    git = ["git", "-C", str(ROOT)]
+    subprocess.run(git + ["worktree", "add", "--detach", str(root), commit], check=True,
+                   capture_output=True)  # fmt: skip
+    try:
+        subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
+        python = str(venv / "bin" / "python")
+        site = subprocess.run(
+            [python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+            check=True,
+            capture_output=True,
+            text=True,
+        ).stdout.strip()
+        # this interpreter's packages (torch, warp, newton, pip, setuptools ...), not its checkout:
+        # a plain path line adds a directory without running the .pth files (editable finders) in it
+        shared = [p for p in sys.path if p.endswith("site-packages") and Path(p).is_dir()]
+        Path(site, "zz_shared_packages.pth").write_text("\n".join(shared) + "\n")
+        subprocess.run(
+            [python, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
+             "--no-index", "-e", str(root)],
+            check=True,
+            capture_output=True,
+        )  # fmt: skip
+        yield python, root
+    finally:
+        subprocess.run(git + ["worktree", "remove", "--force", str(root)], capture_output=True)
+        subprocess.run(["rm", "-rf", str(tmp)])
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--scene", default=str(ROOT / "scenes" / "kuka.usda"))
-    p.add_argument(
-        "--preset", default="kuka-table1", help="training settings (warp_critic.evaluation.presets)"
-    )
-    p.add_argument(
-        "--iterations",
-        type=int,
-        default=8,
-        help=f"iterations per run (the first {WARMUP} are not timed)",
-    )
-    p.add_argument(
-        "--seeds", default="0,1,2,3,4", help="seeds batched in the second run, comma-separated"
-    )
+    p.add_argument("--scene", default="scenes/kuka.usda", help="relative to each checkout's root")
+    p.add_argument("--preset", default="kuka-table1", help="training settings (presets)")
+    p.add_argument("--iterations", type=int, default=8,
+                   help=f"iterations per run (the first {WARMUP} are not timed)")  # fmt: skip
+    p.add_argument("--seeds", default="0,1,2,3,4", help="seeds batched in the second run")
     p.add_argument("--device", default="cpu")
-    p.add_argument(
-        "--profile",
-        action="store_true",
-        help="also profile each configuration (extra runs) and print where the time goes",
-    )
+    p.add_argument("--repeats", type=int, default=1, help="measurements per configuration")
+    p.add_argument("--against", metavar="COMMIT", help="also measure this commit, side by side")
+    p.add_argument("--profile", action="store_true", help="also profile (extra runs)")
+    p.add_argument("--worker", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
-
-    from warp_critic.core.errors import UserError
-    from warp_critic.evaluation.presets import preset
-
+    if args.worker:
+        print(json.dumps(measure(json.loads(args.worker))), flush=True)
+        return 0
     try:
         seeds = [int(x) for x in args.seeds.split(",") if x.strip()]
-        if args.iterations <= WARMUP or not seeds:
-            raise UserError(f"--iterations must be > {WARMUP} and --seeds non-empty")
-        settings = preset(args.preset)
-        settings.pop("iterations", None)
-        runtime.init()
-        configs = [
-            (f"1 seed, {mode}", seeds[:1], graphs)
-            for graphs, mode in ((False, "direct"), (True, "graphs"))
-        ]
-        if len(seeds) > 1:
-            configs += [
-                (f"{len(seeds)} seeds, {mode}", seeds, graphs)
-                for graphs, mode in ((False, "direct"), (True, "graphs"))
-            ]
-        times, groups = {}, {}
-        for label, s, graphs in configs:
-            per_it, wall, _ = run(
-                args.scene, settings, s, args.iterations, args.device, graphs, False
-            )
-            times[label] = per_it
-            print(
-                f"{label:>18}: {per_it:.3f} s/iteration ({wall:.1f} s for {args.iterations} iterations)",
-                flush=True,
-            )
-        if args.profile:
-            for label, s, graphs in configs:
-                groups[label] = run(args.scene, settings, s, WARMUP + 2, args.device, graphs, True)[
-                    2
-                ]
-    except UserError as e:
-        print(f"bench_speed: error: {e}", file=sys.stderr)
+    except ValueError:
+        seeds = []
+    if args.iterations <= WARMUP or not seeds or args.repeats < 1:
+        print(f"bench_speed: error: --iterations must be > {WARMUP}, --seeds non-empty integers, "
+              "--repeats >= 1", file=sys.stderr)  # fmt: skip
         return 2
-    one_d, one_g = times["1 seed, direct"], times["1 seed, graphs"]
-    print(f"\ngraph replay: 1 seed {one_d / one_g:.2f}x faster per iteration")
-    if len(seeds) > 1:
-        n = len(seeds)
-        many_d, many_g = times[f"{n} seeds, direct"], times[f"{n} seeds, graphs"]
-        print(f"graph replay: {n} seeds {many_d / many_g:.2f}x faster per iteration")
-        print(
-            f"{n} seeds batched (graphs): {many_g / one_g:.2f}x the time per iteration of 1 seed, "
-            f"{n * one_g / many_g:.2f}x the throughput (seeds x iterations per second)"
-        )
-        print(
-            f"{n} seeds batched (graphs) vs 1 seed direct: {n * one_d / many_g:.2f}x the throughput"
-        )
-    if groups:
-        print("\nbreakdown (cProfile own time, share of each profiled run):")
-        labels = list(groups)
-        print("| part | " + " | ".join(labels) + " |\n|---|" + "---:|" * len(labels))
-        for k in next(iter(groups.values())):
-            cells = [f"{100 * g[k] / sum(g.values()):.0f}%" for g in groups.values()]
-            print(f"| {k} | " + " | ".join(cells) + " |")
+    configs = [("1 seed", seeds[:1])] + ([(f"{len(seeds)} seeds", seeds)] if len(seeds) > 1 else [])
+    base = {"preset": args.preset, "iterations": args.iterations, "device": args.device}
+    with contextlib.ExitStack() as stack:
+        sides = [("this", sys.executable, ROOT)]
+        if args.against:
+            try:
+                python, root = stack.enter_context(other_checkout(args.against))
+            except subprocess.CalledProcessError as e:
+                err = (e.stderr or b"").decode(errors="replace").strip().splitlines()
+                print(f"bench_speed: error: --against {args.against}: {err[-1] if err else e}",
+                      file=sys.stderr)  # fmt: skip
+                return 2
+            sides.append((args.against, python, root))
+            modes = [(True, "graphs")]
+        else:
+            modes = [(False, "direct"), (True, "graphs")]
+        times: dict[tuple, float] = {}
+        for rep in range(args.repeats):
+            for label, s in configs:
+                for graphs, mode in modes:
+                    for side, python, root in sides:
+                        job = {**base, "seeds": s, "graphs": graphs, "profile": False,
+                               "scene": str(root / args.scene)}  # fmt: skip
+                        r = run_job(python, job)
+                        key = (label, mode, side)
+                        times[key] = min(times.get(key, float("inf")), r["per_it"])
+                        print(f"[{rep + 1}/{args.repeats}] {label:>8}, {mode:>6}, {side:>8}: "
+                              f"{r['per_it']:.3f} s/iteration ({r['wall']:.1f} s for "
+                              f"{args.iterations} iterations; {r['package']})", flush=True)  # fmt: skip
+        print(f"\nfastest of {args.repeats} (s/iteration):")
+        for key, t in times.items():
+            print(f"  {', '.join(key)}: {t:.3f}")
+        print()
+        for label, _ in configs:
+            if not args.against:
+                d, g = times[(label, "direct", "this")], times[(label, "graphs", "this")]
+                print(f"graph replay: {label} {d / g:.2f}x faster per iteration")
+            else:
+                t, o = times[(label, "graphs", "this")], times[(label, "graphs", args.against)]
+                print(f"{label}: {o / t:.2f}x faster per iteration than {args.against}")
+        if len(seeds) > 1:
+            n, one = len(seeds), times[("1 seed", "graphs", "this")]
+            many = times[(f"{n} seeds", "graphs", "this")]
+            print(f"{n} seeds batched (graphs): {n * one / many:.2f}x the throughput of 1 seed")
+        if args.profile:
+            print("\nbreakdown (cProfile own time of the timed iterations, share of each run):")
+            profiles = {}
+            for label, s in configs:
+                for side, python, root in sides:
+                    job = {**base, "seeds": s, "graphs": True, "profile": True,
+                           "scene": str(root / args.scene), "iterations": WARMUP + 3}  # fmt: skip
+                    profiles[f"{label}, {side}"] = run_job(python, job)
+            print("| part | " + " | ".join(profiles) + " |\n|---|" + "---:|" * len(profiles))
+            for k in next(iter(profiles.values()))["groups"]:
+                cells = [f"{100 * r['groups'][k] / sum(r['groups'].values()):.0f}%"
+                         for r in profiles.values()]  # fmt: skip
+                print(f"| {k} | " + " | ".join(cells) + " |")
+            for name, r in profiles.items():
+                total = sum(r["groups"].values())
+                print(f"\nPython in warp/ with the most own time ({name}):")
+                for fn, t in r["in_warp"]:
+                    print(f"  {100 * t / total:5.1f}%  {fn}")
     return 0
 
 

@@ -66,11 +66,11 @@ def rollout(
     qs, qds, taus = [q0], [qd0], []
     q, qd = q0, qd0
     if differentiable:
-        sim.begin_rollout()
-        for _ in range(horizon):
-            tau = policy(q, qd)
-            q, qd = sim.step(q, qd, tau)
-            qs.append(q), qds.append(qd), taus.append(tau)
+        with sim.begin_rollout() as ro:
+            for _ in range(horizon):
+                tau = policy(q, qd)
+                q, qd = ro.step(q, qd, tau)
+                qs.append(q), qds.append(qd), taus.append(tau)
     else:
         with torch.no_grad():
             for _ in range(horizon):

@@ -28,30 +28,36 @@ Two paths:
 On CUDA, Warp launches go to torch's current stream (``wp.stream_from_torch``), so torch copies into
 the zero-copy views and Warp kernels are ordered without host synchronisation.
 
-**Graph replay.** A Featherstone step is ~25 small Warp operations whose Python-side argument packing
-costs more than their arithmetic (a KUKA step over 16 worlds: ~0.35 ms of Python for ~0.09 ms of
-work). Every step of both paths always touches the same arrays (the forward path's ping-pong pair;
-the differentiable path's per-sub-step buffers, reused across rollouts), so after running it once
-directly (allocating, loading kernels, recording its tape) the bridge captures it with
-``wp.capture_begin``/``wp.capture_end`` -- a CUDA graph on a GPU, Warp's APIC operation stream on
-a CPU -- and from then on replays it with ``wp.capture_launch``. The same goes for each sub-step's
-backward pass (``tape.backward()``) and gradient reset (``tape.zero()``). Replay runs the same kernels on the same
-memory in the same order, so results are bitwise those of the direct calls
-(``tests/test_bridge.py`` checks it).
+**Graph replay** (:mod:`warp_critic.physics.replay`). Every step of both paths always touches the
+same arrays (the forward path's ping-pong pair; the differentiable path's per-sub-step buffers,
+reused across rollouts), so after running it once directly the bridge captures it and replays it
+with ``wp.capture_launch``: one graph per control step forward (its ``substeps`` solver steps), and
+in a differentiable rollout one graph per control step for the taped forward and one for the
+backward (each sub-step's ``tape.backward()``, the gradient hand-over between sub-steps and
+``tape.zero()``). Replay runs the same kernels on the same memory in the same order, so results
+are bitwise those of the direct calls (``tests/test_bridge.py`` checks it).
 
-Buffers are reused across rollouts. A rollout that has started (``begin_rollout``) invalidates the
-buffers of the previous one; calling ``backward`` on an older graph raises instead of silently
-returning wrong gradients.
+**Rollouts are objects.** :meth:`NewtonBridge.begin_rollout` returns a :class:`DiffRollout` that
+counts its own steps. Buffers are reused across rollouts: starting a newer one invalidates the
+older one's, and calling ``backward`` through an older graph raises instead of silently returning
+wrong gradients.
 """
 
 from __future__ import annotations
 
 import contextlib
-from dataclasses import dataclass
 
 import newton
 import torch
 import warp as wp
+
+from warp_critic.physics.replay import (
+    ControlBuffers,
+    Replay,
+    StepBuffers,
+    keep_input_grads,
+    seed_output_grads,
+)
 
 _SCRATCH = ("M", "J", "P", "H", "L")
 # With use_tile_gemm the solver reads batched views of J, M, H, L grouped by articulation size.
@@ -61,52 +67,6 @@ _TILE_VIEWS = {
     "_H_by_size": ("H", "articulation_H_start"),
     "_L_by_size": ("L", "articulation_H_start"),
 }
-
-
-class _Replay:
-    """Run ``direct()`` the first time, capture ``captured()`` into a graph the second, replay after.
-
-    ``direct`` does the first call's one-time work (allocations, kernel loads, tape recording);
-    ``captured`` issues the same Warp operations without it. Capture records without executing, so
-    the freshly captured graph is launched right away.
-    """
-
-    __slots__ = ("device", "direct", "captured", "enabled", "graph", "ran")
-
-    def __init__(self, device, direct, captured=None, enabled: bool = True):
-        self.device, self.direct, self.captured = device, direct, captured or direct
-        self.enabled, self.graph, self.ran = enabled, None, False
-
-    def __call__(self) -> None:
-        if self.graph is None:
-            if not (self.enabled and self.ran):
-                self.ran = True
-                self.direct()
-                return
-            # the direct call loaded every kernel this graph launches
-            wp.capture_begin(device=self.device, force_module_load=False)
-            try:
-                self.captured()
-            finally:
-                graph = wp.capture_end(device=self.device)
-            self.graph = graph
-        wp.capture_launch(self.graph)
-
-
-@dataclass
-class _StepBuffers:
-    """Everything physics sub-step ``k`` of a differentiable rollout needs for its backward pass."""
-
-    state_out: newton.State
-    scratch: dict  # name -> wp.array, the solver's mass-matrix scratch for this step
-    tape: wp.Tape
-    q_out: torch.Tensor  # torch views (W, dof) of state_out.joint_q / joint_qd and their grads
-    qd_out: torch.Tensor
-    q_out_grad: torch.Tensor
-    qd_out_grad: torch.Tensor
-    forward: _Replay | None = None  # this sub-step's solver step (records its tape the first time)
-    backward: _Replay | None = None  # tape.backward()
-    zero: _Replay | None = None  # tape.zero()
 
 
 class NewtonBridge:
@@ -159,16 +119,14 @@ class NewtonBridge:
         self._fw_q = [self._view(s.joint_q) for s in self._fw_states]
         self._fw_qd = [self._view(s.joint_qd) for s in self._fw_states]
         self._fw_tau = self._view(self._fw_control.joint_f)
-        self._fw_run = _Replay(model.device, self._fw_substeps, enabled=self.graphs)
+        self._fw_run = Replay(model.device, self._fw_substeps, enabled=self.graphs)
         self._fw_last = self.substeps % 2  # the ping-pong state holding the result
 
         # differentiable path: grown on demand, reused across rollouts
-        self._steps: list[_StepBuffers] = []
-        self._controls: list[newton.Control] = []  # one per control step (shared by its sub-steps)
+        self._steps: list[StepBuffers] = []  # one per physics sub-step
+        self._controls: list[ControlBuffers] = []  # one per control step
         self._state0: newton.State | None = None
-        self._k = 0  # next physics sub-step index in the current rollout
-        self._c = 0  # next control step index
-        self.generation = 0
+        self.generation = 0  # of the newest DiffRollout: older ones' buffers are overwritten
 
     # -- torch views on warp memory ------------------------------------------------------------
     def _view(self, arr: wp.array) -> torch.Tensor:
@@ -232,133 +190,197 @@ class NewtonBridge:
             setattr(self.solver, n, arr)
 
     # -- differentiable ------------------------------------------------------------------------
-    def begin_rollout(self) -> None:
-        """Start a new differentiable rollout; buffers of the previous one become invalid."""
+    def begin_rollout(self) -> DiffRollout:
+        """Start a differentiable rollout: returns its :class:`DiffRollout`.
+
+        The rollout object carries its own position; starting a newer one reuses the buffers, and a
+        ``backward()`` through an older one then raises instead of returning wrong gradients.
+        """
         if not self.requires_grad:
             raise RuntimeError(
                 "differentiable rollout needs a model finalized with requires_grad=True"
             )
         self.generation += 1
-        self._k = 0
-        self._c = 0
         if self._state0 is None:
             self._state0 = self.model.state(requires_grad=True)
-
-    def _grow(self, k: int, c: int) -> None:
-        while len(self._controls) <= c:
-            self._controls.append(self.model.control(clone_variables=True, requires_grad=True))
-        while len(self._steps) <= k:
-            i = len(self._steps)
-            s = self.model.state(requires_grad=True)
-            buf = _StepBuffers(
-                state_out=s,
-                scratch=self._new_scratch(),
-                tape=wp.Tape(),
-                q_out=self._view(s.joint_q),
-                qd_out=self._view(s.joint_qd),
-                q_out_grad=self._view(s.joint_q.grad),
-                qd_out_grad=self._view(s.joint_qd.grad),
-            )
-            # sub-step i always reads the same state and control: those of control step i // substeps
-            step = self._taped_step(buf, self._state_in(i), self._controls[i // self.substeps])
-            buf.forward = _Replay(
-                self.device, step, lambda step=step: step(record=False), enabled=self.graphs
-            )
-            buf.backward = _Replay(self.device, buf.tape.backward, enabled=self.graphs)
-            buf.zero = _Replay(self.device, buf.tape.zero, enabled=self.graphs)
-            self._steps.append(buf)
-
-    def _taped_step(self, buf: _StepBuffers, state_in: newton.State, control: newton.Control):
-        def step(record: bool = True) -> None:
-            for n, arr in buf.scratch.items():
-                setattr(self.solver, n, arr)
-            if record:  # the tape is recorded once: later rollouts reuse the same arrays
-                buf.tape.reset()
-                with buf.tape:
-                    self.solver.step(state_in, buf.state_out, control, None, self.dt)
-            else:
-                self.solver.step(state_in, buf.state_out, control, None, self.dt)
-            self._restore_scratch()
-
-        return step
+        return DiffRollout(self, self.generation)
 
     def _state_in(self, k: int) -> newton.State:
         return self._state0 if k == 0 else self._steps[k - 1].state_out
 
-    def step(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor):
-        """One control step; differentiable w.r.t. ``q``, ``qd`` and ``tau`` when grad is enabled.
+    def _grow(self, c: int) -> None:
+        """Buffers for control steps ``0 .. c`` (and their sub-steps)."""
+        S = self.substeps
+        while len(self._steps) < (c + 1) * S:
+            s = self.model.state(requires_grad=True)
+            self._steps.append(
+                StepBuffers(
+                    state_out=s,
+                    scratch=self._new_scratch(),
+                    tape=wp.Tape(),
+                    q_out=self._view(s.joint_q),
+                    qd_out=self._view(s.joint_qd),
+                    q_out_grad=self._view(s.joint_q.grad),
+                    qd_out_grad=self._view(s.joint_qd.grad),
+                )
+            )
+        while len(self._controls) <= c:
+            i = len(self._controls)
+            control = self.model.control(clone_variables=True, requires_grad=True)
+            state_in = self._state_in(i * S)
+            n = self.worlds * self.dof
+            keep = [wp.zeros(n, dtype=float, device=self.device) for _ in range(3)]
+            buf = ControlBuffers(
+                control=control,
+                q_in=self._view(state_in.joint_q),
+                qd_in=self._view(state_in.joint_qd),
+                tau=self._view(control.joint_f),
+                g_tau=keep[0],
+                q_keep=keep[1],
+                qd_keep=keep[2],
+                g_tau_t=self._view(keep[0]),
+                q_keep_t=self._view(keep[1]),
+                qd_keep_t=self._view(keep[2]),
+            )
+            buf.forward = Replay(
+                self.device,
+                lambda i=i: self._taped_substeps(i, record=True),
+                lambda i=i: self._taped_substeps(i, record=False),
+                enabled=self.graphs,
+            )
+            buf.backward = Replay(
+                self.device, lambda i=i: self._backward_substeps(i), enabled=self.graphs
+            )
+            self._controls.append(buf)
 
-        In a differentiable rollout the steps must be chained: ``q, qd`` of step ``i+1`` are the
-        outputs of step ``i`` (call :meth:`begin_rollout` first).
-        """
+    def _taped_substeps(self, c: int, record: bool) -> None:
+        """The sub-steps of control step ``c``; each records its own tape once (``record``)."""
+        control = self._controls[c].control
+        for k in range(c * self.substeps, (c + 1) * self.substeps):
+            buf = self._steps[k]
+            for n, arr in buf.scratch.items():
+                setattr(self.solver, n, arr)
+            if record:  # later rollouts reuse the same arrays, so the tape stays valid
+                buf.tape.reset()
+                with buf.tape:
+                    self.solver.step(self._state_in(k), buf.state_out, control, None, self.dt)
+            else:
+                self.solver.step(self._state_in(k), buf.state_out, control, None, self.dt)
+        self._restore_scratch()
+
+    def _backward_substeps(self, c: int) -> None:
+        """Reverse sub-steps of control step ``c``: the output gradient is seeded in the last one."""
+        cb = self._controls[c]
+        tau_grad = cb.control.joint_f.grad
+        tau_grad.zero_()
+        cb.g_tau.zero_()
+        n = self.worlds * self.dof
+        for k in reversed(range(c * self.substeps, (c + 1) * self.substeps)):
+            state_in = self._state_in(k)
+            self._steps[k].tape.backward()
+            wp.launch(
+                keep_input_grads,
+                dim=n,
+                inputs=[state_in.joint_q.grad, state_in.joint_qd.grad, tau_grad],
+                outputs=[cb.q_keep, cb.qd_keep, cb.g_tau],
+                device=self.device,
+            )
+            self._steps[k].tape.zero()  # every gradient this step touched (incl. its inputs')
+            tau_grad.zero_()
+            if k > c * self.substeps:
+                wp.launch(
+                    seed_output_grads,
+                    dim=n,
+                    inputs=[cb.q_keep, cb.qd_keep],
+                    outputs=[state_in.joint_q.grad, state_in.joint_qd.grad],
+                    device=self.device,
+                )
+
+    def step(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor):
+        """One control step without gradients (a differentiable one: :meth:`begin_rollout`)."""
         if torch.is_grad_enabled() and (q.requires_grad or qd.requires_grad or tau.requires_grad):
-            return _SimStep.apply(q, qd, tau, self)
+            raise RuntimeError(
+                "a differentiable step belongs to a rollout: "
+                "rollout = sim.begin_rollout(); q, qd = rollout.step(q, qd, tau)"
+            )
         return self.step_forward(q, qd, tau)
 
     # called by _SimStep ----------------------------------------------------------------------
-    def _forward_taped(self, q, qd, tau):
+    def _forward_taped(self, c: int, q, qd, tau):
         with self._stream():
-            return self._forward_taped_impl(q, qd, tau)
+            self._grow(c)
+            cb = self._controls[c]
+            cb.q_in.copy_(q)
+            cb.qd_in.copy_(qd)
+            cb.tau.copy_(tau)
+            cb.forward()
+            last = self._steps[(c + 1) * self.substeps - 1]
+            return last.q_out.clone(), last.qd_out.clone()
 
-    def _forward_taped_impl(self, q, qd, tau):
-        k0, c = self._k, self._c
-        self._grow(k0 + self.substeps - 1, c)
-        state_in = self._state_in(k0)
-        self._view(state_in.joint_q).copy_(q)
-        self._view(state_in.joint_qd).copy_(qd)
-        control = self._controls[c]
-        self._view(control.joint_f).copy_(tau)
-        for j in range(self.substeps):
-            self._steps[k0 + j].forward()
-        self._k += self.substeps
-        self._c += 1
-        last = self._steps[k0 + self.substeps - 1]
-        return k0, c, last.q_out.clone(), last.qd_out.clone()
-
-    def _backward_taped(self, k0: int, c: int, generation: int, gq, gqd):
+    def _backward_taped(self, c: int, gq, gqd):
         with self._stream():
-            return self._backward_taped_impl(k0, c, generation, gq, gqd)
+            last = self._steps[(c + 1) * self.substeps - 1]
+            last.q_out_grad.copy_(gq)
+            last.qd_out_grad.copy_(gqd)
+            cb = self._controls[c]
+            cb.backward()
+            return cb.q_keep_t.clone(), cb.qd_keep_t.clone(), cb.g_tau_t.clone()
 
-    def _backward_taped_impl(self, k0: int, c: int, generation: int, gq, gqd):
-        if generation != self.generation:
-            raise RuntimeError(
-                "this rollout's simulation buffers were reused by a newer rollout before backward(); "
-                "call backward() before starting the next differentiable rollout"
-            )
-        control = self._controls[c]
-        tau_grad = self._view(control.joint_f.grad)
-        tau_grad.zero_()
-        g_tau = torch.zeros_like(tau_grad)
-        for j in reversed(range(self.substeps)):
-            buf = self._steps[k0 + j]
-            buf.q_out_grad.copy_(gq)
-            buf.qd_out_grad.copy_(gqd)
-            state_in = self._state_in(k0 + j)
-            gq_in, gqd_in = self._view(state_in.joint_q.grad), self._view(state_in.joint_qd.grad)
-            buf.backward()
-            gq, gqd = gq_in.clone(), gqd_in.clone()
-            g_tau += tau_grad
-            buf.zero()  # clears every gradient this step touched (incl. its inputs' and tau's)
-            tau_grad.zero_()
-        return gq, gqd, g_tau
+
+class DiffRollout:
+    """One differentiable rollout: control steps chained through the bridge's reused buffers.
+
+    ``q, qd`` of step ``i+1`` must be the outputs of step ``i``. Use as a plain object or as a
+    context manager (``with sim.begin_rollout() as ro: q, qd = ro.step(q, qd, tau)``); backward
+    through its steps works until the bridge starts a newer rollout.
+    """
+
+    def __init__(self, bridge: NewtonBridge, generation: int):
+        self.bridge, self.generation = bridge, generation
+        self.steps = 0  # control steps taken
+
+    def __enter__(self) -> DiffRollout:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        return None
+
+    @property
+    def current(self) -> bool:
+        """Whether the bridge's buffers still hold this rollout."""
+        return self.generation == self.bridge.generation
+
+    def step(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor):
+        """One control step, differentiable w.r.t. ``q``, ``qd`` and ``tau`` when grad is enabled."""
+        if torch.is_grad_enabled() and (q.requires_grad or qd.requires_grad or tau.requires_grad):
+            if not self.current:
+                raise RuntimeError("a newer rollout has started: this one can take no more steps")
+            return _SimStep.apply(q, qd, tau, self)
+        return self.bridge.step_forward(q, qd, tau)
 
 
 class _SimStep(torch.autograd.Function):
     """``(q, qd, tau) -> (q', qd')`` through ``substeps`` Featherstone steps, exact reverse mode."""
 
     @staticmethod
-    def forward(ctx, q, qd, tau, bridge: NewtonBridge):
-        k0, c, q1, qd1 = bridge._forward_taped(q.detach(), qd.detach(), tau.detach())
-        ctx.bridge, ctx.k0, ctx.c, ctx.generation = bridge, k0, c, bridge.generation
+    def forward(ctx, q, qd, tau, rollout: DiffRollout):
+        c = rollout.steps
+        q1, qd1 = rollout.bridge._forward_taped(c, q.detach(), qd.detach(), tau.detach())
+        rollout.steps += 1
+        ctx.rollout, ctx.c = rollout, c
         return q1, qd1
 
     @staticmethod
     def backward(ctx, gq, gqd):
+        rollout, bridge = ctx.rollout, ctx.rollout.bridge
+        if not rollout.current:
+            raise RuntimeError(
+                "this rollout's simulation buffers were reused by a newer rollout before backward(); "
+                "call backward() before starting the next differentiable rollout"
+            )
         if gq is None:
-            gq = torch.zeros(ctx.bridge.worlds, ctx.bridge.dof, device=ctx.bridge.torch_device)
+            gq = torch.zeros(bridge.worlds, bridge.dof, device=bridge.torch_device)
         if gqd is None:
             gqd = torch.zeros_like(gq)
-        dq, dqd, dtau = ctx.bridge._backward_taped(
-            ctx.k0, ctx.c, ctx.generation, gq.contiguous(), gqd.contiguous()
-        )
+        dq, dqd, dtau = bridge._backward_taped(ctx.c, gq.contiguous(), gqd.contiguous())
         return dq, dqd, dtau, None

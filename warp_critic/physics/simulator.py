@@ -14,7 +14,7 @@ import warp as wp
 
 from warp_critic.core import runtime
 from warp_critic.core.errors import FieldError
-from warp_critic.physics.bridge import NewtonBridge
+from warp_critic.physics.bridge import DiffRollout, NewtonBridge
 from warp_critic.physics.scene import Scene, Variant
 from warp_critic.physics.schema import STANDARD_GRAVITY  # a scene's gravity when it authors none
 
@@ -101,12 +101,12 @@ class Simulator:
         )
 
     # -- stepping --------------------------------------------------------------------------------
-    def begin_rollout(self) -> None:
-        """Call before each differentiable rollout (reuses the per-step gradient buffers)."""
-        self.bridge.begin_rollout()
+    def begin_rollout(self) -> DiffRollout:
+        """A differentiable rollout (its ``step`` is differentiable; reuses the gradient buffers)."""
+        return self.bridge.begin_rollout()
 
     def step(self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor):
-        """One control step. ``q, qd, tau``: ``(W, dof)``. Differentiable when inputs need grad."""
+        """One control step without gradients. ``q, qd, tau``: ``(W, dof)``."""
         return self.bridge.step(q, qd, tau)
 
     def zeros(self) -> torch.Tensor:
