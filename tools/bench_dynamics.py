@@ -8,12 +8,22 @@ The rollout: open-loop joint torques ``tau_t`` (a leaf tensor), semi-implicit Eu
 ``dt`` in both, joint damping on, gravity on, loss ``sum_t <w_t, q_t>``; one backward pass to the
 torques and the initial state. A world-step is one physics step of one world.
 
-Usage: ``python tools/bench_dynamics.py [--worlds 1,64,512] [--horizon 100] [--device cpu]``
+``--against COMMIT`` adds the same Newton rollout on another commit's checkout, side by side in one
+run (interleaved, each measurement a fresh process, the best of ``--repeats``; see
+``tools/bench_speed.py``'s ``other_checkout``).
+
+Usage: ``python tools/bench_dynamics.py [--worlds 1,64,512] [--horizon 100] [--device cpu]
+[--against COMMIT] [--repeats 1]``
 """
 
 from __future__ import annotations
 
+import argparse
+import contextlib
+import json
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -21,19 +31,26 @@ import torch
 
 PROG = "bench_dynamics"
 
-
-from warp_critic.cli.flags import ToolParser, comma_list  # noqa: E402
+try:
+    from warp_critic.cli.flags import ToolParser, comma_list
+except ImportError:  # run as --worker on a checkout before the layer folders (e.g. 4268102)
+    from warp_critic.flags import ToolParser, comma_list
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 def bench_newton(
-    worlds: int, horizon: int, dt: float, device: str, repeats: int = 2
+    worlds: int, horizon: int, dt: float, device: str, repeats: int = 2, root: Path = ROOT
 ) -> tuple[float, float]:
-    from warp_critic.physics.scene import Variant, load_scene
-    from warp_critic.physics.simulator import Simulator
+    """(fwd+bwd, fwd) world-steps/s of the checkout whose ``warp_critic`` is imported."""
+    try:
+        from warp_critic.physics.scene import Variant, load_scene
+        from warp_critic.physics.simulator import Simulator
+    except ImportError:  # before the layer folders (e.g. 4268102)
+        from warp_critic.scene import Variant, load_scene
+        from warp_critic.simulator import Simulator
 
-    scene = load_scene(ROOT / "scenes" / "kuka.usda")
+    scene = load_scene(Path(root) / "scenes" / "kuka.usda")
     sim = Simulator(
         scene, [Variant()] * worlds, dt=dt, substeps=1, device=device, differentiable=True
     )
@@ -45,7 +62,7 @@ def bench_newton(
     qd0 = torch.zeros(worlds, 7, device=dev)
 
     def run():
-        ro = sim.begin_rollout()
+        ro = sim.begin_rollout() or sim  # older checkouts: hidden rollout state, sim.step
         q, qd, loss = q0, qd0, 0.0
         for t in range(horizon):
             q, qd = ro.step(q, qd, tau[t])
@@ -112,6 +129,51 @@ def bench_drm(worlds: int, horizon: int, dt: float) -> float:
     return worlds * horizon / (time.perf_counter() - t0)
 
 
+def newton_in(python: str, root: Path, worlds: int, horizon: int, dt: float, device: str):
+    """:func:`bench_newton` in a fresh process of ``python`` (its own checkout's package)."""
+    job = json.dumps([worlds, horizon, dt, device, str(root)])
+    proc = subprocess.run(
+        [python, str(Path(__file__).resolve()), "--worker", job],
+        capture_output=True,
+        text=True,
+        cwd=tempfile.gettempdir(),
+    )
+    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("[")]
+    if proc.returncode != 0 or not lines:
+        raise RuntimeError(f"measurement failed ({python}):\n{proc.stderr[-3000:]}")
+    return json.loads(lines[-1])
+
+
+def compare(args) -> int:
+    """This checkout's Newton rollout next to ``args.against``'s, interleaved."""
+    from bench_speed import other_checkout
+
+    print(
+        f"iiwa7, horizon {args.horizon}, dt {args.dt} s, world-steps/s, best of {args.repeats} "
+        f"(newton device: {args.device})"
+    )
+    with contextlib.ExitStack() as stack:
+        python, root = stack.enter_context(other_checkout(args.against))
+        sides = [("this", sys.executable, ROOT), (args.against, python, root)]
+        print(
+            f"{'worlds':>7} | {'fwd+bwd this':>13} | {'fwd+bwd ' + args.against:>16} | {'gain':>5} | "
+            f"{'fwd this':>10} | {'fwd ' + args.against:>12} | {'gain':>5}"
+        )
+        for n in args.worlds:
+            best = {side: [0.0, 0.0] for side, _, _ in sides}
+            for _ in range(args.repeats):
+                for side, py, r in sides:
+                    fb, fw = newton_in(py, r, n, args.horizon, args.dt, args.device)
+                    best[side] = [max(best[side][0], fb), max(best[side][1], fw)]
+            (tb, tf), (ob, of) = best["this"], best[args.against]
+            print(
+                f"{n:>7} | {tb:>13,.0f} | {ob:>16,.0f} | {tb / ob:>4.2f}x | "
+                f"{tf:>10,.0f} | {of:>12,.0f} | {tf / of:>4.2f}x",
+                flush=True,
+            )
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
     p.add_argument(
@@ -127,7 +189,21 @@ def main(argv: list[str] | None = None) -> int:
         action="store_true",
         help="skip the paper's model (e.g. for 4096 worlds on GPU)",
     )
+    p.add_argument("--against", metavar="COMMIT", help="also measure this commit, side by side")
+    p.add_argument("--repeats", type=int, default=1, help="measurements per side (with --against)")
+    p.add_argument("--worker", help=argparse.SUPPRESS)
     args = p.parse_args(argv)
+    if args.worker:
+        worlds, horizon, dt, device, root = json.loads(args.worker)
+        try:
+            from warp_critic.core import runtime
+        except ImportError:
+            from warp_critic import runtime
+        runtime.init(threads=0)
+        print(json.dumps(bench_newton(worlds, horizon, dt, device, root=Path(root))), flush=True)
+        return 0
+    if args.against:
+        return compare(args)
     from warp_critic.core import runtime
     from warp_critic.core.errors import UserError
 

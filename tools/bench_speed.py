@@ -9,9 +9,8 @@ speed swings 2-3x between runs: compare only numbers of one run).
 
 ``--against COMMIT`` measures the same configurations (graph replay on) on another commit too, in
 the same run, interleaved: a temporary ``git worktree`` of COMMIT gets a temporary virtual
-environment that shares this interpreter's packages and installs only that checkout (``pip install
---no-deps -e``, because ``warp_critic.kernels`` is mapped from the top-level ``kernels/`` folder);
-the same measuring code then runs there and imports that checkout's package. Both are removed after.
+environment that shares this interpreter's packages but imports that checkout's package (see
+:func:`other_checkout`); the same measuring code runs there. Both are removed after.
 
 ``--profile`` adds where the time of the steady-state iterations goes (cProfile own time of the
 iterations after the untimed ones, grouped: Warp kernels incl. graph replay, the rest of Warp's
@@ -143,13 +142,23 @@ def run_job(python: str, job: dict) -> dict:
 
 @contextlib.contextmanager
 def other_checkout(commit: str):
-    """``(python, root)`` of a temporary checkout of ``commit`` with its own editable install."""
+    """``(python, root)``: a temporary checkout of ``commit`` importable as ``warp_critic``.
+
+    A virtual environment of this interpreter whose site-packages list this interpreter's package
+    directories (torch, warp, newton ...) after the checkout. A plain path line adds a directory
+    without running the ``.pth`` files in it, so this checkout's editable install stays out. The
+    checkout's ``[tool.setuptools.package-dir]`` entries (``warp_critic.kernels`` = ``kernels``)
+    become links inside its package, as an editable install would map them (``pip install -e``
+    needs the ``wheel`` package without build isolation, which a reused environment may lack).
+    """
+    import tomllib
+
     tmp = Path(tempfile.mkdtemp(prefix="bench-against-"))
     root, venv = tmp / "checkout", tmp / "venv"
     git = ["git", "-C", str(ROOT)]
-    subprocess.run(git + ["worktree", "add", "--detach", str(root), commit], check=True,
-                   capture_output=True)  # fmt: skip
     try:
+        subprocess.run(git + ["worktree", "add", "--detach", str(root), commit], check=True,
+                       capture_output=True)  # fmt: skip
         subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
         python = str(venv / "bin" / "python")
         site = subprocess.run(
@@ -158,16 +167,16 @@ def other_checkout(commit: str):
             capture_output=True,
             text=True,
         ).stdout.strip()
-        # this interpreter's packages (torch, warp, newton, pip, setuptools ...), not its checkout:
-        # a plain path line adds a directory without running the .pth files (editable finders) in it
         shared = [p for p in sys.path if p.endswith("site-packages") and Path(p).is_dir()]
-        Path(site, "zz_shared_packages.pth").write_text("\n".join(shared) + "\n")
-        subprocess.run(
-            [python, "-m", "pip", "install", "--quiet", "--no-deps", "--no-build-isolation",
-             "--no-index", "-e", str(root)],
-            check=True,
-            capture_output=True,
-        )  # fmt: skip
+        Path(site, "zz_checkout.pth").write_text("\n".join([str(root), *shared]) + "\n")
+        meta = tomllib.loads((root / "pyproject.toml").read_text())
+        package_dir = meta.get("tool", {}).get("setuptools", {}).get("package-dir", {})
+        for name, folder in package_dir.items():
+            parts = name.split(".")
+            if len(parts) == 2 and parts[0] == "warp_critic":
+                link = root / "warp_critic" / parts[1]
+                if not link.exists():
+                    link.symlink_to(root / folder, target_is_directory=True)
         yield python, root
     finally:
         subprocess.run(git + ["worktree", "remove", "--force", str(root)], capture_output=True)
