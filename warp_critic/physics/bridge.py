@@ -8,9 +8,10 @@ and velocities ``qd`` (rad/s or m/s) as torch tensors of shape ``(W, dof)``, joi
 
 Two paths:
 
-* **forward only** (:meth:`NewtonBridge.step` under ``torch.no_grad`` or with no input requiring a
-  gradient): two preallocated Newton states ping-pong, no tape, no per-step allocation.
-* **differentiable** (:class:`_SimStep`): every physics sub-step ``k`` of a rollout gets its own
+* **forward only** (:meth:`NewtonBridge.step`, or a rollout's step under ``torch.no_grad`` or with no
+  input requiring a gradient): two preallocated Newton states ping-pong, no tape, no per-step
+  allocation.
+* **differentiable** (:meth:`DiffRollout.step`, :class:`_SimStep`): every physics sub-step ``k`` of a rollout gets its own
   Newton state, its own ``wp.Tape`` and its **own copy of the solver's mass-matrix scratch**
   (``M, J, P, H, L``). ``SolverFeatherstone`` keeps that scratch on the solver object and rewrites it
   every step, so a single tape over many steps replays the backward pass of every step with the
