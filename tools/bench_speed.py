@@ -144,43 +144,50 @@ def run_job(python: str, job: dict) -> dict:
 def other_checkout(commit: str):
     """``(python, root)``: a temporary checkout of ``commit`` importable as ``warp_critic``.
 
-    A virtual environment of this interpreter whose site-packages list this interpreter's package
-    directories (torch, warp, newton ...) after the checkout. A plain path line adds a directory
+    A virtual environment of this interpreter whose site-packages list the checkout, then this
+    interpreter's package directories (torch, warp, newton ...). A plain path line adds a directory
     without running the ``.pth`` files in it, so this checkout's editable install stays out. The
     checkout's ``[tool.setuptools.package-dir]`` entries (``warp_critic.kernels`` = ``kernels``)
     become links inside its package, as an editable install would map them (``pip install -e``
     needs the ``wheel`` package without build isolation, which a reused environment may lack).
     """
+    import sysconfig
+
     import tomllib
 
-    tmp = Path(tempfile.mkdtemp(prefix="bench-against-"))
-    root, venv = tmp / "checkout", tmp / "venv"
     git = ["git", "-C", str(ROOT)]
-    try:
+    with tempfile.TemporaryDirectory(prefix="bench-against-") as tmp:
+        root, venv = Path(tmp) / "checkout", Path(tmp) / "venv"
         subprocess.run(git + ["worktree", "add", "--detach", str(root), commit], check=True,
                        capture_output=True)  # fmt: skip
-        subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
-        python = str(venv / "bin" / "python")
-        site = subprocess.run(
-            [python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-            check=True,
-            capture_output=True,
-            text=True,
-        ).stdout.strip()
-        shared = [p for p in sys.path if p.endswith("site-packages") and Path(p).is_dir()]
-        Path(site, "zz_checkout.pth").write_text("\n".join([str(root), *shared]) + "\n")
-        meta = tomllib.loads((root / "pyproject.toml").read_text())
-        package_dir = meta.get("tool", {}).get("setuptools", {}).get("package-dir", {})
-        for name, folder in package_dir.items():
-            parts = name.split(".")
-            if len(parts) == 2 and parts[0] == "warp_critic":
-                link = root / "warp_critic" / parts[1]
-                if not link.exists():
-                    link.symlink_to(root / folder, target_is_directory=True)
-        yield python, root
-    finally:
-        subprocess.run(git + ["worktree", "remove", "--force", str(root)], capture_output=True)
-        subprocess.run(["rm", "-rf", str(tmp)])
+        try:
+            subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True)
+            python = str(venv / "bin" / "python")
+            site = subprocess.run(
+                [python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                check=True,
+                capture_output=True,
+                text=True,
+            ).stdout.strip()
+            # the checkout first, then this interpreter's package directory and what its .pth
+            # files add, except this checkout's own editable install
+            ours = Path(sysconfig.get_paths()["purelib"])
+            lines = [str(root), str(ours)]
+            for pth in sorted(ours.glob("*.pth")):
+                if "warp_critic" not in pth.name:
+                    lines += pth.read_text().splitlines()
+            Path(site, "zz_checkout.pth").write_text("\n".join(lines) + "\n")
+            meta = tomllib.loads((root / "pyproject.toml").read_text())
+            package_dir = meta.get("tool", {}).get("setuptools", {}).get("package-dir", {})
+            for name, folder in package_dir.items():
+                parts = name.split(".")
+                if len(parts) == 2 and parts[0] == "warp_critic":
+                    link = root / "warp_critic" / parts[1]
+                    if not link.exists():
+                        link.symlink_to(root / folder, target_is_directory=True)
+            yield python, root
+        finally:
+            subprocess.run(git + ["worktree", "remove", "--force", str(root)], capture_output=True)
 
 
 def main(argv: list[str] | None = None) -> int:
