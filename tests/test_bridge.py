@@ -121,7 +121,9 @@ def test_gradient_matches_finite_differences():
     sim = Simulator(scene, [Variant()], dt=0.01, substeps=2, device="cpu")
     gen = torch.Generator().manual_seed(2)
     taus = torch.randn(20, 1, 2, generator=gen) * 5
-    direction = torch.randn_like(taus)
+    direction = torch.randn(
+        taus.shape, generator=gen
+    )  # seeded: randn_like draws from the global RNG
     goal = torch.tensor([[0.7, -0.4]])
 
     def loss_of(t, differentiable):
