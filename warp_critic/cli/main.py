@@ -35,7 +35,7 @@ EXIT_USER_ERROR = 2
 EXIT_DIVERGED = 1
 EXIT_FAILED = 1  # the machine failed (a full disk), not the user's input
 EXIT_INTERRUPTED = 130
-POSITIONAL = ("scene", "run_dir", "method")
+POSITIONAL = ("scene", "run_dir", "method", "robot")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -104,6 +104,42 @@ def _not_owned(path, what: str) -> None:
     check_not_owned(path, what)
 
 
+def cmd_import(args: argparse.Namespace) -> int:
+    from warp_critic.physics.export import write_scene
+    from warp_critic.physics.robot import is_robot_file, load_any
+
+    robot = args.robot
+    if not is_robot_file(robot):
+        from pathlib import Path
+
+        if Path(robot).is_file():
+            raise UserError(
+                f"{robot}: already a warp-critic scene (it has warp_critic attributes); "
+                "import reads robot files (.urdf, MJCF .xml, .usd/.usda without them)"
+            )
+    tip = args.tip_offset
+    if tip is not None and len(tip) != 3:
+        raise UserError(f"--tip-offset: needs 3 values x,y,z (got {len(tip)})")
+    joints = None if args.joints is None else [n for n in args.joints.split(",") if n.strip()]
+    scene = load_any(robot, ee_body=args.ee_body, tip_offset=tip, joints=joints)
+    out = write_scene(scene, args.out)
+    print(f"scene: {out} ({scene.dof} joints, end effector {scene.body_names[scene.ee_body]})")
+    print(f"meta-train: warp-critic meta-train {out}")
+    return 0
+
+
+def derived_rules_epilog() -> str:
+    """The rules of the defaults derived for a robot file, for ``--help``."""
+    from warp_critic.physics.derive import RULES
+
+    lines = [
+        "robot files (.urdf, MJCF .xml, .usd/.usda without warp_critic attributes):",
+        "defaults derived from the robot (each overridden by its flag):",
+    ]
+    lines += [f"  {key}: {rule}" for key, rule in RULES.items()]
+    return "\n".join(lines)
+
+
 def build_parser() -> argparse.ArgumentParser:
     from warp_critic.analysis.landscape import command as landscape
     from warp_critic.analysis.toy import command as toy
@@ -125,7 +161,11 @@ def build_parser() -> argparse.ArgumentParser:
         help="meta-learn a critic through the differentiable Newton model (Algorithm 2)",
         description="Meta-learn the critic L(s, a, g) with a bi-level loop through the differentiable Newton model.",
     )
-    mt.add_argument("scene", help="USD scene, e.g. scenes/kuka.usda")
+    mt.epilog = derived_rules_epilog()
+    mt.formatter_class = argparse.RawDescriptionHelpFormatter
+    mt.add_argument(
+        "scene", help="USD scene, e.g. scenes/kuka.usda, or a robot file (.urdf, .xml, .usd)"
+    )
     add_dataclass_arguments(mt, TrainConfig, skip=("scene",))
     mt.set_defaults(func=cmd_meta_train)
 
@@ -152,9 +192,46 @@ def build_parser() -> argparse.ArgumentParser:
         choices=METHODS,
         help="ddpg (Lillicrap et al. 2015) or meta-critic (Zhou et al. 2020)",
     )
-    bl.add_argument("scene", help="USD scene, e.g. scenes/reacher.usda")
+    bl.epilog = derived_rules_epilog()
+    bl.formatter_class = argparse.RawDescriptionHelpFormatter
+    bl.add_argument(
+        "scene", help="USD scene, e.g. scenes/reacher.usda, or a robot file (.urdf, .xml, .usd)"
+    )
     add_dataclass_arguments(bl, BaselineConfig, skip=("scene", "method"))
     bl.set_defaults(func=cmd_baseline)
+
+    im = sub.add_parser(
+        "import",
+        help="write a robot file (URDF, MJCF, USD) as a scene with the derived defaults",
+        description="Import a fixed-base robot (.urdf, MJCF .xml, .usd/.usda without warp_critic "
+        "attributes) with newton's importer and write it as a warp-critic scene whose "
+        "warp_critic:* attributes hold the defaults derived from the robot; edit them there.",
+        epilog=derived_rules_epilog(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    im.add_argument("robot", help="robot file: .urdf, MJCF .xml, .usd/.usda")
+    im.add_argument(
+        "--out", required=True, help="the scene file to write (.usda); never overwritten"
+    )
+    im.add_argument(
+        "--ee-body",
+        default=None,
+        help="the end-effector body (default: the last body of the longest chain)",
+    )
+    im.add_argument(
+        "--tip-offset",
+        default=None,
+        type=_floats,
+        metavar="X,Y,Z",
+        help="the tip (m) in the end-effector body frame (default: 0,0,0)",
+    )
+    im.add_argument(
+        "--joints",
+        default=None,
+        metavar="NAME,..",
+        help="train only these joints; the others are locked at the home pose (default: all)",
+    )
+    im.set_defaults(func=cmd_import)
 
     an = sub.add_parser(
         "analyze",
@@ -267,6 +344,18 @@ def check_utf8(args: argparse.Namespace) -> None:
                         f"{str(v).encode('utf-8', 'backslashreplace').decode()}: not valid UTF-8 "
                         f"(byte {e.object[e.start : e.end].encode('utf-8', 'surrogateescape')!r})",
                     ) from None
+
+
+def _floats(text: str) -> list[float]:
+    import math
+
+    try:
+        values = [float(x) for x in text.split(",") if x.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected numbers x,y,z (got {text!r})") from None
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"must be finite numbers (got {text!r})")
+    return values
 
 
 def _main_thread() -> bool:

@@ -18,7 +18,9 @@ Two input layouts (``CRITIC_INPUTS``, normalised as below):
   offsets, it reaches the paper's Table 1 (RESULTS.md has the measurements).
 
 Input normalisation (documented, fixed from the scene, not learned):
-  * joint positions and goals: ``(q - centre) / half_range`` of the joint limits,
+  * joint positions and goals: ``(q - centre) / half_range`` of the joint limits; a continuous joint
+    (no limits: a half range of at least ``CONTINUOUS_HALF_RANGE``) is an angle, seen wrapped:
+    ``wrap(q) / pi`` with ``wrap`` to ``[-pi, pi)``, and so are its differences ``q - g``,
   * joint velocities: ``qd / qd_scale`` (``qd_scale`` a flag, rad/s),
   * actions: ``tau / max_torque``.
 Policy output shaping: ``tau = max_torque * tanh(out)``, so torque limits always hold.
@@ -39,25 +41,44 @@ PolicyParams = dict[str, torch.Tensor]
 POLICY_INIT_SCHEMES = ("fresh", "fixed", "persistent")
 
 
+CONTINUOUS_HALF_RANGE = 1e6  # rad: a joint whose limits are this far apart has none
+
+
+def wrap_angles(x: torch.Tensor, wrap: torch.Tensor | None) -> torch.Tensor:
+    """``x (..., dof)`` with the joints where ``wrap (dof,)`` is true wrapped to ``[-pi, pi)``."""
+    if wrap is None:
+        return x
+    return torch.where(wrap, torch.remainder(x + math.pi, 2 * math.pi) - math.pi, x)
+
+
 @dataclass(frozen=True)
 class Normalizer:
-    """Fixed affine input scales (all ``(dof,)`` tensors)."""
+    """Fixed affine input scales (all ``(dof,)`` tensors); ``wrap``: the continuous joints (bool)."""
 
     q_centre: torch.Tensor
     q_half_range: torch.Tensor
     qd_scale: float
     max_torque: torch.Tensor
+    wrap: torch.Tensor | None = None
 
     @staticmethod
     def from_limits(
         q_lower: torch.Tensor, q_upper: torch.Tensor, max_torque: torch.Tensor, qd_scale: float
     ) -> Normalizer:
-        return Normalizer(
-            (q_upper + q_lower) / 2, (q_upper - q_lower) / 2, float(qd_scale), max_torque
-        )
+        centre, half = (q_upper + q_lower) / 2, (q_upper - q_lower) / 2
+        wrap = half >= CONTINUOUS_HALF_RANGE
+        if not bool(wrap.any()):
+            return Normalizer(centre, half, float(qd_scale), max_torque)
+        centre = torch.where(wrap, torch.zeros_like(centre), centre)
+        half = torch.where(wrap, torch.full_like(half, math.pi), half)
+        return Normalizer(centre, half, float(qd_scale), max_torque, wrap)
 
     def q(self, q: torch.Tensor) -> torch.Tensor:
-        return (q - self.q_centre) / self.q_half_range
+        return wrap_angles(q - self.q_centre, self.wrap) / self.q_half_range
+
+    def dq(self, q: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """``(q - goal) / half_range``, continuous joints wrapped."""
+        return wrap_angles(q - goal, self.wrap) / self.q_half_range
 
     def state(self, q: torch.Tensor, qd: torch.Tensor) -> torch.Tensor:
         return torch.cat([self.q(q), qd / self.qd_scale], dim=-1)
@@ -169,23 +190,33 @@ class Critic(nn.Module):
         self.register_buffer("q_centre", norm.q_centre.clone())
         self.register_buffer("q_half_range", norm.q_half_range.clone())
         self.register_buffer("max_torque", norm.max_torque.clone())
+        # the continuous joints: from the scene, not the checkpoint (persistent=False)
+        wrap = norm.wrap if norm.wrap is not None else torch.zeros_like(norm.q_centre, dtype=bool)
+        self.register_buffer("q_wrap", wrap.clone(), persistent=False)
+        self._wraps = bool(wrap.any())
         self.qd_scale = norm.qd_scale
 
     def features(
         self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor
     ) -> torch.Tensor:
         """The normalised input ``(..., n_in)`` of the input layout."""
+        wrap = self.q_wrap if self._wraps else None
         if self.inputs == "relative":
             return torch.cat(
-                [(q - goal) / self.q_half_range, qd / self.qd_scale, tau / self.max_torque], dim=-1
+                [
+                    wrap_angles(q - goal, wrap) / self.q_half_range,
+                    qd / self.qd_scale,
+                    tau / self.max_torque,
+                ],
+                dim=-1,
             )
         return torch.cat(
             [
-                (q - self.q_centre) / self.q_half_range,
+                wrap_angles(q - self.q_centre, wrap) / self.q_half_range,
                 qd / self.qd_scale,
                 tau / self.max_torque,
-                (goal - self.q_centre) / self.q_half_range,
-                (q - goal) / self.q_half_range,
+                wrap_angles(goal - self.q_centre, wrap) / self.q_half_range,
+                wrap_angles(q - goal, wrap) / self.q_half_range,
             ],
             dim=-1,
         )
@@ -257,7 +288,13 @@ class StackedCritic(nn.Module):
         c = self.template[0]
         out = Critic(
             c.dof,
-            Normalizer(c.q_centre, c.q_half_range, c.qd_scale, c.max_torque),
+            Normalizer(
+                c.q_centre,
+                c.q_half_range,
+                c.qd_scale,
+                c.max_torque,
+                c.q_wrap if c._wraps else None,
+            ),
             hidden=c.net[0].out_features,
             inputs=c.inputs,
         ).to(c.q_centre.device)

@@ -11,7 +11,7 @@ import torch
 from torch import nn
 
 from warp_critic.core.errors import UserError
-from warp_critic.learning.networks import Normalizer
+from warp_critic.learning.networks import Normalizer, wrap_angles
 
 METHODS = ("ddpg", "meta-critic")
 
@@ -23,10 +23,14 @@ class _GoalInput(nn.Module):
         self.register_buffer("q_half_range", norm.q_half_range.detach().clone())
         self.register_buffer("max_torque", norm.max_torque.detach().clone())
         self.register_buffer("qd_scale", torch.tensor(float(norm.qd_scale)))
+        wrap = norm.wrap if norm.wrap is not None else torch.zeros_like(norm.q_centre, dtype=bool)
+        self.register_buffer("q_wrap", wrap.detach().clone(), persistent=False)  # from the scene
+        self._wraps = bool(wrap.any())
 
     def obs(self, q: torch.Tensor, qd: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         """``[(q - g) / q_half_range, qd / qd_scale]`` ``(..., 2*dof)``."""
-        return torch.cat([(q - goal) / self.q_half_range, qd / self.qd_scale], dim=-1)
+        dq = wrap_angles(q - goal, self.q_wrap if self._wraps else None)
+        return torch.cat([dq / self.q_half_range, qd / self.qd_scale], dim=-1)
 
 
 def _small_last_layer(layer: nn.Linear, bound: float = 3e-3) -> None:

@@ -208,6 +208,10 @@ def load_scene(path: str | Path) -> Scene:
         raise SceneError(f"{path}: no such scene file")
     if path.is_dir():
         raise SceneError(f"{path}: is a directory, not a USD scene file")
+    from warp_critic.physics.robot import is_robot_file, load_robot
+
+    if is_robot_file(path):  # a URDF/MJCF/plain USD robot: imported with derived defaults
+        return load_robot(path)
     return _CACHE.get(path.resolve(), _read)
 
 

@@ -32,9 +32,25 @@ def _candidates(recorded: list[str]) -> list[Path]:
     return unique
 
 
+def _loader(config: dict):
+    """``path -> Scene`` with the run's robot options (a robot file's end effector, joints)."""
+    from warp_critic.physics.robot import load_any
+
+    joints = config.get("joints")
+    if joints is not None:
+        joints = [n.strip() for n in str(joints).split(",") if n.strip()]
+    options = dict(
+        ee_body=config.get("ee_body"), tip_offset=config.get("tip_offset"), joints=joints
+    )
+    if all(v is None for v in options.values()):
+        return load_scene
+    return lambda path: load_any(path, **options)
+
+
 def find_run_scene(ckpt: dict, run_dir) -> Scene:
     """The scene of the run whose checkpoint is ``ckpt`` (see the module docstring)."""
     given = str(ckpt["config"]["scene"])
+    load_scene = _loader(ckpt["config"])
     recorded = [r for r in (ckpt.get("scene_file"), given) if r]
     want = ckpt.get("scene_hash")
     if not want:  # a run that recorded no content hash: the path as recorded

@@ -30,7 +30,7 @@ from warp_critic.core.errors import FieldError
 from warp_critic.core.runtime import MAX_SEED, check_threads
 from warp_critic.learning.networks import Normalizer
 from warp_critic.physics import schema
-from warp_critic.physics.scene import Scene, Variant, load_scene
+from warp_critic.physics.scene import Scene, Variant
 
 # Used for a field that neither the user nor the scene sets (the scene schema's defaults).
 GENERIC_DEFAULTS: dict[str, Any] = schema.fallbacks()
@@ -135,7 +135,21 @@ def _check_value(name: str, x, meta) -> None:
 class TaskConfig(SerializableConfig):
     """The task and run settings every method shares. ``None`` = the scene's default."""
 
-    scene: str = spec("scenes/kuka.usda", "USD scene file")
+    scene: str = spec(
+        "scenes/kuka.usda",
+        "USD scene file, or a robot file (.urdf, MJCF .xml, .usd/.usda without warp_critic attributes)",
+    )
+    ee_body: str | None = spec(
+        None,
+        "robot files: the end-effector body (default: the last body of the longest chain)",
+    )
+    tip_offset: list[float] | None = spec(
+        None, "robot files: the tip x,y,z (m) in the end-effector body frame (default: 0,0,0)"
+    )
+    joints: str | None = spec(
+        None,
+        "robot files: train only these joints (comma-separated names); the others are locked at the home pose (default: every movable joint)",
+    )
     goals: list[list[float]] | None = spec(
         None,
         "training goals in joint space: inline '0.1,0.2;0.3,0.4' or a .json/.txt file (one goal per line); default: the scene's",
@@ -200,6 +214,13 @@ class TaskConfig(SerializableConfig):
     scene_fields = schema.keys("task")
 
     # -- defaults and checks -------------------------------------------------------------------
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        derived = getattr(self, "derived_defaults", None)
+        if derived:  # the defaults derived from a robot file, each with its rule (not a setting)
+            d["derived_defaults"] = copy.deepcopy(derived)
+        return d
+
     def default_out(self) -> str:
         return f"runs/{Path(self.scene).stem}-{self.method}"
 
@@ -446,12 +467,52 @@ class Task:
         return torch.zeros(self.G, device=per_world.device).index_add_(0, idx, per_world) / self.K
 
 
+def scene_of(cfg) -> Scene:
+    """The config's scene: a scene file, or a robot file with the config's robot options."""
+    from warp_critic.physics.robot import load_any
+
+    joints = getattr(cfg, "joints", None)
+    if joints is not None:
+        joints = [n.strip() for n in str(joints).split(",") if n.strip()]
+    return load_any(
+        cfg.scene,
+        ee_body=getattr(cfg, "ee_body", None),
+        tip_offset=getattr(cfg, "tip_offset", None),
+        joints=joints,
+    )
+
+
+_ANNOUNCED: set[tuple] = set()
+
+
 def load_task_scene(cfg: TaskConfig) -> Scene:
-    """Load the scene, fill the config's defaults from it and check the config; returns the scene."""
+    """Load the scene, fill the config's defaults from it and check the config; returns the scene.
+
+    For a robot file, the defaults derived from the robot that the run uses are kept in the config
+    (``derived_defaults``: value and rule) and announced on one line.
+    """
     check_fields(cfg)  # finite numbers before anything is built
-    scene = load_scene(cfg.scene)
+    if cfg.tip_offset is not None and len(cfg.tip_offset) != 3:
+        raise FieldError("tip_offset", f"needs 3 values x,y,z (got {len(cfg.tip_offset)})")
+    scene = scene_of(cfg)
+    unset = {name for name in cfg.scene_fields if getattr(cfg, name) is None}
     cfg.fill_defaults(scene)
     cfg.check(scene)
+    if getattr(scene, "derived", False):
+        from warp_critic.physics import derive
+
+        used = unset & set(scene.defaults)
+        values = {name: getattr(cfg, name) for name in used}
+        cfg.derived_defaults = {
+            "home": {"value": scene.home.tolist(), "rule": derive.RULES["home"]},
+            **{n: {"value": values[n], "rule": derive.RULES[n]} for n in sorted(used)},
+        }
+        key = (scene.content_hash, tuple(sorted(used)))
+        if key not in _ANNOUNCED:
+            _ANNOUNCED.add(key)
+            import sys
+
+            sys.stderr.write(f"warp-critic: {derive.summary(scene, values, used)}\n")
     return scene
 
 

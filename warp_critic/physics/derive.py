@@ -1,0 +1,240 @@
+"""Training defaults derived from a robot that carries none (a URDF, an MJCF, a plain USD).
+
+Each default has one rule (:data:`RULES`, printed by ``--help``, stored in ``config.json`` and in
+the summary line at the start of a run). ``dof`` joints, limits ``[lo_j, hi_j]``, range
+``r_j = hi_j - lo_j`` (a continuous joint, with no limits: ``lo = -pi, hi = pi`` here), effort
+limits ``e_j``; ``M(q)`` the joint-space mass matrix (armature included), ``g(q)`` the gravity
+torque (``M qdd = tau - g(q)`` at rest):
+
+* home pose ``q_h``: the file's own initial joint position when it authors a non-zero one inside
+  the limits (an MJCF ``ref``, a USD joint state), else mid-range ``(lo + hi) / 2`` (0 for a
+  continuous joint);
+* goals: :data:`GOALS` draws ``U[q_h - d_j, q_h + d_j]`` (generator seeded with :data:`GOAL_SEED`),
+  ``d_j = min(r_j / 4, GOAL_REACH)``, clipped to the limits;
+* torque bound ``tau_j = min(e_j, A_MAX * M_jj(q_h) + max |g_j|)``: joint ``j`` alone (the others
+  held) accelerates by at most ``A_MAX`` rad/s^2 beyond holding itself against gravity at the
+  home pose and every goal (``max |g_j|`` over them; gravity at its default magnitude). A joint
+  whose effort limit binds first accelerates less;
+* ``dt`` and substeps: the control period is the KUKA's, ``T = 0.01`` s; ``dt = T / 2^k`` for the
+  smallest ``k`` (at most :data:`MAX_HALVINGS`) at which :data:`PROBE_WORLDS` rollouts of the
+  horizon from the home pose under random torques ``U[-tau_j, tau_j]`` (redrawn every control
+  step, seeded) stay finite with kinetic energy ``1/2 qd^T M(q) qd`` at most
+  ``E_cap = 10 (sum_j tau_j min(r_j, 2 pi) + |gravity| sum_b m_b 2 R)`` (J), ``R`` the largest
+  distance of a body's centre of mass from the first joint at the home pose;
+* gravity: on (9.81 m/s^2 along -z); ``--gravity 0`` for torque-mode (gravity-compensated) arms;
+* horizon, learning rates, iterations, inner steps, critic input, start std, home starts, velocity
+  scale: the KUKA's (``scenes/kuka.usda``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+RULES_VERSION = "derive-1"
+NO_EFFORT_LIMIT = 1e6  # N*m or N: a joint whose file gives no finite positive effort limit
+CONTROL_PERIOD = 0.01  # s, the KUKA's dt x substeps (0.0025 x 4)
+GOALS = 4
+GOAL_SEED = 0
+GOAL_REACH = 1.0  # rad or m
+A_MAX = 50.0  # rad/s^2 (or m/s^2)
+GRAVITY = 9.81
+MAX_HALVINGS = 6
+PROBE_WORLDS = 8
+PROBE_SEED = 0
+ENERGY_FACTOR = 10.0
+# the KUKA's schedule (scenes/kuka.usda)
+KUKA = dict(
+    horizon=50,
+    qd_scale=5.0,
+    alpha=3e-4,
+    lr=3e-3,
+    iterations=3000,
+    inner_steps=3,
+    critic_input="relative",
+    start_std=0.4,
+    home_starts=2,
+)
+
+RULES: dict[str, str] = {
+    "home": "the file's own non-zero initial pose inside the limits, else mid-range (0 for continuous joints)",
+    "goals": f"{GOALS} seeded draws U[home - d, home + d], d = min(range/4, {GOAL_REACH}), inside the limits",
+    "max_torque": f"min(effort limit, {A_MAX:g} rad/s^2 x M_jj(home) + max |gravity torque| over home and goals)",
+    "dt": f"control period {CONTROL_PERIOD} s halved until {PROBE_WORLDS} random-torque rollouts stay finite "
+    f"with kinetic energy <= {ENERGY_FACTOR:g} x (sum tau x range + weight x 2 x reach)",
+    "substeps": "control period / dt",
+    "gravity": f"{GRAVITY} m/s^2 (--gravity 0 for a torque-mode arm)",
+    **{key: "the KUKA's (scenes/kuka.usda)" for key in KUKA},
+}
+
+
+def home_value(lo: float, hi: float, file_q: float, big: float) -> float:
+    """The home position of one joint [rad or m] (rule: module docstring)."""
+    continuous = lo <= -big and hi >= big
+    if file_q != 0.0 and lo <= file_q <= hi:
+        return float(file_q)
+    return 0.0 if continuous else 0.5 * (lo + hi)
+
+
+def limits(scene, big: float = 1e9) -> tuple[np.ndarray, np.ndarray]:
+    """``(lo, hi)`` with continuous joints as ``[-pi, pi]``."""
+    lo, hi = scene.q_lower, scene.q_upper
+    continuous = (lo <= -big) & (hi >= big)
+    return np.where(continuous, -math.pi, lo), np.where(continuous, math.pi, hi)
+
+
+def draw_goals(scene) -> np.ndarray:
+    """``(GOALS, dof)`` goals [rad or m] (rule: module docstring)."""
+    lo, hi = limits(scene)
+    home = scene.home
+    d = np.minimum((hi - lo) / 4.0, GOAL_REACH)
+    u = np.random.default_rng(GOAL_SEED).uniform(-1.0, 1.0, size=(GOALS, scene.dof))
+    return np.clip(home + u * d, lo, hi)
+
+
+def _simulator(scene, worlds: int, dt: float, substeps: int, gravity: float):
+    from warp_critic.physics.simulator import Simulator
+    from warp_critic.physics.variants import Variant
+
+    return Simulator(
+        scene,
+        [Variant()] * worlds,
+        dt=dt,
+        substeps=substeps,
+        device="cpu",
+        differentiable=False,
+        gravity=gravity,
+        graphs=False,
+    )
+
+
+def mass_matrices(sim, q) -> np.ndarray:
+    """``(W, dof, dof)`` joint-space mass matrices [kg m^2 or kg] at ``q`` ``(W, dof)``."""
+    import newton
+    import torch
+    import warp as wp
+
+    state = sim.model.state(requires_grad=False)
+    wp.to_torch(state.joint_q).view(sim.worlds, sim.dof).copy_(torch.as_tensor(q))
+    newton.eval_fk(sim.model, state.joint_q, state.joint_qd, state)
+    H = newton.eval_mass_matrix(sim.model, state)
+    return H.numpy()[:, : sim.dof, : sim.dof].astype(np.float64)
+
+
+def gravity_torques(scene, q: np.ndarray, gravity: float = GRAVITY) -> np.ndarray:
+    """``(N, dof)`` gravity torques ``g(q)`` [N m or N] at the poses ``q`` ``(N, dof)``."""
+    import torch
+
+    q = np.atleast_2d(q)
+    dt = 1e-4
+    sim = _simulator(scene, q.shape[0], dt, 1, gravity)
+    qt = torch.as_tensor(q, dtype=torch.float32)
+    with torch.no_grad():
+        _, qd = sim.step(qt, torch.zeros_like(qt), torch.zeros_like(qt))
+    qdd = qd.double().numpy() / dt
+    return -np.einsum("wij,wj->wi", mass_matrices(sim, q), qdd)
+
+
+def torque_bounds(scene, goals: np.ndarray, gravity: float = GRAVITY) -> np.ndarray:
+    """``(dof,)`` policy torque bounds [N m or N] (rule: module docstring)."""
+    home = scene.home[None]
+    sim = _simulator(scene, 1, 1e-3, 1, 0.0)
+    m_home = np.diag(mass_matrices(sim, home)[0])
+    poses = np.concatenate([home, goals])
+    hold = np.abs(gravity_torques(scene, poses, gravity)).max(axis=0)
+    return np.minimum(scene.effort_limit, A_MAX * m_home + hold)
+
+
+def energy_cap(scene, max_torque: np.ndarray, gravity: float = GRAVITY) -> float:
+    """``E_cap`` [J] of the stability probe (rule: module docstring)."""
+    import torch
+
+    lo, hi = limits(scene)
+    work = float(np.sum(max_torque * np.minimum(hi - lo, 2 * math.pi)))
+    sim = _simulator(scene, 1, 1e-3, 1, 0.0)
+    poses = sim.body_poses(torch.as_tensor(scene.home[None], dtype=torch.float32))[0]
+    model = sim.model
+    com = model.body_com.numpy().astype(np.float64)
+    mass = model.body_mass.numpy().astype(np.float64)
+    centres = np.array(
+        [_transform_point(poses[b], com[b]) for b in range(model.body_count)], dtype=np.float64
+    )
+    base = model.joint_X_p.numpy()[0, :3].astype(np.float64)
+    reach = float(np.linalg.norm(centres - base, axis=1).max())
+    return ENERGY_FACTOR * (work + gravity * float(mass.sum()) * 2.0 * reach)
+
+
+def _transform_point(pose: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """Position + quaternion ``(x, y, z, w)`` applied to a point."""
+    t, (x, y, z, w) = pose[:3], pose[3:]
+    u = np.array([x, y, z])
+    return t + p + 2.0 * np.cross(u, np.cross(u, p) + w * p)
+
+
+def stable(scene, dt: float, substeps: int, max_torque: np.ndarray, gravity: float) -> bool:
+    """Whether the probe's random-torque rollouts stay finite and inside ``E_cap`` (docstring)."""
+    import torch
+
+    sim = _simulator(scene, PROBE_WORLDS, dt, substeps, gravity)
+    cap = energy_cap(scene, max_torque, gravity)
+    gen = torch.Generator().manual_seed(PROBE_SEED)
+    bound = torch.as_tensor(max_torque, dtype=torch.float32)
+    q = torch.as_tensor(scene.home, dtype=torch.float32).expand(PROBE_WORLDS, -1).clone()
+    qd = torch.zeros_like(q)
+    with torch.no_grad():
+        for t in range(KUKA["horizon"]):
+            tau = (torch.rand(q.shape, generator=gen) * 2 - 1) * bound
+            q, qd = sim.step(q, qd, tau)
+            if not (torch.isfinite(q).all() and torch.isfinite(qd).all()):
+                return False
+            if t % 10 == 9 or t == KUKA["horizon"] - 1:
+                M = mass_matrices(sim, q.double().numpy())
+                v = qd.double().numpy()
+                energy = 0.5 * np.einsum("wi,wij,wj->w", v, M, v)
+                if not np.all(np.isfinite(energy)) or energy.max() > cap:
+                    return False
+    return True
+
+
+def time_step(scene, max_torque: np.ndarray, gravity: float = GRAVITY) -> tuple[float, int]:
+    """``(dt, substeps)`` from the stability probe; raises SceneError when none is stable."""
+    from warp_critic.core.errors import SceneError
+
+    for k in range(MAX_HALVINGS + 1):
+        substeps = 2**k
+        dt = CONTROL_PERIOD / substeps
+        if stable(scene, dt, substeps, max_torque, gravity):
+            return dt, substeps
+    raise SceneError(
+        f"{scene.path}: unstable: random-torque rollouts diverge even at dt = "
+        f"{CONTROL_PERIOD / 2**MAX_HALVINGS:g} s (check masses, inertias and joint limits)"
+    )
+
+
+def derive_defaults(scene) -> dict[str, Any]:
+    """The training defaults of ``scene`` (``Scene.defaults`` keys) by the rules of this module."""
+    goals = draw_goals(scene)
+    max_torque = torque_bounds(scene, goals)
+    dt, substeps = time_step(scene, max_torque)
+    return {
+        "goals": [[round(float(v), 6) for v in g] for g in goals],
+        "max_torque": [float(f"{v:.6g}") for v in max_torque],
+        "dt": dt,
+        "substeps": substeps,
+        "gravity": GRAVITY,
+        **KUKA,
+    }
+
+
+def summary(scene, values: dict[str, Any], derived: set[str]) -> str:
+    """One line: the derived defaults in effect, each with its rule."""
+    parts = [f"home {np.round(scene.home, 3).tolist()} ({RULES['home']})"]
+    for key in ("goals", "max_torque", "dt", "substeps", "gravity", *KUKA):
+        if key in derived:
+            value = values[key]
+            if key == "goals":
+                value = f"{len(value)} goals"
+            parts.append(f"{key} {value} ({RULES[key]})")
+    return f"{scene.name}: derived defaults: " + "; ".join(parts)

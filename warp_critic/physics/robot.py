@@ -1,0 +1,418 @@
+"""Robot files people already have (URDF, MJCF, USD without our attributes) as a :class:`Scene`.
+
+Newton's own importers read the file (``ModelBuilder.add_urdf`` / ``add_mjcf`` / ``add_usd``); this
+module only checks that the result is a robot warp-critic can train, and fills in what a robot
+file cannot say:
+
+* the end effector: ``ee_body`` (default: the last body of the longest chain of the file's kinematic
+  tree, counting fixed joints too; ties go to the body that comes first in the file) and
+  ``tip_offset`` ``(3,)`` m in that body's frame (default ``(0, 0, 0)``). A body that is welded to
+  its parent by a fixed joint is merged into it; naming it puts the tip at its origin;
+* ``joints``: train only these joints; the others are locked at the home pose (fixed joints);
+* the training defaults (goals, home pose, torque bounds, ``dt``/substeps, ...), derived from the
+  robot by :mod:`warp_critic.physics.derive`.
+
+Refused, with one line naming the reason (:class:`~warp_critic.core.errors.SceneError`): a floating
+base (a free joint to the world; for a URDF, which cannot say, a root link that carries two or more
+separate movable chains, i.e. legs), a closed kinematic loop, a joint that is not revolute or
+prismatic (after fixed joints are merged), no movable joint, a body without mass.
+
+Mesh files are not needed for dynamics: a URDF is imported without its ``<visual>``/``<collision>``
+meshes (masses and inertias come from ``<inertial>``), and a missing mesh file gives one warning
+naming the first one. A continuous joint (no limits) keeps Newton's ``+-1e10`` limits; the networks
+see its angle wrapped to ``[-pi, pi)`` (:class:`warp_critic.learning.networks.Normalizer`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import threading
+import warnings
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from warp_critic.core.errors import SceneError, warn
+from warp_critic.physics.scene import EE_ATTR, Scene, load_scene
+
+__all__ = ["RobotOptions", "ROBOT_SUFFIXES", "is_robot_file", "load_any", "load_robot"]
+
+ROBOT_SUFFIXES = (".urdf", ".xml", ".mjcf")
+USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
+CONTINUOUS_LIMIT = 1e9  # |limit| at or beyond this: a joint without limits (newton writes 1e10)
+
+
+@dataclass(frozen=True)
+class RobotOptions:
+    """What a robot file cannot say.
+
+    Attributes:
+        ee_body: end-effector body name (None: the last body of the longest chain).
+        tip_offset: ``(3,)`` tip in the end-effector body frame [m] (None: ``(0, 0, 0)``).
+        joints: names of the joints to train (None: every movable joint); the rest are locked.
+    """
+
+    ee_body: str | None = None
+    tip_offset: tuple[float, float, float] | None = None
+    joints: tuple[str, ...] | None = None
+
+    def any(self) -> bool:
+        return any(v is not None for v in (self.ee_body, self.tip_offset, self.joints))
+
+
+def _fail(path: Path, problem: str) -> SceneError:
+    return SceneError(f"{path}: {' '.join(str(problem).split())}")
+
+
+def is_robot_file(path: str | Path) -> bool:
+    """A URDF/MJCF file, or a USD file whose articulation carries no ``warp_critic:*`` attributes."""
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix in ROBOT_SUFFIXES:
+        return True
+    if suffix not in USD_SUFFIXES or not path.is_file():
+        return False
+    try:
+        from pxr import Usd
+
+        stage = Usd.Stage.Open(str(path))
+    except Exception:  # an unreadable file: load_scene says why
+        return False
+    if stage is None:
+        return False
+    return not any(prim.HasAttribute(EE_ATTR) for prim in stage.Traverse())
+
+
+def load_any(
+    path: str | Path,
+    *,
+    ee_body: str | None = None,
+    tip_offset=None,
+    joints=None,
+) -> Scene:
+    """A scene file (our ``warp_critic:*`` USD) or a robot file, by what the file is."""
+    options = RobotOptions(
+        ee_body=ee_body,
+        tip_offset=None if tip_offset is None else tuple(float(v) for v in tip_offset),
+        joints=None if joints is None else tuple(joints),
+    )
+    path = Path(path).expanduser()
+    if path.exists() and not path.is_dir() and is_robot_file(path):
+        return load_robot(path, options)
+    if options.any():
+        given = [
+            flag
+            for flag, v in (
+                ("ee_body", ee_body),
+                ("tip_offset", tip_offset),
+                ("joints", joints),
+            )
+            if v is not None
+        ]
+        raise SceneError(
+            f"{path}: {', '.join(given)} apply to robot files (URDF, MJCF, USD without "
+            "warp_critic attributes); this scene names its own end effector and joints"
+        )
+    return load_scene(path)
+
+
+_CACHE: dict[tuple, Scene] = {}
+_CACHE_LOCK = threading.Lock()
+
+
+def load_robot(path: str | Path, options: RobotOptions = RobotOptions()) -> Scene:
+    """Import a robot file into a :class:`Scene` with derived training defaults (cached per file
+    version and options). Raises :class:`SceneError` with one line naming the reason."""
+    path = Path(path).expanduser()
+    if not path.exists():
+        raise SceneError(f"{path}: no such robot file")
+    if path.is_dir():
+        raise SceneError(f"{path}: is a directory, not a robot file")
+    path = path.resolve()
+    stat = path.stat()
+    key = (str(path), stat.st_mtime_ns, stat.st_size, options)
+    with _CACHE_LOCK:
+        scene = _CACHE.get(key)
+        if scene is None:
+            scene = _load(path, options)
+            _CACHE[key] = scene
+    return scene
+
+
+# ------------------------------------------------------------------------------------------------
+# importing
+# ------------------------------------------------------------------------------------------------
+
+
+def _urdf_without_meshes(path: Path) -> tuple[str, str | None]:
+    """The URDF text with mesh visuals/colliders removed, and the first mesh file that is missing."""
+    try:
+        tree = ET.parse(path)
+    except (ET.ParseError, OSError) as exc:
+        raise _fail(path, f"not a readable URDF ({exc})") from None
+    robot = tree.getroot()
+    if robot.tag != "robot":
+        raise _fail(path, f"not a URDF (root element <{robot.tag}>, expected <robot>)")
+    missing = None
+    for link in robot.iter("link"):
+        for kind in ("visual", "collision"):
+            for element in list(link.findall(kind)):
+                mesh = element.find("geometry/mesh")
+                if mesh is None:
+                    continue
+                if missing is None and not _mesh_exists(path, mesh.get("filename", "")):
+                    missing = mesh.get("filename", "")
+                link.remove(element)
+    return ET.tostring(robot, encoding="unicode"), missing
+
+
+def _mesh_exists(urdf: Path, filename: str) -> bool:
+    """Whether a URDF mesh reference resolves to a file (package:// searched up from the URDF)."""
+    if filename.startswith("package://"):
+        package, _, rest = filename[len("package://") :].partition("/")
+        for parent in urdf.parents:
+            if parent.name == package and (parent / rest).is_file():
+                return True
+            if (parent / package / rest).is_file():
+                return True
+        return False
+    if filename.startswith("file://"):
+        filename = filename[len("file://") :]
+    target = Path(filename)
+    return (target if target.is_absolute() else urdf.parent / target).is_file()
+
+
+def _import(path: Path):
+    """Newton's importer for the file's format -> a ModelBuilder with fixed joints still in."""
+    import newton
+
+    builder = newton.ModelBuilder()
+    suffix = path.suffix.lower()
+    missing = None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            if suffix == ".urdf":
+                text, missing = _urdf_without_meshes(path)
+                builder.add_urdf(text, joint_ordering="dfs")
+            elif suffix in (".xml", ".mjcf"):
+                builder.add_mjcf(str(path))
+            else:
+                builder.add_usd(str(path), load_sites=False)
+        except SceneError:
+            raise
+        except Exception as exc:  # newton/pxr/xml errors: one line, never a traceback
+            text = " ".join(str(exc).split())[:300] or type(exc).__name__
+            raise _fail(path, f"newton's importer failed: {text}") from None
+    for w in caught:
+        text = str(w.message)
+        if missing is None and "does not exist" in text and "Asset file" in text:
+            missing = text.split("Asset file", 1)[1].split("does not exist")[0].strip()
+    if missing:
+        warn(f"{path}: mesh file {missing} is missing (meshes are not needed for dynamics)")
+    return builder
+
+
+def _short(label: str) -> str:
+    return label.rsplit("/", 1)[-1]
+
+
+def _check_topology(path: Path, builder) -> None:
+    """Refuse floating bases, closed loops and bodies that two joints move."""
+    import newton
+
+    free = {int(newton.JointType.FREE), int(newton.JointType.DISTANCE)}
+    for j, t in enumerate(builder.joint_type):
+        if int(t) in free:
+            raise _fail(
+                path,
+                f"floating base: joint {_short(builder.joint_label[j])!r} lets "
+                f"{_short(builder.body_label[builder.joint_child[j]])!r} move freely in the world; "
+                "warp-critic trains fixed-base robots",
+            )
+    children = list(builder.joint_child)
+    loops = len(children) != len(set(children)) or any(a < 0 for a in builder.joint_articulation)
+    eq = getattr(builder, "equality_constraint_type", None) or []
+    if loops or len(eq):
+        raise _fail(path, "closed kinematic loop: warp-critic trains open-chain (tree) robots")
+    jointed = set(children)
+    for b, label in enumerate(builder.body_label):
+        if b not in jointed:
+            raise _fail(path, f"floating base: body {_short(label)!r} has no joint to the world")
+
+
+def _lock(builder, locked: list[int], home: dict[int, float]) -> None:
+    """Turn the joints ``locked`` into fixed joints at their home position (baked into X_p)."""
+    import newton
+    import warp as wp
+
+    for j in locked:
+        q = home.get(j, 0.0)
+        dof = builder.joint_qd_start[j]
+        axis = wp.vec3(*builder.joint_axis[dof])
+        if int(builder.joint_type[j]) == int(newton.JointType.REVOLUTE):
+            motion = wp.transform(wp.vec3(0.0, 0.0, 0.0), wp.quat_from_axis_angle(axis, q))
+        else:
+            motion = wp.transform(axis * q, wp.quat_identity())
+        builder.joint_X_p[j] = wp.transform_expand(builder.joint_X_p[j]) * motion
+        builder.joint_type[j] = newton.JointType.FIXED
+
+
+# per-DoF lists that collapse_fixed_joints() does not rebuild (it truncates or leaves them)
+_PER_DOF_KEPT = ("joint_f", "joint_act", "joint_velocity_limit", "joint_friction")
+
+
+def _collapse(builder) -> dict:
+    """``builder.collapse_fixed_joints()``, with every per-DoF list realigned to the kept joints."""
+    saved = {}
+    for j, label in enumerate(builder.joint_label):
+        start = builder.joint_qd_start[j]
+        end = (
+            builder.joint_qd_start[j + 1] if j + 1 < builder.joint_count else len(builder.joint_qd)
+        )
+        saved[label] = {a: list(getattr(builder, a)[start:end]) for a in _PER_DOF_KEPT}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        info = builder.collapse_fixed_joints()
+    for a in _PER_DOF_KEPT:
+        setattr(builder, a, [v for label in builder.joint_label for v in saved[label][a]])
+    return info
+
+
+def _chains(builder) -> tuple[list[int], list[int]]:
+    """Per body: depth in joints from the world, and the body's joint (original order)."""
+    parent_of = {c: p for p, c in zip(builder.joint_parent, builder.joint_child)}
+    depth = []
+    for b in range(builder.body_count):
+        d, x = 0, b
+        while x >= 0 and d <= builder.body_count:
+            x, d = parent_of.get(x, -1), d + 1
+        depth.append(d)
+    return depth, list(parent_of)
+
+
+def _load(path: Path, options: RobotOptions) -> Scene:
+    import newton
+
+    from warp_critic.physics import derive
+
+    builder = _import(path)
+    if builder.body_count == 0:
+        raise _fail(path, "no bodies: not a robot")
+    _check_topology(path, builder)
+
+    movable = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
+    fixed = int(newton.JointType.FIXED)
+    for j, t in enumerate(builder.joint_type):
+        if int(t) not in movable and int(t) != fixed:
+            name = newton.JointType(int(t)).name.lower()
+            raise _fail(
+                path,
+                f"joint {_short(builder.joint_label[j])!r} is a {name} joint; only revolute and "
+                "prismatic joints (and fixed ones) are supported",
+            )
+    roots = [j for j, p in enumerate(builder.joint_parent) if p < 0]
+    root_links = {builder.joint_child[j] for j in roots}
+    moving_roots = [
+        j for j in range(builder.joint_count) if builder.joint_parent[j] in root_links | {-1}
+    ]
+    if path.suffix.lower() == ".urdf":
+        # a URDF cannot say whether its base floats: a root carrying several chains is a legged robot
+        branches = [
+            j
+            for j in moving_roots
+            if int(builder.joint_type[j]) in movable
+            and builder.joint_parent[j] in root_links
+            and int(builder.joint_type[roots[0]]) == fixed
+        ]
+        if len(branches) >= 2:
+            raise _fail(
+                path,
+                f"floating base: the root link {_short(builder.body_label[builder.joint_child[roots[0]]])!r} "
+                f"carries {len(branches)} separate movable chains (legs); warp-critic trains "
+                "fixed-base arms",
+            )
+
+    names = [_short(label) for label in builder.joint_label]
+    movable_joints = [j for j, t in enumerate(builder.joint_type) if int(t) in movable]
+    if not movable_joints:
+        raise _fail(path, "no movable joint (every joint is fixed): nothing to train")
+    dof_of = {j: builder.joint_qd_start[j] for j in movable_joints}
+    lower = {j: float(builder.joint_limit_lower[dof_of[j]]) for j in movable_joints}
+    upper = {j: float(builder.joint_limit_upper[dof_of[j]]) for j in movable_joints}
+    file_home = {j: float(builder.joint_q[builder.joint_q_start[j]]) for j in movable_joints}
+    home = {
+        j: derive.home_value(lower[j], upper[j], file_home[j], CONTINUOUS_LIMIT)
+        for j in movable_joints
+    }
+
+    if options.joints is not None:
+        by_name = {names[j]: j for j in movable_joints}
+        unknown = [n for n in options.joints if n not in by_name]
+        if unknown or not options.joints:
+            raise _fail(
+                path,
+                f"joints: {unknown[0] if unknown else '(none)'!r} is not a movable joint of the "
+                f"robot (movable: {', '.join(names[j] for j in movable_joints)})",
+            )
+        keep = {by_name[n] for n in options.joints}
+        _lock(builder, [j for j in movable_joints if j not in keep], home)
+
+    # the end-effector body, chosen on the file's tree (fixed links included)
+    labels = list(builder.body_label)
+    if options.ee_body is not None:
+        matches = [i for i, lb in enumerate(labels) if lb == options.ee_body]
+        matches = matches or [i for i, lb in enumerate(labels) if _short(lb) == options.ee_body]
+        if len(matches) != 1:
+            raise _fail(
+                path,
+                f"ee_body {options.ee_body!r} names {len(matches)} of the bodies "
+                f"{[_short(lb) for lb in labels]}",
+            )
+        ee = matches[0]
+    else:
+        depth, _ = _chains(builder)
+        ee = int(np.argmax(depth))  # first body of greatest depth
+    ee_label = labels[ee]
+
+    info = _collapse(builder)
+    tip = np.array(options.tip_offset or (0.0, 0.0, 0.0), dtype=np.float64)
+    if ee in info["body_merged_parent"]:
+        parent = info["body_merged_parent"][ee]
+        if parent < 0:
+            raise _fail(path, f"ee_body {_short(ee_label)!r} is welded to the world")
+        xf = info["body_merged_transform"][ee]
+        import warp as wp
+
+        tip = np.array(wp.transform_point(xf, wp.vec3(*tip)), dtype=np.float64)
+        ee = info["body_remap"][parent]
+    else:
+        ee = info["body_remap"][ee]
+
+    for b, m in enumerate(builder.body_mass):
+        if not m > 0.0:
+            raise _fail(path, f"body {_short(builder.body_label[b])!r} has no mass ({m} kg)")
+    if builder.joint_dof_count == 0:
+        raise _fail(path, "no movable joint left to train")
+    if not builder.joint_count == builder.joint_dof_count == builder.joint_coord_count:
+        raise _fail(path, "joints other than revolute/prismatic remain after merging fixed joints")
+
+    effort = np.array(builder.joint_effort_limit, dtype=np.float64)
+    effort = np.where(np.isfinite(effort) & (effort > 0), effort, derive.NO_EFFORT_LIMIT)
+    builder.joint_effort_limit = [float(v) for v in effort]
+    kept = [names.index(_short(label)) for label in builder.joint_label]
+    home_q = np.array([home[j] for j in kept], dtype=np.float64)
+    digest = hashlib.sha256(
+        path.read_bytes()
+        + json.dumps(
+            {"options": [options.ee_body, options.tip_offset, options.joints]}, sort_keys=True
+        ).encode()
+        + derive.RULES_VERSION.encode()
+    ).hexdigest()
+    scene = Scene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
+    scene._defaults = derive.derive_defaults(scene)  # the derived training defaults
+    scene.derived = True
+    return scene
