@@ -17,8 +17,8 @@ torque (``M qdd = tau - g(q)`` at rest):
   whose effort limit binds first accelerates less;
 * ``dt`` and substeps: the control period is the KUKA's, ``T = 0.01`` s; ``dt = T / 2^k`` for the
   smallest ``k`` (at most :data:`MAX_HALVINGS`) at which :data:`PROBE_WORLDS` rollouts of the
-  horizon from the home pose under random torques ``U[-tau_j, tau_j]`` (redrawn every control
-  step, seeded) stay finite with kinetic energy ``1/2 qd^T M(q) qd`` at most
+  horizon from the home pose under random saturated torques ``+-tau_j`` (random signs, seeded,
+  redrawn every :data:`PROBE_HOLD` control steps, so that joints slam into their limits) stay finite with kinetic energy ``1/2 qd^T M(q) qd`` at most
   ``E_cap = 10 (sum_j tau_j min(r_j, 2 pi) + |gravity| sum_b m_b 2 R)`` (J), ``R`` the largest
   distance of a body's centre of mass from the first joint at the home pose;
 * gravity: on (9.81 m/s^2 along -z); ``--gravity 0`` for torque-mode (gravity-compensated) arms;
@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-RULES_VERSION = "derive-1"
+RULES_VERSION = "derive-2"
 NO_EFFORT_LIMIT = 1e6  # N*m or N: a joint whose file gives no finite positive effort limit
 CONTROL_PERIOD = 0.01  # s, the KUKA's dt x substeps (0.0025 x 4)
 GOALS = 4
@@ -44,6 +44,7 @@ GRAVITY = 9.81
 MAX_HALVINGS = 6
 PROBE_WORLDS = 8
 PROBE_SEED = 0
+PROBE_HOLD = 10  # control steps a probe torque is held
 ENERGY_FACTOR = 10.0
 # the KUKA's schedule (scenes/kuka.usda)
 KUKA = dict(
@@ -62,7 +63,8 @@ RULES: dict[str, str] = {
     "home": "the file's own non-zero initial pose inside the limits, else mid-range (0 for continuous joints)",
     "goals": f"{GOALS} seeded draws U[home - d, home + d], d = min(range/4, {GOAL_REACH}), inside the limits",
     "max_torque": f"min(effort limit, {A_MAX:g} rad/s^2 x M_jj(home) + max |gravity torque| over home and goals)",
-    "dt": f"control period {CONTROL_PERIOD} s halved until {PROBE_WORLDS} random-torque rollouts stay finite "
+    "dt": f"control period {CONTROL_PERIOD} s halved until {PROBE_WORLDS} rollouts under random +-max_torque "
+    f"(signs redrawn every {PROBE_HOLD} steps) stay finite "
     f"with kinetic energy <= {ENERGY_FACTOR:g} x (sum tau x range + weight x 2 x reach)",
     "substeps": "control period / dt",
     "gravity": f"{GRAVITY} m/s^2 (--gravity 0 for a torque-mode arm)",
@@ -185,7 +187,9 @@ def stable(scene, dt: float, substeps: int, max_torque: np.ndarray, gravity: flo
     qd = torch.zeros_like(q)
     with torch.no_grad():
         for t in range(KUKA["horizon"]):
-            tau = (torch.rand(q.shape, generator=gen) * 2 - 1) * bound
+            if t % PROBE_HOLD == 0:  # saturated torques of random sign, held: slams into limits
+                sign = torch.randint(0, 2, q.shape, generator=gen).float() * 2 - 1
+            tau = sign * bound
             q, qd = sim.step(q, qd, tau)
             if not (torch.isfinite(q).all() and torch.isfinite(qd).all()):
                 return False
