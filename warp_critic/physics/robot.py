@@ -412,7 +412,26 @@ def _load(path: Path, options: RobotOptions) -> Scene:
         ).encode()
         + derive.RULES_VERSION.encode()
     ).hexdigest()
-    scene = Scene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
-    scene._defaults = derive.derive_defaults(scene)  # the derived training defaults
-    scene.derived = True
-    return scene
+    return RobotScene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
+
+
+class RobotScene(Scene):
+    """A :class:`Scene` imported from a robot file; its training defaults are derived from the
+    robot (:mod:`warp_critic.physics.derive`) on first use, so loading alone stays cheap."""
+
+    derived = True
+
+    @property
+    def _defaults(self) -> dict:
+        if self._derived_values is None:
+            from warp_critic.physics import derive
+
+            with self._derive_lock:
+                if self._derived_values is None:
+                    self._derived_values = derive.derive_defaults(self)
+        return self._derived_values
+
+    @_defaults.setter
+    def _defaults(self, value: dict) -> None:  # Scene.__init__ sets {}: derive instead
+        self._derived_values = value or None
+        self._derive_lock = threading.Lock()

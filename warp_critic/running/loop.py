@@ -265,8 +265,8 @@ class Session:
                     f"({', '.join(f'{r.cfg.out}: {r.start}' for r in self.runs)}); resume them one by one"
                 )
             scene = None
-            for r in self.runs:
-                scene = load_task_scene(r.cfg)
+            for k, r in enumerate(self.runs):
+                scene = load_task_scene(r.cfg, announce=k == 0)
             self.scene_hash = getattr(scene, "content_hash", None)
             if cfg.seeds:
                 check_memory(self.runs[0].cfg, scene.dof, copies=len(self.runs))

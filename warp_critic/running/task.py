@@ -482,14 +482,11 @@ def scene_of(cfg) -> Scene:
     )
 
 
-_ANNOUNCED: set[tuple] = set()
-
-
-def load_task_scene(cfg: TaskConfig) -> Scene:
+def load_task_scene(cfg: TaskConfig, announce: bool = True) -> Scene:
     """Load the scene, fill the config's defaults from it and check the config; returns the scene.
 
     For a robot file, the defaults derived from the robot that the run uses are kept in the config
-    (``derived_defaults``: value and rule) and announced on one line.
+    (``derived_defaults``: value and rule) and, with ``announce``, stated on one line on stderr.
     """
     check_fields(cfg)  # finite numbers before anything is built
     if cfg.tip_offset is not None and len(cfg.tip_offset) != 3:
@@ -507,9 +504,7 @@ def load_task_scene(cfg: TaskConfig) -> Scene:
             "home": {"value": scene.home.tolist(), "rule": derive.RULES["home"]},
             **{n: {"value": values[n], "rule": derive.RULES[n]} for n in sorted(used)},
         }
-        key = (scene.content_hash, tuple(sorted(used)))
-        if key not in _ANNOUNCED:
-            _ANNOUNCED.add(key)
+        if announce:
             import sys
 
             sys.stderr.write(f"warp-critic: {derive.summary(scene, values, used)}\n")
