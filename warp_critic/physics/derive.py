@@ -33,7 +33,6 @@ from typing import Any
 
 import numpy as np
 
-RULES_VERSION = "derive-2"
 NO_EFFORT_LIMIT = 1e6  # N*m or N: a joint whose file gives no finite positive effort limit
 CONTROL_PERIOD = 0.01  # s, the KUKA's dt x substeps (0.0025 x 4)
 GOALS = 4

@@ -405,12 +405,13 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     builder.joint_effort_limit = [float(v) for v in effort]
     kept = [names.index(_short(label)) for label in builder.joint_label]
     home_q = np.array([home[j] for j in kept], dtype=np.float64)
+    # the file and the options shape the model; the derived defaults do not enter (a run resolves
+    # them into its own config, as the training-default attributes of a scene file)
     digest = hashlib.sha256(
         path.read_bytes()
         + json.dumps(
             {"options": [options.ee_body, options.tip_offset, options.joints]}, sort_keys=True
         ).encode()
-        + derive.RULES_VERSION.encode()
     ).hexdigest()
     return RobotScene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
 
