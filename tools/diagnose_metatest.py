@@ -140,7 +140,10 @@ def main(argv=None) -> int:
         f"{'as trained' if args.link_length is None else f'{args.link_length} m'}"
     )
     traj = rollout(sim, policy_fn(MLPPolicy(norm), params), q0, qd0, horizon)
-    print(f"step 0 (untrained): mean {((traj.q[-1] - goal) ** 2).sum(-1).mean():.4f}")
+    untrained = ((traj.q[-1] - goal) ** 2).sum(-1).mean()
+    print(
+        f"step 0 (untrained): mean {untrained:.4f} (MSE over the joints {untrained / scene.dof:.5f})"
+    )
     for step in range(1, steps + 1):
         params, _ = inner_update(
             critic,
@@ -181,6 +184,7 @@ def main(argv=None) -> int:
             gravity=sim.gravity,
         )
         u = torch.zeros(horizon, G, scene.dof, requires_grad=True)
+        home = torch.as_tensor(scene.home, dtype=torch.float32).expand(G, -1).clone()
         opt = torch.optim.Adam([u], lr=0.1)
         best = torch.full(
             (G,), float("inf")
@@ -190,7 +194,7 @@ def main(argv=None) -> int:
             traj = rollout(
                 dsim,
                 lambda q, qd, t=t: norm.max_torque * torch.tanh(u[next(t)]),
-                dsim.zeros(),
+                home,  # from the home pose, as the policies start
                 dsim.zeros(),
                 horizon,
                 differentiable=True,
@@ -202,7 +206,8 @@ def main(argv=None) -> int:
             opt.step()
         print(
             f"open-loop torques through the model ({args.reach_iterations} Adam steps): "
-            f"best final sq. error per goal {fmt(best)}"
+            f"best final sq. error per goal {fmt(best)}; mean {best.mean():.4f} "
+            f"(MSE over the joints {best.mean() / scene.dof:.5f})"
         )
     return 0
 
