@@ -452,11 +452,9 @@ BAD_SCENES = {
         lambda tmp: (tmp / "notes.txt", (tmp / "notes.txt").write_text("text\n"))[0],
         "not a USD",
     ),
-    "urdf": (
-        lambda tmp: (
-            tmp / "robot.urdf",
-            (tmp / "robot.urdf").write_text(URDF["reacher"]().read_text()),
-        )[0],
+    # a .urdf is a robot file now (tests/test_robots.py); an unknown suffix is still refused
+    "suffix": (
+        lambda tmp: (tmp / "robot.obj", (tmp / "robot.obj").write_text("v 0 0 0"))[0],
         "not a USD",
     ),
     "no_articulation": (lambda tmp: _edited_reacher(tmp, _no_root), "ArticulationRootAPI"),
@@ -523,7 +521,7 @@ def test_bad_variants_raise_user_error_naming_the_field(variant, flag):
 
 
 @pytest.mark.parametrize(
-    "case", ["missing", "text", "urdf", "no_articulation", "spherical", "negative_mass"]
+    "case", ["missing", "text", "suffix", "no_articulation", "spherical", "negative_mass"]
 )
 def test_bad_scene_files_on_the_command_line_exit_2_with_one_line(case, tmp_path, capsys):
     from warp_critic.cli.main import main

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from warp_critic.core.errors import SceneError, warn
-from warp_critic.physics.scene import EE_ATTR, Scene, load_scene
+from warp_critic.physics.scene import Scene, load_scene
 
 __all__ = ["RobotOptions", "ROBOT_SUFFIXES", "is_robot_file", "load_any", "load_robot"]
 
@@ -68,7 +68,8 @@ def _fail(path: Path, problem: str) -> SceneError:
 
 
 def is_robot_file(path: str | Path) -> bool:
-    """A URDF/MJCF file, or a USD file whose articulation carries no ``warp_critic:*`` attributes."""
+    """A URDF/MJCF file, or a USD file with no ``warp_critic:*`` attribute at all (a scene file that
+    lacks one of ours is a broken scene, reported as such by :func:`load_scene`)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix in ROBOT_SUFFIXES:
@@ -83,7 +84,11 @@ def is_robot_file(path: str | Path) -> bool:
         return False
     if stage is None:
         return False
-    return not any(prim.HasAttribute(EE_ATTR) for prim in stage.Traverse())
+    return not any(
+        prop.GetName().startswith("warp_critic:")
+        for prim in stage.Traverse()
+        for prop in prim.GetProperties()
+    )
 
 
 def load_any(
