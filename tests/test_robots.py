@@ -329,7 +329,7 @@ def test_import_round_trip_trains_to_the_same_first_iteration(two_link, tmp_path
 def test_run_config_states_each_derived_default_with_its_rule(two_link, tmp_path, capfd):
     import json
 
-    _first_iteration(str(two_link), tmp_path / "run")
+    _first_iteration(str(two_link), tmp_path / "run", "--ee-body", "l1", "--joints", "j1,j2")
     err = capfd.readouterr().err
     summary = [line for line in err.splitlines() if "derived defaults" in line]
     assert len(summary) == 1 and "max_torque" in summary[0] and "dt" in summary[0], err
@@ -337,6 +337,11 @@ def test_run_config_states_each_derived_default_with_its_rule(two_link, tmp_path
     assert set(derived) >= {"home", "goals", "max_torque", "dt", "substeps", "gravity"}
     assert "horizon" not in derived  # given on the command line: not derived
     assert all(entry["rule"] for entry in derived.values())
+    # meta-test finds the robot again with the run's robot options (end effector l1)
+    out = tmp_path / "metatest.json"
+    argv = ["meta-test", str(tmp_path / "run"), "--num-goals", "2", "--inits", "1"]
+    code, err = _run([*argv, "--goal-std", "0.1", "--device", "cpu", "--out", str(out)], capfd)
+    assert code == 0 and out.is_file(), err
 
 
 # ------------------------------------------------------------------------------------------------
