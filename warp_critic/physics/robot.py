@@ -28,14 +28,21 @@ from __future__ import annotations
 import hashlib
 import json
 import threading
-import warnings
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from warp_critic.core.errors import SceneError, warn
+from warp_critic.core.errors import SceneError
+from warp_critic.physics.importers import (
+    check_topology,
+    collapse,
+    depths,
+    fail,
+    import_builder,
+    lock,
+    short,
+)
 from warp_critic.physics.scene import Scene, load_scene
 
 __all__ = ["RobotOptions", "ROBOT_SUFFIXES", "is_robot_file", "load_any", "load_robot"]
@@ -61,10 +68,6 @@ class RobotOptions:
 
     def any(self) -> bool:
         return any(v is not None for v in (self.ee_body, self.tip_offset, self.joints))
-
-
-def _fail(path: Path, problem: str) -> SceneError:
-    return SceneError(f"{path}: {' '.join(str(problem).split())}")
 
 
 def is_robot_file(path: str | Path) -> bool:
@@ -147,176 +150,24 @@ def load_robot(path: str | Path, options: RobotOptions = RobotOptions()) -> Scen
     return scene
 
 
-# ------------------------------------------------------------------------------------------------
-# importing
-# ------------------------------------------------------------------------------------------------
-
-
-def _urdf_without_meshes(path: Path) -> tuple[str, str | None]:
-    """The URDF text with mesh visuals/colliders removed, and the first mesh file that is missing."""
-    try:
-        tree = ET.parse(path)
-    except (ET.ParseError, OSError) as exc:
-        raise _fail(path, f"not a readable URDF ({exc})") from None
-    robot = tree.getroot()
-    if robot.tag != "robot":
-        raise _fail(path, f"not a URDF (root element <{robot.tag}>, expected <robot>)")
-    missing = None
-    for link in robot.iter("link"):
-        for kind in ("visual", "collision"):
-            for element in list(link.findall(kind)):
-                mesh = element.find("geometry/mesh")
-                if mesh is None:
-                    continue
-                if missing is None and not _mesh_exists(path, mesh.get("filename", "")):
-                    missing = mesh.get("filename", "")
-                link.remove(element)
-    return ET.tostring(robot, encoding="unicode"), missing
-
-
-def _mesh_exists(urdf: Path, filename: str) -> bool:
-    """Whether a URDF mesh reference resolves to a file (package:// searched up from the URDF)."""
-    if filename.startswith("package://"):
-        package, _, rest = filename[len("package://") :].partition("/")
-        for parent in urdf.parents:
-            if parent.name == package and (parent / rest).is_file():
-                return True
-            if (parent / package / rest).is_file():
-                return True
-        return False
-    if filename.startswith("file://"):
-        filename = filename[len("file://") :]
-    target = Path(filename)
-    return (target if target.is_absolute() else urdf.parent / target).is_file()
-
-
-def _import(path: Path):
-    """Newton's importer for the file's format -> a ModelBuilder with fixed joints still in."""
-    import newton
-
-    builder = newton.ModelBuilder()
-    suffix = path.suffix.lower()
-    missing = None
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
-            if suffix == ".urdf":
-                text, missing = _urdf_without_meshes(path)
-                builder.add_urdf(text, joint_ordering="dfs")
-            elif suffix in (".xml", ".mjcf"):
-                builder.add_mjcf(str(path))
-            else:
-                builder.add_usd(str(path), load_sites=False)
-        except SceneError:
-            raise
-        except Exception as exc:  # newton/pxr/xml errors: one line, never a traceback
-            text = " ".join(str(exc).split())[:300] or type(exc).__name__
-            raise _fail(path, f"newton's importer failed: {text}") from None
-    for w in caught:
-        text = str(w.message)
-        if missing is None and "does not exist" in text and "Asset file" in text:
-            missing = text.split("Asset file", 1)[1].split("does not exist")[0].strip()
-    if missing:
-        warn(f"{path}: mesh file {missing} is missing (meshes are not needed for dynamics)")
-    return builder
-
-
-def _short(label: str) -> str:
-    return label.rsplit("/", 1)[-1]
-
-
-def _check_topology(path: Path, builder) -> None:
-    """Refuse floating bases, closed loops and bodies that two joints move."""
-    import newton
-
-    free = {int(newton.JointType.FREE), int(newton.JointType.DISTANCE)}
-    for j, t in enumerate(builder.joint_type):
-        if int(t) in free:
-            raise _fail(
-                path,
-                f"floating base: joint {_short(builder.joint_label[j])!r} lets "
-                f"{_short(builder.body_label[builder.joint_child[j]])!r} move freely in the world; "
-                "warp-critic trains fixed-base robots",
-            )
-    children = list(builder.joint_child)
-    loops = len(children) != len(set(children)) or any(a < 0 for a in builder.joint_articulation)
-    eq = getattr(builder, "equality_constraint_type", None) or []
-    if loops or len(eq):
-        raise _fail(path, "closed kinematic loop: warp-critic trains open-chain (tree) robots")
-    jointed = set(children)
-    for b, label in enumerate(builder.body_label):
-        if b not in jointed:
-            raise _fail(path, f"floating base: body {_short(label)!r} has no joint to the world")
-
-
-def _lock(builder, locked: list[int], home: dict[int, float]) -> None:
-    """Turn the joints ``locked`` into fixed joints at their home position (baked into X_p)."""
-    import newton
-    import warp as wp
-
-    for j in locked:
-        q = home.get(j, 0.0)
-        dof = builder.joint_qd_start[j]
-        axis = wp.vec3(*builder.joint_axis[dof])
-        if int(builder.joint_type[j]) == int(newton.JointType.REVOLUTE):
-            motion = wp.transform(wp.vec3(0.0, 0.0, 0.0), wp.quat_from_axis_angle(axis, q))
-        else:
-            motion = wp.transform(axis * q, wp.quat_identity())
-        builder.joint_X_p[j] = wp.transform_expand(builder.joint_X_p[j]) * motion
-        builder.joint_type[j] = newton.JointType.FIXED
-
-
-# per-DoF lists that collapse_fixed_joints() does not rebuild (it truncates or leaves them)
-_PER_DOF_KEPT = ("joint_f", "joint_act", "joint_velocity_limit", "joint_friction")
-
-
-def _collapse(builder) -> dict:
-    """``builder.collapse_fixed_joints()``, with every per-DoF list realigned to the kept joints."""
-    saved = {}
-    for j, label in enumerate(builder.joint_label):
-        start = builder.joint_qd_start[j]
-        end = (
-            builder.joint_qd_start[j + 1] if j + 1 < builder.joint_count else len(builder.joint_qd)
-        )
-        saved[label] = {a: list(getattr(builder, a)[start:end]) for a in _PER_DOF_KEPT}
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        info = builder.collapse_fixed_joints()
-    for a in _PER_DOF_KEPT:
-        setattr(builder, a, [v for label in builder.joint_label for v in saved[label][a]])
-    return info
-
-
-def _chains(builder) -> tuple[list[int], list[int]]:
-    """Per body: depth in joints from the world, and the body's joint (original order)."""
-    parent_of = {c: p for p, c in zip(builder.joint_parent, builder.joint_child)}
-    depth = []
-    for b in range(builder.body_count):
-        d, x = 0, b
-        while x >= 0 and d <= builder.body_count:
-            x, d = parent_of.get(x, -1), d + 1
-        depth.append(d)
-    return depth, list(parent_of)
-
-
 def _load(path: Path, options: RobotOptions) -> Scene:
     import newton
 
     from warp_critic.physics import derive
 
-    builder = _import(path)
+    builder = import_builder(path)
     if builder.body_count == 0:
-        raise _fail(path, "no bodies: not a robot")
-    _check_topology(path, builder)
+        raise fail(path, "no bodies: not a robot")
+    check_topology(path, builder)
 
     movable = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
     fixed = int(newton.JointType.FIXED)
     for j, t in enumerate(builder.joint_type):
         if int(t) not in movable and int(t) != fixed:
             name = newton.JointType(int(t)).name.lower()
-            raise _fail(
+            raise fail(
                 path,
-                f"joint {_short(builder.joint_label[j])!r} is a {name} joint; only revolute and "
+                f"joint {short(builder.joint_label[j])!r} is a {name} joint; only revolute and "
                 "prismatic joints (and fixed ones) are supported",
             )
     roots = [j for j, p in enumerate(builder.joint_parent) if p < 0]
@@ -334,17 +185,17 @@ def _load(path: Path, options: RobotOptions) -> Scene:
             and int(builder.joint_type[roots[0]]) == fixed
         ]
         if len(branches) >= 2:
-            raise _fail(
+            raise fail(
                 path,
-                f"floating base: the root link {_short(builder.body_label[builder.joint_child[roots[0]]])!r} "
+                f"floating base: the root link {short(builder.body_label[builder.joint_child[roots[0]]])!r} "
                 f"carries {len(branches)} separate movable chains (legs); warp-critic trains "
                 "fixed-base arms",
             )
 
-    names = [_short(label) for label in builder.joint_label]
+    names = [short(label) for label in builder.joint_label]
     movable_joints = [j for j, t in enumerate(builder.joint_type) if int(t) in movable]
     if not movable_joints:
-        raise _fail(path, "no movable joint (every joint is fixed): nothing to train")
+        raise fail(path, "no movable joint (every joint is fixed): nothing to train")
     dof_of = {j: builder.joint_qd_start[j] for j in movable_joints}
     lower = {j: float(builder.joint_limit_lower[dof_of[j]]) for j in movable_joints}
     upper = {j: float(builder.joint_limit_upper[dof_of[j]]) for j in movable_joints}
@@ -358,37 +209,37 @@ def _load(path: Path, options: RobotOptions) -> Scene:
         by_name = {names[j]: j for j in movable_joints}
         unknown = [n for n in options.joints if n not in by_name]
         if unknown or not options.joints:
-            raise _fail(
+            raise fail(
                 path,
                 f"joints: {unknown[0] if unknown else '(none)'!r} is not a movable joint of the "
                 f"robot (movable: {', '.join(names[j] for j in movable_joints)})",
             )
         keep = {by_name[n] for n in options.joints}
-        _lock(builder, [j for j in movable_joints if j not in keep], home)
+        lock(builder, [j for j in movable_joints if j not in keep], home)
 
     # the end-effector body, chosen on the file's tree (fixed links included)
     labels = list(builder.body_label)
     if options.ee_body is not None:
         matches = [i for i, lb in enumerate(labels) if lb == options.ee_body]
-        matches = matches or [i for i, lb in enumerate(labels) if _short(lb) == options.ee_body]
+        matches = matches or [i for i, lb in enumerate(labels) if short(lb) == options.ee_body]
         if len(matches) != 1:
-            raise _fail(
+            raise fail(
                 path,
                 f"ee_body {options.ee_body!r} names {len(matches)} of the bodies "
-                f"{[_short(lb) for lb in labels]}",
+                f"{[short(lb) for lb in labels]}",
             )
         ee = matches[0]
     else:
-        depth, _ = _chains(builder)
+        depth, _ = depths(builder)
         ee = int(np.argmax(depth))  # first body of greatest depth
     ee_label = labels[ee]
 
-    info = _collapse(builder)
+    info = collapse(builder)
     tip = np.array(options.tip_offset or (0.0, 0.0, 0.0), dtype=np.float64)
     if ee in info["body_merged_parent"]:
         parent = info["body_merged_parent"][ee]
         if parent < 0:
-            raise _fail(path, f"ee_body {_short(ee_label)!r} is welded to the world")
+            raise fail(path, f"ee_body {short(ee_label)!r} is welded to the world")
         xf = info["body_merged_transform"][ee]
         import warp as wp
 
@@ -399,16 +250,16 @@ def _load(path: Path, options: RobotOptions) -> Scene:
 
     for b, m in enumerate(builder.body_mass):
         if not m > 0.0:
-            raise _fail(path, f"body {_short(builder.body_label[b])!r} has no mass ({m} kg)")
+            raise fail(path, f"body {short(builder.body_label[b])!r} has no mass ({m} kg)")
     if builder.joint_dof_count == 0:
-        raise _fail(path, "no movable joint left to train")
+        raise fail(path, "no movable joint left to train")
     if not builder.joint_count == builder.joint_dof_count == builder.joint_coord_count:
-        raise _fail(path, "joints other than revolute/prismatic remain after merging fixed joints")
+        raise fail(path, "joints other than revolute/prismatic remain after merging fixed joints")
 
     effort = np.array(builder.joint_effort_limit, dtype=np.float64)
     effort = np.where(np.isfinite(effort) & (effort > 0), effort, derive.NO_EFFORT_LIMIT)
     builder.joint_effort_limit = [float(v) for v in effort]
-    kept = [names.index(_short(label)) for label in builder.joint_label]
+    kept = [names.index(short(label)) for label in builder.joint_label]
     home_q = np.array([home[j] for j in kept], dtype=np.float64)
     # the file and the options shape the model; the derived defaults do not enter (a run resolves
     # them into its own config, as the training-default attributes of a scene file)

@@ -1,0 +1,170 @@
+"""Newton's importers, one call per robot-file format, and the builder surgery a robot file needs.
+
+* :func:`import_builder`: ``add_urdf`` (the URDF without its meshes: they are not needed for
+  dynamics; one warning names the first missing mesh file), ``add_mjcf`` or ``add_usd``;
+* :func:`check_topology`: refuse floating bases and closed loops;
+* :func:`lock`: weld joints at a position; :func:`collapse`: merge fixed joints, keeping every
+  per-DoF list aligned; :func:`depths`: each body's depth in the kinematic tree.
+"""
+
+from __future__ import annotations
+
+import warnings
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+from warp_critic.core.errors import SceneError, warn
+
+
+def fail(path: Path, problem: str) -> SceneError:
+    return SceneError(f"{path}: {' '.join(str(problem).split())}")
+
+
+def short(label: str) -> str:
+    return label.rsplit("/", 1)[-1]
+
+
+# ------------------------------------------------------------------------------------------------
+
+
+def _urdf_without_meshes(path: Path) -> tuple[str, str | None]:
+    """The URDF text with mesh visuals/colliders removed, and the first mesh file that is missing."""
+    try:
+        tree = ET.parse(path)
+    except (ET.ParseError, OSError) as exc:
+        raise fail(path, f"not a readable URDF ({exc})") from None
+    robot = tree.getroot()
+    if robot.tag != "robot":
+        raise fail(path, f"not a URDF (root element <{robot.tag}>, expected <robot>)")
+    missing = None
+    for link in robot.iter("link"):
+        for kind in ("visual", "collision"):
+            for element in list(link.findall(kind)):
+                mesh = element.find("geometry/mesh")
+                if mesh is None:
+                    continue
+                if missing is None and not _mesh_exists(path, mesh.get("filename", "")):
+                    missing = mesh.get("filename", "")
+                link.remove(element)
+    return ET.tostring(robot, encoding="unicode"), missing
+
+
+def _mesh_exists(urdf: Path, filename: str) -> bool:
+    """Whether a URDF mesh reference resolves to a file (package:// searched up from the URDF)."""
+    if filename.startswith("package://"):
+        package, _, rest = filename[len("package://") :].partition("/")
+        for parent in urdf.parents:
+            if parent.name == package and (parent / rest).is_file():
+                return True
+            if (parent / package / rest).is_file():
+                return True
+        return False
+    if filename.startswith("file://"):
+        filename = filename[len("file://") :]
+    target = Path(filename)
+    return (target if target.is_absolute() else urdf.parent / target).is_file()
+
+
+def import_builder(path: Path):
+    """Newton's importer for the file's format -> a ModelBuilder with fixed joints still in."""
+    import newton
+
+    builder = newton.ModelBuilder()
+    suffix = path.suffix.lower()
+    missing = None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            if suffix == ".urdf":
+                text, missing = _urdf_without_meshes(path)
+                builder.add_urdf(text, joint_ordering="dfs")
+            elif suffix in (".xml", ".mjcf"):
+                builder.add_mjcf(str(path))
+            else:
+                builder.add_usd(str(path), load_sites=False)
+        except SceneError:
+            raise
+        except Exception as exc:  # newton/pxr/xml errors: one line, never a traceback
+            text = " ".join(str(exc).split())[:300] or type(exc).__name__
+            raise fail(path, f"newton's importer failed: {text}") from None
+    for w in caught:
+        text = str(w.message)
+        if missing is None and "does not exist" in text and "Asset file" in text:
+            missing = text.split("Asset file", 1)[1].split("does not exist")[0].strip()
+    if missing:
+        warn(f"{path}: mesh file {missing} is missing (meshes are not needed for dynamics)")
+    return builder
+
+
+def check_topology(path: Path, builder) -> None:
+    """Refuse floating bases, closed loops and bodies that two joints move."""
+    import newton
+
+    free = {int(newton.JointType.FREE), int(newton.JointType.DISTANCE)}
+    for j, t in enumerate(builder.joint_type):
+        if int(t) in free:
+            raise fail(
+                path,
+                f"floating base: joint {short(builder.joint_label[j])!r} lets "
+                f"{short(builder.body_label[builder.joint_child[j]])!r} move freely in the world; "
+                "warp-critic trains fixed-base robots",
+            )
+    children = list(builder.joint_child)
+    loops = len(children) != len(set(children)) or any(a < 0 for a in builder.joint_articulation)
+    eq = getattr(builder, "equality_constraint_type", None) or []
+    if loops or len(eq):
+        raise fail(path, "closed kinematic loop: warp-critic trains open-chain (tree) robots")
+    jointed = set(children)
+    for b, label in enumerate(builder.body_label):
+        if b not in jointed:
+            raise fail(path, f"floating base: body {short(label)!r} has no joint to the world")
+
+
+def lock(builder, locked: list[int], home: dict[int, float]) -> None:
+    """Turn the joints ``locked`` into fixed joints at their home position (baked into X_p)."""
+    import newton
+    import warp as wp
+
+    for j in locked:
+        q = home.get(j, 0.0)
+        dof = builder.joint_qd_start[j]
+        axis = wp.vec3(*builder.joint_axis[dof])
+        if int(builder.joint_type[j]) == int(newton.JointType.REVOLUTE):
+            motion = wp.transform(wp.vec3(0.0, 0.0, 0.0), wp.quat_from_axis_angle(axis, q))
+        else:
+            motion = wp.transform(axis * q, wp.quat_identity())
+        builder.joint_X_p[j] = wp.transform_expand(builder.joint_X_p[j]) * motion
+        builder.joint_type[j] = newton.JointType.FIXED
+
+
+# per-DoF lists that collapse_fixed_joints() does not rebuild (it truncates or leaves them)
+_PER_DOF_KEPT = ("joint_f", "joint_act", "joint_velocity_limit", "joint_friction")
+
+
+def collapse(builder) -> dict:
+    """``builder.collapse_fixed_joints()``, with every per-DoF list realigned to the kept joints."""
+    saved = {}
+    for j, label in enumerate(builder.joint_label):
+        start = builder.joint_qd_start[j]
+        end = (
+            builder.joint_qd_start[j + 1] if j + 1 < builder.joint_count else len(builder.joint_qd)
+        )
+        saved[label] = {a: list(getattr(builder, a)[start:end]) for a in _PER_DOF_KEPT}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        info = builder.collapse_fixed_joints()
+    for a in _PER_DOF_KEPT:
+        setattr(builder, a, [v for label in builder.joint_label for v in saved[label][a]])
+    return info
+
+
+def depths(builder) -> tuple[list[int], list[int]]:
+    """Per body: depth in joints from the world, and the body's joint (original order)."""
+    parent_of = {c: p for p, c in zip(builder.joint_parent, builder.joint_child)}
+    depth = []
+    for b in range(builder.body_count):
+        d, x = 0, b
+        while x >= 0 and d <= builder.body_count:
+            x, d = parent_of.get(x, -1), d + 1
+        depth.append(d)
+    return depth, list(parent_of)
