@@ -170,27 +170,27 @@ def _load(path: Path, options: RobotOptions) -> Scene:
                 f"joint {short(builder.joint_label[j])!r} is a {name} joint; only revolute and "
                 "prismatic joints (and fixed ones) are supported",
             )
-    roots = [j for j, p in enumerate(builder.joint_parent) if p < 0]
-    root_links = {builder.joint_child[j] for j in roots}
-    moving_roots = [
-        j for j in range(builder.joint_count) if builder.joint_parent[j] in root_links | {-1}
-    ]
     if path.suffix.lower() == ".urdf":
-        # a URDF cannot say whether its base floats: a root carrying several chains is a legged robot
-        branches = [
-            j
-            for j in moving_roots
-            if int(builder.joint_type[j]) in movable
-            and builder.joint_parent[j] in root_links
-            and int(builder.joint_type[roots[0]]) == fixed
+        # a URDF cannot say whether its base floats: a root link welded to the world that carries
+        # several movable chains (legs) is taken for a floating-base robot
+        welded = [
+            builder.joint_child[j]
+            for j, p in enumerate(builder.joint_parent)
+            if p < 0 and int(builder.joint_type[j]) == fixed
         ]
-        if len(branches) >= 2:
-            raise fail(
-                path,
-                f"floating base: the root link {short(builder.body_label[builder.joint_child[roots[0]]])!r} "
-                f"carries {len(branches)} separate movable chains (legs); warp-critic trains "
-                "fixed-base arms",
-            )
+        for link in welded:
+            branches = [
+                j
+                for j, p in enumerate(builder.joint_parent)
+                if p == link and int(builder.joint_type[j]) in movable
+            ]
+            if len(branches) >= 2:
+                raise fail(
+                    path,
+                    f"floating base: the root link {short(builder.body_label[link])!r} carries "
+                    f"{len(branches)} separate movable chains (legs); warp-critic trains fixed-base "
+                    "arms",
+                )
 
     names = [short(label) for label in builder.joint_label]
     movable_joints = [j for j, t in enumerate(builder.joint_type) if int(t) in movable]
