@@ -26,23 +26,6 @@ import numpy as np
 from warp_critic.core.errors import UserError
 
 DEG = math.pi / 180.0
-# Scene.defaults key -> (attribute name, kind)
-_DEFAULT_ATTRS = {
-    "goals": ("goals", "goals"),
-    "horizon": ("horizon", "int"),
-    "dt": ("dt", "double"),
-    "substeps": ("substeps", "int"),
-    "max_torque": ("maxTorque", "doubles"),
-    "qd_scale": ("qdScale", "double"),
-    "alpha": ("alpha", "double"),
-    "lr": ("lr", "double"),
-    "gravity": ("gravity", "double"),
-    "iterations": ("iterations", "int"),
-    "inner_steps": ("innerSteps", "int"),
-    "critic_input": ("criticInput", "string"),
-    "start_std": ("startStd", "double"),
-    "home_starts": ("homeStarts", "int"),
-}
 
 
 def _quat_x_to(axis: np.ndarray) -> np.ndarray:
@@ -156,22 +139,16 @@ def write_scene(scene, out: str | Path) -> Path:
         _vec3(scene.tip_offset)
     )
     T = Sdf.ValueTypeNames
-    for key, value in scene.defaults.items():
-        attr, kind = _DEFAULT_ATTRS[key]
-        if kind == "goals":
-            type_name, v = T.DoubleArray, [float(x) for g in value for x in g]
-        elif kind == "doubles":
-            type_name, v = T.DoubleArray, [float(x) for x in value]
-        elif kind == "double":
-            type_name, v = T.Double, float(value)
-        elif kind == "int":
-            type_name, v = T.Int, int(value)
-        else:
-            type_name, v = T.String, str(value)
-        rp.CreateAttribute(f"warp_critic:{attr}", type_name, custom=True).Set(v)
-    rp.CreateAttribute("warp_critic:homePose", T.DoubleArray, custom=True).Set(
-        [float(x) for x in scene.home]
-    )
+    from warp_critic.physics import schema
+
+    values = {**scene.defaults, "home": [float(x) for x in scene.home]}
+    for (
+        attr
+    ) in schema.ATTRIBUTES:  # the scene schema's attributes, authored as the loader reads them
+        if attr.key in values:
+            rp.CreateAttribute(attr.usd, T.Find(attr.type), custom=True).Set(
+                schema.to_usd(attr, values[attr.key])
+            )
 
     paths = []
     for b, bname in enumerate(body_names):
