@@ -205,9 +205,11 @@ def main(argv=None) -> int:
             err.sum().backward()
             opt.step()
         print(
+            f"open-loop floor: mean {best.mean():.4g} (MSE over the joints {best.mean() / scene.dof:.3g})"
+        )
+        print(
             f"open-loop torques through the model ({args.reach_iterations} Adam steps): "
-            f"best final sq. error per goal {fmt(best)}; mean {best.mean():.4f} "
-            f"(MSE over the joints {best.mean() / scene.dof:.5f})"
+            f"best final sq. error per goal {fmt(best)}"
         )
     return 0
 
