@@ -221,9 +221,13 @@ def derive_defaults(scene) -> dict[str, Any]:
     goals = draw_goals(scene)
     max_torque = torque_bounds(scene, goals)
     dt, substeps = time_step(scene, max_torque)
+    # short decimals for config.json and an imported scene, never past a limit by rounding
+    lo, hi = limits(scene)
+    goals = np.clip([[round(float(v), 6) for v in g] for g in goals], lo, hi)
+    torques = np.minimum([float(f"{v:.6g}") for v in max_torque], scene.effort_limit)
     return {
-        "goals": [[round(float(v), 6) for v in g] for g in goals],
-        "max_torque": [float(f"{v:.6g}") for v in max_torque],
+        "goals": [[float(v) for v in g] for g in goals],
+        "max_torque": [float(v) for v in torques],
         "dt": dt,
         "substeps": substeps,
         "gravity": GRAVITY,
