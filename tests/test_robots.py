@@ -393,10 +393,10 @@ def test_panda_rollout_and_gradients_match_the_paper_model(tmp_path):
     scale = torch.tensor([40.0, 40.0, 30.0, 30.0, 5.0, 5.0, 2.0])
     taus = (torch.randn(H, 2, 7, generator=gen) * scale).requires_grad_()
     wq, wqd = torch.randn(H, 2, 7, generator=gen), torch.randn(H, 2, 7, generator=gen)
-    sim.begin_rollout()
+    roll = sim.begin_rollout()
     q, qd, loss = q0, qd0, 0.0
     for t in range(H):
-        q, qd = sim.step(q, qd, taus[t])
+        q, qd = roll.step(q, qd, taus[t])
         loss = loss + (q * wq[t]).sum() + 0.1 * (qd * wqd[t]).sum()
     grads = torch.autograd.grad(loss, [taus, q0, qd0])
     motion = (q - q0).abs().max().item()
