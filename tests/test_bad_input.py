@@ -79,7 +79,7 @@ HAS_CUDA = torch.cuda.is_available()
 @pytest.fixture(scope="module")
 def base(tmp_path_factory):
     from warp_critic.core.runtime import init
-    from warp_critic.evaluation.metatest import TestConfig, meta_test
+    from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
     from warp_critic.methods.baseline import BaselineConfig
     from warp_critic.methods.ddpg import train_ddpg
     from warp_critic.methods.ours import TrainConfig, meta_train
@@ -97,7 +97,9 @@ def base(tmp_path_factory):
         ),
         progress=False,
     )
-    meta_test(TestConfig(run_dir=str(d / "run"), num_goals=1, inits=1, device="cpu"), progress=None)
+    meta_test(
+        MetaTestConfig(run_dir=str(d / "run"), num_goals=1, inits=1, device="cpu"), progress=None
+    )
     train_ddpg(
         BaselineConfig(
             scene=REACHER,
@@ -1996,5 +1998,5 @@ def test_meta_test_numbers_property(name, text, base):
                 str(out),
             ]
         )
-        check_outcome(metatest.TestConfig, name, text, code, err)
+        check_outcome(metatest.MetaTestConfig, name, text, code, err)
         assert not out.exists()

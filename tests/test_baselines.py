@@ -13,7 +13,7 @@ from conftest import REACHER
 
 from warp_critic.cli.main import main
 from warp_critic.core.errors import UserError
-from warp_critic.evaluation.metatest import TestConfig, build_test_critic, meta_test
+from warp_critic.evaluation.metatest import MetaTestConfig, build_test_critic, meta_test
 from warp_critic.learning.networks import Normalizer
 from warp_critic.learning.rollout import Trajectory
 from warp_critic.methods import q_networks as baseline_networks
@@ -131,7 +131,7 @@ def test_baseline_learns_and_its_q_runs_through_meta_test(tmp_path, method):
     assert torch.allclose(loss_fn(q, qd, tau, g), -res.model.q(q, qd, tau, g), atol=1e-6)
 
     result = meta_test(
-        TestConfig(run_dir=str(out), num_goals=2, inits=2, device="cpu"), progress=None
+        MetaTestConfig(run_dir=str(out), num_goals=2, inits=2, device="cpu"), progress=None
     )
     assert result["method"] == method and math.isfinite(result["mean"])
     assert len(result["final_error_per_goal"]) == 2
@@ -234,8 +234,9 @@ def test_baseline_cli_writes_run_directory_and_resumes(tmp_path, capsys):
 
 def test_default_out_directory():
     cfg = BaselineConfig(scene=REACHER, method="meta-critic")
-    cfg.fill_defaults(load_scene(REACHER))
-    assert cfg.out == "runs/reacher-meta-critic" and cfg.horizon is not None and cfg.goals
+    filled = cfg.fill_defaults(load_scene(REACHER))
+    assert filled.out == "runs/reacher-meta-critic" and filled.horizon is not None and filled.goals
+    assert cfg.out is None and cfg.horizon is None and cfg.goals is None  # a new config: cfg as it was
 
 
 @pytest.mark.parametrize(

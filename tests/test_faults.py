@@ -2,8 +2,8 @@
 a crafted checkpoint never runs its code.
 
 The runs here are real ``warp-critic`` processes (``python -m warp_critic.cli.main``), killed with SIGKILL
-(what a crash, an OOM kill or a lost node does) at exact points chosen through ``$WARP_CRITIC_FAULT``
-(see :func:`warp_critic.running.rundir._fault_point`), or stopped with SIGTERM.
+(what a crash, an OOM kill or a lost node does) at exact points
+(``fault_injection.py`` here), or stopped with SIGTERM.
 """
 
 from __future__ import annotations
@@ -40,11 +40,11 @@ ITERATIONS = 6
 
 
 def cli(*args: str, fault: str | None = None, wait: bool = True, **kw):
+    """``warp-critic ARGS`` in a child process; with ``fault`` (``POINT:N``) killed at that point."""
     env = {**os.environ, "WARP_CRITIC_TORCH_THREADS": "1"}
-    env.pop("WARP_CRITIC_FAULT", None)
-    if fault:
-        env["WARP_CRITIC_FAULT"] = fault
     cmd = [sys.executable, "-m", "warp_critic.cli.main", *args]
+    if fault:
+        cmd = [sys.executable, str(Path(__file__).with_name("fault_injection.py")), fault, *args]
     if not wait:
         return subprocess.Popen(
             cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw

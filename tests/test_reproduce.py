@@ -190,7 +190,7 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
     """One job of the batched evaluator (here next to other runs and variants) = meta-test on that run."""
     import torch
 
-    from warp_critic.evaluation.metatest import TestConfig, meta_test
+    from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
     from warp_critic.physics.scene import Variant
     from warp_critic.reproduce.evaluate import Job, evaluate
 
@@ -208,7 +208,7 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
     r = evaluate(jobs, inits=2, steps=3, seed=7, device="cpu", progress=False)
     for job, err in zip(jobs, r["errors"]):
         v = job.variant
-        tc = TestConfig(
+        tc = MetaTestConfig(
             run_dir=job.run_dir,
             goals=job.goals.tolist(),
             inits=2,

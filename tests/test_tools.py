@@ -14,7 +14,8 @@ from conftest import REACHER, ROOT
 
 from warp_critic.core.errors import FieldError, UserError
 
-PAPER = Path("/work/shared/paper/model_based_meta_learning_of_critics.tex")
+# the paper's LaTeX source: ``shared/paper/`` next to the repository (as CI and a clean clone have it)
+PAPER = ROOT.parent / "shared" / "paper" / "model_based_meta_learning_of_critics.tex"
 
 
 def load_tool(name: str):
@@ -92,7 +93,7 @@ def test_diagnose_tool_runs_on_a_run_directory(tmp_path, capsys):
 
 
 def test_paper_table_tool_pools_seeds_and_reports_the_mean_over_joints(tmp_path, capsys):
-    from warp_critic.evaluation.metatest import TestConfig, meta_test
+    from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
 
     tool = load_tool("paper_table")
     runs = [tmp_path / "s0", tmp_path / "s1"]
@@ -132,7 +133,7 @@ def test_paper_table_tool_pools_seeds_and_reports_the_mean_over_joints(tmp_path,
     # each run's share is exactly that run's own meta-test on the same goals and inits
     cell = next(c for c in table["cells"] if c["reading"] == "distance" and c["std"] == 0.3)
     alone = meta_test(
-        TestConfig(
+        MetaTestConfig(
             run_dir=str(runs[1]),
             num_goals=2,
             inits=2,
@@ -446,7 +447,7 @@ def _tex_table(label: str) -> tuple[list[float], dict[str, list[tuple[float, flo
     return columns, rows
 
 
-@pytest.mark.skipif(not PAPER.is_file(), reason="the paper's LaTeX source is not on this machine")
+@pytest.mark.skipif(not PAPER.is_file(), reason="no ../shared/paper/ next to the repository")
 @pytest.mark.parametrize(
     "label", ["table:gen_tasks_kuka", "table:gen_kuka_mass", "table:gen_kuka_link"]
 )
@@ -454,7 +455,7 @@ def test_paper_tables_are_the_papers_latex_tables(label):
     from warp_critic.evaluation.protocol import PAPER_METHODS, PAPER_TABLES
 
     columns, rows = _tex_table(label)
-    _, table = PAPER_TABLES[label]
+    (table,) = [t.values for t in PAPER_TABLES.values() if t.label == label]
     assert set(rows) == set(table) == set(PAPER_METHODS)
     for method, values in rows.items():
         assert list(table[method]) == columns
@@ -471,12 +472,12 @@ def test_paper_table1_has_the_ten_stds():
 
 
 def test_protocol_readings_are_meta_tests():
-    from warp_critic.evaluation.metatest import TestConfig, meta_test  # noqa: F401  (the names the protocol uses)
+    from warp_critic.evaluation.metatest import MetaTestConfig, meta_test  # noqa: F401  (the names the protocol uses)
     from warp_critic.evaluation.protocol import GOAL_NOISE, ProtocolConfig, check_settings
 
     check_settings(ProtocolConfig(goal_noise=list(GOAL_NOISE)))
     assert GOAL_NOISE == ("per-joint", "distance")
-    assert TestConfig().goal_noise in GOAL_NOISE
+    assert MetaTestConfig().goal_noise in GOAL_NOISE
 
 
 # ------------------------------------------------------------------------------------------------

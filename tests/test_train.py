@@ -12,7 +12,7 @@ from conftest import KUKA, REACHER
 
 from warp_critic.cli.main import main
 from warp_critic.core.errors import UserError
-from warp_critic.evaluation.metatest import TestConfig, meta_test
+from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
 from warp_critic.methods import ours as train
 from warp_critic.methods.ours import TrainConfig
 from warp_critic.physics import bridge
@@ -219,7 +219,7 @@ def test_meta_test_uses_no_model_gradient(tmp_path, monkeypatch, capsys):
 
     monkeypatch.setattr(bridge.NewtonBridge, "__init__", spy)
     res = meta_test(
-        TestConfig(run_dir=str(out), num_goals=3, inits=2, goal_std=0.2, device="cpu"),
+        MetaTestConfig(run_dir=str(out), num_goals=3, inits=2, goal_std=0.2, device="cpu"),
         progress=None,
     )
     assert built == [False]  # the test-time model has no gradient buffers at all
@@ -377,7 +377,9 @@ def test_relative_critic_run_meta_tests_from_its_checkpoint(tmp_path):
     )
     ckpt = load_checkpoint(out)
     assert ckpt["critic_input"] == "relative" and ckpt["config"]["velocity_weight"] == 0.01
-    res = meta_test(TestConfig(run_dir=str(out), num_goals=2, inits=1, device="cpu"), progress=None)
+    res = meta_test(
+        MetaTestConfig(run_dir=str(out), num_goals=2, inits=1, device="cpu"), progress=None
+    )
     assert res["mean"] >= 0
 
 
@@ -398,7 +400,8 @@ def test_staggered_policy_lifetime_continues_each_policy_until_it_is_replaced(tm
     assert torch.allclose(before2[:, 1], seen[1][1][:, 1], atol=1e-6)
     ckpt = load_checkpoint(tmp_path / "s")
     res = meta_test(
-        TestConfig(run_dir=str(tmp_path / "s"), num_goals=1, inits=1, device="cpu"), progress=None
+        MetaTestConfig(run_dir=str(tmp_path / "s"), num_goals=1, inits=1, device="cpu"),
+        progress=None,
     )
     assert res["policy_steps"] == ckpt["config"]["inner_steps"] * 2
 

@@ -188,7 +188,7 @@ def main(argv=None) -> int:
 
 def run(args) -> list[dict]:
     from warp_critic.core.errors import FieldError
-    from warp_critic.evaluation.metatest import TestConfig, meta_test
+    from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
     from warp_critic.evaluation.presets import preset
     from warp_critic.evaluation.protocol import ProtocolConfig, check_settings
     from warp_critic.methods.ddpg import BaselineConfig, train_ddpg
@@ -260,7 +260,7 @@ def run(args) -> list[dict]:
         row = {"run": label, "run_dir": str(run_dir), **summary, "meta_test": {}}
         for std in args.stds:
             suffix = "" if args.goal_noise == "per-joint" else f"-{args.goal_noise}"
-            tc = TestConfig(
+            tc = MetaTestConfig(
                 run_dir=str(run_dir),
                 num_goals=args.num_goals,
                 goal_std=std,

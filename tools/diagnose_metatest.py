@@ -91,7 +91,7 @@ def main(argv=None) -> int:
 
     from warp_critic.core import runtime
     from warp_critic.core.errors import UserError
-    from warp_critic.evaluation.metatest import TestConfig, setup_meta_test
+    from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
     from warp_critic.learning.inner import inner_update, policy_fn
     from warp_critic.learning.networks import MLPPolicy
     from warp_critic.learning.rollout import rollout
@@ -109,7 +109,7 @@ def main(argv=None) -> int:
             else args.num_goals
         )
         m = setup_meta_test(
-            TestConfig(
+            MetaTestConfig(
                 run_dir=args.run_dir,
                 goals=parse_goals(args.goals),
                 num_goals=num_goals,

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import math
 import numbers
-import os
 from contextlib import contextmanager
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
+from warp_critic.core.memory import available_memory
 
 
 def number(
@@ -76,28 +76,6 @@ def not_owned(field: str, path) -> None:
         check_not_owned(path, "output")
     except UserError as e:
         raise FieldError(field, str(e).removeprefix("output ")) from None
-
-
-def available_memory(device: str = "cpu") -> int | None:
-    """Free memory in bytes on ``device`` (host RAM for the CPU), or ``None`` when unknown."""
-    if str(device).startswith("cuda"):
-        import torch
-
-        try:
-            return int(torch.cuda.mem_get_info(torch.device(device))[0])
-        except Exception:  # noqa: BLE001 - no driver: let the run report the device itself
-            return None
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    try:
-        return int(os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):
-        return None
 
 
 def _size(n: float) -> str:

@@ -60,14 +60,14 @@ def cmd_meta_train(args: argparse.Namespace) -> int:
 
 
 def cmd_meta_test(args: argparse.Namespace) -> int:
-    from warp_critic.evaluation.metatest import TestConfig, meta_test
+    from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
 
-    tc, _ = dataclass_from_args(TestConfig, args)
+    tc, _ = dataclass_from_args(MetaTestConfig, args)
     if tc.out:
         _not_owned(tc.out, "--out")
     else:
         _not_owned(Path(tc.run_dir) / "metatest.json", "result (give --out)")
-    result = meta_test(tc)
+    result = meta_test(tc, progress=print)
     print(f"results: {result['output']}")
     return 0
 
@@ -143,7 +143,7 @@ def derived_rules_epilog() -> str:
 def build_parser() -> argparse.ArgumentParser:
     from warp_critic.analysis.landscape import command as landscape
     from warp_critic.analysis.toy import command as toy
-    from warp_critic.evaluation.metatest import TestConfig
+    from warp_critic.evaluation.metatest import MetaTestConfig
     from warp_critic.methods.baseline import BaselineConfig
     from warp_critic.methods.ours import TrainConfig
     from warp_critic.methods.q_networks import METHODS
@@ -178,7 +178,7 @@ def build_parser() -> argparse.ArgumentParser:
         "paper's tables).",
     )
     te.add_argument("run_dir", help="run directory written by meta-train or baseline")
-    add_dataclass_arguments(te, TestConfig, skip=("run_dir",))
+    add_dataclass_arguments(te, MetaTestConfig, skip=("run_dir",))
     te.set_defaults(func=cmd_meta_test)
 
     bl = sub.add_parser(
@@ -280,7 +280,6 @@ def _run(argv: list[str] | None, in_process: bool) -> tuple[int, bool]:
 
     if in_process:
         signals.running()
-    os.environ.setdefault("WARP_CRITIC_CLI", "1")
     parser = build_parser()
     args = parser.parse_args(argv)
     if not getattr(args, "func", None):

@@ -1,7 +1,8 @@
-"""Process set-up, in one place: Warp start, torch threads, device, seeding and RNG state.
+"""Process set-up, in one place: Warp start, torch threads, seeding and RNG state.
 
-Everything that starts a run (the CLI, the tools, the tests) calls :func:`init` once; library code
-never starts Warp or changes torch's thread count itself.
+Everything that starts a run (the CLI, the tools, the tests) calls :func:`init` once. Library code
+never changes torch's thread count or reseeds global random state; code that needs Warp (the
+simulator) starts it only through :func:`init_warp`, which does so once, quietly.
 """
 
 from __future__ import annotations
@@ -20,27 +21,34 @@ GRAPHS_ENV = "WARP_CRITIC_GRAPHS"
 MAX_SEED = 2**32 - 1  # numpy's legacy seeding takes 32 bits; torch takes 64: the common range
 
 
+_warp_started = False
+
+
 def init_warp(quiet: bool = True) -> None:
-    """Initialise Warp once, without its banner and without the native CUDA-driver warning on GPU-less
-    machines (printed unconditionally to file descriptor 2; ``device="cuda"`` on such a machine gets
-    our own one-line error instead)."""
+    """Initialise Warp once (later calls return at once), without its banner and without the native
+    CUDA-driver warning on GPU-less machines (printed unconditionally to file descriptor 2;
+    ``device="cuda"`` on such a machine gets our own one-line error instead)."""
+    global _warp_started
+    if _warp_started:
+        return
     import warp as wp
 
-    if not quiet:
+    if quiet:
+        wp.config.quiet = True
+        if hasattr(wp, "LOG_WARNING"):
+            wp.config.log_level = wp.LOG_WARNING
+        sys.stderr.flush()
+        saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
+        try:
+            os.dup2(devnull, 2)
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            os.close(devnull)
+    else:
         wp.init()
-        return
-    wp.config.quiet = True
-    if hasattr(wp, "LOG_WARNING"):
-        wp.config.log_level = wp.LOG_WARNING
-    sys.stderr.flush()
-    saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 2)
-        wp.init()
-    finally:
-        os.dup2(saved, 2)
-        os.close(saved)
-        os.close(devnull)
+    _warp_started = True
 
 
 def check_threads(n: int, name: str = "cpu_threads") -> int:
@@ -94,7 +102,7 @@ def init(threads: int | None = None, quiet: bool = True) -> None:
     """Start a process: Warp (quietly) and torch threads (default ``$WARP_CRITIC_TORCH_THREADS`` or 1).
 
     The networks are small and Warp's CPU kernels are single-threaded: one torch thread avoids
-    oversubscription stalls (measured 25x slower steps with 2 threads on a busy 2-core machine).
+    oversubscription stalls on a busy machine.
     """
     set_threads(threads_from_env() if threads is None else threads)
     graphs_from_env()  # a bad value is reported at start, not at the first simulator

@@ -27,7 +27,9 @@ import numpy as np
 import torch
 
 from warp_critic.core.errors import FieldError, UserError
-from warp_critic.core.runtime import seed_everything
+from warp_critic.core.memory import check_fits
+from warp_critic.core.runtime import check_seed
+from warp_critic.evaluation.protocol import GOAL_NOISE
 from warp_critic.learning.inner import inner_update, policy_fn
 from warp_critic.learning.losses import final_error
 from warp_critic.learning.networks import Critic, MLPPolicy, Normalizer
@@ -38,7 +40,6 @@ from warp_critic.running.scenefile import find_run_scene
 from warp_critic.running.task import (
     SerializableConfig,
     TaskConfig,
-    available_memory,
     build_task,
     check_fields,
     estimate_memory,
@@ -51,10 +52,8 @@ RESULT_KIND = "warp-critic/metatest-v1"
 
 
 @dataclass
-class TestConfig(SerializableConfig):
+class MetaTestConfig(SerializableConfig):
     """Meta-test settings; ``None`` = the value the run was trained with."""
-
-    __test__ = False  # not a pytest class
 
     run_dir: str = spec("", "run directory written by meta-train or baseline")
     goals: list[list[float]] | None = spec(
@@ -68,7 +67,7 @@ class TestConfig(SerializableConfig):
     goal_noise: str = spec(
         "per-joint",
         "per-joint: N(g, std^2) on every joint; distance: a random direction at a distance N(0, std^2) (the paper's 'at a distance of N(0, std)' reads both ways)",
-        choices=("per-joint", "distance"),
+        choices=GOAL_NOISE,
     )
     around: list[int] | None = spec(
         None, "indices of the training goals to sample around (default: all, cycled)", ge=0
@@ -149,9 +148,6 @@ def build_test_critic(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, di
         ) from None
 
 
-GOAL_NOISE = ("per-joint", "distance")
-
-
 def sample_goals(
     train_goals: torch.Tensor,
     num: int,
@@ -209,8 +205,12 @@ class MetaTestSetup:
     alpha: float
 
 
-def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
-    """Load the run, check ``tc``, sample the goals and build the gradient-free model and fresh policies."""
+def setup_meta_test(tc: MetaTestConfig, gen: torch.Generator | None = None) -> MetaTestSetup:
+    """Load the run, check ``tc``, sample the goals and build the gradient-free model and fresh policies.
+
+    ``gen`` draws the goals and the policy initialisations (default: a new generator seeded with
+    ``tc.seed``); no global random state is read or changed.
+    """
     check_fields(tc)
     ckpt = RunDir.open(tc.run_dir).load_checkpoint(require=("config", "dof", "scene", "method"))
     try:
@@ -233,7 +233,8 @@ def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
         )
     horizon = tc.horizon if tc.horizon is not None else cfg.horizon
 
-    gen = seed_everything(tc.seed)
+    if gen is None:
+        gen = torch.Generator().manual_seed(check_seed(tc.seed))
     train_goals = torch.tensor(cfg.goals, dtype=torch.float32)
     lo = torch.as_tensor(scene.q_lower, dtype=torch.float32)
     hi = torch.as_tensor(scene.q_upper, dtype=torch.float32)
@@ -245,13 +246,11 @@ def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
         )
     G, K = goals.shape[0], tc.inits
     W = G * K
-    need, have = estimate_memory(W, scene.dof, horizon, cfg.substeps), available_memory()
-    if need > 0.8 * have:
-        raise FieldError(
-            "inits",
-            f"{G} goals x {K} inits = {W} worlds, horizon {horizon} need about "
-            f"{need / 2**30:.1f} GiB, more than 80% of the {have / 2**30:.1f} GiB available",
-        )
+    check_fits(
+        "inits",
+        f"{G} goals x {K} inits = {W} worlds, horizon {horizon}",
+        estimate_memory(W, scene.dof, horizon, cfg.substeps),
+    )
     # the run's task with the test's goals, inits and dynamics variant, as training laid it out; built
     # without gradient buffers (differentiable=False): a taped rollout through it is impossible
     test_task = replace(
@@ -302,8 +301,11 @@ def setup_meta_test(tc: TestConfig) -> MetaTestSetup:
     )
 
 
-def meta_test(tc: TestConfig, progress: Callable[[str], None] | None = print) -> dict:
-    """Algorithm 3 on ``G x K`` fresh policies; writes and returns the results (see the module docstring)."""
+def meta_test(tc: MetaTestConfig, progress: Callable[[str], None] | None = None) -> dict:
+    """Algorithm 3 on ``G x K`` fresh policies; writes and returns the results (see the module docstring).
+
+    ``progress`` (the CLI passes ``print``) gets the summary, one line per call; nothing is printed.
+    """
     out = check_output_file(Path(tc.out) if tc.out else Path(tc.run_dir) / "metatest.json", "out")
     m = setup_meta_test(tc)
     ckpt, scene, goals, goal, sim, critic, policy = (

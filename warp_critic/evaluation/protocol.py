@@ -162,11 +162,34 @@ PAPER_TABLE3: dict[str, dict[float, tuple[float, float]]] = {
     },
 }
 
-#: LaTeX label -> (column variable, table), for looking the tables up by the paper's names.
-PAPER_TABLES: dict[str, tuple[str, dict[str, dict[float, tuple[float, float]]]]] = {
-    "table:gen_tasks_kuka": ("std", PAPER_TABLE1),
-    "table:gen_kuka_mass": ("mass", PAPER_TABLE2),
-    "table:gen_kuka_link": ("length", PAPER_TABLE3),
+
+@dataclass(frozen=True)
+class PaperTable:
+    """One of the paper's KUKA tables: ``values[method][column value] = (mean, std)``."""
+
+    label: str  # the LaTeX label
+    column: str  # the varied quantity, as the paper's column headers name it
+    values: dict[str, dict[float, tuple[float, float]]]
+    title: str  # what the report calls it
+
+
+#: The paper's tables, by the names the report uses.
+PAPER_TABLES: dict[str, PaperTable] = {
+    "table1": PaperTable(
+        "table:gen_tasks_kuka", "std", PAPER_TABLE1, "Table 1 (new goals, `table:gen_tasks_kuka`)"
+    ),
+    "table2": PaperTable(
+        "table:gen_kuka_mass",
+        "Mass",
+        PAPER_TABLE2,
+        "Table 2 (end-effector mass, `table:gen_kuka_mass`)",
+    ),
+    "table3": PaperTable(
+        "table:gen_kuka_link",
+        "length",
+        PAPER_TABLE3,
+        "Table 3 (end-effector link length, `table:gen_kuka_link`)",
+    ),
 }
 
 #: Table 1's goal stds.
@@ -347,7 +370,7 @@ def run_protocol(pc: ProtocolConfig, log: Callable[[str], None] | None = None) -
 
     import numpy as np
 
-    from warp_critic.evaluation.metatest import TestConfig, meta_test
+    from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
 
     validate(pc)
     t0 = time.perf_counter()
@@ -366,7 +389,7 @@ def run_protocol(pc: ProtocolConfig, log: Callable[[str], None] | None = None) -
             errs, per_run, dof = [], [], 0
             for run in result.runs:
                 out = str(Path(run) / f"table-{reading}-{std}.json") if pc.write_run_json else None
-                tc = TestConfig(
+                tc = MetaTestConfig(
                     run_dir=run,
                     num_goals=pc.num_goals,
                     goal_std=std,

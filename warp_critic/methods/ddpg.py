@@ -16,6 +16,7 @@ with Meta-Critic in :mod:`warp_critic.methods.baseline`. The learned Q is what m
 from __future__ import annotations
 
 import copy
+from dataclasses import replace
 
 import torch
 
@@ -98,5 +99,4 @@ class DDPGAgent:
 
 def train_ddpg(cfg: BaselineConfig, **kwargs) -> TrainResult:
     """Train (or resume) DDPG; ``kwargs`` go to :func:`~warp_critic.methods.baseline.train_baseline`."""
-    cfg.method = "ddpg"
-    return train_baseline(cfg, DDPGAgent, **kwargs)
+    return train_baseline(replace(cfg, method="ddpg"), DDPGAgent, **kwargs)

@@ -32,6 +32,8 @@ meta-train"): ``L = -Q``; ``h_omega`` is saved in the checkpoint but not used th
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import torch
 from torch import nn
 from torch.func import functional_call
@@ -137,5 +139,4 @@ class MetaCriticAgent(DDPGAgent):
 
 def train_meta_critic(cfg: BaselineConfig, **kwargs) -> TrainResult:
     """Train (or resume) Meta-Critic; ``kwargs`` go to :func:`~warp_critic.methods.baseline.train_baseline`."""
-    cfg.method = "meta-critic"
-    return train_baseline(cfg, MetaCriticAgent, **kwargs)
+    return train_baseline(replace(cfg, method="meta-critic"), MetaCriticAgent, **kwargs)

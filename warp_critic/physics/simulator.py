@@ -75,8 +75,8 @@ class Simulator:
         self.dof = scene.dof
         self.dt, self.substeps = float(dt), int(substeps)
         self.control_dt = self.dt * self.substeps
+        runtime.init_warp()  # once per process, quietly (a no-op after runtime.init)
         self.device = resolve_device(device)
-        wp.init()
         self.model = scene.build_model(
             self.variants, device=self.device, requires_grad=differentiable
         )

@@ -1,7 +1,7 @@
 """``REPORT.md``, ``results.json``, ``figures/*.png`` and ``report.rrd`` from the stage files.
 
 Every number comes from a stage's ``stage.json`` (or a file it names); nothing is typed in. The
-paper's values come from :data:`warp_critic.evaluation.protocol.PAPER_TABLE1` / ``2`` / ``3``. The report covers
+paper's values come from :data:`warp_critic.evaluation.protocol.PAPER_TABLES`. The report covers
 every stage of the current settings that is complete, whether it ran in this call or earlier.
 """
 
@@ -15,17 +15,12 @@ from pathlib import Path
 
 import numpy as np
 
-from warp_critic.evaluation.protocol import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE3
+from warp_critic.evaluation.protocol import PAPER_TABLES
 from warp_critic.reproduce.settings import METHOD_LABELS, METHODS, SCENES, STAGES
 from warp_critic.reproduce.stages import STAGE_FILE, StageRecord, read_stage
 from warp_critic.running.rundir import atomic_write_text, save_figure
 
 COLORS = {"ours": "tab:blue", "ddpg": "tab:orange", "meta-critic": "tab:green"}
-PAPER_TABLES = {
-    "table1": ("std", PAPER_TABLE1, "Table 1 (new goals, `table:gen_tasks_kuka`)"),
-    "table2": ("Mass", PAPER_TABLE2, "Table 2 (end-effector mass, `table:gen_kuka_mass`)"),
-    "table3": ("length", PAPER_TABLE3, "Table 3 (end-effector link length, `table:gen_kuka_link`)"),
-}
 PAPER_ROW = {
     "ours": "paper: L_critic (ours)",
     "ddpg": "paper: DDPG",
@@ -197,7 +192,7 @@ def _fmt(x: float) -> str:
 
 def table_markdown(table: str, res: dict, source: str) -> tuple[list[str], list[dict], list[str]]:
     """Markdown rows, the results.json cells and one summary line per method."""
-    label, paper, _ = PAPER_TABLES[table]
+    label, paper = PAPER_TABLES[table].column, PAPER_TABLES[table].values
     values = res["columns"][table]
     cells = {(c["column"], c["method"]): c for c in res["cells"] if c["table"] == table}
     head = "| Method | " + " | ".join(f"{label}={v:g}" for v in values) + " |"
@@ -596,7 +591,7 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
         ]
         for table in ("table1", "table2", "table3"):
             lines, cells, summary = table_markdown(table, T, src)
-            md += [f"### {PAPER_TABLES[table][2]}", ""]
+            md += [f"### {PAPER_TABLES[table].title}", ""]
             if table == "table2":
                 md += [
                     "Our column is the mass ADDED at the end-effector tip (0 = as trained); the paper's column is "

@@ -28,7 +28,7 @@ import torch
 
 from warp_critic.core.errors import DivergenceError, FieldError, UserError
 from warp_critic.core.runtime import restore_rng, seed_everything, set_threads
-from warp_critic.running.rundir import RunDir, _fault_point
+from warp_critic.running.rundir import RunDir
 from warp_critic.running.task import (
     RUNTIME_FIELDS,
     Task,
@@ -158,9 +158,11 @@ class SeedRun:
         self.run_id = self.rundir.ensure_marker(cfg.method).get("run_id")
 
     def _resume_config(self, requested: TaskConfig, given: set[str] | None) -> TaskConfig:
+        """The run's saved config, with what may change on resume taken from ``requested`` (a new
+        object; ``requested`` is left as it was). Loads the checkpoint into ``self.ckpt``."""
         cls = type(requested)
         if requested.out is None:
-            requested.out = requested.default_out()
+            requested = replace(requested, out=requested.default_out())
         self.rundir = RunDir.open(requested.out)
         ckpt = self.rundir.load_checkpoint(require=self.require)
         _same_run(self.rundir, ckpt)
@@ -192,17 +194,19 @@ class SeedRun:
         if not Path(requested.scene).is_file():
             raise FieldError("scene", f"{requested.scene}: no such scene file")
         # a moved or copied run directory records where it now is; the scene is the one given now
-        saved.iterations, saved.resume, saved.device, saved.out = (
-            iterations,
-            True,
-            requested.device,
-            requested.out,
-        )
-        saved.scene, saved.seeds = requested.scene, None
-        if requested.cpu_threads is not None:
-            saved.cpu_threads = requested.cpu_threads
         self.ckpt = ckpt
-        return saved
+        return replace(
+            saved,
+            iterations=iterations,
+            resume=True,
+            device=requested.device,
+            out=requested.out,
+            scene=requested.scene,
+            seeds=None,
+            cpu_threads=(
+                requested.cpu_threads if requested.cpu_threads is not None else saved.cpu_threads
+            ),
+        )
 
     def kept(self) -> str:
         if self.last_checkpoint is None:
@@ -266,7 +270,7 @@ class Session:
                 )
             scene = None
             for k, r in enumerate(self.runs):
-                scene = load_task_scene(r.cfg, announce=k == 0)
+                r.cfg, scene = load_task_scene(r.cfg, announce=k == 0)
             self.scene_hash = getattr(scene, "content_hash", None)
             if cfg.seeds:
                 check_memory(self.runs[0].cfg, scene.dof, copies=len(self.runs))
@@ -410,7 +414,6 @@ class Session:
                     r.history.append(row)
                     r.metrics_file.write(_json_line(row))
                     r.metrics_file.flush()
-                    _fault_point("metrics-row")
                     info = IterationInfo(it, row, result, task.goal_index_of(i))
                     for cb in ([r.recorder] if r.recorder is not None else []) + (
                         callbacks if i == 0 else []

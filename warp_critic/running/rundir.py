@@ -12,8 +12,9 @@ Layout (the same for every method, so ``warp-critic meta-test RUN_DIR`` works on
 
 Rules:
 
-* A new run claims a directory that does not exist, is empty, or is a finished/aborted run of ours
-  started anew is refused: anything else (someone's files) is never overwritten.
+* A new run claims a directory that does not exist or is empty (:meth:`RunDir.create`). One that
+  holds a run of ours is refused (continue it with ``--resume``); anything else (someone's files) is
+  never written into.
 * One process at a time: :meth:`RunDir.lock` takes the directory's OS file lock
   (:class:`~warp_critic.running.locks.FolderLock`), which dies with its process; a directory locked by a
   live process is refused at once.
@@ -64,24 +65,6 @@ FULL = (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC))
 # atomic writes
 # ------------------------------------------------------------------------------------------------
 
-FAULT_ENV = "WARP_CRITIC_FAULT"  # fault injection for the tests: "<file name>:<n>"
-_writes: dict[str, int] = {}
-
-
-def _fault_point(name: str) -> None:
-    """Kill this process (SIGKILL, as a crash or an OOM kill would) at the n-th write of ``name`` when
-    ``$WARP_CRITIC_FAULT`` asks for it: how the fault tests interrupt a run at an exact point."""
-    spec = os.environ.get(FAULT_ENV)
-    if not spec:
-        return
-    _writes[name] = _writes.get(name, 0) + 1
-    target, _, n = spec.rpartition(":")
-    if target == name and n.isdigit() and _writes[name] == int(n):
-        import signal
-
-        os.kill(os.getpid(), signal.SIGKILL)
-
-
 _UMASK = os.umask(0)
 os.umask(_UMASK)
 
@@ -95,7 +78,6 @@ def _atomic(path: Path):
     os.chmod(tmp, 0o666 & ~_UMASK)  # an ordinary file, not mkstemp's private 0600
     try:
         yield Path(tmp)
-        _fault_point(path.name)  # written, not yet in place: the worst moment to die
         os.replace(tmp, path)
     except BaseException:
         with contextlib.suppress(OSError):

@@ -18,19 +18,22 @@ from __future__ import annotations
 
 import copy
 import math
-import os
 import typing
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import torch
 
 from warp_critic.core.errors import FieldError
+from warp_critic.core.memory import check_fits
 from warp_critic.core.runtime import MAX_SEED, check_threads
 from warp_critic.learning.networks import Normalizer
 from warp_critic.physics import schema
 from warp_critic.physics.scene import Scene, Variant
+
+if TYPE_CHECKING:
+    from typing_extensions import Self
 
 # Used for a field that neither the user nor the scene sets (the scene schema's defaults).
 GENERIC_DEFAULTS: dict[str, Any] = schema.fallbacks()
@@ -224,27 +227,28 @@ class TaskConfig(SerializableConfig):
     def default_out(self) -> str:
         return f"runs/{Path(self.scene).stem}-{self.method}"
 
-    def fill_defaults(self, scene: Scene) -> TaskConfig:
-        """Fill ``None`` fields from the scene's content, then the generic defaults."""
+    def fill_defaults(self, scene: Scene) -> Self:
+        """A copy with the ``None`` fields filled from the scene's content, then the generic defaults."""
         authored = dict(getattr(scene, "defaults", {}) or {})
+        filled: dict[str, Any] = {}
         for name in self.scene_fields:
             if getattr(self, name) is not None:
                 continue
             if name in authored:
-                setattr(self, name, copy.deepcopy(authored[name]))
+                filled[name] = copy.deepcopy(authored[name])
             elif name in GENERIC_DEFAULTS:
-                setattr(self, name, GENERIC_DEFAULTS[name])
-        if self.goals is None:
+                filled[name] = GENERIC_DEFAULTS[name]
+        if filled.get("goals", self.goals) is None:
             raise FieldError(
                 "goals",
                 f"the scene {scene.path} carries no training goals "
                 "(warp_critic:goals); give them explicitly",
             )
-        if self.max_torque is None:  # the joints' own effort limits
-            self.max_torque = [float(x) for x in scene.effort_limit]
+        if self.max_torque is None and "max_torque" not in filled:  # the joints' own effort limits
+            filled["max_torque"] = [float(x) for x in scene.effort_limit]
         if self.out is None:
-            self.out = self.default_out()
-        return self
+            filled["out"] = self.default_out()
+        return replace(self, **filled)
 
     def check(self, scene: Scene | None = None) -> None:
         """Check every field (types, finiteness, ranges, cross-field rules); with ``scene``, against it."""
@@ -270,6 +274,9 @@ class TaskConfig(SerializableConfig):
             if self.goals is not None:
                 goals_tensor(self.goals, scene)
             check_memory(self, dof)
+
+
+TaskConfigT = TypeVar("TaskConfigT", bound=TaskConfig)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -335,19 +342,6 @@ def max_torque_tensor(max_torque: list[float], scene: Scene, device="cpu") -> to
     return torch.minimum(t, limit).to(device)
 
 
-def available_memory() -> int:
-    """Bytes of memory this process may use (physical memory; the cgroup limit where lower)."""
-    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    for path in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
-        try:
-            text = Path(path).read_text().strip()
-        except OSError:
-            continue
-        if text.isdigit():
-            total = min(total, int(text))
-    return total
-
-
 def estimate_memory(
     worlds: int, dof: int, horizon: int, substeps: int, graph_steps: int = 1
 ) -> int:
@@ -375,24 +369,22 @@ def check_memory(cfg: TaskConfig, dof: int, graph_steps: int = 1, copies: int = 
         cfg.substeps,
         max(graph_steps, getattr(cfg, "inner_steps", 1) + 1),
     )
-    have = available_memory()
-    if need > 0.8 * have:
-        inner = getattr(cfg, "inner_steps", 1)
-        culprit = max(
-            (
-                ("worlds_per_goal", cfg.worlds_per_goal / 64),
-                ("horizon", cfg.horizon / 1000),
-                ("substeps", cfg.substeps / 100),
-                ("inner_steps", inner / 100),
-            ),
-            key=lambda kv: kv[1],
-        )[0]
-        raise FieldError(
-            culprit,
-            f"{goals} goals x {cfg.worlds_per_goal} worlds, horizon {cfg.horizon} x "
-            f"{cfg.substeps} substeps, {getattr(cfg, 'inner_steps', 1)} inner steps need about {need / 2**30:.1f} GiB, more than "
-            f"80% of the {have / 2**30:.1f} GiB available",
-        )
+    inner = getattr(cfg, "inner_steps", 1)
+    culprit = max(
+        (
+            ("worlds_per_goal", cfg.worlds_per_goal / 64),
+            ("horizon", cfg.horizon / 1000),
+            ("substeps", cfg.substeps / 100),
+            ("inner_steps", inner / 100),
+        ),
+        key=lambda kv: kv[1],
+    )[0]
+    check_fits(
+        culprit,
+        f"{goals} goals x {cfg.worlds_per_goal} worlds, horizon {cfg.horizon} x "
+        f"{cfg.substeps} substeps, {inner} inner steps",
+        need,
+    )
 
 
 # ------------------------------------------------------------------------------------------------
@@ -482,8 +474,9 @@ def scene_of(cfg) -> Scene:
     )
 
 
-def load_task_scene(cfg: TaskConfig, announce: bool = True) -> Scene:
-    """Load the scene, fill the config's defaults from it and check the config; returns the scene.
+def load_task_scene(cfg: TaskConfigT, announce: bool = True) -> tuple[TaskConfigT, Scene]:
+    """Load the scene, check the config and fill its defaults from the scene: returns ``(the filled
+    config, a new object; the scene)``, ``cfg`` itself is left as it was.
 
     For a robot file, the defaults derived from the robot that the run uses are kept in the config
     (``derived_defaults``: value and rule) and, with ``announce``, stated on one line on stderr.
@@ -493,22 +486,23 @@ def load_task_scene(cfg: TaskConfig, announce: bool = True) -> Scene:
         raise FieldError("tip_offset", f"needs 3 values x,y,z (got {len(cfg.tip_offset)})")
     scene = scene_of(cfg)
     unset = {name for name in cfg.scene_fields if getattr(cfg, name) is None}
-    cfg.fill_defaults(scene)
-    cfg.check(scene)
+    filled = cfg.fill_defaults(scene)
+    filled.check(scene)
     if getattr(scene, "derived", False):
         from warp_critic.physics import derive
 
         used = unset & set(scene.defaults)
-        values = {name: getattr(cfg, name) for name in used}
-        cfg.derived_defaults = {
+        values = {name: getattr(filled, name) for name in used}
+        derived = {
             "home": {"value": scene.home.tolist(), "rule": derive.RULES["home"]},
             **{n: {"value": values[n], "rule": derive.RULES[n]} for n in sorted(used)},
         }
+        filled.derived_defaults = derived  # on the new config, kept by to_dict
         if announce:
             import sys
 
             sys.stderr.write(f"warp-critic: {derive.summary(scene, values, used)}\n")
-    return scene
+    return filled, scene
 
 
 def build_task(cfg: TaskConfig, scene: Scene, *, differentiable: bool, copies: int = 1) -> Task:
