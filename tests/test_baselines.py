@@ -236,7 +236,9 @@ def test_default_out_directory():
     cfg = BaselineConfig(scene=REACHER, method="meta-critic")
     filled = cfg.fill_defaults(load_scene(REACHER))
     assert filled.out == "runs/reacher-meta-critic" and filled.horizon is not None and filled.goals
-    assert cfg.out is None and cfg.horizon is None and cfg.goals is None  # a new config: cfg as it was
+    assert (
+        cfg.out is None and cfg.horizon is None and cfg.goals is None
+    )  # a new config: cfg as it was
 
 
 @pytest.mark.parametrize(

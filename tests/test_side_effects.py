@@ -29,7 +29,9 @@ def test_resume_leaves_the_callers_config_alone(finished_run, copy_of):
     cfg = TrainConfig(scene=REACHER, iterations=3, device="cpu", out=str(run), resume=True)
     before = copy.deepcopy(cfg)
     result = meta_train(cfg, progress=False, record=False, given={"iterations"})
-    assert cfg == before and cfg.horizon is None  # the run's saved horizon (5) was used, not put here
+    assert (
+        cfg == before and cfg.horizon is None
+    )  # the run's saved horizon (5) was used, not put here
     assert [r["iteration"] for r in result.metrics] == [0, 1, 2]
 
 
