@@ -1,7 +1,30 @@
 """warp-critic: model-based meta-learning of critics for policy gradients on Newton/Warp.
 
-Data flow: scene (USD) -> simulator (Newton worlds) -> bridge (warp<->torch autograd) -> rollout ->
-networks / losses -> inner update -> outer update -> training loop -> recording.
+The public API, re-exported lazily from the layer packages (importing ``warp_critic`` imports neither
+torch nor Warp)::
+
+    from warp_critic import TrainConfig, meta_train, MetaTestConfig, meta_test
+
+The layers, each importing only the ones before it: ``core`` -> ``physics`` -> ``learning`` ->
+``running`` -> ``methods`` -> ``evaluation`` -> ``analysis`` -> ``reproduce`` -> ``cli`` (README.md).
 """
+
+from warp_critic.core.exports import lazy_exports
+
+_EXPORTS = {
+    "warp_critic.core.errors": ("UserError", "FieldError", "SceneError", "DivergenceError"),
+    "warp_critic.core.runtime": ("init",),
+    "warp_critic.physics.scene": ("Scene", "Variant", "load_scene"),
+    "warp_critic.physics.simulator": ("Simulator",),
+    "warp_critic.running.rundir": ("RunDir",),
+    "warp_critic.methods.ours": ("TrainConfig", "meta_train"),
+    "warp_critic.methods.baseline": ("BaselineConfig",),
+    "warp_critic.methods.ddpg": ("train_ddpg",),
+    "warp_critic.methods.meta_critic": ("train_meta_critic",),
+    "warp_critic.evaluation.metatest": ("MetaTestConfig", "meta_test"),
+    "warp_critic.evaluation.protocol": ("ProtocolConfig", "run_protocol"),
+}
+__all__ = ["__version__", *(name for names in _EXPORTS.values() for name in names)]
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
 
 __version__ = "0.1.0"

@@ -1,4 +1,4 @@
-"""The ``warp-critic`` command line.
+"""The ``warp-critic`` command line (nothing below this package imports it).
 
 In the ``warp-critic`` process itself (the console script), importing this package installs the
 Ctrl-C / SIGTERM handlers (:mod:`warp_critic.cli.signals`, standard library only) before anything
@@ -12,3 +12,7 @@ if _sys.argv and _os.path.basename(_sys.argv[0]) == "warp-critic":
     from warp_critic.cli import signals as _signals
 
     _signals.install()
+
+from warp_critic.core.exports import lazy_exports  # noqa: E402
+
+__all__, __getattr__, __dir__ = lazy_exports(__name__, {"warp_critic.cli.main": ("main",)})

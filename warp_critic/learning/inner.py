@@ -8,22 +8,27 @@ a differentiable function of the critic's parameters (second order, through ``to
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 
 from warp_critic.learning.losses import critic_loss
 from warp_critic.learning.networks import PolicyParams
+from warp_critic.learning.protocols import CriticFn, Policy
 from warp_critic.learning.rollout import Trajectory, rollout
 from warp_critic.physics.simulator import Simulator
 
 
-def policy_fn(policy, params: PolicyParams):
+def policy_fn(
+    policy: Policy, params: PolicyParams
+) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
     """Bind parameters: ``policy(params, q, qd)`` -> a rollout's ``(q, qd) -> tau``."""
     return lambda q, qd: policy(params, q, qd)
 
 
 def inner_update(
-    critic,
-    policy,
+    critic: CriticFn,
+    policy: Policy,
     params: PolicyParams,
     sim: Simulator,
     q0: torch.Tensor,

@@ -13,6 +13,7 @@ from __future__ import annotations
 import torch
 
 from warp_critic.learning.networks import PolicyParams
+from warp_critic.learning.protocols import CriticFn, Policy
 from warp_critic.learning.rollout import Trajectory
 
 
@@ -34,7 +35,7 @@ def task_loss(
 
 
 def critic_loss(
-    critic, policy, params: PolicyParams, traj: Trajectory, goal: torch.Tensor
+    critic: CriticFn, policy: Policy, params: PolicyParams, traj: Trajectory, goal: torch.Tensor
 ) -> torch.Tensor:
     """Per-world ``sum_t L_critic(s_t, pi_theta(s_t), g)`` ``(W,)``.
 

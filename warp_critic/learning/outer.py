@@ -10,6 +10,7 @@ import torch
 from warp_critic.learning.inner import inner_update, policy_fn
 from warp_critic.learning.losses import task_loss
 from warp_critic.learning.networks import PolicyParams
+from warp_critic.learning.protocols import CriticFn, Policy
 from warp_critic.learning.rollout import Trajectory, rollout
 from warp_critic.physics.simulator import Simulator
 
@@ -25,8 +26,8 @@ class OuterResult:
 
 
 def meta_loss(
-    critic,
-    policy,
+    critic: CriticFn,
+    policy: Policy,
     params: PolicyParams,
     sim: Simulator,
     q0: torch.Tensor,

@@ -1,0 +1,11 @@
+"""Physics: USD scenes, the Newton simulator of many worlds, and the Warp <-> torch bridge."""
+
+from warp_critic.core.exports import lazy_exports
+
+_EXPORTS = {
+    "warp_critic.physics.scene": ("Scene", "Variant", "load_scene", "scenes_dir", "content_hash"),
+    "warp_critic.physics.simulator": ("Simulator", "STANDARD_GRAVITY", "resolve_device"),
+    "warp_critic.physics.bridge": ("NewtonBridge",),
+}
+__all__ = [name for names in _EXPORTS.values() for name in names]
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

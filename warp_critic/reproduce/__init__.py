@@ -1,8 +1,23 @@
 """``warp-critic reproduce``: the paper's experiments end to end, resumable stage by stage, and a report.
 
 Modules: :mod:`.settings` (paper and ``--quick`` settings, hashes), :mod:`.stages` (stage directories,
-``stage.json``, the output marker), :mod:`.analyses` (toy, landscape), :mod:`.training` (meta-training
-of the three methods, every seed batched), :mod:`.evaluate` (batched meta-test: many runs, goals and
-dynamics variants in one model), :mod:`.generalize` (KUKA tables, reacher maps), :mod:`.report`
-(REPORT.md, results.json, figures, report.rrd), :mod:`.pipeline` (the order), :mod:`.cli` (flags).
+``stage.json``, the output marker), :mod:`.analyses` (toy, landscape), :mod:`.metatrain`
+(meta-training of the three methods, every seed batched), :mod:`.evaluate` (batched meta-test: many
+runs, goals and dynamics variants in one model), :mod:`.generalize` (KUKA tables, reacher maps),
+:mod:`.report` (REPORT.md, results.json, figures, report.rrd), :mod:`.executors` (in process, local
+processes, Ray), :mod:`.pipeline` (the order). The flags live in :mod:`warp_critic.cli.reproduce`.
 """
+
+from warp_critic.core.exports import lazy_exports
+
+_EXPORTS = {
+    "warp_critic.reproduce.pipeline": ("ReproduceConfig", "reproduce"),
+    "warp_critic.reproduce.executors": (
+        "InProcess",
+        "LocalProcesses",
+        "RayExecutor",
+        "make_executor",
+    ),
+}
+__all__ = [name for names in _EXPORTS.values() for name in names]
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

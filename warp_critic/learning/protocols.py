@@ -1,0 +1,32 @@
+"""What the inner and outer updates need of a critic and a policy (structural types, PEP 544).
+
+Any callable with the signature fits: our :class:`~warp_critic.learning.networks.Critic` and
+:class:`~warp_critic.learning.networks.StackedCritic`, a baseline's ``-Q``
+(:class:`~warp_critic.methods.q_networks.NegQ`), :class:`~warp_critic.learning.networks.MLPPolicy`.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import torch
+
+from warp_critic.learning.networks import PolicyParams
+
+
+class CriticFn(Protocol):
+    """The loss ``L(s, a, g)`` a policy descends: ``q, qd, tau, g`` all ``(..., W, dof)`` (rad, rad/s,
+    N·m, rad) -> ``(..., W)``."""
+
+    def __call__(
+        self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, g: torch.Tensor, /
+    ) -> torch.Tensor: ...
+
+
+class Policy(Protocol):
+    """A batch of ``W`` policies as a pure function of their parameters: ``(params, q, qd) -> tau``,
+    states ``(..., W, dof)`` -> torques ``(..., W, dof)`` (N·m), each world with its own parameters."""
+
+    def __call__(
+        self, params: PolicyParams, q: torch.Tensor, qd: torch.Tensor, /
+    ) -> torch.Tensor: ...
