@@ -14,7 +14,8 @@ from warp_critic.core.exports import lazy_exports
 _EXPORTS = {
     "warp_critic.core.errors": ("UserError", "FieldError", "SceneError", "DivergenceError"),
     "warp_critic.core.runtime": ("init",),
-    "warp_critic.physics.scene": ("Scene", "Variant", "load_scene"),
+    "warp_critic.physics.scene": ("Scene", "load_scene"),
+    "warp_critic.physics.variants": ("Variant",),
     "warp_critic.physics.simulator": ("Simulator",),
     "warp_critic.running.rundir": ("RunDir",),
     "warp_critic.methods.ours": ("TrainConfig", "meta_train"),

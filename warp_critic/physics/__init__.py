@@ -3,7 +3,8 @@
 from warp_critic.core.exports import lazy_exports
 
 _EXPORTS = {
-    "warp_critic.physics.scene": ("Scene", "Variant", "load_scene", "scenes_dir", "content_hash"),
+    "warp_critic.physics.scene": ("Scene", "load_scene", "scenes_dir", "content_hash"),
+    "warp_critic.physics.variants": ("Variant",),
     "warp_critic.physics.simulator": ("Simulator", "STANDARD_GRAVITY", "resolve_device"),
     "warp_critic.physics.bridge": ("NewtonBridge",),
 }
