@@ -46,14 +46,15 @@ def integer(field: str, value, lo: int, hi: int | None = None) -> int:
     """An integer in ``[lo, hi]``."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise FieldError(field, f"must be an integer, got {value!r}")
-    if value < lo or (hi is not None and value > hi):
+    n = int(value)
+    if n < lo or (hi is not None and n > hi):
         raise FieldError(
             field,
             f"must be an integer >= {lo}"
             + (f" and <= {hi}" if hi is not None else "")
             + f", got {value!r}",
         )
-    return int(value)
+    return n
 
 
 def out_dir(field: str, path) -> Path:

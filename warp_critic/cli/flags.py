@@ -94,7 +94,9 @@ def add_dataclass_arguments(
             suffix = "" if "default" in help_text.lower() else " (default: the scene's)"
         else:
             suffix = f" (default: {default})"
-        kwargs = dict(dest=f.name, default=argparse.SUPPRESS, help=f"{help_text}{suffix}")
+        kwargs: dict[str, typing.Any] = dict(
+            dest=f.name, default=argparse.SUPPRESS, help=f"{help_text}{suffix}"
+        )
         if hint is bool:
             parser.add_argument(flag_of(f.name), action="store_true", **kwargs)
             continue

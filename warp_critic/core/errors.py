@@ -41,6 +41,7 @@ class DivergenceError(RuntimeError):
         super().__init__(message)
         self.world = world
         self.step = step
+        self.checkpoint: int | None = None  # the last good checkpoint's iteration, where known
 
 
 def warn(message: str) -> None:

@@ -34,6 +34,7 @@ from warp_critic.learning.inner import inner_update, policy_fn
 from warp_critic.learning.losses import final_error
 from warp_critic.learning.networks import Critic, MLPPolicy, Normalizer
 from warp_critic.learning.rollout import rollout
+from warp_critic.physics.scene import Scene
 from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
 from warp_critic.running.rundir import RunDir, check_output_file, write_result
 from warp_critic.running.scenefile import find_run_scene
@@ -189,7 +190,7 @@ class MetaTestSetup:
 
     ckpt: dict
     cfg: TaskConfig  # the run's task
-    scene: object
+    scene: Scene
     goals: torch.Tensor  # (G, dof) rad, on the CPU
     goal: torch.Tensor  # (W, dof) rad, each world's goal
     sim: Simulator  # built without gradient buffers

@@ -14,7 +14,7 @@ import torch
 
 from warp_critic.learning.losses import critic_loss
 from warp_critic.learning.networks import PolicyParams
-from warp_critic.learning.protocols import CriticFn, Policy
+from warp_critic.learning.protocols import CriticFn, Policy, StepSize
 from warp_critic.learning.rollout import Trajectory, rollout
 from warp_critic.physics.simulator import Simulator
 
@@ -36,7 +36,7 @@ def inner_update(
     goal: torch.Tensor,
     *,
     horizon: int,
-    alpha: float,
+    alpha: float | StepSize,
     steps: int = 1,
     create_graph: bool = False,
 ) -> tuple[PolicyParams, list[Trajectory]]:
@@ -47,7 +47,7 @@ def inner_update(
         policy: ``(params, q, qd) -> tau``, e.g. :class:`~warp_critic.learning.networks.MLPPolicy`.
         params: per-world policy parameters (leading dim ``W``); must require grad.
         goal: ``(W, dof)`` goal per world.
-        alpha: inner learning rate.
+        alpha: inner learning rate (or one per world, see :class:`~warp_critic.learning.protocols.StepSize`).
         create_graph: keep the graph of the update (meta-training); ``False`` at meta-test.
 
     Returns the updated parameters and the rollout used for each step.

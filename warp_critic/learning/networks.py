@@ -174,11 +174,15 @@ class Critic(nn.Module):
     checkpoint is self-contained).
     """
 
+    q_centre: torch.Tensor  # buffers (dof,)
+    q_half_range: torch.Tensor
+    max_torque: torch.Tensor
+
     def __init__(self, dof: int, norm: Normalizer, hidden: int = 400, inputs: str = "full"):
         super().__init__()
         if inputs not in CRITIC_INPUTS:
             raise ValueError(f"critic inputs must be one of {CRITIC_INPUTS} (got {inputs!r})")
-        self.dof, self.inputs = dof, inputs
+        self.dof, self.inputs, self.hidden = dof, inputs, hidden
         n_in = 5 * dof if inputs == "full" else 3 * dof
         self.net = nn.Sequential(
             nn.Linear(n_in, hidden),
@@ -228,6 +232,12 @@ class Critic(nn.Module):
         return self.net(self.features(q, qd, tau, goal)).squeeze(-1)
 
 
+def _linear(module: nn.Module) -> nn.Linear:
+    if not isinstance(module, nn.Linear):
+        raise TypeError(f"expected a Linear layer, got {type(module).__name__}")
+    return module
+
+
 class StackedCritic(nn.Module):
     """``S`` critics of one architecture (one per seed) evaluated as one module.
 
@@ -243,17 +253,16 @@ class StackedCritic(nn.Module):
     def __init__(self, critics: list[Critic]):
         super().__init__()
         first = critics[0]
-        self.template = [first]  # a list: not a registered submodule (its parameters are not ours)
+        self.template: list[Critic] = [
+            first
+        ]  # a list: not a registered submodule (its parameters are not ours)
         self.seeds = len(critics)
         self.weights = nn.ParameterList()
         self.biases = nn.ParameterList()
         for i in self._LAYERS:
-            self.weights.append(
-                nn.Parameter(torch.stack([c.net[i].weight.detach() for c in critics]).clone())
-            )
-            self.biases.append(
-                nn.Parameter(torch.stack([c.net[i].bias.detach() for c in critics]).clone())
-            )
+            layers = [_linear(c.net[i]) for c in critics]
+            self.weights.append(nn.Parameter(torch.stack([x.weight.detach() for x in layers])))
+            self.biases.append(nn.Parameter(torch.stack([x.bias.detach() for x in layers])))
 
     def forward(
         self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor
@@ -295,7 +304,7 @@ class StackedCritic(nn.Module):
                 c.max_torque,
                 c.q_wrap if c._wraps else None,
             ),
-            hidden=c.net[0].out_features,
+            hidden=c.hidden,
             inputs=c.inputs,
         ).to(c.q_centre.device)
         out.load_state_dict(self.critic_state(s))

@@ -23,6 +23,13 @@ class CriticFn(Protocol):
     ) -> torch.Tensor: ...
 
 
+class StepSize(Protocol):
+    """A learning rate other than one float, e.g. one per world: ``alpha * grad`` (``grad`` with the
+    worlds as its leading dim) -> the step, ``grad``'s shape."""
+
+    def __mul__(self, grad: torch.Tensor, /) -> torch.Tensor: ...
+
+
 class Policy(Protocol):
     """A batch of ``W`` policies as a pure function of their parameters: ``(params, q, qd) -> tau``,
     states ``(..., W, dof)`` -> torques ``(..., W, dof)`` (N·m), each world with its own parameters."""

@@ -19,6 +19,10 @@ METHODS = ("ddpg", "meta-critic")
 class _GoalInput(nn.Module):
     """Holds the fixed normaliser as buffers (checkpoints are self-contained)."""
 
+    q_half_range: torch.Tensor  # buffers: (dof,), (dof,), ()
+    max_torque: torch.Tensor
+    qd_scale: torch.Tensor
+
     def _init_norm(self, norm: Normalizer) -> None:
         self.register_buffer("q_half_range", norm.q_half_range.detach().clone())
         self.register_buffer("max_torque", norm.max_torque.detach().clone())
@@ -33,8 +37,10 @@ class _GoalInput(nn.Module):
         return torch.cat([dq / self.q_half_range, qd / self.qd_scale], dim=-1)
 
 
-def _small_last_layer(layer: nn.Linear, bound: float = 3e-3) -> None:
+def _small_last_layer(layer: nn.Module, bound: float = 3e-3) -> None:
     """Lillicrap et al.: final layer weights and biases from U(-3e-3, 3e-3)."""
+    if not isinstance(layer, nn.Linear):
+        raise TypeError(f"expected a Linear layer, got {type(layer).__name__}")
     nn.init.uniform_(layer.weight, -bound, bound)
     nn.init.uniform_(layer.bias, -bound, bound)
 

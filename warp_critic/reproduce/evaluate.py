@@ -116,7 +116,9 @@ def default_steps(run_dir: str) -> int:
 
 def batches(jobs: list[Job], inits: int, max_worlds: int) -> list[list[int]]:
     """Job indices grouped into batches of at most ``max_worlds`` worlds (whole jobs; a bigger job alone)."""
-    out, cur, n = [], [], 0
+    out: list[list[int]] = []
+    cur: list[int] = []
+    n = 0
     for i, j in enumerate(jobs):
         w = j.G * inits
         if cur and n + w > max_worlds:
@@ -201,14 +203,16 @@ def evaluate(
                 if run.critic is None or next(run.critic.parameters()).device != dev:
                     critic, defaults = build_test_critic(run.ckpt, norm)
                     run.critic = critic.to(dev).requires_grad_(False)
-                    run.alpha = defaults.get("alpha")
-                    if not (isinstance(run.alpha, (int, float)) and run.alpha > 0):
+                    alpha = defaults.get("alpha")
+                    if not (isinstance(alpha, (int, float)) and alpha > 0):
                         raise UserError(
                             f"{job.run_dir}: the run stores no usable policy learning rate"
                         )
+                    run.alpha = float(alpha)
+                assert run.alpha is not None  # set with the critic above
                 n = job.G * inits
                 segments.append((run.critic, start, start + n))
-                rates.append(torch.full((n,), float(run.alpha)))
+                rates.append(torch.full((n,), run.alpha))
                 goals.append(job.goals.to(torch.float32).repeat_interleave(inits, dim=0))
                 if job.G not in inits_cache:
                     gen = torch.Generator().manual_seed(int(seed))

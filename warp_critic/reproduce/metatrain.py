@@ -21,11 +21,16 @@ environment steps. What counts as an environment step (one control step of one w
 from __future__ import annotations
 
 import shutil
+from collections.abc import Callable
 from dataclasses import fields
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from warp_critic.core.errors import UserError
 from warp_critic.reproduce.settings import METHODS
+
+if TYPE_CHECKING:
+    from warp_critic.running.loop import TrainResult
 
 STEPS_COUNTED = {
     "ours": "(inner_steps + 1) x worlds x horizon per iteration: the inner-loop rollouts and the rollout of the updated policies",
@@ -115,7 +120,12 @@ def run_metatrain_stage(
     values = dict(values)
     record = True
     cfg = make_config(scene, method, values, seeds, run, device, resume)
-    train = {"ours": meta_train, "ddpg": train_ddpg, "meta-critic": train_meta_critic}[method]
+    trainers: dict[str, Callable[..., TrainResult]] = {
+        "ours": meta_train,
+        "ddpg": train_ddpg,
+        "meta-critic": train_meta_critic,
+    }
+    train = trainers[method]
     result = train(cfg, progress=progress, record=record)
     per_seed = {}
     steps_per_it = None

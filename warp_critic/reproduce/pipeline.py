@@ -170,8 +170,11 @@ def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, 
 
         runs = {}
         for dep, dep_dir in st["depends"].items():  # metatrain-<robot>-<method> -> its directory
+            data = read_stage(out / dep_dir)
+            if data is None:
+                raise UserError(f"{out / dep_dir}: the stage {dep} this one needs is not complete")
             runs[stages_method(dep)] = [
-                str(p.relative_to(out)) for p in run_dirs(out / dep_dir, read_stage(out / dep_dir))
+                str(p.relative_to(out)) for p in run_dirs(out / dep_dir, data)
             ]
         kwargs = {"s": settings[group], "runs": runs, "device": device, "progress": progress}
     return Unit(

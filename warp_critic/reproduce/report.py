@@ -451,8 +451,7 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
     # -- Figure 3: meta-training --------------------------------------------------------------------
     md += ["## Figure 3: meta-training (reacher, KUKA)", ""]
     for scene in SCENES:
-        got = {m: recs.get(f"metatrain-{scene}-{m}") for m in METHODS}
-        got = {m: v for m, v in got.items() if v is not None}
+        got = {m: rec for m in METHODS if (rec := recs.get(f"metatrain-{scene}-{m}")) is not None}
         if not got:
             md += [f"{scene}: not run (stage `metatrain`).", ""]
             continue
@@ -480,12 +479,12 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
         md.append("")
         if "ours" in summary and len(summary) == 3:
             best = min(summary, key=lambda m: summary[m]["final_mean"])
-            spread = {m: s["final_std"] for m, s in summary.items()}
+            spread: dict[str, float] = {m: s["final_std"] for m, s in summary.items()}
             sentence = (
                 f"Figure 3 ({scene}): final error vs iterations and environment steps; the paper reports ours as "
                 f"the most sample-efficient and least seed-sensitive. Here the lowest final error is "
                 f"{METHOD_LABELS[best]}'s ({'as' if best == 'ours' else 'NOT as'} in the paper) and the smallest "
-                f"spread over seeds is {METHOD_LABELS[min(spread, key=spread.get)]}'s."
+                f"spread over seeds is {METHOD_LABELS[min(spread, key=spread.__getitem__)]}'s."
             )
         else:
             sentence = f"Figure 3 ({scene}): training curves of the methods that ran."
@@ -508,7 +507,7 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
         plot_sweep(p5, M, "mass", "mass added at the link-2 tip (kg); link 1 unchanged", 0.0)
         plot_sweep(p6, M, "length", "link-2 length (m); link 1 unchanged", tip)
         gm = {m: M["goals"][m]["mse_mean"] for m in METHODS}
-        best = min(gm, key=gm.get)
+        best = min(gm, key=gm.__getitem__)
         md += [
             f"Goal grid: {len(M['axis_q1'])} x {len(M['axis_q2'])} goals over the joint limits, "
             f"{M['policy_updates']} policy update(s), horizon {M['horizon']}; mean MSE over the grid: "
@@ -546,7 +545,7 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
         )
         for fig_no, kind, png in ((5, "mass", p5), (6, "length", p6)):
             avg = {m: float(np.mean([c["mse_mean"] for c in M[kind][m]])) for m in METHODS}
-            b = min(avg, key=avg.get)
+            b = min(avg, key=avg.__getitem__)
             figures.append(
                 (
                     f"Figure {fig_no}: reacher {kind}",
@@ -590,7 +589,7 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
             "",
         ]
         for table in ("table1", "table2", "table3"):
-            lines, cells, summary = table_markdown(table, T, src)
+            lines, cells, findings = table_markdown(table, T, src)
             md += [f"### {PAPER_TABLES[table].title}", ""]
             if table == "table2":
                 md += [
@@ -604,7 +603,7 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
                     "value is 'length=0'.",
                     "",
                 ]
-            md += lines + [""] + [f"- {s}." for s in summary] + [""]
+            md += lines + [""] + [f"- {s}." for s in findings] + [""]
             results["tables"] += cells
 
     md += ["## Figures", ""]

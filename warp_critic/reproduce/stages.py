@@ -145,9 +145,14 @@ class StageRecord:
     group: str  # toy, landscape, metatrain, maps, tables
     name: str  # e.g. metatrain-kuka-ours
     dir: Path
-    data: dict | None = None  # stage.json
+    data: dict  # stage.json
     ran: bool = False  # ran (or resumed) in this call; False: skipped as complete
     seconds_this_call: float = 0.0
+
+
+def _to_stderr(line: str) -> None:
+    sys.stderr.write(line + "\n")
+    sys.stderr.flush()
 
 
 @dataclass
@@ -156,9 +161,7 @@ class Runner:
 
     out: Path
     total: int = 0  # stages to run in this call (set once the complete ones are known)
-    log: Callable[[str], None] = field(
-        default=lambda s: (sys.stderr.write(s + "\n"), sys.stderr.flush())
-    )
+    log: Callable[[str], None] = field(default=_to_stderr)
     records: dict[str, StageRecord] = field(default_factory=dict)
     t0: float = field(default_factory=time.perf_counter)
     done: int = 0  # stages that ran to completion in this call
@@ -201,7 +204,7 @@ class Runner:
             "result": result,
         }
         atomic_write_text(d / STAGE_FILE, json.dumps(data, indent=1, default=_jsonable) + "\n")
-        rec = StageRecord(group, name, d, read_stage(d), ran=True, seconds_this_call=seconds)
+        rec = StageRecord(group, name, d, data, ran=True, seconds_this_call=seconds)
         self.records[name] = rec
         self.done += 1
         minutes = (time.perf_counter() - self.t0) / 60

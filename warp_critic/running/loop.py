@@ -22,7 +22,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any, TextIO
 
 import torch
 
@@ -38,6 +38,9 @@ from warp_critic.running.task import (
     check_memory,
     load_task_scene,
 )
+
+if TYPE_CHECKING:
+    from warp_critic.running.recording import TrainingRecorder
 
 
 class Interrupted(KeyboardInterrupt):
@@ -126,17 +129,42 @@ class SeedRun:
             require
         )
         self.ckpt: dict | None = None
-        self.rundir: RunDir | None = None
+        self._rundir: RunDir | None = None  # opened on resume, else created by claim()
         self.cfg = self._resume_config(cfg, given) if cfg.resume else cfg
-        self.gen: torch.Generator | None = None
+        self._gen: torch.Generator | None = None  # made by Session.seed()
         self.global_rng: torch.Tensor | None = (
             None  # torch's global RNG state after this seed's set-up
         )
         self.history: list[dict] = []
-        self.metrics_file = None
-        self.recorder = None
+        self.metrics_file: TextIO | None = None
+        self.recorder: TrainingRecorder | None = None
         self.run_id: str | None = None
-        self.last_checkpoint = self.ckpt["iteration"] if self.ckpt is not None else None
+        self.last_checkpoint: int | None = self.ckpt["iteration"] if self.ckpt is not None else None
+
+    @property
+    def rundir(self) -> RunDir:
+        if self._rundir is None:
+            raise RuntimeError("the run directory is not claimed yet (SeedRun.claim)")
+        return self._rundir
+
+    @rundir.setter
+    def rundir(self, value: RunDir) -> None:
+        self._rundir = value
+
+    @property
+    def claimed(self) -> bool:
+        """Whether this seed holds its run directory (opened on resume or created)."""
+        return self._rundir is not None
+
+    @property
+    def gen(self) -> torch.Generator:
+        if self._gen is None:
+            raise RuntimeError("this seed's generator is not made yet (Session.seed)")
+        return self._gen
+
+    @gen.setter
+    def gen(self, value: torch.Generator) -> None:
+        self._gen = value
 
     @property
     def start(self) -> int:
@@ -154,16 +182,16 @@ class SeedRun:
                 )
             self.rundir.lock()
         else:
-            self.rundir = RunDir.create(cfg.out, cfg.method)
+            self.rundir = RunDir.create(cfg.out or cfg.default_out(), cfg.method)
         self.run_id = self.rundir.ensure_marker(cfg.method).get("run_id")
 
     def _resume_config(self, requested: TaskConfig, given: set[str] | None) -> TaskConfig:
         """The run's saved config, with what may change on resume taken from ``requested`` (a new
         object; ``requested`` is left as it was). Loads the checkpoint into ``self.ckpt``."""
         cls = type(requested)
-        if requested.out is None:
-            requested = replace(requested, out=requested.default_out())
-        self.rundir = RunDir.open(requested.out)
+        out = requested.out if requested.out is not None else requested.default_out()
+        requested = replace(requested, out=out)
+        self.rundir = RunDir.open(out)
         ckpt = self.rundir.load_checkpoint(require=self.require)
         _same_run(self.rundir, ckpt)
         if ckpt["method"] != requested.method:
@@ -268,8 +296,7 @@ class Session:
                     "resume: the seeds' run directories are at different iterations "
                     f"({', '.join(f'{r.cfg.out}: {r.start}' for r in self.runs)}); resume them one by one"
                 )
-            scene = None
-            for k, r in enumerate(self.runs):
+            for k, r in enumerate(self.runs):  # the same scene file for every seed
                 r.cfg, scene = load_task_scene(r.cfg, announce=k == 0)
             self.scene_hash = getattr(scene, "content_hash", None)
             if cfg.seeds:
@@ -412,6 +439,7 @@ class Session:
                 for i, (r, row) in enumerate(zip(self.runs, rows)):
                     row = {"iteration": it, **row, "seconds": seconds}
                     r.history.append(row)
+                    assert r.metrics_file is not None  # opened above for every seed
                     r.metrics_file.write(_json_line(row))
                     r.metrics_file.flush()
                     info = IterationInfo(it, row, result, task.goal_index_of(i))
@@ -469,7 +497,7 @@ class Session:
 
     def close(self, failed: bool = False) -> None:
         for r in self.runs:
-            if r.rundir is None:
+            if not r.claimed:
                 continue
             # a new run that failed before its first iteration leaves nothing behind
             if failed and r.ckpt is None and not (r.rundir.path / "metrics.jsonl").exists():

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import rerun as rr
@@ -61,7 +62,7 @@ class Recorder:
 
     def series_style(self, entity: str, name: str, color: Sequence[int] | None = None) -> None:
         """Name (and optionally colour) a series once, statically."""
-        kwargs = {"names": name}
+        kwargs: dict[str, Any] = {"names": name}
         if color is not None:
             kwargs["colors"] = [list(color)]
         self.stream.log(entity, rr.SeriesLines(**kwargs), static=True)

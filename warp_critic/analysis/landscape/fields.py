@@ -57,11 +57,11 @@ def compute_landscapes(
         differentiable=True,
     )
     qT = diff.q[-1]
-    jac = []
+    rows = []
     for j in range(2):  # dq_T/dtheta rows: q_T(theta) per axis
         (gj,) = torch.autograd.grad(qT[:, j].sum(), th, retain_graph=(j == 0))
-        jac.append(gj)
-    jac = torch.stack(jac, 1)  # (P, 2 [q axis], 2 [theta])
+        rows.append(gj)
+    jac = torch.stack(rows, 1)  # (P, 2 [q axis], 2 [theta])
     qT_data = data.q[-1]
     values = np.zeros((len(goals), 3, n, n))
     grads = np.zeros((len(goals), 3, n, n, 2))
