@@ -73,7 +73,7 @@ from warp_critic.methods.replay import (
 from warp_critic.physics import schema
 from warp_critic.physics.simulator import Simulator
 from warp_critic.running.loop import Callback, Session, TrainResult
-from warp_critic.running.task import TaskConfig, spec
+from warp_critic.running.task import TaskConfig, filled, spec
 
 ALPHA_GRID = tuple(10.0 ** (k / 2) for k in range(-12, 1))  # 1e-6, 3.2e-6, ..., 0.32, 1
 
@@ -168,9 +168,9 @@ class BaselineConfig(TaskConfig):
     scene_fields = TaskConfig.scene_fields + ("inner_steps",)
 
     def n_updates(self) -> int:
-        return (
-            self.updates_per_iteration if self.updates_per_iteration is not None else self.horizon
-        )
+        if self.updates_per_iteration is not None:
+            return self.updates_per_iteration
+        return filled(self.horizon, "horizon")
 
 
 # ------------------------------------------------------------------------------------------------
@@ -268,7 +268,13 @@ def train_baseline(
     with Session(
         cfg, differentiable=False, given=given, require=("agent_state", "buffer", "selected_alpha")
     ) as session:
-        cfg, task = session.cfg, session.task
+        filled_cfg, task = session.cfg, session.task  # the scene's defaults filled in
+        assert isinstance(filled_cfg, BaselineConfig)
+        cfg = filled_cfg
+        horizon, inner_steps = (
+            filled(cfg.horizon, "horizon"),
+            filled(cfg.inner_steps, "inner_steps"),
+        )
         S, sim, norm, goal, dof, dev = (
             task.S,
             task.sim,
@@ -282,7 +288,7 @@ def train_baseline(
             gens.append(session.seed(i))
             agents.append(make_agent(cfg, dof, norm, dev))
             buffers.append(
-                ReplayBuffer(min(cfg.buffer_size, cfg.iterations * task.Wc * cfg.horizon), dof, dev)
+                ReplayBuffer(min(cfg.buffer_size, cfg.iterations * task.Wc * horizon), dof, dev)
             )
             noises.append(
                 ExplorationNoise(
@@ -307,11 +313,11 @@ def train_baseline(
             else Simulator(
                 task.scene,
                 sim.variants[: task.Wc],
-                dt=cfg.dt,
-                substeps=cfg.substeps,
+                dt=filled(cfg.dt, "dt"),
+                substeps=filled(cfg.substeps, "substeps"),
                 device=cfg.device,
                 differentiable=False,
-                gravity=cfg.gravity,
+                gravity=filled(cfg.gravity, "gravity"),
             )
         )
 
@@ -323,8 +329,8 @@ def train_baseline(
                 norm,
                 eval_sim,
                 goal[sl],
-                cfg.horizon,
-                cfg.inner_steps,
+                horizon,
+                inner_steps,
                 grid,
                 session.runs[i].cfg.seed + 1,
                 q0=task.home[sl],
@@ -357,9 +363,9 @@ def train_baseline(
                 return torch.maximum(torch.minimum(tau, norm.max_torque), -norm.max_torque)
 
             with torch.no_grad():
-                explore_traj = rollout(sim, per_seed(explore), q0, qd0, cfg.horizon)
+                explore_traj = rollout(sim, per_seed(explore), q0, qd0, horizon)
             r, done = rewards(explore_traj, goal, cfg.reward, cfg.reward_scale)
-            rows = []
+            rows: list[dict[str, Any]] = []
             for i in range(S):
                 sl = task.copy(i)
                 part = Trajectory(
@@ -386,13 +392,13 @@ def train_baseline(
                     per_seed(lambda i, q, qd, g: agents[i].actor(q, qd, g)),
                     q0,
                     qd0,
-                    cfg.horizon,
+                    horizon,
                 )
             per_world = final_error(eval_traj.q[-1], goal)
             explore_err = final_error(explore_traj.q[-1], goal)
             for i, stats in enumerate(rows):
                 sl = task.copy(i)
-                row = {
+                row: dict[str, Any] = {
                     "task_loss": per_world[sl].mean().item(),
                     "task_loss_per_goal": task.per_goal(per_world[sl]).tolist(),
                     "task_loss_explore": explore_err[sl].mean().item(),

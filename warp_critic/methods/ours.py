@@ -19,20 +19,22 @@ from warp_critic.learning.networks import (
     POLICY_INIT_SCHEMES,
     Critic,
     MLPPolicy,
+    PolicyParams,
     StackedCritic,
     detach_params,
 )
 from warp_critic.learning.outer import meta_loss
 from warp_critic.physics import schema
 from warp_critic.running.loop import Callback, Session, TrainResult
-from warp_critic.running.task import TaskConfig, spec
+from warp_critic.running.task import TaskConfig, filled, spec
 
 
 @dataclass
 class TrainConfig(TaskConfig):
     """Model-based meta-training of the critic (Algorithm 2). ``None`` = the scene's default."""
 
-    iterations: int | None = spec(
+    # None: the scene's count; Session hands the method the filled config (an int)
+    iterations: int | None = spec(  # type: ignore[assignment]
         None,
         "outer iterations (critic updates); default: the scene's (the reported runs), else "
         + schema.fallback_text("iterations"),
@@ -98,11 +100,11 @@ class TrainConfig(TaskConfig):
 
     def lr_at(self, it: int) -> float:
         """Cosine decay to 10% of ``lr`` at the last iteration, or constant."""
+        lr = filled(self.lr, "lr")
         if self.lr_schedule == "cosine":
-            return self.lr * (
-                0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * it / max(self.iterations - 1, 1)))
-            )
-        return self.lr
+            iterations = filled(self.iterations, "iterations")
+            return lr * (0.1 + 0.9 * 0.5 * (1 + math.cos(math.pi * it / max(iterations - 1, 1))))
+        return lr
 
 
 def meta_train(
@@ -127,32 +129,37 @@ def meta_train(
         given=given,
         require=("critic_state", "optimizer_state", "policy_params"),
     ) as session:
-        cfg, task = session.cfg, session.task
+        filled_cfg, task = session.cfg, session.task  # the scene's defaults filled in
+        assert isinstance(filled_cfg, TrainConfig)
+        cfg = filled_cfg
+        critic_input = filled(cfg.critic_input, "critic_input")
         S, dev = task.S, task.device
         policy = MLPPolicy(task.norm)
-        gens, critics, params = [], [], []
+        gens: list[torch.Generator] = []
+        critics: list[Critic] = []
+        seed_params: list[PolicyParams] = []
         for i in range(S):  # each seed's draws in the order of a single-seed run
             gens.append(session.seed(i))
             critics.append(
-                Critic(
-                    task.scene.dof, task.norm, hidden=cfg.critic_hidden, inputs=cfg.critic_input
-                ).to(dev)
+                Critic(task.scene.dof, task.norm, hidden=cfg.critic_hidden, inputs=critic_input).to(
+                    dev
+                )
             )
-            params.append(policy.init(task.Wc, generator=gens[-1], device=dev))
+            seed_params.append(policy.init(task.Wc, generator=gens[-1], device=dev))
             session.seeded(i)
         critic = StackedCritic(critics)
-        opt = torch.optim.Adam(critic.ordered(), lr=cfg.lr)
+        opt = torch.optim.Adam(critic.ordered(), lr=filled(cfg.lr, "lr"))
         for i in range(S):
             ckpt = session.restore(i)
             if ckpt is not None:
                 with session.loading(i):
                     critic.load_critic_state(i, ckpt["critic_state"])
                     load_optimizer_slice(opt, critic, i, ckpt["optimizer_state"])
-                    params[i] = {
+                    seed_params[i] = {
                         k: ckpt["policy_params"][k].to(dev).reshape(v.shape)
-                        for k, v in params[i].items()
+                        for k, v in seed_params[i].items()
                     }
-        params = _cat(params)
+        params = _cat(seed_params)
         q0, qd0 = task.home, torch.zeros_like(task.home)
 
         def step(it: int):
@@ -177,9 +184,9 @@ def meta_train(
                 q0,
                 qd0,
                 task.goal,
-                horizon=cfg.horizon,
-                alpha=cfg.alpha,
-                inner_steps=cfg.inner_steps,
+                horizon=filled(cfg.horizon, "horizon"),
+                alpha=filled(cfg.alpha, "alpha"),
+                inner_steps=filled(cfg.inner_steps, "inner_steps"),
                 running_weight=cfg.running_weight,
                 velocity_weight=cfg.velocity_weight,
             )
@@ -225,7 +232,7 @@ def meta_train(
             return {
                 "critic_state": critic.critic_state(i),
                 "critic_hidden": cfg.critic_hidden,
-                "critic_input": cfg.critic_input,
+                "critic_input": critic_input,
                 "optimizer_state": optimizer_slice(opt, critic, i),
                 "policy_params": {k: v[sl].cpu() for k, v in params.items()},
             }
@@ -248,7 +255,7 @@ def meta_train(
 # ------------------------------------------------------------------------------------------------
 
 
-def _cat(per_seed: list[dict]) -> dict:
+def _cat(per_seed: list[PolicyParams]) -> PolicyParams:
     return (
         {k: torch.cat([p[k] for p in per_seed]) for k in per_seed[0]}
         if len(per_seed) > 1

@@ -114,6 +114,7 @@ def run_metatrain_stage(
     from warp_critic.methods.ddpg import train_ddpg
     from warp_critic.methods.meta_critic import train_meta_critic
     from warp_critic.methods.ours import meta_train
+    from warp_critic.running.task import filled
 
     run = d / "run"
     resume = _clear_unstarted(run, seeds)
@@ -131,9 +132,10 @@ def run_metatrain_stage(
     steps_per_it = None
     for seed, r in zip(seeds, result.seeds):
         c = r.config
-        worlds = len(c.goals) * c.worlds_per_goal
-        mult = (c.inner_steps + 1) if method == "ours" else 1
-        steps_per_it = mult * worlds * c.horizon
+        assert c is not None  # a run returns its config
+        worlds = len(filled(c.goals, "goals")) * c.worlds_per_goal
+        mult = (getattr(c, "inner_steps", 1) + 1) if method == "ours" else 1
+        steps_per_it = mult * worlds * filled(c.horizon, "horizon")
         rows = r.metrics
         per_seed[str(seed)] = {
             "run_dir": str(Path(r.run_dir).relative_to(d)),
@@ -147,6 +149,7 @@ def run_metatrain_stage(
             "seconds": float(sum(x.get("seconds", 0.0) for x in rows)),
         }
     first = result.seeds[0].config
+    assert first is not None
     return {
         "scene": scene,
         "method": method,

@@ -21,7 +21,7 @@ import math
 import typing
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import torch
 
@@ -76,6 +76,8 @@ def spec(default, help: str, *, gt=None, ge=None, le=None, lt=None, cap=None, ch
 class SerializableConfig:
     """``to_dict`` / ``from_dict`` (unknown keys ignored) for config dataclasses."""
 
+    __dataclass_fields__: ClassVar[dict[str, Any]]  # the subclasses are dataclasses
+
     def to_dict(self) -> dict:
         return asdict(self)
 
@@ -129,7 +131,9 @@ def _check_value(name: str, x, meta) -> None:
             f"must be in {'(' if lo[0] == 'gt' else '['}{lo[1]}, {hi[1]}"
             f"{')' if hi[0] == 'lt' else ']'} (got {x!r})",
         )
-    key, bound = lo if lo else hi
+    violated = lo if lo else hi
+    assert violated is not None  # without bounds every value is in range
+    key, bound = violated
     word = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}[key]
     raise FieldError(name, f"must be {word} {bound} (got {x!r})")
 
@@ -214,7 +218,7 @@ class TaskConfig(SerializableConfig):
 
     method = "task"  # overridden by each method's config
     # fields a scene's content may set (a method adds its own, e.g. ours the inner/outer learning rates)
-    scene_fields = schema.keys("task")
+    scene_fields: ClassVar[tuple[str, ...]] = schema.keys("task")
 
     # -- defaults and checks -------------------------------------------------------------------
     def to_dict(self) -> dict:
@@ -257,7 +261,7 @@ class TaskConfig(SerializableConfig):
             raise FieldError("device", f"must be one of {', '.join(DEVICES)} (got {self.device!r})")
         if self.cpu_threads is not None:
             check_threads(self.cpu_threads)
-        if self.home_starts > self.worlds_per_goal:
+        if self.home_starts is not None and self.home_starts > self.worlds_per_goal:
             raise FieldError(
                 "home_starts",
                 f"must be at most worlds_per_goal {self.worlds_per_goal} (got {self.home_starts})",
@@ -277,6 +281,15 @@ class TaskConfig(SerializableConfig):
 
 
 TaskConfigT = TypeVar("TaskConfigT", bound=TaskConfig)
+T = TypeVar("T")
+
+
+def filled(value: T | None, name: str) -> T:
+    """A field that :meth:`TaskConfig.fill_defaults` has set: ``None`` only before it (a scene default
+    not yet read), which is a programming error here, named by the field."""
+    if value is None:
+        raise FieldError(name, "has no value: the config's defaults were not filled from its scene")
+    return value
 
 
 # ------------------------------------------------------------------------------------------------
@@ -359,22 +372,23 @@ def estimate_memory(
 
 def check_memory(cfg: TaskConfig, dof: int, graph_steps: int = 1, copies: int = 1) -> None:
     """Refuse settings whose memory estimate cannot fit, with the estimate, before allocating."""
-    if not all(isinstance(v, int) for v in (cfg.horizon, cfg.substeps)):
+    horizon, substeps = cfg.horizon, cfg.substeps
+    if not (isinstance(horizon, int) and isinstance(substeps, int)):
         return
     goals = (len(cfg.goals) if cfg.goals else 1) * copies
     need = estimate_memory(
         goals * cfg.worlds_per_goal,
         dof,
-        cfg.horizon,
-        cfg.substeps,
+        horizon,
+        substeps,
         max(graph_steps, getattr(cfg, "inner_steps", 1) + 1),
     )
     inner = getattr(cfg, "inner_steps", 1)
     culprit = max(
         (
             ("worlds_per_goal", cfg.worlds_per_goal / 64),
-            ("horizon", cfg.horizon / 1000),
-            ("substeps", cfg.substeps / 100),
+            ("horizon", horizon / 1000),
+            ("substeps", substeps / 100),
             ("inner_steps", inner / 100),
         ),
         key=lambda kv: kv[1],
@@ -444,7 +458,7 @@ class Task:
         home, slot = self.home[self.copy(i)], self.slot[self.copy(i)]
         if not self.cfg.start_std:
             return home
-        away = (slot >= self.cfg.home_starts).float().unsqueeze(1)
+        away = (slot >= (self.cfg.home_starts or 0)).float().unsqueeze(1)
         noise = (
             torch.randn(self.Wc, self.scene.dof, generator=gen).to(self.device)
             * self.cfg.start_std
@@ -515,17 +529,20 @@ def build_task(cfg: TaskConfig, scene: Scene, *, differentiable: bool, copies: i
     sim = Simulator(
         scene,
         [variant] * (copies * G * K),
-        dt=cfg.dt,
-        substeps=cfg.substeps,
+        dt=filled(cfg.dt, "dt"),
+        substeps=filled(cfg.substeps, "substeps"),
         device=cfg.device,
         differentiable=differentiable,
-        gravity=cfg.gravity,
+        gravity=filled(cfg.gravity, "gravity"),
     )
     dev = sim.torch_device
     goal_index = torch.arange(G, device=dev).repeat_interleave(K).repeat(copies)
     slot = torch.arange(K, device=dev).repeat(G * copies)
     norm = Normalizer.from_limits(
-        sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale
+        sim.q_lower,
+        sim.q_upper,
+        max_torque_tensor(filled(cfg.max_torque, "max_torque"), scene, dev),
+        filled(cfg.qd_scale, "qd_scale"),
     )
     home = torch.as_tensor(
         getattr(scene, "home", [0.0] * scene.dof), dtype=torch.float32, device=dev

@@ -6,6 +6,10 @@ Model ``s_{t+1} = s_t + a_t``, policy ``a_t = theta``, horizon ``T = 2``, sparse
 
 from __future__ import annotations
 
+import functools
+import operator
+from collections.abc import Iterable
+
 import numpy as np
 import torch
 
@@ -53,11 +57,16 @@ def critic(phi: torch.Tensor, s: torch.Tensor, a: torch.Tensor) -> torch.Tensor:
     return phi * (s + a) ** 2
 
 
+def _total(terms: Iterable[torch.Tensor]) -> torch.Tensor:
+    """``t_0 + t_1 + ...`` left to right (the order, hence the rounding, of ``sum``)."""
+    return functools.reduce(operator.add, terms)
+
+
 def critic_objective(
     phi: torch.Tensor, states: list[torch.Tensor], theta: torch.Tensor
 ) -> torch.Tensor:
     """``sum_{t=0}^{T-1} Q_phi(s_t, pi_theta(s_t))`` with the given (data) states."""
-    return sum(critic(phi, states[t], theta) for t in range(T))
+    return _total(critic(phi, states[t], theta) for t in range(T))
 
 
 def td_error(
@@ -72,12 +81,12 @@ def td_error(
     ``delta = sum_{t=0}^{T-1} (Q(s_t, a_t) - (r_t + gamma * V_{t+1}))^2`` with ``V_{t+1} = Q(s_{t+1}, a_{t+1})``
     for ``t + 1 < T`` and the terminal cost ``V_T = r_T``.
     """
-    delta = 0.0
+    terms = []
     for t in range(T):
         nxt = reward(states[T], T, g) if t + 1 == T else critic(phi, states[t + 1], theta)
         target = reward(states[t], t, g) + gamma * nxt
-        delta = delta + (critic(phi, states[t], theta) - target) ** 2
-    return delta
+        terms.append((critic(phi, states[t], theta) - target) ** 2)
+    return _total(terms)
 
 
 def inner_step(
@@ -101,7 +110,7 @@ def task_loss_after_inner_step(
     """Our outer objective: ``L_task = (s_2^new - g)^2`` for ``theta_new(phi)`` rolled out through the model."""
     theta_new = inner_step(theta, states, phi, alpha)
     new_states = rollout(s0, theta_new)
-    return sum(reward(new_states[t], t, g) for t in range(T + 1))
+    return _total(reward(new_states[t], t, g) for t in range(T + 1))
 
 
 def meta_critic_loss(
