@@ -11,21 +11,23 @@ The layers, each importing only the ones before it: ``core`` -> ``physics`` -> `
 
 from warp_critic.core.exports import lazy_exports
 
-_EXPORTS = {
-    "warp_critic.core.errors": ("UserError", "FieldError", "SceneError", "DivergenceError"),
-    "warp_critic.core.runtime": ("init",),
-    "warp_critic.physics.scene": ("Scene", "load_scene"),
-    "warp_critic.physics.variants": ("Variant",),
-    "warp_critic.physics.simulator": ("Simulator",),
-    "warp_critic.running.rundir": ("RunDir",),
-    "warp_critic.methods.ours": ("TrainConfig", "meta_train"),
-    "warp_critic.methods.baseline": ("BaselineConfig",),
-    "warp_critic.methods.ddpg": ("train_ddpg",),
-    "warp_critic.methods.meta_critic": ("train_meta_critic",),
-    "warp_critic.evaluation.metatest": ("MetaTestConfig", "meta_test"),
-    "warp_critic.evaluation.protocol": ("ProtocolConfig", "run_protocol"),
-}
-__all__ = ["__version__", *(name for names in _EXPORTS.values() for name in names)]
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "warp_critic.core.errors": ("UserError", "FieldError", "SceneError", "DivergenceError"),
+        "warp_critic.core.runtime": ("init",),
+        "warp_critic.physics.scene": ("Scene", "load_scene"),
+        "warp_critic.physics.variants": ("Variant",),
+        "warp_critic.physics.simulator": ("Simulator",),
+        "warp_critic.running.rundir": ("RunDir",),
+        "warp_critic.methods.ours": ("TrainConfig", "meta_train"),
+        "warp_critic.methods.baseline": ("BaselineConfig",),
+        "warp_critic.methods.ddpg": ("train_ddpg",),
+        "warp_critic.methods.meta_critic": ("train_meta_critic",),
+        "warp_critic.evaluation.metatest": ("MetaTestConfig", "meta_test"),
+        "warp_critic.evaluation.protocol": ("ProtocolConfig", "run_protocol"),
+    },
+)
+__all__.insert(0, "__version__")
 
 __version__ = "0.1.0"

@@ -2,16 +2,23 @@
 
 from warp_critic.core.exports import lazy_exports
 
-_EXPORTS = {
-    "warp_critic.core.errors": ("UserError", "FieldError", "SceneError", "DivergenceError", "warn"),
-    "warp_critic.core.runtime": (
-        "init",
-        "init_warp",
-        "seed_everything",
-        "rng_state",
-        "restore_rng",
-    ),
-    "warp_critic.core.memory": ("available_memory", "check_fits"),
-}
-__all__ = [name for names in _EXPORTS.values() for name in names]
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "warp_critic.core.errors": (
+            "UserError",
+            "FieldError",
+            "SceneError",
+            "DivergenceError",
+            "warn",
+        ),
+        "warp_critic.core.runtime": (
+            "init",
+            "init_warp",
+            "seed_everything",
+            "rng_state",
+            "restore_rng",
+        ),
+        "warp_critic.core.memory": ("available_memory", "check_fits"),
+    },
+)

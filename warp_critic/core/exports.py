@@ -14,8 +14,12 @@ from typing import Any
 
 def lazy_exports(
     package: str, exports: Mapping[str, tuple[str, ...]]
-) -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
-    """``(__getattr__, __dir__)`` for ``package``, which re-exports ``exports[module]`` from each module."""
+) -> tuple[list[str], Callable[[str], Any], Callable[[], list[str]]]:
+    """``(__all__, __getattr__, __dir__)`` for ``package``, which re-exports ``exports[module]`` from
+    each module::
+
+        __all__, __getattr__, __dir__ = lazy_exports(__name__, {"pkg.mod": ("name", ...)})
+    """
     where = {name: module for module, names in exports.items() for name in names}
 
     def __getattr__(name: str) -> Any:
@@ -27,4 +31,4 @@ def lazy_exports(
     def __dir__() -> list[str]:
         return sorted(set(vars(sys.modules[package])) | set(where))
 
-    return __getattr__, __dir__
+    return list(where), __getattr__, __dir__

@@ -2,20 +2,21 @@
 
 from warp_critic.core.exports import lazy_exports
 
-_EXPORTS = {
-    "warp_critic.evaluation.metatest": (
-        "MetaTestConfig",
-        "meta_test",
-        "setup_meta_test",
-        "register_critic_loader",
-    ),
-    "warp_critic.evaluation.protocol": (
-        "ProtocolConfig",
-        "ProtocolResult",
-        "run_protocol",
-        "PAPER_TABLES",
-    ),
-    "warp_critic.evaluation.presets": ("PRESETS", "preset"),
-}
-__all__ = [name for names in _EXPORTS.values() for name in names]
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "warp_critic.evaluation.metatest": (
+            "MetaTestConfig",
+            "meta_test",
+            "setup_meta_test",
+            "register_critic_loader",
+        ),
+        "warp_critic.evaluation.protocol": (
+            "ProtocolConfig",
+            "ProtocolResult",
+            "run_protocol",
+            "PAPER_TABLES",
+        ),
+        "warp_critic.evaluation.presets": ("PRESETS", "preset"),
+    },
+)

@@ -2,13 +2,14 @@
 
 from warp_critic.core.exports import lazy_exports
 
-_EXPORTS = {
-    "warp_critic.learning.networks": ("Critic", "StackedCritic", "MLPPolicy", "Normalizer"),
-    "warp_critic.learning.losses": ("final_error", "task_loss", "critic_loss", "td_loss"),
-    "warp_critic.learning.protocols": ("CriticFn", "Policy"),
-    "warp_critic.learning.rollout": ("Trajectory", "rollout"),
-    "warp_critic.learning.inner": ("inner_update", "policy_fn"),
-    "warp_critic.learning.outer": ("OuterResult", "meta_loss"),
-}
-__all__ = [name for names in _EXPORTS.values() for name in names]
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "warp_critic.learning.networks": ("Critic", "StackedCritic", "MLPPolicy", "Normalizer"),
+        "warp_critic.learning.losses": ("final_error", "task_loss", "critic_loss", "td_loss"),
+        "warp_critic.learning.protocols": ("CriticFn", "Policy"),
+        "warp_critic.learning.rollout": ("Trajectory", "rollout"),
+        "warp_critic.learning.inner": ("inner_update", "policy_fn"),
+        "warp_critic.learning.outer": ("OuterResult", "meta_loss"),
+    },
+)

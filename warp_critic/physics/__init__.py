@@ -2,11 +2,12 @@
 
 from warp_critic.core.exports import lazy_exports
 
-_EXPORTS = {
-    "warp_critic.physics.scene": ("Scene", "load_scene", "scenes_dir", "content_hash"),
-    "warp_critic.physics.variants": ("Variant",),
-    "warp_critic.physics.simulator": ("Simulator", "STANDARD_GRAVITY", "resolve_device"),
-    "warp_critic.physics.bridge": ("NewtonBridge",),
-}
-__all__ = [name for names in _EXPORTS.values() for name in names]
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "warp_critic.physics.scene": ("Scene", "load_scene", "scenes_dir", "content_hash"),
+        "warp_critic.physics.variants": ("Variant",),
+        "warp_critic.physics.simulator": ("Simulator", "STANDARD_GRAVITY", "resolve_device"),
+        "warp_critic.physics.bridge": ("NewtonBridge",),
+    },
+)

@@ -10,14 +10,15 @@ processes, Ray), :mod:`.pipeline` (the order). The flags live in :mod:`warp_crit
 
 from warp_critic.core.exports import lazy_exports
 
-_EXPORTS = {
-    "warp_critic.reproduce.pipeline": ("ReproduceConfig", "reproduce"),
-    "warp_critic.reproduce.executors": (
-        "InProcess",
-        "LocalProcesses",
-        "RayExecutor",
-        "make_executor",
-    ),
-}
-__all__ = [name for names in _EXPORTS.values() for name in names]
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "warp_critic.reproduce.pipeline": ("ReproduceConfig", "reproduce"),
+        "warp_critic.reproduce.executors": (
+            "InProcess",
+            "LocalProcesses",
+            "RayExecutor",
+            "make_executor",
+        ),
+    },
+)

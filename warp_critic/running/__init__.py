@@ -2,17 +2,18 @@
 
 from warp_critic.core.exports import lazy_exports
 
-_EXPORTS = {
-    "warp_critic.running.task": (
-        "TaskConfig",
-        "Task",
-        "build_task",
-        "load_task_scene",
-        "check_fields",
-    ),
-    "warp_critic.running.loop": ("Session", "TrainResult", "IterationInfo", "Interrupted"),
-    "warp_critic.running.rundir": ("RunDir", "RunExistsError"),
-    "warp_critic.running.recording": ("Recorder", "TrainingRecorder"),
-}
-__all__ = [name for names in _EXPORTS.values() for name in names]
-__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+__all__, __getattr__, __dir__ = lazy_exports(
+    __name__,
+    {
+        "warp_critic.running.task": (
+            "TaskConfig",
+            "Task",
+            "build_task",
+            "load_task_scene",
+            "check_fields",
+        ),
+        "warp_critic.running.loop": ("Session", "TrainResult", "IterationInfo", "Interrupted"),
+        "warp_critic.running.rundir": ("RunDir", "RunExistsError"),
+        "warp_critic.running.recording": ("Recorder", "TrainingRecorder"),
+    },
+)
