@@ -25,12 +25,14 @@ from warp_critic.methods.replay import ReplayBuffer, rewards
 
 
 def make_critic(sim, cfg, seed: int) -> Critic:
-    """The paper's critic network for the point mass, initialised from ``torch.manual_seed(seed)``."""
-    torch.manual_seed(seed)
+    """The paper's critic network for the point mass, initialised as after ``torch.manual_seed(seed)``;
+    torch's global random state is left as it was."""
     norm = Normalizer.from_limits(
         sim.q_lower, sim.q_upper, torch.full((2,), cfg.range, device=sim.torch_device), cfg.qd_scale
     )
-    return Critic(2, norm).to(sim.torch_device)
+    with torch.random.fork_rng():
+        torch.manual_seed(seed)
+        return Critic(2, norm).to(sim.torch_device)
 
 
 def _random_forces(W: int, cfg, gen: torch.Generator, device) -> torch.Tensor:
