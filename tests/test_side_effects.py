@@ -7,9 +7,11 @@ import copy
 import random
 
 import numpy as np
+import pytest
 import torch
 from conftest import REACHER
 
+from warp_critic.core.errors import FieldError
 from warp_critic.evaluation.metatest import MetaTestConfig, meta_test, setup_meta_test
 from warp_critic.methods.ours import TrainConfig, meta_train
 from warp_critic.running.task import load_task_scene
@@ -55,3 +57,22 @@ def test_meta_test_draws_from_its_own_generator_and_prints_nothing(finished_run,
     lines: list[str] = []
     meta_test(tc, progress=lines.append)
     assert lines and lines[0].startswith("meta-test ours on reacher")
+
+
+def test_available_memory_is_psutils_capped_by_the_cgroup(tmp_path, monkeypatch):
+    from warp_critic.core import memory
+
+    free = memory.psutil.virtual_memory().available
+    limit, usage = tmp_path / "memory.max", tmp_path / "memory.current"
+    monkeypatch.setattr(memory, "_CGROUP_FILES", ((str(limit), str(usage)),))
+    limit.write_text("max\n")  # cgroup v2 without a limit
+    assert abs(memory.available_memory() - free) < 2**30
+    limit.write_text(f"{3 * 2**30}\n")
+    usage.write_text(f"{2**30}\n")
+    assert memory.available_memory() == min(2 * 2**30, memory.psutil.virtual_memory().available)
+    # the one check: 80% of what is available, naming the field
+    with pytest.raises(
+        FieldError, match="inits: 4 worlds need about 1.8 GiB, more than 80% of the 2.0 GiB"
+    ):
+        memory.check_fits("inits", "4 worlds", 2**30 + 2**29 + 2**28)
+    memory.check_fits("inits", "4 worlds", 2**30)
