@@ -66,7 +66,7 @@ class TrainResult:
     run_dir: Path
     metrics: list[dict] = field(default_factory=list)
     model: Any = None  # the critic (ours) or the agent (baselines)
-    config: TaskConfig | None = None  # the run's config, defaults filled (None: not a real run)
+    config: TaskConfig | None = None  # the run's config, with the scene's defaults filled in
     seeds: list[TrainResult] = field(default_factory=list)  # every seed's result (a batched run)
 
 
