@@ -452,7 +452,7 @@ def _tex_table(label: str) -> tuple[list[float], dict[str, list[tuple[float, flo
     "label", ["table:gen_tasks_kuka", "table:gen_kuka_mass", "table:gen_kuka_link"]
 )
 def test_paper_tables_are_the_papers_latex_tables(label):
-    from warp_critic.evaluation.protocol import PAPER_METHODS, PAPER_TABLES
+    from warp_critic.evaluation.paper import PAPER_METHODS, PAPER_TABLES
 
     columns, rows = _tex_table(label)
     (table,) = [t.values for t in PAPER_TABLES.values() if t.label == label]
@@ -463,7 +463,7 @@ def test_paper_tables_are_the_papers_latex_tables(label):
 
 
 def test_paper_table1_has_the_ten_stds():
-    from warp_critic.evaluation.protocol import PAPER_TABLE1, TABLE1_STDS
+    from warp_critic.evaluation.paper import PAPER_TABLE1, TABLE1_STDS
 
     assert TABLE1_STDS == (0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
     assert (
@@ -473,7 +473,8 @@ def test_paper_table1_has_the_ten_stds():
 
 def test_protocol_readings_are_meta_tests():
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test  # noqa: F401  (the names the protocol uses)
-    from warp_critic.evaluation.protocol import GOAL_NOISE, ProtocolConfig, check_settings
+    from warp_critic.evaluation.paper import GOAL_NOISE
+    from warp_critic.evaluation.protocol import ProtocolConfig, check_settings
 
     check_settings(ProtocolConfig(goal_noise=list(GOAL_NOISE)))
     assert GOAL_NOISE == ("per-joint", "distance")

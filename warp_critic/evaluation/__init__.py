@@ -1,4 +1,4 @@
-"""Evaluation: meta-test (Algorithm 3), the paper"s protocol and tables, and the named presets."""
+"""Evaluation: meta-test (Algorithm 3), the paper's protocol and tables, and the named presets."""
 
 from warp_critic.core.exports import lazy_exports
 
@@ -11,12 +11,8 @@ __all__, __getattr__, __dir__ = lazy_exports(
             "setup_meta_test",
             "register_critic_loader",
         ),
-        "warp_critic.evaluation.protocol": (
-            "ProtocolConfig",
-            "ProtocolResult",
-            "run_protocol",
-            "PAPER_TABLES",
-        ),
+        "warp_critic.evaluation.protocol": ("ProtocolConfig", "ProtocolResult", "run_protocol"),
+        "warp_critic.evaluation.paper": ("PAPER_TABLES", "PaperTable", "GOAL_NOISE"),
         "warp_critic.evaluation.presets": ("PRESETS", "preset"),
     },
 )

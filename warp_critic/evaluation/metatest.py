@@ -29,7 +29,7 @@ import torch
 from warp_critic.core.errors import FieldError, UserError
 from warp_critic.core.memory import check_fits
 from warp_critic.core.runtime import check_seed
-from warp_critic.evaluation.protocol import GOAL_NOISE
+from warp_critic.evaluation.paper import GOAL_NOISE
 from warp_critic.learning.inner import inner_update, policy_fn
 from warp_critic.learning.losses import final_error
 from warp_critic.learning.networks import Critic, MLPPolicy, Normalizer

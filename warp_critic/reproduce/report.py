@@ -1,7 +1,7 @@
 """``REPORT.md``, ``results.json``, ``figures/*.png`` and ``report.rrd`` from the stage files.
 
 Every number comes from a stage's ``stage.json`` (or a file it names); nothing is typed in. The
-paper's values come from :data:`warp_critic.evaluation.protocol.PAPER_TABLES`. The report covers
+paper's values come from :data:`warp_critic.evaluation.paper.PAPER_TABLES`. The report covers
 every stage of the current settings that is complete, whether it ran in this call or earlier.
 """
 
@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from warp_critic.evaluation.protocol import PAPER_TABLES
+from warp_critic.evaluation.paper import PAPER_TABLES
 from warp_critic.reproduce.settings import METHOD_LABELS, METHODS, SCENES, STAGES
 from warp_critic.reproduce.stages import STAGE_FILE, StageRecord, read_stage
 from warp_critic.running.rundir import atomic_write_text, save_figure
