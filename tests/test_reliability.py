@@ -224,7 +224,7 @@ def test_start_states_and_sampled_goals_stay_inside_asymmetric_limits(tmp_path):
         horizon=3,
         device="cpu",
     )
-    scene = load_task_scene(cfg)
+    cfg, scene = load_task_scene(cfg)
     task = build_task(cfg, scene, differentiable=False)
     lo, hi = task.sim.q_lower.cpu(), task.sim.q_upper.cpu()
     assert float(lo[0]) > 0.5  # 30 degrees: 0.95 * lower would lie below it

@@ -317,8 +317,8 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
             md.append(f"| {name} | `{name}-{st['hash']}` | not run | — | — |")
             continue
         status = "ran" if r.ran else "complete, skipped"
-        seeds = r.data["result"].get("seeds") if r.group == "metatrain" else None
-        train = f"{next(iter(seeds.values()))['seconds']:.1f}" if seeds else "—"
+        per_seed = r.data["result"].get("seeds") if r.group == "metatrain" else None
+        train = f"{next(iter(per_seed.values()))['seconds']:.1f}" if per_seed else "—"
         md.append(f"| {name} | `{r.dir.name}` | {status} | {r.data['seconds']:.1f} | {train} |")
         results["stages"][name] = {
             "dir": r.dir.name,

@@ -103,7 +103,7 @@ def read_complete(d: Path, group: str) -> dict | None:
 
 
 #: what the report and the stages that read a stage take from its result: key -> JSON type
-RESULT_KEYS = {
+RESULT_KEYS: dict[str, dict[str, type | tuple[type, ...]]] = {
     "toy": {"closed_form": dict, "numerical": dict, "table_markdown": str, "files": dict},
     "landscape": {"goals": list, "fractions": (list, dict), "files": dict, "generalising": dict},
     "metatrain": {"seeds": dict, "iterations": int, "env_steps_per_iteration": int},

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
+from pathlib import Path
 
 from warp_critic.core.errors import FieldError
 
@@ -149,9 +151,9 @@ def check_metatrain(m: dict) -> dict[str, int]:
                     raise bad(f"{where}.{k}", values[k], "may not be set (reproduce sets it)")
             check_fields_known(method, values, f"--set {where}")
             try:
-                cfg = make_config(scene, method, values, seeds, "unused", "cpu", False)
-                cfg.seeds = None
-                robot = load_task_scene(cfg)  # fills cfg's defaults from the scene, checks it
+                cfg = make_config(scene, method, values, seeds, Path("unused"), "cpu", False)
+                # the defaults filled from the scene, checked
+                cfg, robot = load_task_scene(replace(cfg, seeds=None))
                 check_memory(cfg, robot.dof, copies=len(seeds))
             except FieldError as e:
                 raise _as_set(where, values, e) from None
@@ -171,7 +173,7 @@ def _common(stage: str, s: dict) -> None:
 
 
 def check_tables(s: dict, train_goals: int) -> None:
-    from warp_critic.evaluation.metatest import GOAL_NOISE
+    from warp_critic.evaluation.paper import GOAL_NOISE
 
     _common("tables", s)
     numbers("tables.stds", s["stds"], lo=0, hi=100)

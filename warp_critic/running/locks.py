@@ -17,8 +17,12 @@ import os
 import socket
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from warp_critic.core.errors import UserError, warn
+
+if TYPE_CHECKING:
+    from filelock import BaseFileLock
 
 LOCK = ".lock"
 #: The marker of a ``warp-critic reproduce`` output folder (written by :mod:`warp_critic.reproduce.stages`).
@@ -52,7 +56,7 @@ class FolderLock:
     def __init__(self, folder: str | Path, what: str = "run directory"):
         self.folder, self.what = Path(folder), what
         self.path = self.folder / LOCK
-        self._lock = None
+        self._lock: BaseFileLock | None = None  # held while not None
 
     @property
     def held(self) -> bool:
