@@ -5,7 +5,8 @@ Modules: :mod:`.settings` (paper and ``--quick`` settings, hashes), :mod:`.stage
 (meta-training of the three methods, every seed batched), :mod:`.evaluate` (batched meta-test: many
 runs, goals and dynamics variants in one model), :mod:`.generalize` (KUKA tables, reacher maps),
 :mod:`.report` (REPORT.md, results.json, figures, report.rrd), :mod:`.executors` (in process, local
-processes, Ray), :mod:`.pipeline` (the order). The flags live in :mod:`warp_critic.cli.reproduce`.
+processes) and :mod:`.on_ray` (Ray), :mod:`.validate` (every ``--set`` checked up front),
+:mod:`.pipeline` (the order). The flags live in :mod:`warp_critic.cli.reproduce`.
 """
 
 from warp_critic.core.exports import lazy_exports
@@ -14,11 +15,7 @@ __all__, __getattr__, __dir__ = lazy_exports(
     __name__,
     {
         "warp_critic.reproduce.pipeline": ("ReproduceConfig", "reproduce"),
-        "warp_critic.reproduce.executors": (
-            "InProcess",
-            "LocalProcesses",
-            "RayExecutor",
-            "make_executor",
-        ),
+        "warp_critic.reproduce.executors": ("InProcess", "LocalProcesses", "make_executor"),
+        "warp_critic.reproduce.on_ray": ("RayExecutor",),
     },
 )
