@@ -70,13 +70,17 @@ def rollout(
             for _ in range(horizon):
                 tau = policy(q, qd)
                 q, qd = ro.step(q, qd, tau)
-                qs.append(q), qds.append(qd), taus.append(tau)
+                qs.append(q)
+                qds.append(qd)
+                taus.append(tau)
     else:
         with torch.no_grad():
             for _ in range(horizon):
                 tau = policy(q, qd)
                 q, qd = sim.step(q, qd, tau)
-                qs.append(q), qds.append(qd), taus.append(tau)
+                qs.append(q)
+                qds.append(qd)
+                taus.append(tau)
     traj = Trajectory(torch.stack(qs), torch.stack(qds), torch.stack(taus))
     check_finite(traj)
     return traj

@@ -314,6 +314,7 @@ class NewtonBridge:
             cb.q_in.copy_(q)
             cb.qd_in.copy_(qd)
             cb.tau.copy_(tau)
+            assert cb.forward is not None  # captured by _grow
             cb.forward()
             last = self._steps[(c + 1) * self.substeps - 1]
             return last.q_out.clone(), last.qd_out.clone()
@@ -324,6 +325,7 @@ class NewtonBridge:
             last.q_out_grad.copy_(gq)
             last.qd_out_grad.copy_(gqd)
             cb = self._controls[c]
+            assert cb.backward is not None  # captured by _grow
             cb.backward()
             return cb.q_keep_t.clone(), cb.qd_keep_t.clone(), cb.g_tau_t.clone()
 
