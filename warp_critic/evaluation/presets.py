@@ -63,6 +63,16 @@ SCENES: dict[str, str | None] = {
     "meta-critic": None,
 }
 
+# both baselines were reported with the same protocol
+_BASELINE_EVALUATION: dict[str, Any] = {
+    "stds": [0.1, 0.3, 0.4],
+    "goal_noise": ["per-joint"],
+    "around": [0, 1],
+    "num_goals": 10,
+    "inits": 5,
+    "seed": 1,
+}
+
 #: The meta-test protocol each preset's numbers were reported with (ProtocolConfig fields).
 EVALUATIONS: dict[str, dict[str, Any]] = {
     "reacher": {
@@ -81,22 +91,8 @@ EVALUATIONS: dict[str, dict[str, Any]] = {
         "inits": 5,
         "seed": 1,
     },
-    "ddpg": {
-        "stds": [0.1, 0.3, 0.4],
-        "goal_noise": ["per-joint"],
-        "around": [0, 1],
-        "num_goals": 10,
-        "inits": 5,
-        "seed": 1,
-    },
-    "meta-critic": {
-        "stds": [0.1, 0.3, 0.4],
-        "goal_noise": ["per-joint"],
-        "around": [0, 1],
-        "num_goals": 10,
-        "inits": 5,
-        "seed": 1,
-    },
+    "ddpg": _BASELINE_EVALUATION,
+    "meta-critic": _BASELINE_EVALUATION,
 }
 
 
