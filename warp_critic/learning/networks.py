@@ -177,6 +177,7 @@ class Critic(nn.Module):
     q_centre: torch.Tensor  # buffers (dof,)
     q_half_range: torch.Tensor
     max_torque: torch.Tensor
+    q_wrap: torch.Tensor  # (dof,) bool: the continuous joints
 
     def __init__(self, dof: int, norm: Normalizer, hidden: int = 400, inputs: str = "full"):
         super().__init__()
@@ -195,7 +196,11 @@ class Critic(nn.Module):
         self.register_buffer("q_half_range", norm.q_half_range.clone())
         self.register_buffer("max_torque", norm.max_torque.clone())
         # the continuous joints: from the scene, not the checkpoint (persistent=False)
-        wrap = norm.wrap if norm.wrap is not None else torch.zeros_like(norm.q_centre, dtype=bool)
+        wrap = (
+            norm.wrap
+            if norm.wrap is not None
+            else torch.zeros_like(norm.q_centre, dtype=torch.bool)
+        )
         self.register_buffer("q_wrap", wrap.clone(), persistent=False)
         self._wraps = bool(wrap.any())
         self.qd_scale = norm.qd_scale

@@ -22,12 +22,17 @@ class _GoalInput(nn.Module):
     q_half_range: torch.Tensor  # buffers: (dof,), (dof,), ()
     max_torque: torch.Tensor
     qd_scale: torch.Tensor
+    q_wrap: torch.Tensor  # (dof,) bool: the continuous joints
 
     def _init_norm(self, norm: Normalizer) -> None:
         self.register_buffer("q_half_range", norm.q_half_range.detach().clone())
         self.register_buffer("max_torque", norm.max_torque.detach().clone())
         self.register_buffer("qd_scale", torch.tensor(float(norm.qd_scale)))
-        wrap = norm.wrap if norm.wrap is not None else torch.zeros_like(norm.q_centre, dtype=bool)
+        wrap = (
+            norm.wrap
+            if norm.wrap is not None
+            else torch.zeros_like(norm.q_centre, dtype=torch.bool)
+        )
         self.register_buffer("q_wrap", wrap.detach().clone(), persistent=False)  # from the scene
         self._wraps = bool(wrap.any())
 

@@ -46,8 +46,9 @@ PROBE_SEED = 0
 PROBE_HOLD = 10  # control steps a probe torque is held
 ENERGY_FACTOR = 10.0
 # the KUKA's schedule (scenes/kuka.usda)
+KUKA_HORIZON = 50  # steps; typed on its own, the schedule's dict mixes value types
 KUKA = dict(
-    horizon=50,
+    horizon=KUKA_HORIZON,
     qd_scale=5.0,
     alpha=3e-4,
     lr=3e-3,
@@ -185,14 +186,14 @@ def stable(scene, dt: float, substeps: int, max_torque: np.ndarray, gravity: flo
     q = torch.as_tensor(scene.home, dtype=torch.float32).expand(PROBE_WORLDS, -1).clone()
     qd = torch.zeros_like(q)
     with torch.no_grad():
-        for t in range(KUKA["horizon"]):
+        for t in range(KUKA_HORIZON):
             if t % PROBE_HOLD == 0:  # saturated torques of random sign, held: slams into limits
                 sign = torch.randint(0, 2, q.shape, generator=gen).float() * 2 - 1
             tau = sign * bound
             q, qd = sim.step(q, qd, tau)
             if not (torch.isfinite(q).all() and torch.isfinite(qd).all()):
                 return False
-            if t % 10 == 9 or t == KUKA["horizon"] - 1:
+            if t % 10 == 9 or t == KUKA_HORIZON - 1:
                 M = mass_matrices(sim, q.double().numpy())
                 v = qd.double().numpy()
                 energy = 0.5 * np.einsum("wi,wij,wj->w", v, M, v)

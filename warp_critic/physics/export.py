@@ -191,13 +191,13 @@ def write_scene(scene, out: str | Path) -> Path:
         uj.CreateLocalRot1Attr(_gf_quat(_quat_mul(X_c[j, 3:], turn)))
         prim = uj.GetPrim()
         per = DEG if revolute else 1.0  # newton reads revolute gains per degree
-        for attr, value in (
+        for gain, value in (
             ("newton:damping", scene.damping[j] * per),
             ("newton:limitStiffness", limit_ke[j] * per),
             ("newton:limitDamping", limit_kd[j] * per),
             ("newton:armature", float(armature[j])),
         ):
-            prim.CreateAttribute(attr, T.Float).Set(float(value))
+            prim.CreateAttribute(gain, T.Float).Set(float(value))
         prim.CreateAttribute("warp_critic:effortLimit", T.Float, custom=True).Set(
             float(scene.effort_limit[j])
         )

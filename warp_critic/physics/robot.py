@@ -28,8 +28,10 @@ from __future__ import annotations
 import hashlib
 import json
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -98,14 +100,20 @@ def load_any(
     path: str | Path,
     *,
     ee_body: str | None = None,
-    tip_offset=None,
-    joints=None,
+    tip_offset: Sequence[float] | None = None,
+    joints: Sequence[str] | None = None,
 ) -> Scene:
-    """A scene file (our ``warp_critic:*`` USD) or a robot file, by what the file is."""
+    """A scene file (our ``warp_critic:*`` USD) or a robot file, by what the file is.
+
+    ``tip_offset``: ``(3,)`` [m], or None; ``joints``: joint names, or None (see :class:`RobotOptions`).
+    """
+    tip: tuple[float, float, float] | None = None
+    if tip_offset is not None:
+        if len(tip_offset) != 3:
+            raise SceneError(f"{path}: tip_offset needs 3 values x,y,z (got {len(tip_offset)})")
+        tip = (float(tip_offset[0]), float(tip_offset[1]), float(tip_offset[2]))
     options = RobotOptions(
-        ee_body=ee_body,
-        tip_offset=None if tip_offset is None else tuple(float(v) for v in tip_offset),
-        joints=None if joints is None else tuple(joints),
+        ee_body=ee_body, tip_offset=tip, joints=None if joints is None else tuple(joints)
     )
     path = Path(path).expanduser()
     if path.exists() and not path.is_dir() and is_robot_file(path):
@@ -277,9 +285,11 @@ class RobotScene(Scene):
     robot (:mod:`warp_critic.physics.derive`) on first use, so loading alone stays cheap."""
 
     derived = True
+    _derived_values: dict[str, Any] | None  # None until first use (set by the setter below)
+    _derive_lock: threading.Lock
 
     @property
-    def _defaults(self) -> dict:
+    def _defaults(self) -> dict[str, Any]:
         if self._derived_values is None:
             from warp_critic.physics import derive
 
@@ -289,6 +299,6 @@ class RobotScene(Scene):
         return self._derived_values
 
     @_defaults.setter
-    def _defaults(self, value: dict) -> None:  # Scene.__init__ sets {}: derive instead
+    def _defaults(self, value: dict[str, Any]) -> None:  # Scene.__init__ sets {}: derive instead
         self._derived_values = value or None
         self._derive_lock = threading.Lock()

@@ -39,12 +39,10 @@ def _loader(config: dict):
     joints = config.get("joints")
     if joints is not None:
         joints = [n.strip() for n in str(joints).split(",") if n.strip()]
-    options = dict(
-        ee_body=config.get("ee_body"), tip_offset=config.get("tip_offset"), joints=joints
-    )
-    if all(v is None for v in options.values()):
+    ee_body, tip_offset = config.get("ee_body"), config.get("tip_offset")
+    if ee_body is None and tip_offset is None and joints is None:
         return load_scene
-    return lambda path: load_any(path, **options)
+    return lambda path: load_any(path, ee_body=ee_body, tip_offset=tip_offset, joints=joints)
 
 
 def find_run_scene(ckpt: dict, run_dir) -> Scene:
