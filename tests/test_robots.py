@@ -344,6 +344,27 @@ def test_run_config_states_each_derived_default_with_its_rule(two_link, tmp_path
     assert code == 0 and out.is_file(), err
 
 
+def test_load_task_scene_logs_the_derived_defaults_and_prints_nothing(two_link, capfd, caplog):
+    import dataclasses
+    import logging
+
+    from warp_critic.methods.ours import TrainConfig
+    from warp_critic.running.task import load_task_scene
+
+    cfg = TrainConfig(scene=str(two_link), device="cpu", ee_body="l1", joints="j1,j2")
+    with caplog.at_level(logging.INFO, logger="warp_critic"):
+        filled, _ = load_task_scene(cfg)
+        load_task_scene(cfg, announce=False)
+    assert "derived defaults" not in capfd.readouterr().err  # the command line prints, not this
+    said = [r.getMessage() for r in caplog.records if "derived defaults" in r.getMessage()]
+    assert len(said) == 1 and "max_torque" in said[0] and "dt" in said[0], said
+    assert set(filled.derived_defaults) >= {"home", "goals", "max_torque", "dt"}
+    assert filled.to_dict()["derived_defaults"] == filled.derived_defaults
+    # a record of the run, not a setting: no flag, no range check, not compared on --resume
+    assert "derived_defaults" not in {f.name for f in dataclasses.fields(filled)}
+    assert cfg.derived_defaults == {}
+
+
 # ------------------------------------------------------------------------------------------------
 # real robots nobody here wrote
 # ------------------------------------------------------------------------------------------------

@@ -29,6 +29,7 @@ from warp_critic.cli.flags import (
     flag_of,
     user_message,
 )
+from warp_critic.cli.messages import library_messages
 from warp_critic.core.errors import DivergenceError, FieldError, UserError
 
 EXIT_USER_ERROR = 2
@@ -293,7 +294,8 @@ def _run(argv: list[str] | None, in_process: bool) -> tuple[int, bool]:
         check_utf8(args)
         init()
         signals.running()
-        return int(args.func(args) or 0), False
+        with library_messages():  # library code logs (e.g. a robot's derived defaults); we print
+            return int(args.func(args) or 0), False
     except ResumeMismatch as e:
         sys.stderr.write(f"warp-critic: error: {e.render(flag_of)}\n")
         return EXIT_USER_ERROR, False

@@ -17,6 +17,7 @@ one :class:`~warp_critic.physics.simulator.Simulator` and draws the training sta
 from __future__ import annotations
 
 import copy
+import logging
 import math
 import typing
 from dataclasses import asdict, dataclass, field, fields, replace
@@ -34,6 +35,8 @@ from warp_critic.physics.scene import Scene, Variant
 
 if TYPE_CHECKING:
     from typing_extensions import Self
+
+log = logging.getLogger(__name__)
 
 # Used for a field that neither the user nor the scene sets (the scene schema's defaults).
 GENERIC_DEFAULTS: dict[str, Any] = schema.fallbacks()
@@ -220,12 +223,17 @@ class TaskConfig(SerializableConfig):
     # fields a scene's content may set (a method adds its own, e.g. ours the inner/outer learning rates)
     scene_fields: ClassVar[tuple[str, ...]] = schema.keys("task")
 
+    def __post_init__(self) -> None:
+        # Set here, not annotated in the class body (that would make it a field: a flag, a range
+        # check, a setting compared on --resume): the defaults load_task_scene derived from a robot
+        # file, ``{name: {"value", "rule"}}``; a record of the run, not a setting.
+        self.derived_defaults: dict[str, dict[str, Any]] = {}
+
     # -- defaults and checks -------------------------------------------------------------------
     def to_dict(self) -> dict:
         d = asdict(self)
-        derived = getattr(self, "derived_defaults", None)
-        if derived:  # the defaults derived from a robot file, each with its rule (not a setting)
-            d["derived_defaults"] = copy.deepcopy(derived)
+        if self.derived_defaults:  # the defaults derived from a robot file, each with its rule
+            d["derived_defaults"] = copy.deepcopy(self.derived_defaults)
         return d
 
     def default_out(self) -> str:
@@ -493,7 +501,8 @@ def load_task_scene(cfg: TaskConfigT, announce: bool = True) -> tuple[TaskConfig
     config, a new object; the scene)``, ``cfg`` itself is left as it was.
 
     For a robot file, the defaults derived from the robot that the run uses are kept in the config
-    (``derived_defaults``: value and rule) and, with ``announce``, stated on one line on stderr.
+    (``derived_defaults``: value and rule) and, with ``announce``, stated in one INFO record on this
+    module's logger (the command line prints it as one line at the start of a run).
     """
     check_fields(cfg)  # finite numbers before anything is built
     if cfg.tip_offset is not None and len(cfg.tip_offset) != 3:
@@ -513,9 +522,7 @@ def load_task_scene(cfg: TaskConfigT, announce: bool = True) -> tuple[TaskConfig
         }
         filled.derived_defaults = derived  # on the new config, kept by to_dict
         if announce:
-            import sys
-
-            sys.stderr.write(f"warp-critic: {derive.summary(scene, values, used)}\n")
+            log.info("%s", derive.summary(scene, values, used))
     return filled, scene
 
 
