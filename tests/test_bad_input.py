@@ -80,7 +80,7 @@ HAS_CUDA = torch.cuda.is_available()
 def base(tmp_path_factory):
     from warp_critic.core.runtime import init
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
-    from warp_critic.methods.baseline import BaselineConfig
+    from warp_critic.methods.baseline_config import BaselineConfig
     from warp_critic.methods.ddpg import train_ddpg
     from warp_critic.methods.ours import TrainConfig, meta_train
 

@@ -17,7 +17,7 @@ from warp_critic.evaluation.metatest import MetaTestConfig, build_test_critic, m
 from warp_critic.learning.networks import Normalizer
 from warp_critic.learning.rollout import Trajectory
 from warp_critic.methods import q_networks as baseline_networks
-from warp_critic.methods.baseline import BaselineConfig
+from warp_critic.methods.baseline_config import BaselineConfig
 from warp_critic.methods.ddpg import train_ddpg
 from warp_critic.methods.meta_critic import train_meta_critic
 from warp_critic.methods.replay import ReplayBuffer, rewards

@@ -311,8 +311,8 @@ def test_a_full_disk_while_saving_a_checkpoint_leaves_the_old_one(tmp_path, monk
 
 def test_user_errors_survive_pickling():
     from warp_critic.core.errors import FieldError, SceneError, UserError
-    from warp_critic.running.loop import ResumeMismatch
     from warp_critic.running.rundir import RunExistsError
+    from warp_critic.running.seedrun import ResumeMismatch
 
     for e in (
         FieldError("horizon", "must be > 0 (got 0)"),

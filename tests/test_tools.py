@@ -496,7 +496,7 @@ def test_presets_are_the_reported_settings_keyed_by_config_fields():
         preset,
     )
     from warp_critic.evaluation.protocol import ProtocolConfig, check_settings
-    from warp_critic.methods.ddpg import BaselineConfig
+    from warp_critic.methods.baseline_config import BaselineConfig
     from warp_critic.methods.ours import TrainConfig
 
     assert preset("kuka-table1") == {

@@ -191,7 +191,8 @@ def run(args) -> list[dict]:
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
     from warp_critic.evaluation.presets import preset
     from warp_critic.evaluation.protocol import ProtocolConfig, check_settings
-    from warp_critic.methods.ddpg import BaselineConfig, train_ddpg
+    from warp_critic.methods.baseline_config import BaselineConfig
+    from warp_critic.methods.ddpg import train_ddpg
     from warp_critic.methods.meta_critic import train_meta_critic
 
     train = {"ddpg": train_ddpg, "meta-critic": train_meta_critic}

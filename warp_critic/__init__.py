@@ -21,7 +21,7 @@ __all__, __getattr__, __dir__ = lazy_exports(
         "warp_critic.physics.simulator": ("Simulator",),
         "warp_critic.running.rundir": ("RunDir",),
         "warp_critic.methods.ours": ("TrainConfig", "meta_train"),
-        "warp_critic.methods.baseline": ("BaselineConfig",),
+        "warp_critic.methods.baseline_config": ("BaselineConfig",),
         "warp_critic.methods.ddpg": ("train_ddpg",),
         "warp_critic.methods.meta_critic": ("train_meta_critic",),
         "warp_critic.evaluation.metatest": ("MetaTestConfig", "meta_test"),

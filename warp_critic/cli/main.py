@@ -74,7 +74,7 @@ def cmd_meta_test(args: argparse.Namespace) -> int:
 
 
 def cmd_baseline(args: argparse.Namespace) -> int:
-    from warp_critic.methods.baseline import BaselineConfig
+    from warp_critic.methods.baseline_config import BaselineConfig
     from warp_critic.methods.ddpg import train_ddpg
     from warp_critic.methods.meta_critic import train_meta_critic
 
@@ -145,7 +145,7 @@ def build_parser() -> argparse.ArgumentParser:
     from warp_critic.analysis.landscape import command as landscape
     from warp_critic.analysis.toy import command as toy
     from warp_critic.evaluation.metatest import MetaTestConfig
-    from warp_critic.methods.baseline import BaselineConfig
+    from warp_critic.methods.baseline_config import BaselineConfig
     from warp_critic.methods.ours import TrainConfig
     from warp_critic.methods.q_networks import METHODS
 
@@ -287,8 +287,9 @@ def _run(argv: list[str] | None, in_process: bool) -> tuple[int, bool]:
         parser.print_help()
         return EXIT_USER_ERROR, False
     from warp_critic.core.runtime import init
-    from warp_critic.running.loop import Interrupted, ResumeMismatch
+    from warp_critic.running.loop import Interrupted
     from warp_critic.running.rundir import DiskFullError, RunExistsError
+    from warp_critic.running.seedrun import ResumeMismatch
 
     try:
         check_utf8(args)

@@ -2,7 +2,7 @@
 
 :data:`PRESETS` maps a name to config values keyed by config **field names** (of
 :class:`warp_critic.methods.ours.TrainConfig` for meta-training presets, of
-:class:`warp_critic.methods.baseline.BaselineConfig` for the baselines); everything not named is the
+:class:`warp_critic.methods.baseline_config.BaselineConfig` for the baselines); everything not named is the
 scene default. A meta-training preset is a :class:`FromScene`: it names the settings of a reported
 run, and their values are the ones its scene (:data:`SCENES`) authors, so the numbers live in one
 place (``tools/make_scenes.py``, written into ``scenes/*.usda``). :data:`DESCRIPTIONS` says in one

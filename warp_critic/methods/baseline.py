@@ -1,5 +1,6 @@
-"""The baselines' config and their one training step (DDPG, Meta-Critic); everything around the
-step (run directory, resume, metrics, recording, checkpoints) is the shared harness
+"""The baselines' protocol and their one training step (DDPG, Meta-Critic); their config is
+:class:`~warp_critic.methods.baseline_config.BaselineConfig`, meta-test's ``alpha`` search is
+:mod:`warp_critic.methods.alpha_search`, and everything around the step (run directory, resume, metrics, recording, checkpoints) is the shared harness
 :class:`warp_critic.running.loop.Session`, the same as ours.
 
 Protocol (the paper's section 5, same as our meta-training so that ``warp-critic meta-test RUN_DIR``
@@ -49,7 +50,6 @@ checkpoint iterations.
 
 from __future__ import annotations
 
-import copy
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -58,182 +58,15 @@ from typing import Any
 import torch
 
 from warp_critic.core.errors import DivergenceError
-from warp_critic.learning.inner import inner_update, policy_fn
-from warp_critic.learning.losses import critic_loss, final_error
-from warp_critic.learning.networks import MLPPolicy, Normalizer
+from warp_critic.learning.losses import final_error
+from warp_critic.learning.networks import Normalizer
 from warp_critic.learning.rollout import Trajectory, rollout
-from warp_critic.methods.q_networks import METHODS, NegQ, QNetwork
-from warp_critic.methods.replay import (
-    NOISE_KINDS,
-    REWARD_KINDS,
-    ExplorationNoise,
-    ReplayBuffer,
-    rewards,
-)
-from warp_critic.physics import schema
+from warp_critic.methods.alpha_search import ALPHA_GRID, fresh_policy_errors
+from warp_critic.methods.baseline_config import BaselineConfig
+from warp_critic.methods.replay import ExplorationNoise, ReplayBuffer, rewards
 from warp_critic.physics.simulator import Simulator
 from warp_critic.running.loop import Callback, Session, TrainResult
-from warp_critic.running.task import TaskConfig, filled, spec
-
-ALPHA_GRID = tuple(10.0 ** (k / 2) for k in range(-12, 1))  # 1e-6, 3.2e-6, ..., 0.32, 1
-
-
-@dataclass
-class BaselineConfig(TaskConfig):
-    """DDPG / Meta-Critic training. ``None`` = the scene's default (as for meta-train).
-
-    Defaults follow the published DDPG settings (Lillicrap et al. 2015): Adam with actor lr 1e-4 and
-    critic lr 1e-3, gamma 0.99, minibatch 64, replay buffer 1e6, Ornstein-Uhlenbeck exploration
-    noise (theta 0.15, sigma 0.2), final layers initialised in +-3e-3. Two documented deviations:
-    tau = 5e-3 (TD3-era DDPG implementations; 1e-3 lags too far behind in runs of a few thousand
-    updates) and no L2 weight decay on Q by default (``critic_weight_decay`` 1e-2 restores it);
-    plus a 5-iteration random-action warm-up (``warmup_iterations`` 0 disables it).
-    Meta-Critic settings follow Zhou et al. 2020's code: meta-critic lr 1e-3, weight decay 1e-4,
-    2 x 100 hidden units, virtual step size = the actor lr.
-    """
-
-    method: str = spec("ddpg", "ddpg or meta-critic", choices=METHODS)
-    iterations: int = spec(
-        300,
-        "training iterations (one episode in every world, then the gradient updates)",
-        gt=0,
-        cap=10**8,
-    )
-    # -- DDPG ------------------------------------------------------------------------------------
-    actor_lr: float = spec(1e-4, "actor learning rate (Adam)", gt=0, cap=1e3)
-    critic_lr: float = spec(1e-3, "Q learning rate (Adam)", gt=0, cap=1e3)
-    critic_weight_decay: float = spec(0.0, "L2 weight decay on Q (Lillicrap et al.: 1e-2)", ge=0)
-    tau: float = spec(
-        5e-3, "soft target update rate, in (0, 1] (Lillicrap et al.: 1e-3)", gt=0, le=1
-    )
-    gamma: float = spec(0.99, "discount factor, in (0, 1]", gt=0, le=1)
-    batch_size: int = spec(64, "minibatch size", gt=0, cap=10**7)
-    buffer_size: int = spec(1_000_000, "replay buffer capacity (transitions)", gt=0, cap=10**9)
-    warmup_iterations: int = spec(
-        5,
-        "first iterations explore with uniformly random torques and train only Q (the actor starts once Q has seen varied actions; 0 = Lillicrap et al.)",
-        ge=0,
-    )
-    updates_per_iteration: int | None = spec(
-        None, "gradient updates per iteration (default: the horizon)", gt=0, cap=10**7
-    )
-    noise: str = spec(
-        "ou", "exploration noise: ou (Ornstein-Uhlenbeck) or gaussian", choices=NOISE_KINDS
-    )
-    noise_std: float = spec(
-        0.2, "noise scale (OU sigma or Gaussian std) as a fraction of max_torque", ge=0, cap=100
-    )
-    ou_theta: float = spec(0.15, "OU mean reversion per control step, in [0, 1]", ge=0, le=1)
-    reward: str = spec(
-        "dense",
-        "dense: r_t = -||q_{t+1}-g||^2 every step; sparse: only -||q_T-g||^2 at the end",
-        choices=REWARD_KINDS,
-    )
-    reward_scale: float = spec(1.0, "multiply the reward by this", gt=0)
-    actor_hidden: int = spec(64, "actor hidden units (2 tanh layers)", gt=0, cap=8192)
-    critic_hidden: int = spec(400, "Q hidden units (2 ELU layers)", gt=0, cap=8192)
-    # -- Meta-Critic -----------------------------------------------------------------------------
-    aux_lr: float = spec(
-        1e-3, "meta-critic only: learning rate of the auxiliary loss h_omega (Adam)", gt=0, cap=1e3
-    )
-    aux_weight_decay: float = spec(1e-4, "meta-critic only: weight decay of h_omega", ge=0)
-    aux_hidden: int = spec(
-        100, "meta-critic only: h_omega hidden units (2 ReLU layers)", gt=0, cap=8192
-    )
-    aux_weight: float = spec(
-        1.0, "meta-critic only: weight of the auxiliary loss in the actor update", ge=0
-    )
-    virtual_lr: float | None = spec(
-        None,
-        "meta-critic only: SGD step of the virtual actor updates (default: the actor lr)",
-        gt=0,
-        cap=1e3,
-    )
-    # -- meta-test defaults stored in the checkpoint ---------------------------------------------
-    alpha: float | None = spec(
-        None,
-        "policy learning rate meta-test uses with -Q (default: grid search on the training goals at every checkpoint)",
-        gt=0,
-        cap=1e6,
-    )
-    inner_steps: int | None = spec(
-        None,
-        "meta-test's default number of fresh-policy updates with -Q (default: the scene's, as meta-train's inner steps, else "
-        + schema.fallback_text("inner_steps")
-        + ")",
-        gt=0,
-        cap=10**4,
-    )
-
-    scene_fields = TaskConfig.scene_fields + ("inner_steps",)
-
-    def n_updates(self) -> int:
-        if self.updates_per_iteration is not None:
-            return self.updates_per_iteration
-        return filled(self.horizon, "horizon")
-
-
-# ------------------------------------------------------------------------------------------------
-# alpha for meta-test
-# ------------------------------------------------------------------------------------------------
-
-
-def fresh_policy_errors(
-    qnet: QNetwork,
-    norm: Normalizer,
-    sim: Simulator,
-    goal: torch.Tensor,
-    horizon: int,
-    steps: int,
-    alphas,
-    seed: int,
-    q0: torch.Tensor | None = None,
-) -> list[float]:
-    """Meta-test's protocol on the training worlds, for every ``alpha``: fresh policies (the same
-    initialisation for every alpha), ``steps`` descents of ``sum_t -Q``, mean final ``||q_T - g||^2``."""
-    neg_q = NegQ(copy.deepcopy(qnet)).requires_grad_(False)
-    policy = MLPPolicy(norm)
-    q0 = sim.zeros() if q0 is None else q0
-    qd0 = torch.zeros_like(q0)
-    gen = torch.Generator().manual_seed(seed)
-    params = {
-        k: v.requires_grad_(True)
-        for k, v in policy.init(sim.worlds, generator=gen, device=sim.torch_device).items()
-    }
-    errors = []
-    if steps == 1:  # one gradient serves every alpha
-        traj = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
-        loss = critic_loss(neg_q, policy, params, traj, goal).sum()
-        grads = torch.autograd.grad(loss, list(params.values()))
-    for alpha in alphas:
-        try:
-            if steps == 1:
-                new = {k: (v - alpha * g).detach() for (k, v), g in zip(params.items(), grads)}
-            else:
-                new, _ = inner_update(
-                    neg_q,
-                    policy,
-                    params,
-                    sim,
-                    q0,
-                    qd0,
-                    goal,
-                    horizon=horizon,
-                    alpha=alpha,
-                    steps=steps,
-                    create_graph=False,
-                )
-            after = rollout(sim, policy_fn(policy, new), q0, qd0, horizon)
-            err = float(final_error(after.q[-1], goal).mean())
-        except DivergenceError:
-            err = math.inf
-        errors.append(err if math.isfinite(err) else math.inf)
-    return errors
-
-
-# ------------------------------------------------------------------------------------------------
-# the step
-# ------------------------------------------------------------------------------------------------
+from warp_critic.running.task import filled
 
 
 @dataclass

@@ -22,7 +22,8 @@ import torch
 
 from warp_critic.learning.losses import td_loss
 from warp_critic.learning.networks import Normalizer
-from warp_critic.methods.baseline import BaselineConfig, train_baseline
+from warp_critic.methods.baseline import train_baseline
+from warp_critic.methods.baseline_config import BaselineConfig
 from warp_critic.methods.q_networks import Actor, QNetwork, soft_update
 from warp_critic.methods.replay import ReplayBuffer
 from warp_critic.running.loop import TrainResult

@@ -39,7 +39,8 @@ from torch import nn
 from torch.func import functional_call
 
 from warp_critic.learning.networks import Normalizer
-from warp_critic.methods.baseline import BaselineConfig, train_baseline
+from warp_critic.methods.baseline import train_baseline
+from warp_critic.methods.baseline_config import BaselineConfig
 from warp_critic.methods.ddpg import DDPGAgent
 from warp_critic.methods.q_networks import _GoalInput
 from warp_critic.methods.replay import ReplayBuffer

@@ -1,0 +1,107 @@
+"""The baselines' config (DDPG, Meta-Critic): the shared task fields of
+:class:`~warp_critic.running.task.TaskConfig` plus the published DDPG / Meta-Critic settings; the
+protocol they train with is described in :mod:`warp_critic.methods.baseline`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from warp_critic.methods.q_networks import METHODS
+from warp_critic.methods.replay import NOISE_KINDS, REWARD_KINDS
+from warp_critic.physics import schema
+from warp_critic.running.task import TaskConfig, filled, spec
+
+
+@dataclass
+class BaselineConfig(TaskConfig):
+    """DDPG / Meta-Critic training. ``None`` = the scene's default (as for meta-train).
+
+    Defaults follow the published DDPG settings (Lillicrap et al. 2015): Adam with actor lr 1e-4 and
+    critic lr 1e-3, gamma 0.99, minibatch 64, replay buffer 1e6, Ornstein-Uhlenbeck exploration
+    noise (theta 0.15, sigma 0.2), final layers initialised in +-3e-3. Two documented deviations:
+    tau = 5e-3 (TD3-era DDPG implementations; 1e-3 lags too far behind in runs of a few thousand
+    updates) and no L2 weight decay on Q by default (``critic_weight_decay`` 1e-2 restores it);
+    plus a 5-iteration random-action warm-up (``warmup_iterations`` 0 disables it).
+    Meta-Critic settings follow Zhou et al. 2020's code: meta-critic lr 1e-3, weight decay 1e-4,
+    2 x 100 hidden units, virtual step size = the actor lr.
+    """
+
+    method: str = spec("ddpg", "ddpg or meta-critic", choices=METHODS)
+    iterations: int = spec(
+        300,
+        "training iterations (one episode in every world, then the gradient updates)",
+        gt=0,
+        cap=10**8,
+    )
+    # -- DDPG ------------------------------------------------------------------------------------
+    actor_lr: float = spec(1e-4, "actor learning rate (Adam)", gt=0, cap=1e3)
+    critic_lr: float = spec(1e-3, "Q learning rate (Adam)", gt=0, cap=1e3)
+    critic_weight_decay: float = spec(0.0, "L2 weight decay on Q (Lillicrap et al.: 1e-2)", ge=0)
+    tau: float = spec(
+        5e-3, "soft target update rate, in (0, 1] (Lillicrap et al.: 1e-3)", gt=0, le=1
+    )
+    gamma: float = spec(0.99, "discount factor, in (0, 1]", gt=0, le=1)
+    batch_size: int = spec(64, "minibatch size", gt=0, cap=10**7)
+    buffer_size: int = spec(1_000_000, "replay buffer capacity (transitions)", gt=0, cap=10**9)
+    warmup_iterations: int = spec(
+        5,
+        "first iterations explore with uniformly random torques and train only Q (the actor starts once Q has seen varied actions; 0 = Lillicrap et al.)",
+        ge=0,
+    )
+    updates_per_iteration: int | None = spec(
+        None, "gradient updates per iteration (default: the horizon)", gt=0, cap=10**7
+    )
+    noise: str = spec(
+        "ou", "exploration noise: ou (Ornstein-Uhlenbeck) or gaussian", choices=NOISE_KINDS
+    )
+    noise_std: float = spec(
+        0.2, "noise scale (OU sigma or Gaussian std) as a fraction of max_torque", ge=0, cap=100
+    )
+    ou_theta: float = spec(0.15, "OU mean reversion per control step, in [0, 1]", ge=0, le=1)
+    reward: str = spec(
+        "dense",
+        "dense: r_t = -||q_{t+1}-g||^2 every step; sparse: only -||q_T-g||^2 at the end",
+        choices=REWARD_KINDS,
+    )
+    reward_scale: float = spec(1.0, "multiply the reward by this", gt=0)
+    actor_hidden: int = spec(64, "actor hidden units (2 tanh layers)", gt=0, cap=8192)
+    critic_hidden: int = spec(400, "Q hidden units (2 ELU layers)", gt=0, cap=8192)
+    # -- Meta-Critic -----------------------------------------------------------------------------
+    aux_lr: float = spec(
+        1e-3, "meta-critic only: learning rate of the auxiliary loss h_omega (Adam)", gt=0, cap=1e3
+    )
+    aux_weight_decay: float = spec(1e-4, "meta-critic only: weight decay of h_omega", ge=0)
+    aux_hidden: int = spec(
+        100, "meta-critic only: h_omega hidden units (2 ReLU layers)", gt=0, cap=8192
+    )
+    aux_weight: float = spec(
+        1.0, "meta-critic only: weight of the auxiliary loss in the actor update", ge=0
+    )
+    virtual_lr: float | None = spec(
+        None,
+        "meta-critic only: SGD step of the virtual actor updates (default: the actor lr)",
+        gt=0,
+        cap=1e3,
+    )
+    # -- meta-test defaults stored in the checkpoint ---------------------------------------------
+    alpha: float | None = spec(
+        None,
+        "policy learning rate meta-test uses with -Q (default: grid search on the training goals at every checkpoint)",
+        gt=0,
+        cap=1e6,
+    )
+    inner_steps: int | None = spec(
+        None,
+        "meta-test's default number of fresh-policy updates with -Q (default: the scene's, as meta-train's inner steps, else "
+        + schema.fallback_text("inner_steps")
+        + ")",
+        gt=0,
+        cap=10**4,
+    )
+
+    scene_fields = TaskConfig.scene_fields + ("inner_steps",)
+
+    def n_updates(self) -> int:
+        if self.updates_per_iteration is not None:
+            return self.updates_per_iteration
+        return filled(self.horizon, "horizon")
