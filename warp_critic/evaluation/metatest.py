@@ -47,6 +47,7 @@ from warp_critic.running.task import (
     goals_tensor,
     inside_limits,
     spec,
+    task_variant,
 )
 
 RESULT_KIND = "warp-critic/metatest-v1"
@@ -87,6 +88,10 @@ class MetaTestConfig(SerializableConfig):
     ee_mass: float = spec(0.0, "mass added at the end-effector (kg)", ge=0, cap=1e4)
     link_length: float | None = spec(None, "set the end-effector link length (m)", gt=0, cap=100)
     link_scale: float = spec(1.0, "scale the end-effector link length", gt=0, cap=100)
+    variant: str | None = spec(
+        None,
+        "dynamics changes of any link at test, ';'-separated LINK.WHAT=V, +=V or *=V (WHAT: mass[:keep|:scale] at the COM, point-mass+=KG@x,y,z|@tip, offset (kinematic length, no mass change), stretch (stretched link)), e.g. 'iiwa_link_7.mass=5; ee.offset+=0.4'; applied after --ee-mass/--link-length/--link-scale (default: none)",
+    )
     seed: int = spec(1, "random seed", ge=0, le=2**32 - 1)
     device: str = spec("auto", "cpu, cuda or auto")
     out: str | None = spec(None, "results JSON (default RUN_DIR/metatest.json)")
@@ -213,6 +218,7 @@ def setup_meta_test(tc: MetaTestConfig, gen: torch.Generator | None = None) -> M
     ``tc.seed``); no global random state is read or changed.
     """
     check_fields(tc)
+    test_variant = task_variant(tc)  # a bad --variant text fails before the run is read
     ckpt = RunDir.open(tc.run_dir).load_checkpoint(require=("config", "dof", "scene", "method"))
     try:
         cfg = TaskConfig.from_dict(ckpt["config"])
@@ -232,6 +238,8 @@ def setup_meta_test(tc: MetaTestConfig, gen: torch.Generator | None = None) -> M
         raise UserError(
             f"{tc.run_dir}: the scene file {cfg.scene} has changed since the run was trained"
         )
+    if test_variant.changes:  # its link names, masses and lengths against the run's scene
+        scene.world_builder(test_variant)
     horizon = tc.horizon if tc.horizon is not None else cfg.horizon
 
     if gen is None:
@@ -261,6 +269,7 @@ def setup_meta_test(tc: MetaTestConfig, gen: torch.Generator | None = None) -> M
         ee_mass=tc.ee_mass,
         link_length=tc.link_length,
         link_scale=tc.link_scale,
+        variant=tc.variant,
         device=tc.device,
         horizon=horizon,
         gravity=cfg.gravity if cfg.gravity is not None else STANDARD_GRAVITY,
@@ -355,6 +364,7 @@ def meta_test(tc: MetaTestConfig, progress: Callable[[str], None] | None = None)
             "ee_mass": tc.ee_mass,
             "link_length": tc.link_length,
             "link_scale": tc.link_scale,
+            "changes": tc.variant,
         },
         "final_error_per_goal": per_goal.tolist(),
         "final_error_all": err.tolist(),

@@ -28,7 +28,13 @@ import numpy as np
 
 from warp_critic.core.errors import SceneError, UserError
 from warp_critic.physics.scene_cache import FileCache
-from warp_critic.physics.variants import Variant, apply_variant, length_map
+from warp_critic.physics.variants import (
+    Variant,
+    apply_changes,
+    apply_variant,
+    changed_tip,
+    length_map,
+)
 
 if TYPE_CHECKING:
     import newton
@@ -139,7 +145,10 @@ class Scene:
     # -- variants ---------------------------------------------------------------------------------
     def tip_offset_of(self, variant: Variant = Variant()) -> np.ndarray:
         """``(3,)`` end-effector tip [m] in the ee body frame with ``variant``'s link length."""
-        return self._length_map(variant)[1] @ self.tip_offset
+        tip = self._length_map(variant)[1] @ self.tip_offset
+        if not variant.changes:
+            return tip
+        return changed_tip(variant.changes, tip, self.body_names, self.ee_body)
 
     def _length_map(self, variant: Variant) -> tuple[float, np.ndarray]:
         """(s, S): the length ratio and the stretch matrix of ``variant`` (see :mod:`.variants`)."""
@@ -157,6 +166,10 @@ class Scene:
         builder = newton.ModelBuilder()
         builder.add_builder(self._base)
         apply_variant(builder, self.ee_body, self.tip_offset, variant, s, stretch)
+        if variant.changes:
+            apply_changes(
+                builder, variant.changes, self.body_names, self.ee_body, stretch @ self.tip_offset
+            )
         return builder
 
     def build_model(

@@ -199,6 +199,10 @@ class TaskConfig(SerializableConfig):
     link_scale: float = spec(
         1.0, "scale the end-effector link length during training", gt=0, cap=100
     )
+    variant: str | None = spec(
+        None,
+        "dynamics changes of any link during training, ';'-separated LINK.WHAT=V, +=V or *=V (WHAT: mass[:keep|:scale] at the COM, point-mass+=KG@x,y,z|@tip, offset (kinematic length, no mass change), stretch (stretched link)), e.g. 'iiwa_link_7.mass=5; ee.offset+=0.4'; applied after --ee-mass/--link-length/--link-scale (default: none)",
+    )
     seed: int = spec(0, "random seed (fixes everything on CPU)", ge=0, le=MAX_SEED)
     seeds: list[int] | None = spec(
         None,
@@ -274,7 +278,10 @@ class TaskConfig(SerializableConfig):
                 "home_starts",
                 f"must be at most worlds_per_goal {self.worlds_per_goal} (got {self.home_starts})",
             )
+        variant = task_variant(self)
         if scene is not None:
+            if variant.changes:  # link names and resulting masses/lengths, against the scene
+                scene.world_builder(variant)
             dof = scene.dof
             if self.max_torque is not None and len(self.max_torque) not in (1, dof):
                 raise FieldError(
@@ -526,11 +533,22 @@ def load_task_scene(cfg: TaskConfigT, announce: bool = True) -> tuple[TaskConfig
     return filled, scene
 
 
+def task_variant(cfg) -> Variant:
+    """The dynamics :class:`Variant` of a task or test config (its ``ee_mass``, ``link_length``,
+    ``link_scale`` and ``variant`` fields; a bad ``variant`` text raises :class:`FieldError`)."""
+    return Variant(
+        ee_mass=cfg.ee_mass,
+        link_length=cfg.link_length,
+        link_scale=cfg.link_scale,
+        changes=getattr(cfg, "variant", None),
+    )
+
+
 def build_task(cfg: TaskConfig, scene: Scene, *, differentiable: bool, copies: int = 1) -> Task:
     """The simulator with ``copies x G x K`` worlds (all with the config's dynamics variant)."""
     from warp_critic.physics.simulator import Simulator
 
-    variant = Variant(ee_mass=cfg.ee_mass, link_length=cfg.link_length, link_scale=cfg.link_scale)
+    variant = task_variant(cfg)
     goals = goals_tensor(cfg.goals, scene)
     G, K = goals.shape[0], cfg.worlds_per_goal
     sim = Simulator(
