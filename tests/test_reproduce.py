@@ -32,6 +32,9 @@ SECTIONS = (
     "### Table 1",
     "### Table 2",
     "### Table 3",
+    "### Stress table A",
+    "### Stress table B",
+    "## The paper's claims",
     "## Figures",
 )
 FIGURES = (
@@ -71,7 +74,23 @@ def test_quick_end_to_end(quick):
         assert f"figures/{name}" in report
     results = json.loads((out / "results.json").read_text())
     # every table cell traces back to an existing stage file and existing run checkpoints
-    assert len(results["tables"]) == 3 * 3 * 3  # quick: 3 tables x 3 columns x 3 methods
+    # quick: Table 1 3 columns, Tables 2-3 3 + the training column, two stress tables 3 columns
+    assert len(results["tables"]) == (3 + 4 + 4 + 3 + 3) * 3
+    assert {c["table"] for c in results["tables"]} == {
+        "table1",
+        "table2",
+        "table3",
+        "stress_mass",
+        "stress_length",
+    }
+    floors = [c["reach_floor"] for c in results["tables"] if c["table"].startswith("stress")]
+    assert all(f is not None and f >= 0 for f in floors)
+    # every claim has a verdict computed from numbers, shown in the claims table
+    assert len(results["claims"]) >= 9
+    for claim in results["claims"]:
+        assert claim["verdict"] in ("met", "not met", "not comparable"), claim
+        assert f"**{claim['verdict']}**" in report
+    assert "as in the paper" not in report
     for cell in results["tables"]:
         stage = out / cell["file"]
         assert stage.is_file()
@@ -204,6 +223,7 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
         Job("ours0", str(runs["ours"][0]), goals, Variant()),
         Job("ddpg1", str(runs["ddpg"][1]), goals, Variant(ee_mass=2.0)),
         Job("ours1", str(runs["ours"][1]), goals[:2], Variant(link_length=1.4)),
+        Job("ddpg0", str(runs["ddpg"][0]), goals, Variant(changes="arm1.mass=2; arm2.stretch=1.4")),
     ]
     r = evaluate(jobs, inits=2, steps=3, seed=7, device="cpu", progress=False)
     for job, err in zip(jobs, r["errors"]):
@@ -217,6 +237,7 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
             device="cpu",
             ee_mass=v.ee_mass,
             link_length=v.link_length,
+            variant=v.text or None,
             out=str(tmp_path / f"{job.key}.json"),
         )
         ref = np.asarray(meta_test(tc, progress=None)["final_error_all"])

@@ -1,4 +1,4 @@
-"""Stages ``tables`` (KUKA Tables 1-3) and ``maps`` (reacher Figures 4-6), batched meta-test.
+"""Stages ``tables`` (KUKA Tables 1-3 and two stress tables) and ``maps`` (reacher Figures 4-6).
 
 Tables (the paper: "the mean squared error between last state and goal over 10 new goals, 5 seeds
 and 5 new policy initialization"): every cell pools ``seeds x goals x inits`` final errors of one
@@ -6,16 +6,23 @@ method, as ``mean_j (q_T,j - g_j)^2`` (MSE over the joints); ``mean(std)`` over 
 
 * Table 1: per column ``std``, ``num_goals`` goals ``N(g, std^2 I)`` per joint around training goals
   ``around`` (cycled), clipped into 98% of the limits (:func:`warp_critic.evaluation.metatest.sample_goals`).
-* Table 2: end-effector mass: ``Variant(ee_mass=m)`` ADDS ``m`` kg at the tip of link 7 (0 = as
-  trained); the paper's column is the end-effector mass itself ("training mass is at mass=3.12").
-* Table 3: end-effector link length: ``Variant(link_length=L)`` SETS the tip distance of link 7 to
-  ``L`` m (as trained: the scene's tip offset).
-* Tables 2 and 3 use one set of ``num_goals`` goals drawn as Table 1's at ``dynamics_goal_std``.
+* Table 2 (the paper's reading, "training mass is at mass=3.12"): SET the mass of link 7 (the
+  end-effector link, 3.129 kg in the iiwa7 URDF) to each column's kg, its centre of mass and its
+  inertia about that centre unchanged (``ee.mass=M:keep``); the training mass is its own column.
+* Table 3 (the paper's reading, "training value is at length=0"): ADD each column's metres to the
+  massless end-effector frame (the paper model's ``iiwa_link_ee``, 0.045 m out of link 7):
+  ``ee.offset+=L``, no mass change; 0 is the training column.
+* Stress tables (this project's earlier, harsher variants): ``stress_mass`` ADDS a point mass at the
+  tip (``Variant(ee_mass=m)``), ``stress_length`` SETS link 7's length by stretching the link
+  (``Variant(link_length=L)``). Each column also gets the open-loop reachability floor
+  (:mod:`.reach`): the error the best open-loop torques with the same bounds and horizon reach.
+* Tables 2, 3 and the stress tables use one set of ``num_goals`` goals drawn as Table 1's at
+  ``dynamics_goal_std``.
 
 Maps (reacher, 2 joints): (a) a ``grid x grid`` goal grid over ``limit_fraction`` of the joint
-limits, MSE per goal over ``seeds x inits``; (b) end-effector (link 2) masses added at the tip and
-(c) link-2 lengths, each for the four training goals. Link 1 cannot be changed by our
-:class:`~warp_critic.physics.scene.Variant` (it changes the end-effector link only).
+limits, MSE per goal over ``seeds x inits``; (b) a 2-D grid over the masses (m1, m2) of both links
+(SET at the centre of mass, inertia kept) and (c) a 2-D grid over the lengths (l1, l2) of both links
+(stretched links: a longer link 1 moves joint 2 out), each at the four training goals.
 """
 
 from __future__ import annotations
@@ -59,8 +66,38 @@ def _pool(errs: list[np.ndarray], dof: int) -> dict:
         "mse_mean": float(mse.mean()),
         "mse_std": float(mse.std()),
         "mse_per_seed": [float(e.mean() / dof) for e in errs],
+        "mse_std_per_seed": [float((e / dof).std()) for e in errs],
         "n": int(mse.size),
     }
+
+
+def table_variant(table: str, v: float) -> Variant:
+    """The dynamics variant of one column of a dynamics table (module docstring)."""
+    if table == "table2":
+        return Variant(changes=f"ee.mass={v!r}:keep")
+    if table == "table3":
+        return Variant(changes=f"ee.offset+={v!r}")
+    if table == "stress_mass":
+        return Variant(ee_mass=v)
+    if table == "stress_length":
+        return Variant(link_length=v)
+    return Variant()
+
+
+def _link_lengths(scene) -> list[float]:
+    """[m] each link's length as trained: its child joint's distance, the tip's for the last."""
+    b = scene.world_builder()
+    out = []
+    for body in range(len(scene.body_names)):
+        child = [j for j, parent in enumerate(b.joint_parent) if parent == body]
+        end = np.array(b.joint_X_p[child[0]].p) if child else scene.tip_offset
+        out.append(round(float(np.linalg.norm(end)), 6))
+    return out
+
+
+def _with(values, extra: float) -> list[float]:
+    """``values`` as floats with ``extra`` (the training value) added, sorted."""
+    return sorted({float(x) for x in values} | {float(extra)})
 
 
 def run_tables_stage(
@@ -72,10 +109,19 @@ def run_tables_stage(
     first = str(runs["ours"][0])
     scene, train_goals, lo, hi = _train_goals_and_limits(first)
     steps = default_steps(first)
+    train_mass = round(float(scene.world_builder().body_mass[scene.ee_body]), 6)
     columns = {
         "table1": [float(x) for x in s["stds"]],
-        "table2": [float(x) for x in s["masses"]],
-        "table3": [float(x) for x in s["lengths"]],
+        "table2": _with(s["masses"], train_mass),
+        "table3": _with(s["lengths"], 0.0),
+        "stress_mass": [float(x) for x in s["stress_masses"]],
+        "stress_length": [float(x) for x in s["stress_lengths"]],
+    }
+    trained = {
+        "table2": train_mass,
+        "table3": 0.0,
+        "stress_mass": 0.0,
+        "stress_length": float(np.linalg.norm(scene.tip_offset)),
     }
     dyn_goals = _sample(
         train_goals,
@@ -104,7 +150,7 @@ def run_tables_stage(
                 variant = Variant()
             else:
                 goals = dyn_goals
-                variant = Variant(ee_mass=v) if table == "table2" else Variant(link_length=v)
+                variant = table_variant(table, v)
             goals_used[f"{table}/{ci}"] = goals.tolist()
             for m in METHODS:
                 for si, rd in enumerate(runs[m]):
@@ -147,8 +193,24 @@ def run_tables_stage(
                     ),
                 )
                 cells.append(cell)
+    floors = {}
+    if int(s["reach_iterations"]) > 0:
+        from warp_critic.reproduce.reach import open_loop_floor
+
+        for table in ("stress_mass", "stress_length"):
+            best = open_loop_floor(
+                first,
+                [table_variant(table, v) for v in columns[table]],
+                dyn_goals,
+                iterations=int(s["reach_iterations"]),
+                device=device,
+            )
+            floors[table] = (best.mean(1) / r["dof"]).tolist()  # MSE over joints, mean over goals
     return {
         "columns": columns,
+        "trained": trained,
+        "reach_floor": floors,
+        "reach_iterations": int(s["reach_iterations"]),
         "cells": cells,
         "dof": r["dof"],
         "horizon": r["horizon"],
@@ -181,16 +243,24 @@ def run_maps_stage(
     )  # row-major: q1 major
     masses = [float(x) for x in s["masses"]]
     lengths = [float(x) for x in s["lengths"]]
+    links = list(scene.body_names)  # the two links, in chain order (arm1, arm2)
+    pairs = {
+        "mass": [(a, b) for a in masses for b in masses],  # row-major: link 1 major
+        "length": [(a, b) for a in lengths for b in lengths],
+    }
+
+    def variant(kind: str, a: float, b: float) -> Variant:
+        if kind == "mass":
+            return Variant(changes=f"{links[0]}.mass={a!r}:keep; {links[1]}.mass={b!r}:keep")
+        return Variant(changes=f"{links[0]}.stretch={a!r}; {links[1]}.stretch={b!r}")
+
     jobs = []
     for m in METHODS:
         for si, rd in enumerate(runs[m]):
             jobs.append(Job(("goals", 0, m, si), str(rd), grid, Variant()))
-            for ci, v in enumerate(masses):
-                jobs.append(Job(("mass", ci, m, si), str(rd), train_goals, Variant(ee_mass=v)))
-            for ci, v in enumerate(lengths):
-                jobs.append(
-                    Job(("length", ci, m, si), str(rd), train_goals, Variant(link_length=v))
-                )
+            for kind, values in pairs.items():
+                for ci, (a, b) in enumerate(values):
+                    jobs.append(Job((kind, ci, m, si), str(rd), train_goals, variant(kind, a, b)))
     r = evaluate(
         jobs,
         inits=int(s["inits"]),
@@ -218,6 +288,10 @@ def run_maps_stage(
         "train_goals": train_goals.tolist(),
         "masses": masses,
         "lengths": lengths,
+        "links": links,
+        "trained_mass": [round(float(x), 6) for x in scene.world_builder().body_mass],
+        "trained_length": _link_lengths(scene),
+        "grid_2d": True,
         "dof": dof,
         "horizon": r["horizon"],
         "policy_updates": steps,
@@ -233,10 +307,10 @@ def run_maps_stage(
             np.stack([e.mean(1) for e in errs]).mean(0) / dof
         )  # mean over seeds x inits, per goal
         out["goals"][m] = {"mse": per_goal.reshape(n, n).tolist(), **_pool(errs, dof)}
-        for kind, values in (("mass", masses), ("length", lengths)):
+        for kind, values in pairs.items():
             cells = []
             for ci, v in enumerate(values):
                 errs = [r["errors"][k] for k, j in enumerate(jobs) if j.key[:3] == (kind, ci, m)]
-                cells.append({"value": v, **_pool(errs, dof)})
+                cells.append({"value": list(v), **_pool(errs, dof)})
             out[kind][m] = cells
     return out

@@ -147,6 +147,9 @@ def run_metatrain_stage(
                 if x.get("fresh_policy_loss") is not None
             ],
             "seconds": float(sum(x.get("seconds", 0.0) for x in rows)),
+            # per iteration (s): the wall time to reach an error level (the seeds run batched, so
+            # each is the whole batch's time for that iteration)
+            "seconds_each": [float(x.get("seconds", 0.0)) for x in rows],
         }
     first = result.seeds[0].config
     assert first is not None

@@ -19,9 +19,10 @@ Paper settings (non-quick):
 * ``tables``: KUKA Tables 1-3: 10 goals x 5 inits per cell and seed; Table 1 samples per-joint
   ``N(g, std^2)`` around training goals 0 and 1; Tables 2-3 use 10 goals drawn the same way at
   ``dynamics_goal_std`` (0.1: the paper does not say which goals it used there).
-* ``maps``: reacher Figures 4-6: a goal grid over the joint space, an end-effector mass sweep and an
-  end-effector link-length sweep (our :class:`~warp_critic.physics.scene.Variant` changes only the end-effector
-  link, link 2 of the reacher; link 1 stays as trained).
+* ``maps``: reacher Figures 4-6: a goal grid over the joint space and 2-D grids over the masses
+  (m1, m2) and the lengths (l1, l2) of both links (:mod:`warp_critic.reproduce.generalize`).
+* ``tables``: also two stress tables (added tip mass, stretched link 7) with their open-loop
+  reachability floors (``reach_iterations`` Adam steps; 0 = none).
 """
 
 from __future__ import annotations
@@ -42,6 +43,15 @@ METHOD_LABELS = {"ours": "L_critic (ours)", "ddpg": "DDPG", "meta-critic": "Meta
 TASK_FIELDS = ("start_std", "home_starts")
 
 
+#: Figure 3 at equal budgets: the baselines' iterations (each 4 goals x 4 worlds x horizon 50 = 800
+#: environment steps). Reacher: 1600 = ours' 1.28M steps (400 x 3200). KUKA: 1500 (1.2M steps),
+#: where the baselines' curves have flattened; ours' 9.6M would be 12000 iterations (hours each on
+#: CPU). The steps-to-threshold table compares every method on the same step axis.
+BASELINE_ITERATIONS = {"reacher": 1600, "kuka": 1500}
+#: Baseline alpha searches every this many iterations (was every 10, at 300 iterations).
+BASELINE_CHECKPOINT_EVERY = 50
+
+
 def _metatrain(quick: bool, seeds: list[int]) -> dict:
     out: dict[str, Any] = {}
     for scene, name in (("reacher", "reacher"), ("kuka", "kuka-table1")):
@@ -59,6 +69,11 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
         for m in METHODS:
             per[m].pop("method", None)
             per[m]["record_every"] = 50
+            if m != "ours":
+                per[m].update(
+                    iterations=BASELINE_ITERATIONS[scene],
+                    checkpoint_every=BASELINE_CHECKPOINT_EVERY,
+                )
             if (
                 quick
             ):  # plumbing only: a handful of iterations on short rollouts with small networks
@@ -144,11 +159,16 @@ def default_settings(quick: bool, seeds: int) -> dict[str, dict]:
             "dynamics_goal_std": 0.1,
             "seed": 1,
             "max_worlds": 4096,
+            # this project's earlier, harsher variants (added tip mass; stretched link 7)
+            "stress_masses": [float(m) for m in range(10)],
+            "stress_lengths": [0.2, 0.4, 0.6, 0.8, 1.0, 1.2, 1.4, 1.6, 1.8, 2.0],
+            "reach_iterations": 200,
         },
         "maps": {
             "grid": 15,
             "limit_fraction": 0.95,
-            "masses": [0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0],
+            # 2-D grids: SET masses (m1, m2) and stretched lengths (l1, l2) of both links
+            "masses": [0.25, 0.5, 1.0, 2.0, 3.0, 4.0, 6.0],
             "lengths": [0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0],
             "inits": 5,
             "seed": 1,
@@ -164,8 +184,11 @@ def default_settings(quick: bool, seeds: int) -> dict[str, dict]:
             lengths=[0.2, 1.0, 2.0],
             num_goals=3,
             inits=2,
+            stress_masses=[0.0, 4.0, 9.0],
+            stress_lengths=[0.2, 1.0, 2.0],
+            reach_iterations=2,
         )
-        s["maps"].update(grid=4, masses=[0.0, 2.0, 4.0], lengths=[0.5, 1.0, 1.5], inits=2)
+        s["maps"].update(grid=4, masses=[0.5, 1.0, 2.0], lengths=[0.75, 1.0, 1.5], inits=2)
     return s
 
 

@@ -1,0 +1,62 @@
+"""The report's computed readings: steps to error levels, solved seeds, verdicts (synthetic curves)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from warp_critic.reproduce import report_paper as rp
+
+
+def _result(curves: dict[str, list[float]], per: int = 100, seconds: float = 2.0) -> dict:
+    return {
+        "env_steps_per_iteration": per,
+        "seeds": {
+            s: {"task_loss": c, "seconds_each": [seconds] * len(c)} for s, c in curves.items()
+        },
+    }
+
+
+class _Rec:
+    def __init__(self, result):
+        self.data = {"result": result}
+
+
+def test_steps_to_levels_first_crossing_and_never():
+    res = _result({"0": [1.0, 0.2, 0.05, 0.02], "1": [1.0, 0.5, 0.4, 0.35]})
+    t = rp.steps_to_levels(res)
+    assert t[0.3]["steps"] == [200] and t[0.3]["never"] == 1
+    assert t[0.03]["steps"] == [400] and t[0.03]["seconds"] == [8.0]
+    assert t[0.1]["never"] == 1 and t[0.1]["seeds"] == 2
+
+
+def test_solved_seeds_use_the_tail_of_the_curve():
+    res = _result({"0": [1.0] * 18 + [0.05, 0.05], "1": [0.05] * 18 + [1.0, 1.0]})
+    assert rp.solved_seeds(res, "reacher") == [True, False]
+
+
+def test_solved_cell_pools_only_solved_seeds():
+    cell = {"mse_per_seed": [0.1, 0.5, 0.3], "mse_std_per_seed": [0.0, 0.0, 0.0]}
+    mean, std = rp.solved_cell(cell, [True, False, True])
+    assert mean == pytest.approx(0.2) and std == pytest.approx(0.1)
+    assert rp.solved_cell(cell, [False, False, False]) is None
+    assert math.isnan(rp.solved_cell({"mse_per_seed": [0.1]}, [True])[1])
+
+
+def test_sample_efficiency_verdict_is_computed():
+    fast = _Rec(_result({"0": [1.0, 0.02], "1": [1.0, 0.02]}))
+    slow = _Rec(_result({"0": [1.0, 0.5, 0.2, 0.02], "1": [1.0, 0.5, 0.2, 0.02]}))
+    _, data = rp.steps_table({"ours": fast, "ddpg": slow})
+    assert rp.sample_efficiency_verdict(data)[0] == "met"
+    _, data = rp.steps_table({"ours": slow, "ddpg": fast})
+    assert rp.sample_efficiency_verdict(data)[0] == "not met"
+    flat = _Rec(_result({"0": [1.0, 1.0]}))
+    _, data = rp.steps_table({"ours": flat, "ddpg": flat})
+    assert rp.sample_efficiency_verdict(data)[0] == "not comparable"
+
+
+def test_error_at_budget_reads_the_curve_at_equal_steps():
+    res = _result({"0": [1.0, 0.5, 0.2, 0.1]}, per=100)
+    assert rp.error_at_budget(res, 250) == [0.5]
+    assert rp.error_at_budget(res, 50) == [1.0]

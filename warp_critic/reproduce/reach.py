@@ -1,0 +1,72 @@
+"""The open-loop reachability floor of a dynamics variant: how close ANY controller with the policy's
+torque bounds and horizon can bring the robot to a goal.
+
+For every (variant, goal) world, open-loop torques ``(T, dof)`` are optimised through the
+*differentiable* model (Adam on ``max_torque * tanh(u)``, from the meta-test start: the home pose at
+rest), keeping the best final error seen per world. This is the computation of
+``tools/diagnose_metatest.py --reachability``, batched over many variants. It is an upper bound of
+the true floor (a local optimiser), so an error near it means the goal is hard, not that the critic
+failed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+
+def open_loop_floor(
+    run_dir: str,
+    variants: list,
+    goals: torch.Tensor,
+    *,
+    iterations: int,
+    lr: float = 0.1,
+    device: str = "cpu",
+) -> np.ndarray:
+    """``(len(variants), G)`` best final ``||q_T - g||^2`` [rad^2] per variant and goal ``(G, dof)``,
+    with the run's scene, horizon, time step, gravity and torque bounds."""
+    from warp_critic.learning.networks import Normalizer
+    from warp_critic.learning.rollout import rollout
+    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
+    from warp_critic.reproduce.evaluate import load_runs
+    from warp_critic.running.task import max_torque_tensor
+
+    cfg = load_runs([run_dir])[str(run_dir)].cfg
+    scene = load_scene(cfg.scene)
+    G, V = goals.shape[0], len(variants)
+    sim = Simulator(
+        scene,
+        [v for v in variants for _ in range(G)],
+        dt=cfg.dt,
+        substeps=cfg.substeps,
+        device=device,
+        differentiable=True,
+        gravity=cfg.gravity if cfg.gravity is not None else STANDARD_GRAVITY,
+    )
+    dev = sim.torch_device
+    norm = Normalizer.from_limits(
+        sim.q_lower, sim.q_upper, max_torque_tensor(cfg.max_torque, scene, dev), cfg.qd_scale
+    )
+    target = goals.to(dev).repeat(V, 1)
+    home = torch.as_tensor(scene.home, dtype=torch.float32, device=dev).expand(V * G, -1)
+    u = torch.zeros(cfg.horizon, V * G, scene.dof, device=dev, requires_grad=True)
+    opt = torch.optim.Adam([u], lr=lr)
+    best = torch.full((V * G,), float("inf"), device=dev)
+    for _ in range(max(1, int(iterations))):
+        steps = iter(range(cfg.horizon))
+        traj = rollout(
+            sim,
+            lambda q, qd, t=steps: norm.max_torque * torch.tanh(u[next(t)]),
+            home.clone(),
+            torch.zeros_like(home),
+            cfg.horizon,
+            differentiable=True,
+        )
+        err = ((traj.q[-1] - target) ** 2).sum(-1)
+        best = torch.minimum(best, err.detach())
+        opt.zero_grad()
+        err.sum().backward()
+        opt.step()
+    return best.view(V, G).cpu().numpy()

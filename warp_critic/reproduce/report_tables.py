@@ -1,0 +1,131 @@
+"""Markdown of the KUKA tables: the paper's rows, ours, each baseline twice (all seeds; seeds that
+solved the training task), the untrained policies and, for the stress tables, the open-loop
+reachability floor."""
+
+from __future__ import annotations
+
+from warp_critic.evaluation.paper import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE3
+from warp_critic.reproduce.report_paper import beats_baselines, method_rows
+from warp_critic.reproduce.settings import METHOD_LABELS, METHODS
+
+MARK = "✓"
+#: table -> (column label, the paper's numbers or None, title)
+TABLES = {
+    "table1": ("std", PAPER_TABLE1, "Table 1 (new goals, `table:gen_tasks_kuka`)"),
+    "table2": (
+        "mass",
+        PAPER_TABLE2,
+        "Table 2 (link 7's mass SET to the column's kg, COM and inertia about it kept; `table:gen_kuka_mass`)",
+    ),
+    "table3": (
+        "length",
+        PAPER_TABLE3,
+        "Table 3 (the column's metres ADDED to the massless end-effector frame; `table:gen_kuka_link`)",
+    ),
+    "stress_mass": ("added kg", None, "Stress table A: a point mass ADDED at the tip of link 7"),
+    "stress_length": ("length", None, "Stress table B: link 7 STRETCHED to the column's length"),
+}
+PAPER_ROW = {
+    "ours": "paper: L_critic (ours)",
+    "ddpg": "paper: DDPG",
+    "meta-critic": "paper: Meta Critic",
+}
+
+
+def _fmt(x: float) -> str:
+    return f"{x:.3g}"
+
+
+def _cell(v) -> str:
+    if v is None:
+        return "—"
+    mean, std = v
+    return f"{_fmt(mean)}({_fmt(std)})" if std == std else _fmt(mean)
+
+
+def table_markdown(
+    table: str, res: dict, source: str, solved: dict[str, list[bool]]
+) -> tuple[list[str], list[dict], list[str], dict]:
+    """Markdown rows, the results.json cells, summary lines and the numbers behind the verdicts."""
+    label, paper, _ = TABLES[table]
+    values = res["columns"][table]
+    trained = res.get("trained", {}).get(table)
+    cells = {(c["column"], c["method"]): c for c in res["cells"] if c["table"] == table}
+
+    def head(v: float) -> str:
+        return f"{label}={v:g}" + (" (trained)" if trained is not None and v == trained else "")
+
+    lines = ["| Method | " + " | ".join(head(v) for v in values) + " |"]
+    lines.append("|---" * (len(values) + 1) + "|")
+    if paper is not None:
+        for m in METHODS:
+            row = [
+                f"{paper[m][v][0]:g}({paper[m][v][1]:g})" if v in paper[m] else "—" for v in values
+            ]
+            lines.append(f"| {PAPER_ROW[m]} | " + " | ".join(row) + " |")
+    untrained = [cells[(ci, METHODS[0])].get("untrained_mse_mean") for ci in range(len(values))]
+    if all(u is not None for u in untrained):
+        lines.append(
+            "| this run: untrained policies (no update) | "
+            + " | ".join(_fmt(u) for u in untrained)
+            + " |"
+        )
+    floor = res.get("reach_floor", {}).get(table)
+    if floor:
+        lines.append(
+            "| open-loop reachability floor (best open-loop torques) | "
+            + " | ".join(_fmt(x) for x in floor)
+            + " |"
+        )
+    rows = method_rows(lambda ci, m: cells[(ci, m)], len(values), solved, None)
+    out_cells, summary = [], []
+    for row_label, m, vals in rows:
+        shown = []
+        for ci, (v, val) in enumerate(zip(values, vals)):
+            ref = paper[m].get(v) if paper is not None else None
+            ok = ref is not None and val is not None and val[0] <= ref[0]
+            shown.append(_cell(val) + (f" {MARK}" if ok else ""))
+            if "solved" in row_label:
+                continue
+            c = cells[(ci, m)]
+            out_cells.append(
+                {
+                    "table": table,
+                    "column": label,
+                    "value": v,
+                    "method": m,
+                    "mse_mean": c["mse_mean"],
+                    "mse_std": c["mse_std"],
+                    "mse_per_seed": c["mse_per_seed"],
+                    "n": c["n"],
+                    "paper": list(ref) if ref else None,
+                    "at_or_below_paper": ok if ref else None,
+                    "untrained_mse_mean": untrained[ci],
+                    "reach_floor": floor[ci] if floor else None,
+                    "file": source,
+                    "runs": [r + "/checkpoint.pt" for r in c["runs"]],
+                }
+            )
+        lines.append(f"| {row_label} | " + " | ".join(shown) + " |")
+        if paper is not None and "solved" not in row_label:
+            comparable = [ci for ci, v in enumerate(values) if v in paper[m]]
+            hits = sum(vals[ci][0] <= paper[m][values[ci]][0] for ci in comparable)
+            summary.append(
+                f"{METHOD_LABELS[m]}: at or below the paper's own value in {hits} of {len(comparable)} "
+                "comparable columns"
+            )
+    wins_all = beats_baselines(rows, len(values), "all")
+    wins_solved = beats_baselines(rows, len(values), "solved")
+    summary.append(
+        f"ours below both baselines (all seeds) in {wins_all[0]} of {wins_all[1]} columns; "
+        f"below both baselines' solved seeds in {wins_solved[0]} of {wins_solved[1]} comparable columns"
+    )
+    if floor:
+        gap = [
+            cells[(ci, "ours")]["mse_mean"] / x if x > 0 else float("inf")
+            for ci, x in enumerate(floor)
+        ]
+        summary.append(
+            "ours' error / the open-loop floor per column: " + ", ".join(_fmt(g) for g in gap)
+        )
+    return lines, out_cells, summary, {"all": wins_all, "solved": wins_solved}
