@@ -197,7 +197,7 @@ def beats_baselines(rows: list[tuple], n_cols: int, which: str) -> tuple[int, in
 # -- Figures 5-6: 2-D maps --------------------------------------------------------------------------
 
 
-def plot_grid_2d(path: Path, M: dict, kind: str, figure, save) -> None:
+def plot_grid_2d(path: Path, M: dict, kind: str, figure) -> None:
     """One panel per method over (link 1, link 2) values, one log colour scale for all three."""
     from matplotlib.colors import LogNorm
 
@@ -222,7 +222,7 @@ def plot_grid_2d(path: Path, M: dict, kind: str, figure, save) -> None:
         ax.set_title(f"{METHOD_LABELS[m]}: mean MSE {grids[m].mean():.3g}", fontsize=9)
     axes[0].legend(fontsize=7, loc="upper right")
     fig.colorbar(im, ax=list(axes), label="MSE at the training goals, seeds x inits (rad^2)")
-    save(fig, path)
+    fig.savefig(path, dpi=90)  # not tight_layout: the shared colour bar spans the three panels
 
 
 def grid_summary(M: dict, kind: str, solved: dict[str, list[bool]]) -> tuple[list[str], dict]:
