@@ -72,7 +72,8 @@ def train_one(scene: str, method: str, setting: dict, args, out: Path) -> dict:
     base = dict(default_settings(False, 1)["metatrain"][scene][method])
     horizon = base.get("horizon") or load_scene(scene_file(scene)).defaults.get("horizon", 50)
     values = {k: v for k, v in setting.items() if k != "updates_per_iteration"}
-    base.update(values, iterations=args.iterations, checkpoint_every=args.iterations)
+    # one fixed meta-test alpha: the score is the training error, so skip the alpha search
+    base.update(values, iterations=args.iterations, checkpoint_every=args.iterations, alpha=1e-3)
     cfg = make_config(scene, method, base, args.seeds, out, args.device, False)
     cfg.updates_per_iteration = int(round(setting["updates_per_iteration"] * horizon))
     t0 = time.perf_counter()
