@@ -74,8 +74,8 @@ def test_quick_end_to_end(quick):
         assert f"figures/{name}" in report
     results = json.loads((out / "results.json").read_text())
     # every table cell traces back to an existing stage file and existing run checkpoints
-    # quick: Table 1 3 columns, Tables 2-3 3 + the training column, two stress tables 3 columns
-    assert len(results["tables"]) == (3 + 4 + 4 + 3 + 3) * 3
+    # quick: Table 1 3 columns, Tables 2-3 3 + the training column, two stress tables 2 columns
+    assert len(results["tables"]) == (3 + 4 + 4 + 2 + 2) * 3
     assert {c["table"] for c in results["tables"]} == {
         "table1",
         "table2",

@@ -184,8 +184,8 @@ def default_settings(quick: bool, seeds: int) -> dict[str, dict]:
             lengths=[0.2, 1.0, 2.0],
             num_goals=3,
             inits=2,
-            stress_masses=[0.0, 4.0, 9.0],
-            stress_lengths=[0.2, 1.0, 2.0],
+            stress_masses=[0.0, 9.0],
+            stress_lengths=[0.2, 2.0],
             reach_iterations=1,
         )
         s["maps"].update(grid=4, masses=[0.5, 1.0, 2.0], lengths=[0.75, 1.0, 1.5], inits=2)
