@@ -175,14 +175,29 @@ def test_bad_link_change_against_the_scene(text, message):
     assert message in str(err.value)
 
 
-def test_bad_variant_flag_is_one_line_exit_2(tmp_path):
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (
+            ["baseline", "ddpg", "SCENE", "--iterations", "1", "--variant", "arm7.mass=1"],
+            "unknown link 'arm7'",
+        ),
+        (
+            ["meta-train", "SCENE", "--iterations", "1", "--variant", "arm1.offset*=0"],
+            "must be > 0",
+        ),
+        (["meta-test", "RUN", "--variant", "ee.mass"], "expected LINK.WHAT=VALUE"),
+    ],
+)
+def test_bad_variant_flag_is_one_line_exit_2(tmp_path, argv, words):
     """The CLI: one line naming --variant, exit 2, before anything runs."""
-    cmd = [sys.executable, "-m", "warp_critic.cli.main", "baseline", "ddpg"]
-    cmd += [str(ROOT / "scenes" / "reacher.usda"), "--iterations", "1"]
-    cmd += ["--out", str(tmp_path / "r"), "--variant", "arm7.mass=1"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    scene = str(ROOT / "scenes" / "reacher.usda")
+    argv = [scene if a == "SCENE" else str(tmp_path / "none") if a == "RUN" else a for a in argv]
+    out = tmp_path / ("r.json" if argv[0] == "meta-test" else "r")
+    cmd = [sys.executable, "-m", "warp_critic.cli.main", *argv, "--out", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 2, proc.stderr
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("warp-critic: error: --variant:"), lines
-    assert "unknown link 'arm7'" in lines[0]
-    assert not (tmp_path / "r").exists()
+    assert words in lines[0]
+    assert not out.exists()
