@@ -4,9 +4,11 @@ Modules: :mod:`.settings` (paper and ``--quick`` settings, hashes), :mod:`.stage
 ``stage.json``, the output marker), :mod:`.analyses` (toy, landscape), :mod:`.metatrain`
 (meta-training of the three methods, every seed batched), :mod:`.evaluate` (batched meta-test: many
 runs, goals and dynamics variants in one model), :mod:`.generalize` (KUKA tables, reacher maps),
-:mod:`.report` (REPORT.md, results.json, figures, report.rrd), :mod:`.executors` (in process, local
-processes) and :mod:`.on_ray` (Ray), :mod:`.validate` (every ``--set`` checked up front),
-:mod:`.pipeline` (the order). The flags live in :mod:`warp_critic.cli.reproduce`.
+:mod:`.reach` (open-loop reachability floors), :mod:`.report` (REPORT.md, results.json, figures,
+report.rrd) with :mod:`.report_paper` (steps to error levels, solved seeds, 2-D maps, verdicts) and
+:mod:`.report_tables` (the KUKA tables), :mod:`.executors` (in process, local processes) and
+:mod:`.on_ray` (Ray), :mod:`.validate` (every ``--set`` checked up front), :mod:`.pipeline` (the
+order). The flags live in :mod:`warp_critic.cli.reproduce`.
 """
 
 from warp_critic.core.exports import lazy_exports
