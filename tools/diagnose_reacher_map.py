@@ -31,11 +31,11 @@ PROG = "diagnose_reacher_map"
 
 def _run(run_dir: str, goals, inits: int, seed: int):
     """(setup, before, after) rollouts of meta-test with ``goals`` ``(G, dof)``."""
-    from warp_critic.evaluation.metatest import TestConfig, setup_meta_test
+    from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
     from warp_critic.learning.inner import inner_update, policy_fn
     from warp_critic.learning.rollout import rollout
 
-    m = setup_meta_test(TestConfig(run_dir=run_dir, goals=goals, inits=inits, seed=seed))
+    m = setup_meta_test(MetaTestConfig(run_dir=run_dir, goals=goals, inits=inits, seed=seed))
     before = rollout(m.sim, policy_fn(m.policy, m.params), m.q0, m.qd0, m.horizon)
     params, _ = inner_update(
         m.critic,

@@ -32,6 +32,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
+from typing import cast
 
 from warp_critic.core.errors import FieldError
 
@@ -129,12 +130,13 @@ def parse_changes(text: str | None) -> tuple[LinkChange, ...]:
             value = float(m["value"])
         except ValueError:
             raise FieldError(FIELD, f"{item!r}: {m['value']!r} is not a number") from None
-        point = None
+        point: tuple[float, float, float] | None = None
         if m["point"] is not None and m["point"] != "tip":
             try:
-                point = tuple(float(x) for x in m["point"].split(","))
+                xyz = tuple(float(x) for x in m["point"].split(","))
             except ValueError:
                 raise FieldError(FIELD, f"{item!r}: @{m['point']} is not x,y,z or tip") from None
+            point = cast("tuple[float, float, float]", xyz)  # validate() refuses another length
         what = m["what"]
         mode = m["mode"] if m["mode"] is not None else MODES.get(what, ("",))[0]
         change = LinkChange(m["link"], what, m["op"], value, point, mode)

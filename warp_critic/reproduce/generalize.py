@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from warp_critic.physics.link_changes import parse_changes
 from warp_critic.physics.scene import Variant
 from warp_critic.reproduce.evaluate import Job, default_steps, evaluate, relpath
 from warp_critic.reproduce.settings import METHODS
@@ -74,9 +75,9 @@ def _pool(errs: list[np.ndarray], dof: int) -> dict:
 def table_variant(table: str, v: float) -> Variant:
     """The dynamics variant of one column of a dynamics table (module docstring)."""
     if table == "table2":
-        return Variant(changes=f"ee.mass={v!r}:keep")
+        return Variant(changes=parse_changes(f"ee.mass={v!r}:keep"))
     if table == "table3":
-        return Variant(changes=f"ee.offset+={v!r}")
+        return Variant(changes=parse_changes(f"ee.offset+={v!r}"))
     if table == "stress_mass":
         return Variant(ee_mass=v)
     if table == "stress_length":
@@ -251,8 +252,10 @@ def run_maps_stage(
 
     def variant(kind: str, a: float, b: float) -> Variant:
         if kind == "mass":
-            return Variant(changes=f"{links[0]}.mass={a!r}:keep; {links[1]}.mass={b!r}:keep")
-        return Variant(changes=f"{links[0]}.stretch={a!r}; {links[1]}.stretch={b!r}")
+            return Variant(
+                changes=parse_changes(f"{links[0]}.mass={a!r}:keep; {links[1]}.mass={b!r}:keep")
+            )
+        return Variant(changes=parse_changes(f"{links[0]}.stretch={a!r}; {links[1]}.stretch={b!r}"))
 
     jobs = []
     for m in METHODS:

@@ -11,6 +11,8 @@ failed.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import numpy as np
 import torch
 
@@ -56,9 +58,13 @@ def open_loop_floor(
     best = torch.full((V * G,), float("inf"), device=dev)
     for _ in range(max(1, int(iterations))):
         steps = iter(range(cfg.horizon))
+
+        def open_loop(q: torch.Tensor, qd: torch.Tensor, t: Iterator[int] = steps) -> torch.Tensor:
+            return norm.max_torque * torch.tanh(u[next(t)])
+
         traj = rollout(
             sim,
-            lambda q, qd, t=steps: norm.max_torque * torch.tanh(u[next(t)]),
+            open_loop,
             home.clone(),
             torch.zeros_like(home),
             cfg.horizon,

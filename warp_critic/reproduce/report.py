@@ -436,7 +436,7 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
                 f"the joints; first iteration at or below it, mean [min, max] over the seeds that reach it). "
                 f"Training error at the common budget of {budget:.3g} steps, mean(std) over seeds: "
                 + ", ".join(
-                    f"{METHOD_LABELS[m]} {_fmt(np.mean(v))}({_fmt(np.std(v))})"
+                    f"{METHOD_LABELS[m]} {_fmt(float(np.mean(v)))}({_fmt(float(np.std(v)))})"
                     for m, v in at_budget.items()
                 )
                 + ".",
@@ -645,9 +645,9 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
         for table in TABLES:
             if table not in T["columns"]:
                 continue
-            lines, cells, summary, wins = table_markdown(table, T, src, sv)
+            lines, cells, findings, wins = table_markdown(table, T, src, sv)
             md += [f"### {TABLES[table][2]}", ""]
-            md += lines + [""] + [f"- {s}." for s in summary] + [""]
+            md += lines + [""] + [f"- {s}." for s in findings] + [""]
             results["tables"] += cells
             if table.startswith("table"):
                 (wa, ca), (ws, cs) = wins["all"], wins["solved"]

@@ -162,7 +162,7 @@ def solved_cell(cell: dict, solved: list[bool]) -> tuple[float, float] | None:
 def method_rows(cells_of, n_cols: int, solved: dict[str, list[bool]], fmt_cell) -> list[tuple]:
     """(label, method, [(mean, std) or None per column]) rows: ours, then each baseline with all
     seeds and with its solved seeds."""
-    rows = []
+    rows: list[tuple] = []
     for m in METHODS:
         rows.append(
             (

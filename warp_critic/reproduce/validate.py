@@ -179,6 +179,11 @@ def check_tables(s: dict, train_goals: int) -> None:
     numbers("tables.stds", s["stds"], lo=0, hi=100)
     number("tables.dynamics_goal_std", s["dynamics_goal_std"], lo=0, hi=100)
     number("tables.num_goals", s["num_goals"], lo=1, hi=10**6, integer=True)
+    # the stress tables: a point mass added at the tip (as --ee-mass), link 7 stretched to a length
+    # (as --link-length); the open-loop reachability floor's Adam steps (0: no floor)
+    numbers("tables.stress_masses", s["stress_masses"], lo=0, hi=1e4)
+    numbers("tables.stress_lengths", s["stress_lengths"], lo=0, open_lo=True, hi=100)
+    number("tables.reach_iterations", s["reach_iterations"], lo=0, hi=10**6, integer=True)
     if s["goal_noise"] not in GOAL_NOISE:
         raise bad("tables.goal_noise", s["goal_noise"], f"must be one of {', '.join(GOAL_NOISE)}")
     around = s["around"]

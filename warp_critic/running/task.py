@@ -31,6 +31,7 @@ from warp_critic.core.memory import check_fits
 from warp_critic.core.runtime import MAX_SEED, check_threads
 from warp_critic.learning.networks import Normalizer
 from warp_critic.physics import schema
+from warp_critic.physics.link_changes import parse_changes
 from warp_critic.physics.scene import Scene, Variant
 
 if TYPE_CHECKING:
@@ -540,7 +541,7 @@ def task_variant(cfg) -> Variant:
         ee_mass=cfg.ee_mass,
         link_length=cfg.link_length,
         link_scale=cfg.link_scale,
-        changes=getattr(cfg, "variant", None),
+        changes=parse_changes(getattr(cfg, "variant", None)),
     )
 
 
