@@ -5,8 +5,10 @@ Modules: :mod:`.settings` (paper and ``--quick`` settings, hashes), :mod:`.stage
 (meta-training of the three methods, every seed batched), :mod:`.evaluate` (batched meta-test: many
 runs, goals and dynamics variants in one model), :mod:`.generalize` (KUKA tables, reacher maps),
 :mod:`.reach` (open-loop reachability floors), :mod:`.report` (REPORT.md, results.json, figures,
-report.rrd) with :mod:`.report_paper` (steps to error levels, solved seeds, 2-D maps, verdicts) and
-:mod:`.report_tables` (the KUKA tables), :mod:`.executors` (in process, local processes) and
+report.rrd) with its sections :mod:`.report_analyses` (toy, landscapes), :mod:`.report_training`
+(Figure 3), :mod:`.report_maps` (Figures 4-6) and :mod:`.report_tables` (the KUKA tables), sharing a
+:mod:`.report_draft`, and :mod:`.report_plots` (figures) and :mod:`.report_paper` (steps to error
+levels, solved seeds, 2-D maps, verdicts), :mod:`.executors` (in process, local processes) and
 :mod:`.on_ray` (Ray), :mod:`.validate` (every ``--set`` checked up front), :mod:`.pipeline` (the
 order). The flags live in :mod:`warp_critic.cli.reproduce`.
 """

@@ -1,0 +1,133 @@
+"""The report's Figures 4-6 section: the reacher's goal map and its 2-D mass and length grids,
+with their claims."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from warp_critic.reproduce import report_paper as rp
+from warp_critic.reproduce.report_draft import Draft, fmt
+from warp_critic.reproduce.report_plots import figure, plot_goal_maps
+from warp_critic.reproduce.settings import METHOD_LABELS, METHODS
+from warp_critic.reproduce.stages import STAGE_FILE
+
+
+def maps_section(d: Draft) -> None:
+    """Figures 4-6: reacher generalisation maps."""
+    figs = d.figs
+    recs = d.recs
+    solved = d.solved
+    md = d.md
+    results = d.results
+    figures = d.figures
+    claims = d.claims
+    md += ["## Figures 4-6: reacher generalisation maps", ""]
+    r = recs.get("maps")
+    if r is None:
+        md += ["Not run (stage `maps`).", ""]
+    else:
+        M = r.data["result"]
+        p4, p5, p6 = (
+            figs / "fig4_reacher_goals.png",
+            figs / "fig5_reacher_mass.png",
+            figs / "fig6_reacher_length.png",
+        )
+        plot_goal_maps(p4, M)
+        sv = solved.get("reacher", {})
+        rp.plot_grid_2d(p5, M, "mass", figure)
+        rp.plot_grid_2d(p6, M, "length", figure)
+        gm = {m: M["goals"][m]["mse_mean"] for m in METHODS}
+        frac = {m: float((np.asarray(M["goals"][m]["mse"]) < 0.05).mean()) for m in METHODS}
+        best = min(gm, key=gm.__getitem__)
+        md += [
+            f"Goal grid: {len(M['axis_q1'])} x {len(M['axis_q2'])} goals over the joint limits, "
+            f"{M['policy_updates']} policy update(s), horizon {M['horizon']}; mean MSE over the grid "
+            "(fraction of the grid's goals below 0.05 MSE): "
+            + ", ".join(f"{METHOD_LABELS[m]} {fmt(v)} ({frac[m]:.0%})" for m, v in gm.items())
+            + ".",
+            "",
+        ]
+        goal_rows = rp.method_rows(lambda ci, m: M["goals"][m], 1, sv, None)
+        md += ["| goal grid | mean MSE over the grid |", "|---|---|"]
+        md += [f"| {lab} | {fmt(v[0][0]) if v[0] else '—'} |" for lab, _, v in goal_rows] + [""]
+        md += [
+            "Dynamics (Figures 5, 6): 2-D grids over both links at the four training goals. Masses: each "
+            "link's mass SET at its centre of mass, its inertia about the centre kept (the paper's model "
+            "changes the `mass` parameter of a link). Lengths: each link STRETCHED to the length (its "
+            "centre of mass and inertia stretched with it; a longer link 1 moves joint 2 out). Assumption: the "
+            "paper does not say how it changed a length; a stretched link is a longer link of the same mass.",
+            "",
+        ]
+        grid_means = {}
+        for kind in ("mass", "length"):
+            lines, g = rp.grid_summary(M, kind, sv)
+            grid_means[kind] = g["means"]
+            md += lines + [""]
+        figures.append(
+            (
+                "Figure 4: reacher new goals",
+                p4,
+                f"Figure 4: MSE per new goal over the reacher's joint space (red crosses: training goals); the "
+                f"lowest grid mean is {METHOD_LABELS[best]}'s; ours is below 0.05 MSE on {frac['ours']:.0%} "
+                f"of the grid.",
+            )
+        )
+        claims.append(
+            {
+                "claim": "Figure 4: ours generalises over the full state space of the reacher",
+                "paper": "goal map: ours low everywhere, the baselines only near the training goals",
+                "ours": "fraction of the 2-D goal grid below 0.05 MSE: "
+                + ", ".join(f"{METHOD_LABELS[m]} {frac[m]:.0%}" for m in METHODS)
+                + "; grid mean: "
+                + ", ".join(f"{METHOD_LABELS[m]} {fmt(gm[m])}" for m in METHODS),
+                "verdict": "met" if frac["ours"] >= 0.9 and best == "ours" else "not met",
+                "reason": "criterion: ours below 0.05 MSE on >= 90% of the grid and the lowest grid mean",
+            }
+        )
+        for fig_no, kind, png in ((5, "mass", p5), (6, "length", p6)):
+            means = grid_means[kind]
+            ours_mean = next((v for k, v in means.items() if "(ours)" in k), None)
+            others = {k: v for k, v in means.items() if "(ours)" not in k}
+            ok = ours_mean is not None and others and all(ours_mean < v for v in others.values())
+            figures.append(
+                (
+                    f"Figure {fig_no}: reacher {kind}",
+                    png,
+                    f"Figure {fig_no}: MSE at the training goals over the {kind}s of both links (red cross: "
+                    f"as trained; one colour scale); grid mean: "
+                    + ", ".join(f"{k.replace('this run: ', '')} {fmt(v)}" for k, v in means.items())
+                    + ".",
+                )
+            )
+            claims.append(
+                {
+                    "claim": f"Figure {fig_no}: ours generalises to "
+                    + ("heavier / lighter links" if kind == "mass" else "new link lengths")
+                    + " better than the baselines",
+                    "paper": f"2-D map over the {kind}s of both links; ours lowest",
+                    "ours": "grid mean MSE: "
+                    + ", ".join(
+                        f"{k.replace('this run: ', '')} {fmt(v)}" for k, v in means.items()
+                    ),
+                    "verdict": "met" if ok else "not met",
+                    "reason": (
+                        "ours below every baseline row shown"
+                        if ok
+                        else "a baseline row is at or below ours"
+                    )
+                    + (
+                        ""
+                        if any("solved" in k for k in others)
+                        else "; no baseline seed solved training"
+                    ),
+                }
+            )
+        results["maps"] = {
+            "goals_mse_mean": gm,
+            "goals_fraction_below_0.05": frac,
+            "mass": M["mass"],
+            "length": M["length"],
+            "grid_means": grid_means,
+            "file": f"{r.dir.name}/{STAGE_FILE}",
+            "raw_file": f"{r.dir.name}/{M['raw_file']}",
+        }
