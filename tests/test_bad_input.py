@@ -1978,8 +1978,8 @@ def test_meta_train_numbers_property(name, text):
 @given(name=st.sampled_from(TEST_NUMBERS), text=NUMBER_TEXT)
 def test_meta_test_numbers_property(name, text, base):
     from warp_critic.evaluation import metatest
+    from warp_critic.running.config import check_fields
     from warp_critic.running.rundir import check_output_file
-    from warp_critic.running.task import check_fields
 
     def checks_only(tc, **kw):  # meta-test's checks before it loads the run
         out = check_output_file(Path(tc.out), "out")

@@ -7,7 +7,7 @@ import torch
 
 from warp_critic.core.errors import FieldError
 from warp_critic.evaluation.paper import GOAL_NOISE
-from warp_critic.running.task import inside_limits
+from warp_critic.running.task_inputs import inside_limits
 
 
 def sample_goals(

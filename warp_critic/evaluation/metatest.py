@@ -37,18 +37,11 @@ from warp_critic.learning.networks import Critic, MLPPolicy, Normalizer
 from warp_critic.learning.rollout import rollout
 from warp_critic.physics.scene import Scene
 from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
+from warp_critic.running.config import SerializableConfig, check_fields, spec
 from warp_critic.running.rundir import RunDir, check_output_file, write_result
 from warp_critic.running.scenefile import find_run_scene
-from warp_critic.running.task import (
-    SerializableConfig,
-    TaskConfig,
-    build_task,
-    check_fields,
-    estimate_memory,
-    goals_tensor,
-    spec,
-    task_variant,
-)
+from warp_critic.running.task import TaskConfig, build_task, task_variant
+from warp_critic.running.task_inputs import estimate_memory, goals_tensor
 
 RESULT_KIND = "warp-critic/metatest-v1"
 

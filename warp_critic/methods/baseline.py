@@ -65,8 +65,8 @@ from warp_critic.methods.alpha_search import ALPHA_GRID, fresh_policy_errors
 from warp_critic.methods.baseline_config import BaselineConfig
 from warp_critic.methods.replay import ExplorationNoise, ReplayBuffer, rewards
 from warp_critic.physics.simulator import Simulator
+from warp_critic.running.config import filled
 from warp_critic.running.loop import Callback, Session, TrainResult
-from warp_critic.running.task import filled
 
 
 @dataclass

@@ -9,7 +9,8 @@ from dataclasses import dataclass
 from warp_critic.methods.q_networks import METHODS
 from warp_critic.methods.replay import NOISE_KINDS, REWARD_KINDS
 from warp_critic.physics import schema
-from warp_critic.running.task import TaskConfig, filled, spec
+from warp_critic.running.config import filled, spec
+from warp_critic.running.task import TaskConfig
 
 
 @dataclass

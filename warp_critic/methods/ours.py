@@ -25,8 +25,9 @@ from warp_critic.learning.networks import (
 )
 from warp_critic.learning.outer import meta_loss
 from warp_critic.physics import schema
+from warp_critic.running.config import filled, spec
 from warp_critic.running.loop import Callback, Session, TrainResult
-from warp_critic.running.task import TaskConfig, filled, spec
+from warp_critic.running.task import TaskConfig
 
 
 @dataclass

@@ -152,7 +152,7 @@ def evaluate(
     from warp_critic.physics.scene import load_scene
     from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
     from warp_critic.running.loop import progress_bar
-    from warp_critic.running.task import max_torque_tensor
+    from warp_critic.running.task_inputs import max_torque_tensor
 
     if not jobs:
         raise UserError("nothing to evaluate")

@@ -36,7 +36,7 @@ from warp_critic.physics.link_changes import parse_changes
 from warp_critic.physics.scene import Variant
 from warp_critic.reproduce.evaluate import Job, default_steps, evaluate, relpath
 from warp_critic.reproduce.settings import METHODS
-from warp_critic.running.task import inside_limits
+from warp_critic.running.task_inputs import inside_limits
 
 
 def _train_goals_and_limits(run_dir: str):

@@ -114,7 +114,7 @@ def run_metatrain_stage(
     from warp_critic.methods.ddpg import train_ddpg
     from warp_critic.methods.meta_critic import train_meta_critic
     from warp_critic.methods.ours import meta_train
-    from warp_critic.running.task import filled
+    from warp_critic.running.config import filled
 
     run = d / "run"
     resume = _clear_unstarted(run, seeds)

@@ -33,7 +33,7 @@ def open_loop_floor(
     from warp_critic.physics.scene import load_scene
     from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
     from warp_critic.reproduce.evaluate import load_runs
-    from warp_critic.running.task import max_torque_tensor
+    from warp_critic.running.task_inputs import max_torque_tensor
 
     cfg = load_runs([run_dir])[str(run_dir)].cfg
     scene = load_scene(cfg.scene)

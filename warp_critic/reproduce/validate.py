@@ -132,7 +132,8 @@ def check_metatrain(m: dict) -> dict[str, int]:
     from warp_critic.core.runtime import MAX_SEED
     from warp_critic.reproduce.metatrain import check_fields_known, make_config
     from warp_critic.reproduce.settings import METHODS, SCENES
-    from warp_critic.running.task import check_memory, load_task_scene
+    from warp_critic.running.task import load_task_scene
+    from warp_critic.running.task_inputs import check_memory
 
     seeds = m["seeds"]
     if not isinstance(seeds, list) or not seeds or len(seeds) > MAX_SEEDS:

@@ -29,15 +29,10 @@ import torch
 
 from warp_critic.core.errors import DivergenceError, UserError
 from warp_critic.core.runtime import restore_rng, seed_everything, set_threads
+from warp_critic.running.config import check_fields
 from warp_critic.running.seedrun import SeedRun, seed_configs
-from warp_critic.running.task import (
-    Task,
-    TaskConfig,
-    build_task,
-    check_fields,
-    check_memory,
-    load_task_scene,
-)
+from warp_critic.running.task import Task, TaskConfig, build_task, load_task_scene
+from warp_critic.running.task_inputs import check_memory
 
 
 class Interrupted(KeyboardInterrupt):

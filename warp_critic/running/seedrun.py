@@ -15,8 +15,9 @@ from typing import TYPE_CHECKING, Any, TextIO
 import torch
 
 from warp_critic.core.errors import FieldError, UserError
+from warp_critic.running.config import check_fields
 from warp_critic.running.rundir import RunDir
-from warp_critic.running.task import RUNTIME_FIELDS, TaskConfig, check_fields
+from warp_critic.running.task import RUNTIME_FIELDS, TaskConfig
 
 if TYPE_CHECKING:
     from warp_critic.running.recording import TrainingRecorder

@@ -1,4 +1,4 @@
-"""The training task every method shares: its config fields, their checks, and the worlds it runs.
+"""The training task every method shares: its config fields and the worlds it runs.
 
 :class:`TaskConfig` holds the fields common to meta-training and both baselines (scene, goals,
 horizon, time step, torque bounds, training distribution, run settings). Each method's config
@@ -18,21 +18,25 @@ from __future__ import annotations
 
 import copy
 import logging
-import math
-import typing
-from dataclasses import asdict, dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 
 import torch
 
 from warp_critic.core.errors import FieldError
-from warp_critic.core.memory import check_fits
 from warp_critic.core.runtime import MAX_SEED, check_threads
 from warp_critic.learning.networks import Normalizer
 from warp_critic.physics import schema
 from warp_critic.physics.link_changes import parse_changes
 from warp_critic.physics.scene import Scene, Variant
+from warp_critic.running.config import SerializableConfig, check_fields, filled, spec
+from warp_critic.running.task_inputs import (
+    check_memory,
+    goals_tensor,
+    inside_limits,
+    max_torque_tensor,
+)
 
 if TYPE_CHECKING:
     from typing_extensions import Self
@@ -53,93 +57,6 @@ RUNTIME_FIELDS = (
     "iterations",
     "seeds",
 )
-
-
-def spec(default, help: str, *, gt=None, ge=None, le=None, lt=None, cap=None, choices=None):
-    """A dataclass field with its help text and its valid range (checked by :func:`check_fields`).
-
-    ``gt``/``ge``/``lt``/``le``: the range where the value means something; ``cap``: a sanity limit
-    beyond which a value can only be a typo (it would not fit in memory or time).
-    """
-    meta = {"help": help}
-    for key, value in (
-        ("gt", gt),
-        ("ge", ge),
-        ("le", le),
-        ("lt", lt),
-        ("cap", cap),
-        ("choices", choices),
-    ):
-        if value is not None:
-            meta[key] = value
-    if isinstance(default, list):
-        return field(default_factory=lambda: copy.deepcopy(default), metadata=meta)
-    return field(default=default, metadata=meta)
-
-
-class SerializableConfig:
-    """``to_dict`` / ``from_dict`` (unknown keys ignored) for config dataclasses."""
-
-    __dataclass_fields__: ClassVar[dict[str, Any]]  # the subclasses are dataclasses
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict):
-        names = {f.name for f in fields(cls)}
-        return cls(**{k: v for k, v in d.items() if k in names})
-
-
-def check_fields(cfg) -> None:
-    """Check every field's type, finiteness and range from its :func:`spec`; raises :class:`FieldError`."""
-    hints = typing.get_type_hints(type(cfg))
-    for f in fields(cfg):
-        value = getattr(cfg, f.name)
-        if value is None:
-            continue
-        hint = hints[f.name]
-        base = (
-            next((a for a in typing.get_args(hint) if a is not type(None)), hint)
-            if typing.get_args(hint)
-            else hint
-        )
-        if typing.get_origin(base) is list:
-            values = [x for g in value for x in (g if isinstance(g, list) else [g])]
-        else:
-            values = [value]
-        for x in values:
-            _check_value(f.name, x, f.metadata)
-
-
-def _check_value(name: str, x, meta) -> None:
-    if isinstance(x, bool) or isinstance(x, str):
-        if "choices" in meta and x not in meta["choices"]:
-            raise FieldError(name, f"must be one of {', '.join(meta['choices'])} (got {x!r})")
-        return
-    if not isinstance(x, (int, float)) or not math.isfinite(x):
-        raise FieldError(name, f"must be a finite number (got {x!r})")
-    if "cap" in meta and x > meta["cap"]:
-        raise FieldError(
-            name, f"must be <= {meta['cap']} (got {x!r}; larger values cannot be meant)"
-        )
-    lo = ("gt", meta["gt"]) if "gt" in meta else ("ge", meta["ge"]) if "ge" in meta else None
-    hi = ("lt", meta["lt"]) if "lt" in meta else ("le", meta["le"]) if "le" in meta else None
-    ok_lo = lo is None or (x > lo[1] if lo[0] == "gt" else x >= lo[1])
-    ok_hi = hi is None or (x < hi[1] if hi[0] == "lt" else x <= hi[1])
-    if ok_lo and ok_hi:
-        return
-    if lo and hi:
-        raise FieldError(
-            name,
-            f"must be in {'(' if lo[0] == 'gt' else '['}{lo[1]}, {hi[1]}"
-            f"{')' if hi[0] == 'lt' else ']'} (got {x!r})",
-        )
-    violated = lo if lo else hi
-    assert violated is not None  # without bounds every value is in range
-    key, bound = violated
-    word = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}[key]
-    raise FieldError(name, f"must be {word} {bound} (got {x!r})")
 
 
 @dataclass
@@ -297,129 +214,6 @@ class TaskConfig(SerializableConfig):
 
 
 TaskConfigT = TypeVar("TaskConfigT", bound=TaskConfig)
-T = TypeVar("T")
-
-
-def filled(value: T | None, name: str) -> T:
-    """A field that :meth:`TaskConfig.fill_defaults` has set: ``None`` only before it (a scene default
-    not yet read), which is a programming error here, named by the field."""
-    if value is None:
-        raise FieldError(name, "has no value: the config's defaults were not filled from its scene")
-    return value
-
-
-# ------------------------------------------------------------------------------------------------
-# goals, torque bounds, memory
-# ------------------------------------------------------------------------------------------------
-
-
-def goals_tensor(goals, scene: Scene, device="cpu", name: str = "goals") -> torch.Tensor:
-    """Validate goals against the scene (shape, finiteness, joint limits) -> ``(G, dof)`` rad."""
-    try:
-        g = torch.tensor(goals, dtype=torch.float32)
-    except (TypeError, ValueError):
-        raise FieldError(
-            name, "expected a list of goals, each a list of numbers (rows of equal length)"
-        ) from None
-    if g.ndim != 2 or g.shape[0] == 0 or g.shape[1] != scene.dof:
-        got = list(g.shape)[-1] if g.ndim == 2 else list(g.shape)
-        raise FieldError(
-            name, f"each goal needs {scene.dof} joint values for {scene.name} (got {got})"
-        )
-    if not bool(torch.isfinite(g).all()):
-        raise FieldError(name, "goals must be finite numbers")
-    lo = torch.as_tensor(scene.q_lower, dtype=torch.float32)
-    hi = torch.as_tensor(scene.q_upper, dtype=torch.float32)
-    outside = (g < lo) | (g > hi)
-    if bool(outside.any()):
-        i, j = (int(x) for x in torch.nonzero(outside)[0])
-        raise FieldError(
-            name,
-            f"goal {i} joint {j} = {g[i, j]:.3f} is outside the joint limits "
-            f"[{lo[j]:.3f}, {hi[j]:.3f}] of {scene.name}",
-        )
-    return g.to(device)
-
-
-def inside_limits(lower, upper, fraction: float):
-    """The bounds of the middle ``fraction`` of each joint's range ``[lower, upper]``:
-    ``mid -/+ fraction * half``, inside the limits whatever their signs (for limits symmetric about 0
-    exactly ``fraction * lower`` and ``fraction * upper``)."""
-    mid, half = (upper + lower) / 2, (upper - lower) / 2
-    return mid - fraction * half, mid + fraction * half
-
-
-def max_torque_tensor(max_torque: list[float], scene: Scene, device="cpu") -> torch.Tensor:
-    """Per-joint torque bound ``(dof,)``; a bound above a joint's effort limit is refused (the
-    policy could not apply it, and the run would record a number it did not use)."""
-    t = torch.tensor(max_torque, dtype=torch.float32)
-    if t.numel() == 1:
-        t = t.expand(scene.dof).clone()
-    if t.numel() != scene.dof:
-        raise FieldError(
-            "max_torque", f"needs 1 or {scene.dof} values for {scene.name} (got {t.numel()})"
-        )
-    limit = torch.as_tensor(scene.effort_limit, dtype=torch.float32)
-    over = torch.nonzero(t > limit).flatten()
-    if over.numel():
-        j = int(over[0])
-        raise FieldError(
-            "max_torque",
-            f"{float(t[j]):g} N·m for joint {j} is above its effort limit {float(limit[j]):g} N·m "
-            f"in {scene.name} (give at most the effort limits)",
-        )
-    return torch.minimum(t, limit).to(device)
-
-
-def estimate_memory(
-    worlds: int, dof: int, horizon: int, substeps: int, graph_steps: int = 1
-) -> int:
-    """A coarse upper estimate (bytes) of a run's peak memory.
-
-    Per world and physics step the differentiable model keeps its own state and Featherstone scratch
-    (mass matrix, Jacobians; ~``(6 dof)^2`` floats) for the backward pass; per control step torch keeps
-    the policy activations of every rollout in the graph (``graph_steps`` of them).
-    """
-    per_physics_step = 4 * (6 * dof) ** 2 + 4 * 64 * dof
-    per_control_step = 4 * (3 * 64 + 8 * dof) * 4
-    per_world = horizon * (substeps * per_physics_step + graph_steps * per_control_step)
-    return int(worlds * per_world + 200 * 2**20)
-
-
-def check_memory(cfg: TaskConfig, dof: int, graph_steps: int = 1, copies: int = 1) -> None:
-    """Refuse settings whose memory estimate cannot fit, with the estimate, before allocating."""
-    horizon, substeps = cfg.horizon, cfg.substeps
-    if not (isinstance(horizon, int) and isinstance(substeps, int)):
-        return
-    goals = (len(cfg.goals) if cfg.goals else 1) * copies
-    need = estimate_memory(
-        goals * cfg.worlds_per_goal,
-        dof,
-        horizon,
-        substeps,
-        max(graph_steps, getattr(cfg, "inner_steps", 1) + 1),
-    )
-    inner = getattr(cfg, "inner_steps", 1)
-    culprit = max(
-        (
-            ("worlds_per_goal", cfg.worlds_per_goal / 64),
-            ("horizon", horizon / 1000),
-            ("substeps", substeps / 100),
-            ("inner_steps", inner / 100),
-        ),
-        key=lambda kv: kv[1],
-    )[0]
-    check_fits(
-        culprit,
-        f"{goals} goals x {cfg.worlds_per_goal} worlds, horizon {cfg.horizon} x "
-        f"{cfg.substeps} substeps, {inner} inner steps",
-        need,
-    )
-
-
-# ------------------------------------------------------------------------------------------------
-# the worlds
-# ------------------------------------------------------------------------------------------------
 
 
 @dataclass
