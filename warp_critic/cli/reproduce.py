@@ -48,8 +48,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=str,
         default=None,
         metavar="STAGE,...",
-        help=f"run only these stages (comma-separated: {', '.join(STAGES)}); maps and tables also run the "
-        "meta-training they read (skipped when complete)",
+        help=f"run only these stages (comma-separated: {', '.join(STAGES)}, or one meta-training such as "
+        "metatrain-kuka-ours); maps and tables also run the meta-training they read (skipped when "
+        "complete)",
     )
     A(
         "--quick",

@@ -41,9 +41,14 @@ class ReproduceConfig:
             raise FieldError("seeds", f"must be an integer >= 1 (got {self.seeds!r})")
         if self.seeds > 1000:
             raise FieldError("seeds", f"must be <= 1000 (got {self.seeds})")
+        subs = metatrain_names()
         for s in self.only or []:
-            if s not in STAGES:
-                raise FieldError("only", f"unknown stage {s!r} (stages: {', '.join(STAGES)})")
+            if s not in STAGES and s not in subs:
+                raise FieldError(
+                    "only",
+                    f"unknown stage {s!r} (stages: {', '.join(STAGES)}; one meta-training: "
+                    f"{', '.join(subs)})",
+                )
         if self.only is not None and not self.only:
             raise UserError(f"--only: give one or more of {', '.join(STAGES)}")
         if self.device not in ("auto", "cpu", "cuda") and not str(self.device).startswith("cuda:"):
@@ -62,7 +67,17 @@ class ReproduceConfig:
         return settings
 
     def selected(self) -> list[str]:
-        return [s for s in STAGES if self.only is None or s in self.only]
+        """The selected stage groups, and single meta-trainings (``metatrain-<robot>-<method>``)."""
+        if self.only is None:
+            return list(STAGES)
+        return [s for s in STAGES if s in self.only] + [
+            s for s in metatrain_names() if s in self.only and "metatrain" not in self.only
+        ]
+
+
+def metatrain_names() -> list[str]:
+    """The names of the single meta-trainings ``--only`` also accepts."""
+    return [f"metatrain-{scene}-{m}" for scene in SCENES for m in METHODS]
 
 
 def scene_hashes() -> dict[str, str]:
@@ -136,6 +151,8 @@ def needed(rc: ReproduceConfig, stages: dict) -> list[list[str]]:
             first.append(group)
         elif group == "metatrain":
             first += [n for n, st in stages.items() if st["group"] == "metatrain"]
+        elif group in stages and stages[group]["group"] == "metatrain":  # one meta-training
+            first.append(group)
         else:
             first += [n for n in stages[group]["depends"]]
             second.append(group)
