@@ -16,12 +16,17 @@ Grid (a few values around the published ones, each a factor of 2-10):
 * ``updates_per_iteration`` horizon (published: 50), 2 x horizon;
 * ``reward_scale`` 1 (published), 10.
 
-Prints one line per setting, sorted by score, and the best; writes everything to ``--out`` as JSON.
+Prints one line per setting, sorted by score, and the best; writes everything to ``--out`` as JSON,
+rewritten after every setting. The search resumes: a rerun with the same ``--out`` keeps every
+setting already scored there (same scene, method, setting, iterations and seeds) and continues an
+interrupted training from its last checkpoint (every quarter of the iterations).
 
 Usage::
 
     nice python tools/tune_baselines.py --scenes reacher --methods ddpg,meta-critic \
         --configs 6 --iterations 120 --seeds 100,101 --out runs/tune/tune.json
+    nice python tools/tune_baselines.py --scenes reacher,kuka --design one-at-a-time \
+        --iterations 100 --seeds 100,101 --out runs/tune/tune.json
 """
 
 from __future__ import annotations
@@ -53,6 +58,14 @@ PUBLISHED = {
 }
 
 
+def one_at_a_time() -> list[dict]:
+    """The published setting, then each single change of one value to another of :data:`GRID`."""
+    out = [dict(PUBLISHED)]
+    for key, values in GRID.items():
+        out += [{**PUBLISHED, key: v} for v in values if v != PUBLISHED[key]]
+    return out
+
+
 def settings(n: int, seed: int) -> list[dict]:
     """The published setting first, then ``n - 1`` others drawn from :data:`GRID` without repetition."""
     keys = list(GRID)
@@ -73,8 +86,14 @@ def train_one(scene: str, method: str, setting: dict, args, out: Path) -> dict:
     horizon = base.get("horizon") or load_scene(scene_file(scene)).defaults.get("horizon", 50)
     values = {k: v for k, v in setting.items() if k != "updates_per_iteration"}
     # one fixed meta-test alpha: the score is the training error, so skip the alpha search
-    base.update(values, iterations=args.iterations, checkpoint_every=args.iterations, alpha=1e-3)
-    cfg = make_config(scene, method, base, args.seeds, out, args.device, False)
+    base.update(
+        values,
+        iterations=args.iterations,
+        checkpoint_every=max(1, args.iterations // 4),
+        alpha=1e-3,
+    )
+    resume = all((out / f"seed{s}" / "checkpoint.pt").is_file() for s in args.seeds)
+    cfg = make_config(scene, method, base, args.seeds, out, args.device, resume)
     cfg.updates_per_iteration = int(round(setting["updates_per_iteration"] * horizon))
     t0 = time.perf_counter()
     train = train_ddpg if method == "ddpg" else train_meta_critic
@@ -88,6 +107,8 @@ def train_one(scene: str, method: str, setting: dict, args, out: Path) -> dict:
     return {
         "scene": scene,
         "method": method,
+        "iterations": args.iterations,
+        "seeds": list(args.seeds),
         "setting": setting,
         "updates_per_iteration": cfg.updates_per_iteration,
         "score": sum(scores) / len(scores),
@@ -100,7 +121,14 @@ def main(argv=None) -> int:
     p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
     p.add_argument("--scenes", type=comma_list(str), default=["reacher"])
     p.add_argument("--methods", type=comma_list(str), default=["ddpg", "meta-critic"])
-    p.add_argument("--configs", type=int, default=6, help="settings per scene and method")
+    p.add_argument("--configs", type=int, default=6, help="settings per scene and method (--design draw)")
+    p.add_argument(
+        "--design",
+        choices=("draw", "one-at-a-time"),
+        default="draw",
+        help="draw: the published setting and --configs - 1 seeded draws from the grid; "
+        "one-at-a-time: the published setting and each single change of one value (7 settings)",
+    )
     p.add_argument("--iterations", type=int, default=120)
     p.add_argument("--seeds", type=comma_list(int), default=[100, 101])
     p.add_argument("--draw-seed", type=int, default=0, help="seed of the draw from the grid")
@@ -118,14 +146,26 @@ def main(argv=None) -> int:
     if any(s < 5 for s in args.seeds):
         p.error("--seeds: use seeds other than the reported 0-4")
     out = Path(args.out)
-    rows = []
     try:
+        rows = _done_rows(out)
         for scene in args.scenes:
             for method in args.methods:
-                for k, setting in enumerate(settings(args.configs, args.draw_seed)):
-                    run = out.parent / f"{scene}-{method}-{k}"
+                chosen = (
+                    one_at_a_time()
+                    if args.design == "one-at-a-time"
+                    else settings(args.configs, args.draw_seed)
+                )
+                for k, setting in enumerate(chosen):
+                    key = (scene, method, setting, args.iterations, list(args.seeds))
+                    if any(_key(r) == key for r in rows):
+                        continue  # scored by an earlier call
+                    run = out.parent / (
+                        f"{scene}-{method}-{args.iterations}it-"
+                        + "-".join(f"{v:g}" for v in setting.values())
+                    )
                     row = train_one(scene, method, setting, args, run)
                     rows.append(row)
+                    _write(out, args, rows, {})
                     print(
                         f"{scene} {method} #{k} {setting}: score {row['score']:.4f} "
                         f"(per seed {', '.join(f'{x:.4f}' for x in row['per_seed'])}; "
@@ -138,7 +178,14 @@ def main(argv=None) -> int:
     for scene in args.scenes:
         for method in args.methods:
             mine = sorted(
-                (r for r in rows if r["scene"] == scene and r["method"] == method),
+                (
+                    r
+                    for r in rows
+                    if r["scene"] == scene
+                    and r["method"] == method
+                    and r["iterations"] == args.iterations
+                    and r["seeds"] == list(args.seeds)
+                ),
                 key=lambda r: r["score"],
             )
             published = next(r for r in mine if r["setting"] == PUBLISHED)
@@ -150,9 +197,32 @@ def main(argv=None) -> int:
                 f"  best {mine[0]['setting']} {mine[0]['score']:.4f} vs published "
                 f"{published['score']:.4f}"
             )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"args": vars(args), "rows": rows, "best": best}, indent=1) + "\n")
+    _write(out, args, rows, best)
     return 0
+
+
+def _key(row: dict) -> tuple:
+    return (row["scene"], row["method"], row["setting"], row.get("iterations"), row.get("seeds"))
+
+
+def _done_rows(out: Path) -> list[dict]:
+    """The settings an earlier call scored into ``out`` (none when it does not exist yet)."""
+    if not out.is_file():
+        return []
+    try:
+        rows = json.loads(out.read_text())["rows"]
+        for r in rows:
+            _key(r)
+    except (ValueError, KeyError, TypeError):
+        raise UserError(f"{out}: not a {PROG} result file; choose another --out") from None
+    return rows
+
+
+def _write(out: Path, args, rows: list[dict], best: dict) -> None:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".tmp")
+    tmp.write_text(json.dumps({"args": vars(args), "rows": rows, "best": best}, indent=1) + "\n")
+    tmp.replace(out)  # never a half-written file
 
 
 if __name__ == "__main__":

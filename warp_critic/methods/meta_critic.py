@@ -76,7 +76,7 @@ class MetaCriticAgent(DDPGAgent):
         super().__init__(cfg, dof, norm, device)
         self.aux = AuxiliaryLoss(dof, norm, cfg.aux_hidden).to(device)
         self.aux_opt = torch.optim.Adam(
-            self.aux.parameters(), lr=cfg.aux_lr, weight_decay=cfg.aux_weight_decay
+            self.aux.parameters(), lr=cfg.aux_lr, weight_decay=cfg.aux_weight_decay, foreach=True
         )
         self.eta = cfg.virtual_lr if cfg.virtual_lr is not None else cfg.actor_lr
 

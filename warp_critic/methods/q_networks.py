@@ -131,6 +131,6 @@ def test_critic_from_checkpoint(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.
 
 
 def soft_update(target: nn.Module, source: nn.Module, tau: float) -> None:
+    """``target <- target + tau (source - target)`` for every parameter (one batched lerp)."""
     with torch.no_grad():
-        for t, s in zip(target.parameters(), source.parameters()):
-            t.lerp_(s, tau)
+        torch._foreach_lerp_(list(target.parameters()), list(source.parameters()), tau)
