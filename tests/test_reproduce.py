@@ -277,3 +277,61 @@ def test_interrupted_metatrain_resumes(tmp_path, capsys):
     ]  # the first three iterations were kept, not retrained
     assert data["result"]["seeds"]["0"]["iteration"] == list(range(6))
     assert (stray / "checkpoint.pt").is_file()
+
+
+def _tool(name: str):
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "tools" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
+    """save -> restore without the maps and tables: reproduce reruns only those two, from the slim
+    meta-training checkpoints, to the same cells; the archive holds no optimiser or buffer state."""
+    import torch
+
+    from warp_critic.reproduce.carry import TRAINING_ONLY
+
+    out, rc, _ = quick
+    assert rc == 0
+    carry = _tool("carry_stages")
+    archive = tmp_path / "archive"
+    assert carry.main(["save", str(out), str(archive)]) == 0
+    names = {p.name for p in archive.iterdir()}
+    assert len(names) == 10 and not list(archive.rglob("*.rrd"))
+    ckpts = list(archive.rglob("checkpoint.pt"))
+    assert len(ckpts) == 6 * 2  # 6 meta-trainings x 2 quick seeds
+    for c in ckpts:
+        assert not set(torch.load(c, weights_only=True)) & set(TRAINING_ONLY), c
+    # a second save copies nothing; a differing stage in the archive is refused on one line
+    assert carry.main(["save", str(out), str(archive)]) == 0
+    assert "0 stage(s) copied" in capsys.readouterr().out
+    for name in [n for n in names if n.startswith(("maps-", "tables-"))]:
+        import shutil
+
+        shutil.rmtree(archive / name)
+    other = tmp_path / "other"
+    assert carry.main(["restore", str(archive), str(other)]) == 0
+    capsys.readouterr()
+    assert reproduce_main(["--quick", "--out", str(other), "--device", "cpu"]) == 0
+    err = capsys.readouterr().err
+    assert "2 stage(s) to run" in err
+    cells = {
+        (c["table"], c["value"], c["method"]): c["mse_mean"]
+        for c in json.loads((out / "results.json").read_text())["tables"]
+    }
+    again = {
+        (c["table"], c["value"], c["method"]): c["mse_mean"]
+        for c in json.loads((other / "results.json").read_text())["tables"]
+    }
+    assert again == cells
+    stage = next(p for p in archive.glob("toy-*/stage.json"))
+    stage.write_text(stage.read_text().replace('"seconds"', '"secs"'))
+    with pytest.raises(SystemExit) as e:
+        carry.main(["save", str(out), str(archive)])
+    assert e.value.code == 2
+    assert "edited or damaged" in capsys.readouterr().err

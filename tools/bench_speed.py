@@ -12,13 +12,19 @@ the same run, interleaved: a temporary ``git worktree`` of COMMIT gets a tempora
 environment that shares this interpreter's packages but imports that checkout's package (see
 :func:`other_checkout`); the same measuring code runs there. Both are removed after.
 
+``--method ddpg`` or ``--method meta-critic`` measures a baseline's training iteration instead
+(published settings on the same task: one exploration episode in every world, the minibatch
+updates, the noise-free evaluation; one random-action warm-up iteration and a fixed meta-test alpha,
+so no alpha search is timed); graph replay is then left on.
+
 ``--profile`` adds where the time of the steady-state iterations goes (cProfile own time of the
 iterations after the untimed ones, grouped: Warp kernels incl. graph replay, the rest of Warp's
 Python, Newton's Python, torch's backward engine, torch ops, other Python; plus the functions in
 ``warp/`` with the most own time). Read as proportions: profiling slows Python-heavy parts more.
 
 Usage: ``python tools/bench_speed.py [--scene scenes/kuka.usda] [--iterations 8] [--seeds 0,1,2,3,4]
-[--preset kuka-table1] [--device cpu] [--repeats 1] [--against COMMIT] [--profile]``.
+[--preset kuka-table1] [--method ours] [--device cpu] [--repeats 1] [--against COMMIT]
+[--profile]``.
 """
 
 from __future__ import annotations
@@ -86,7 +92,6 @@ def categorise(stats) -> tuple[dict[str, float], list[tuple[str, float]]]:
 def measure(job: dict) -> dict:
     """Meta-train ``job['iterations']`` iterations; s/iteration after the untimed ones."""
     import cProfile
-    import pstats
 
     os.environ[GRAPHS_ENV] = "1" if job["graphs"] else "0"
     runtime, preset, TrainConfig, meta_train = _imports()
@@ -103,6 +108,10 @@ def measure(job: dict) -> dict:
             prof.enable()
 
     with tempfile.TemporaryDirectory(prefix="bench-speed-") as tmp:
+        if job.get("method", "ours") != "ours":
+            t0 = time.perf_counter()
+            result = _train_baseline(job, Path(tmp) / "run", start_profile)
+            return _result(result, time.perf_counter() - t0, prof, warp_critic.__file__)
         cfg = TrainConfig(
             scene=job["scene"],
             **{**settings, "iterations": job["iterations"]},
@@ -116,13 +125,43 @@ def measure(job: dict) -> dict:
         t0 = time.perf_counter()
         result = meta_train(cfg, callbacks=[start_profile], progress=False, record=False)
         wall = time.perf_counter() - t0
+    return _result(result, wall, prof, warp_critic.__file__)
+
+
+def _result(result, wall: float, prof, package: str) -> dict:
+    import pstats
+
     if prof is not None:
         prof.disable()
     per_it = [r["seconds"] for r in result.metrics][WARMUP:]
-    out = {"per_it": sum(per_it) / len(per_it), "wall": wall, "package": warp_critic.__file__}
+    out = {"per_it": sum(per_it) / len(per_it), "wall": wall, "package": package}
     if prof is not None:
         out["groups"], out["in_warp"] = categorise(pstats.Stats(prof))
     return out
+
+
+def _train_baseline(job: dict, out: Path, callback):
+    """A baseline's ``job['iterations']`` iterations (published settings, fixed alpha)."""
+    from warp_critic.methods.baseline_config import BaselineConfig
+    from warp_critic.methods.ddpg import train_ddpg
+    from warp_critic.methods.meta_critic import train_meta_critic
+
+    seeds = job["seeds"]
+    cfg = BaselineConfig(
+        scene=job["scene"],
+        method=job["method"],
+        iterations=job["iterations"],
+        device=job["device"],
+        out=str(out),
+        seed=seeds[0],
+        seeds=seeds if len(seeds) > 1 else None,
+        checkpoint_every=10**6,
+        record_every=10**6,
+        warmup_iterations=1,
+        alpha=1e-3,
+    )
+    train = train_ddpg if job["method"] == "ddpg" else train_meta_critic
+    return train(cfg, callbacks=[callback], progress=False, record=False)
 
 
 # -- the driving side ------------------------------------------------------------------------------
@@ -194,6 +233,8 @@ def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--scene", default="scenes/kuka.usda", help="relative to each checkout's root")
     p.add_argument("--preset", default="kuka-table1", help="training settings (presets)")
+    p.add_argument("--method", default="ours", choices=("ours", "ddpg", "meta-critic"),
+                   help="whose training iteration to time (the baselines: published settings)")  # fmt: skip
     p.add_argument("--iterations", type=int, default=8,
                    help=f"iterations per run (the first {WARMUP} are not timed)")  # fmt: skip
     p.add_argument("--seeds", default="0,1,2,3,4", help="seeds batched in the second run")
@@ -215,9 +256,14 @@ def main(argv: list[str] | None = None) -> int:
               "--repeats >= 1", file=sys.stderr)  # fmt: skip
         return 2
     configs = [("1 seed", seeds[:1])] + ([(f"{len(seeds)} seeds", seeds)] if len(seeds) > 1 else [])
-    base = {"preset": args.preset, "iterations": args.iterations, "device": args.device}
+    base = {"preset": args.preset, "iterations": args.iterations, "device": args.device,
+            "method": args.method}  # fmt: skip
     with contextlib.ExitStack() as stack:
         sides = [("this", sys.executable, ROOT)]
+        if args.against or args.method != "ours":
+            modes = [(True, "graphs")]
+        else:
+            modes = [(False, "direct"), (True, "graphs")]
         if args.against:
             try:
                 python, root = stack.enter_context(other_checkout(args.against))
@@ -227,9 +273,6 @@ def main(argv: list[str] | None = None) -> int:
                       file=sys.stderr)  # fmt: skip
                 return 2
             sides.append((args.against, python, root))
-            modes = [(True, "graphs")]
-        else:
-            modes = [(False, "direct"), (True, "graphs")]
         times: dict[tuple, float] = {}
         for rep in range(args.repeats):
             for label, s in configs:
@@ -248,6 +291,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {', '.join(key)}: {t:.3f}")
         print()
         for label, _ in configs:
+            if not args.against and args.method != "ours":
+                continue
             if not args.against:
                 d, g = times[(label, "direct", "this")], times[(label, "graphs", "this")]
                 print(f"graph replay: {label} {d / g:.2f}x faster per iteration")

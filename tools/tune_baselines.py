@@ -121,7 +121,9 @@ def main(argv=None) -> int:
     p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
     p.add_argument("--scenes", type=comma_list(str), default=["reacher"])
     p.add_argument("--methods", type=comma_list(str), default=["ddpg", "meta-critic"])
-    p.add_argument("--configs", type=int, default=6, help="settings per scene and method (--design draw)")
+    p.add_argument(
+        "--configs", type=int, default=6, help="settings per scene and method (--design draw)"
+    )
     p.add_argument(
         "--design",
         choices=("draw", "one-at-a-time"),

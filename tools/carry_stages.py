@@ -1,0 +1,59 @@
+#!/usr/bin/env python
+"""Carry the complete stages of a ``warp-critic reproduce`` output to another machine.
+
+A paper-setting reproduce runs for hours on a laptop CPU. ``save`` copies its complete stages into a
+small archive folder (meta-training checkpoints without optimiser state or replay buffers, no
+recordings; see :mod:`warp_critic.reproduce.carry`); ``restore`` copies them into an output folder
+elsewhere, where the same ``reproduce`` command then skips them and runs only the rest.
+
+Usage::
+
+    python tools/carry_stages.py save runs/paper docs/paper/stages      # after some stages finished
+    python tools/carry_stages.py restore docs/paper/stages runs/paper   # on the next machine
+    warp-critic reproduce --out runs/paper                              # runs what is left
+    python tools/carry_stages.py list docs/paper/stages
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from warp_critic.cli.flags import ToolParser, user_message
+from warp_critic.core.errors import UserError
+
+PROG = "carry_stages"
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="what", required=True, parser_class=ToolParser)
+    s = sub.add_parser("save", help="copy OUT's complete stages into ARCHIVE")
+    s.add_argument("out", metavar="OUT", help="a reproduce output folder")
+    s.add_argument("archive", metavar="ARCHIVE", help="the archive folder (created if new)")
+    r = sub.add_parser("restore", help="copy ARCHIVE's stages that OUT lacks into OUT")
+    r.add_argument("archive", metavar="ARCHIVE")
+    r.add_argument("out", metavar="OUT", help="a reproduce output folder (created if new)")
+    ls = sub.add_parser("list", help="the archived stages")
+    ls.add_argument("archive", metavar="ARCHIVE")
+    args = p.parse_args(argv)
+    from warp_critic.reproduce import carry
+
+    try:
+        if args.what == "list":
+            print(carry.summary(Path(args.archive)))
+            return 0
+        if args.what == "save":
+            names = carry.save(Path(args.out), Path(args.archive))
+            dest = args.archive
+        else:
+            names = carry.restore(Path(args.archive), Path(args.out))
+            dest = args.out
+    except UserError as e:
+        p.exit(2, f"{PROG}: error: {user_message(e)}\n")
+    print(f"{PROG}: {len(names)} stage(s) copied to {dest}" + "".join(f"\n  {n}" for n in names))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

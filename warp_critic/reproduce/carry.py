@@ -1,0 +1,148 @@
+"""Carry the complete stages of a reproduce output to another machine, without training-only state.
+
+A paper-setting ``reproduce`` takes longer than one sitting on a laptop CPU. Its complete stages
+can be saved into a small archive (a folder that can be committed or copied), and restored into an
+output folder on another machine, where ``reproduce`` then skips them and runs only what is left.
+
+* :func:`save` copies every complete stage of ``out`` (its ``stage.json`` is present and usable)
+  into ``archive/<stage dir>``, without recordings (``*.rrd``) and locks. Meta-training checkpoints
+  lose the state that only a resumed training needs (:data:`TRAINING_ONLY`: optimisers, ours' last
+  policies, the baselines' target networks and replay buffers); what meta-test, the maps, the
+  tables and the report read stays (networks, config, scene identity, metrics). A stage already in
+  the archive is skipped when its ``stage.json`` is the same, refused when it differs.
+* :func:`restore` copies every archived stage that ``out`` lacks into ``out`` (made a reproduce
+  output if new; its lock is held while copying). A stage ``out`` already has complete is skipped;
+  one that ``out`` holds incomplete (started there) is refused, never overwritten.
+
+Each stage is copied into a temporary sibling directory and renamed into place, so an interrupted
+call leaves no half-copied stage behind.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+from warp_critic.core.errors import UserError
+from warp_critic.reproduce.stages import MARKER, claim_out, read_complete, read_stage
+from warp_critic.running.locks import LOCK
+
+#: checkpoint entries only a resumed training reads
+TRAINING_ONLY = ("optimizer_state", "policy_params", "agent_state", "buffer")
+#: files never carried
+SKIPPED_SUFFIXES = (".rrd",)
+SKIPPED_NAMES = (LOCK,)
+
+
+def complete_stages(folder: Path) -> dict[str, dict]:
+    """Stage directory name -> ``stage.json`` of every complete stage directly under ``folder``."""
+    found = {}
+    for d in sorted(Path(folder).iterdir()) if Path(folder).is_dir() else []:
+        data = read_stage(d) if d.is_dir() else None
+        if data is not None and isinstance(data.get("group"), str):
+            read_complete(d, data["group"])  # an edited or damaged stage.json: one line
+            found[d.name] = data
+    return found
+
+
+def _slim_checkpoint(src: Path, dst: Path) -> None:
+    from warp_critic.running.rundir import atomic_torch_save, load_checkpoint_file
+
+    ckpt = load_checkpoint_file(src)
+    atomic_torch_save({k: v for k, v in ckpt.items() if k not in TRAINING_ONLY}, dst)
+
+
+def _copy_stage(src: Path, dst_parent: Path, slim: bool) -> None:
+    """``src`` -> ``dst_parent/src.name`` through a temporary sibling renamed into place."""
+    final = dst_parent / src.name
+    tmp = dst_parent / f".carrying-{src.name}"
+    if tmp.exists():
+        shutil.rmtree(tmp)  # what an interrupted call of ours left; never a stage
+    try:
+        for path in sorted(src.rglob("*")):
+            rel = path.relative_to(src)
+            if path.is_dir() or path.name in SKIPPED_NAMES or path.suffix in SKIPPED_SUFFIXES:
+                continue
+            target = tmp / rel
+            target.parent.mkdir(parents=True, exist_ok=True)
+            if slim and path.name == "checkpoint.pt":
+                _slim_checkpoint(path, target)
+            else:
+                shutil.copy2(path, target)
+        tmp.rename(final)
+    except OSError as e:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise UserError(f"{final}: cannot write ({e.strerror or e})") from None
+
+
+def save(out: Path, archive: Path) -> list[str]:
+    """Copy the complete stages of ``out`` into ``archive``; returns the names copied."""
+    out, archive = Path(out), Path(archive)
+    if not (out / MARKER).is_file():
+        raise UserError(f"{out}: not a reproduce output (no {MARKER})")
+    stages = complete_stages(out)
+    try:
+        archive.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"{archive}: cannot create ({e.strerror or e})") from None
+    have = complete_stages(archive)
+    copied = []
+    for name, data in stages.items():
+        if name in have:
+            if have[name] != data:
+                raise UserError(
+                    f"{archive / name}: holds another result of this stage than {out / name}; "
+                    "not replacing it"
+                )
+            continue
+        if (archive / name).exists():
+            raise UserError(
+                f"{archive / name}: exists but is not a complete stage; not replacing it"
+            )
+        _copy_stage(out / name, archive, slim=data["group"] == "metatrain")
+        copied.append(name)
+    return copied
+
+
+def restore(archive: Path, out: Path) -> list[str]:
+    """Copy the archived stages that ``out`` lacks into ``out``; returns the names copied."""
+    archive = Path(archive)
+    if not archive.is_dir():
+        raise UserError(f"{archive}: no such directory")
+    stages = complete_stages(archive)
+    if not stages:
+        raise UserError(f"{archive}: holds no complete reproduce stage")
+    out, lock = claim_out(Path(out))
+    try:
+        have = complete_stages(out)
+        copied = []
+        for name, data in stages.items():
+            if name in have:
+                if have[name] != data:
+                    raise UserError(
+                        f"{out / name}: holds another result of this stage than {archive / name}; "
+                        "not replacing it"
+                    )
+                continue
+            if (out / name).exists():
+                raise UserError(
+                    f"{out / name}: this stage was started here and is not complete; remove it to "
+                    "take the archived one"
+                )
+            _copy_stage(archive / name, out, slim=False)
+            copied.append(name)
+        return copied
+    finally:
+        lock.release()
+
+
+def summary(archive: Path) -> str:
+    """One line per archived stage: name, group, seconds (for the tool's listing)."""
+    rows = [
+        f"{name}: {data['group']}, {float(data.get('seconds', 0.0)):.0f} s"
+        for name, data in complete_stages(Path(archive)).items()
+    ]
+    return "\n".join(rows) if rows else f"{archive}: no complete stage"
+
+
+__all__ = ["TRAINING_ONLY", "complete_stages", "save", "restore", "summary"]
