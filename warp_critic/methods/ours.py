@@ -25,9 +25,10 @@ from warp_critic.learning.networks import (
 )
 from warp_critic.learning.outer import meta_loss
 from warp_critic.physics import schema
+from warp_critic.physics.variant_draws import check_on_scene, parse_ranges
 from warp_critic.running.config import filled, spec
 from warp_critic.running.loop import Callback, Session, TrainResult
-from warp_critic.running.task import TaskConfig
+from warp_critic.running.task import TaskConfig, task_variant
 
 
 @dataclass
@@ -84,6 +85,14 @@ class TrainConfig(TaskConfig):
         0.0, "weight (s^2) of the final-velocity term ||qd_T||^2 added to the task loss", ge=0
     )
     clip_grad: float = spec(10.0, "clip the critic's gradient norm (0 = off)", ge=0)
+    train_variants: str | None = spec(
+        None,
+        "dynamics-randomised meta-training: ';'-separated link changes (as --variant) whose values "
+        "may be ranges LO..HI, drawn uniformly for every world at every iteration (seeded by the "
+        "seed and the iteration, so a resumed run draws the same; the draws are in the metrics as "
+        "train_variant_values), applied after --variant; e.g. 'ee.point-mass+=0..9' or "
+        "'arm0.mass=0.25..6; arm1.mass=0.25..6' (default: none, the nominal model)",
+    )
 
     method = "ours"
     scene_fields = TaskConfig.scene_fields + schema.keys("meta-train")
@@ -93,6 +102,9 @@ class TrainConfig(TaskConfig):
 
     def check(self, scene=None) -> None:
         super().check(scene)
+        ranges = parse_ranges(self.train_variants)
+        if scene is not None and ranges:
+            check_on_scene(scene, task_variant(self), ranges)
         if self.policy_lifetime > 1 and self.policy_init != "fresh":
             raise FieldError(
                 "policy_lifetime",
@@ -162,9 +174,15 @@ def meta_train(
                     }
         params = _cat(seed_params)
         q0, qd0 = task.home, torch.zeros_like(task.home)
+        redraw = (
+            VariantRedraw(cfg, task, [r.cfg.seed for r in session.runs])
+            if cfg.train_variants
+            else None
+        )
 
         def step(it: int):
             nonlocal params, q0
+            drawn = redraw(it) if redraw is not None else None
             if cfg.policy_init == "fresh":  # Algorithm 2: new random policies every iteration ...
                 fresh = _cat([policy.init(task.Wc, generator=g, device=dev) for g in gens])
                 if cfg.policy_lifetime == 1:
@@ -226,6 +244,8 @@ def meta_train(
                         "grad_norm": norms[i],
                     }
                 )
+                if drawn is not None:
+                    rows[-1]["train_variant_values"] = drawn[i].tolist()
             return rows, res
 
         def state(i: int) -> dict:
@@ -249,6 +269,36 @@ def meta_train(
     for i, r in enumerate(result.seeds):
         r.model = critic.critic(i)
     return result
+
+
+class VariantRedraw:
+    """``--train-variants``: every iteration, a new variant for every world of the task's simulator.
+
+    Seed ``i``'s worlds draw from ``(seed_i, iteration)`` alone
+    (:func:`~warp_critic.physics.variant_draws.draw`), so batched seeds draw what single-seed runs
+    draw, and a resumed run draws what the uninterrupted one did. Calling it with iteration ``it``
+    sets the variants in place (:func:`~warp_critic.physics.redraw.set_variants`) and returns the
+    values, ``(S, Wc, ranges)``.
+    """
+
+    def __init__(self, cfg: TrainConfig, task, seeds: list[int]):
+        self.ranges = parse_ranges(cfg.train_variants)
+        self.base = task_variant(cfg)
+        self.seeds = seeds  # of the task's copies, in order
+        self.task = task
+
+    def __call__(self, it: int):
+        import numpy as np
+
+        from warp_critic.physics.redraw import set_variants
+        from warp_critic.physics.variant_draws import draw, with_draws
+
+        values = np.stack([draw(self.ranges, self.task.Wc, s, it) for s in self.seeds])
+        worlds = [
+            with_draws(self.base, self.ranges, v) for v in values.reshape(-1, len(self.ranges))
+        ]
+        set_variants(self.task.sim, worlds)
+        return values
 
 
 # ------------------------------------------------------------------------------------------------
