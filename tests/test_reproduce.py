@@ -335,3 +335,53 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
         carry.main(["save", str(out), str(archive)])
     assert e.value.code == 2
     assert "edited or damaged" in capsys.readouterr().err
+
+
+def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
+    """--only beyond on a copy of the quick output: the paper's stages are found complete (their
+    hashes do not depend on the recipes), the recipes train and are evaluated next to the nominal
+    critic, and the report's "Beyond the paper" section has computed verdicts, outside the claims."""
+    import shutil
+
+    from warp_critic.reproduce.pipeline import plan
+    from warp_critic.reproduce.settings import default_settings
+
+    settings = default_settings(True, 2)
+    paper, both = plan(settings), plan(settings, beyond=True)
+    assert {k: v["hash"] for k, v in paper.items()} == {
+        k: both[k]["hash"] for k in paper
+    }  # the recipes change no stage of the paper
+    assert sorted(set(both) - set(paper)) == [
+        "beyond-maps",
+        "beyond-metatrain-kuka-randomised",
+        "beyond-metatrain-reacher-randomised",
+        "beyond-tables",
+    ]
+    out, rc, _ = quick
+    assert rc == 0
+    other = tmp_path / "paper"
+    shutil.copytree(out, other, ignore=shutil.ignore_patterns(".lock"))
+    capsys.readouterr()
+    assert (
+        reproduce_main(["--quick", "--out", str(other), "--only", "beyond", "--device", "cpu"]) == 0
+    )
+    assert "4 stage(s) to run" in capsys.readouterr().err
+    report = (other / "REPORT.md").read_text()
+    beyond = report[report.index("## Beyond the paper") :]
+    assert "### Targets" in beyond and "randomised" in beyond
+    results = json.loads((other / "results.json").read_text())
+    targets = results["beyond"]["targets"]
+    assert len(targets) == 3 + 1 + 2  # reacher goals + 2 maps; KUKA Table 1 + 2 stress tables
+    for t in targets:
+        assert isinstance(t["met"], bool)
+        assert (
+            f"| {t['target']} | {t['measured']} | **{'met' if t['met'] else 'not met'}** |"
+            in beyond
+        )
+    assert not any("randomised" in c["claim"] for c in results["claims"])
+    rows = results["beyond"]["training"]
+    assert set(rows) == {"reacher/ours", "reacher/randomised", "kuka/ours", "kuka/randomised"}
+    stage = next(other.glob("beyond-metatrain-kuka-randomised-*/stage.json"))
+    run = stage.parent / json.loads(stage.read_text())["result"]["seeds"]["0"]["run_dir"]
+    first = json.loads((run / "metrics.jsonl").read_text().splitlines()[0])
+    assert len(first["train_variant_values"]) == 4 * 2  # quick: 4 goals x 2 worlds

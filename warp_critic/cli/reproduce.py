@@ -57,6 +57,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="tiny settings for every stage (a plumbing check in a few minutes, not the paper)",
     )
+    A(
+        "--beyond",
+        action="store_true",
+        help="also run the recipes beyond the paper (stage group beyond: dynamics-randomised "
+        "meta-training, evaluated on the paper's maps and tables next to the nominal critic; "
+        "reported apart from the reproduction); --only beyond runs just them",
+    )
     A("--device", type=str, default="auto", metavar="DEV", help="cpu, cuda or auto (default auto)")
     A(
         "--jobs",
@@ -105,6 +112,8 @@ def command_line(args: argparse.Namespace) -> str:
         parts += ["--only", args.only]
     if args.quick:
         parts.append("--quick")
+    if getattr(args, "beyond", False):
+        parts.append("--beyond")
     parts += ["--device", args.device]
     if getattr(args, "jobs", None) is not None:
         parts += ["--jobs", str(args.jobs)]
@@ -129,6 +138,7 @@ def config_from_args(args: argparse.Namespace):
         overrides=list(args.overrides or []),
         command=command_line(args),
         seeds_given=args.seeds is not None,
+        beyond=bool(getattr(args, "beyond", False)),
     )
 
 

@@ -35,7 +35,6 @@ import torch
 from warp_critic.physics.link_changes import parse_changes
 from warp_critic.physics.scene import Variant
 from warp_critic.reproduce.evaluate import Job, default_steps, evaluate, relpath
-from warp_critic.reproduce.settings import METHODS
 from warp_critic.running.task_inputs import inside_limits
 
 
@@ -104,7 +103,8 @@ def _with(values, extra: float) -> list[float]:
 def run_tables_stage(
     d: Path, s: dict, runs: dict[str, list[Path]], device: str, progress: bool = True
 ) -> dict:
-    """``runs``: method -> per-seed run directories (KUKA)."""
+    """``runs``: method (a row of the tables: ours, the baselines, or a recipe beyond the paper) ->
+    per-seed run directories (KUKA); ``runs["ours"]`` sets the scene, goals and policy updates."""
     import json
 
     first = str(runs["ours"][0])
@@ -153,7 +153,7 @@ def run_tables_stage(
                 goals = dyn_goals
                 variant = table_variant(table, v)
             goals_used[f"{table}/{ci}"] = goals.tolist()
-            for m in METHODS:
+            for m in runs:
                 for si, rd in enumerate(runs[m]):
                     jobs.append(Job((table, ci, m, si), str(rd), goals, variant))
     r = evaluate(
@@ -180,7 +180,7 @@ def run_tables_stage(
     cells = []
     for table, values in columns.items():
         for ci, v in enumerate(values):
-            for m in METHODS:
+            for m in runs:
                 idx = [k for k, j in enumerate(jobs) if j.key[:3] == (table, ci, m)]
                 cell = _pool([r["errors"][k] for k in idx], r["dof"])
                 cell.update(
@@ -227,7 +227,7 @@ def run_tables_stage(
 def run_maps_stage(
     d: Path, s: dict, runs: dict[str, list[Path]], device: str, progress: bool = True
 ) -> dict:
-    """``runs``: method -> per-seed run directories (reacher)."""
+    """``runs``: method (ours, the baselines, or a recipe) -> per-seed run directories (reacher)."""
     import json
 
     first = str(runs["ours"][0])
@@ -258,7 +258,7 @@ def run_maps_stage(
         return Variant(changes=parse_changes(f"{links[0]}.stretch={a!r}; {links[1]}.stretch={b!r}"))
 
     jobs = []
-    for m in METHODS:
+    for m in runs:
         for si, rd in enumerate(runs[m]):
             jobs.append(Job(("goals", 0, m, si), str(rd), grid, Variant()))
             for kind, values in pairs.items():
@@ -304,7 +304,7 @@ def run_maps_stage(
         "mass": {},
         "length": {},
     }
-    for m in METHODS:
+    for m in runs:
         errs = [r["errors"][k] for k, j in enumerate(jobs) if j.key[0] == "goals" and j.key[2] == m]
         per_goal = (
             np.stack([e.mean(1) for e in errs]).mean(0) / dof

@@ -13,6 +13,7 @@ from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
 from warp_critic.reproduce.settings import (
+    BEYOND,
     METHODS,
     SCENES,
     STAGES,
@@ -34,6 +35,7 @@ class ReproduceConfig:
     progress: bool = True
     command: str = ""  # the command line, for the report
     seeds_given: bool = False  # --seeds was given (then metatrain.seeds may not contradict it)
+    beyond: bool = False  # also the recipes beyond the paper (stage group "beyond")
 
     def validate(self) -> dict:
         """Check everything before any work; returns the settings. Raises a one-line :class:`UserError`."""
@@ -43,11 +45,11 @@ class ReproduceConfig:
             raise FieldError("seeds", f"must be <= 1000 (got {self.seeds})")
         subs = metatrain_names()
         for s in self.only or []:
-            if s not in STAGES and s not in subs:
+            if s not in STAGES and s not in subs and s != BEYOND:
                 raise FieldError(
                     "only",
-                    f"unknown stage {s!r} (stages: {', '.join(STAGES)}; one meta-training: "
-                    f"{', '.join(subs)})",
+                    f"unknown stage {s!r} (stages: {', '.join(STAGES)}, {BEYOND}; one "
+                    f"meta-training: {', '.join(subs)})",
                 )
         if self.only is not None and not self.only:
             raise UserError(f"--only: give one or more of {', '.join(STAGES)}")
@@ -68,11 +70,14 @@ class ReproduceConfig:
 
     def selected(self) -> list[str]:
         """The selected stage groups, and single meta-trainings (``metatrain-<robot>-<method>``)."""
+        extra = [BEYOND] if self.beyond or BEYOND in (self.only or []) else []
         if self.only is None:
-            return list(STAGES)
-        return [s for s in STAGES if s in self.only] + [
-            s for s in metatrain_names() if s in self.only and "metatrain" not in self.only
-        ]
+            return list(STAGES) + extra
+        return (
+            [s for s in STAGES if s in self.only]
+            + [s for s in metatrain_names() if s in self.only and "metatrain" not in self.only]
+            + extra
+        )
 
 
 def metatrain_names() -> list[str]:
@@ -87,8 +92,9 @@ def scene_hashes() -> dict[str, str]:
     return {s: load_scene(scene_file(s)).content_hash for s in SCENES}
 
 
-def plan(settings: dict) -> dict[str, dict]:
-    """Every stage (sub-stage) of ``settings``: name -> group, hash, settings, depends (dir names)."""
+def plan(settings: dict, beyond: bool = False) -> dict[str, dict]:
+    """Every stage (sub-stage) of ``settings``: name -> group, hash, settings, depends (dir names);
+    with ``beyond``, also the recipes beyond the paper (:func:`plan_beyond`)."""
     hashes = scene_hashes()
     seeds = settings["metatrain"]["seeds"]
     p: dict[str, dict] = {}
@@ -128,7 +134,42 @@ def plan(settings: dict) -> dict[str, dict]:
             "depends": dep,
             "hash": stage_hash(group, settings[group], dep),
         }
+    if beyond:
+        plan_beyond(settings, p, hashes)
     return p
+
+
+def plan_beyond(settings: dict, p: dict, hashes: dict[str, str]) -> None:
+    """Add the stages beyond the paper to ``p``: one meta-training per robot and recipe
+    (``beyond-metatrain-<robot>-<recipe>``, group metatrain), and ``beyond-maps`` / ``beyond-tables``:
+    the paper's maps and tables (the same settings) of the nominal critic (``ours``) next to each
+    recipe's. The paper's stages and their hashes are unchanged."""
+    seeds = settings["metatrain"]["seeds"]
+    for group, scene in (("maps", "reacher"), ("tables", "kuka")):
+        nominal = f"metatrain-{scene}-ours"
+        dep = {nominal: f"{nominal}-{p[nominal]['hash']}"}
+        labels = {nominal: "ours"}
+        for recipe, values in settings[BEYOND][scene].items():
+            name = f"{BEYOND}-metatrain-{scene}-{recipe}"
+            p[name] = {
+                "group": "metatrain",
+                "scene": scene,
+                "method": "ours",
+                "recipe": recipe,
+                "depends": {},
+                "settings": {"values": values, "seeds": seeds, "scene_hash": hashes[scene]},
+                "hash": stage_hash(name, values, seeds, hashes[scene]),
+            }
+            dep[name] = f"{name}-{p[name]['hash']}"
+            labels[name] = recipe
+        p[f"{BEYOND}-{group}"] = {
+            "group": group,
+            "scene": scene,
+            "settings": settings[group],
+            "depends": dep,
+            "labels": labels,  # dependency -> the row it fills (the run sets of the stage)
+            "hash": stage_hash(f"{BEYOND}-{group}", settings[group], dep),
+        }
 
 
 # the function each stage group runs, by import path (so that any executor can run it anywhere)
@@ -153,6 +194,10 @@ def needed(rc: ReproduceConfig, stages: dict) -> list[list[str]]:
             first += [n for n, st in stages.items() if st["group"] == "metatrain"]
         elif group in stages and stages[group]["group"] == "metatrain":  # one meta-training
             first.append(group)
+        elif group == BEYOND:
+            for ev in (f"{BEYOND}-maps", f"{BEYOND}-tables"):
+                first += list(stages[ev]["depends"])
+                second.append(ev)
         else:
             first += [n for n in stages[group]["depends"]]
             second.append(group)
@@ -177,7 +222,7 @@ def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, 
         kwargs = {
             "scene": st["scene"],
             "method": st["method"],
-            "values": settings["metatrain"][st["scene"]][st["method"]],
+            "values": st["settings"]["values"],
             "seeds": settings["metatrain"]["seeds"],
             "device": device,
             "progress": progress,
@@ -190,7 +235,7 @@ def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, 
             data = read_stage(out / dep_dir)
             if data is None:
                 raise UserError(f"{out / dep_dir}: the stage {dep} this one needs is not complete")
-            runs[stages_method(dep)] = [
+            runs[st.get("labels", {}).get(dep) or stages_method(dep)] = [
                 str(p.relative_to(out)) for p in run_dirs(out / dep_dir, data)
             ]
         kwargs = {"s": settings[group], "runs": runs, "device": device, "progress": progress}
@@ -224,7 +269,7 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
     device = resolve_device(rc.device)
     runner = Runner(out)
     t0 = time.perf_counter()
-    stages = plan(settings)
+    stages = plan(settings, beyond=BEYOND in rc.selected())
 
     def done(unit, result, seconds):
         st = stages[unit.name]

@@ -18,6 +18,7 @@ import numpy as np
 
 from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.report_analyses import landscape_section, toy_section
+from warp_critic.reproduce.report_beyond import beyond_section
 from warp_critic.reproduce.report_draft import Draft, rel
 from warp_critic.reproduce.report_maps import maps_section
 from warp_critic.reproduce.report_tables import tables_section
@@ -27,7 +28,14 @@ from warp_critic.reproduce.stages import STAGE_FILE, StageRecord, read_stage
 from warp_critic.running.rundir import atomic_write_text
 
 #: The sections after the stage table, in the report's order (each appends to the :class:`Draft`).
-SECTIONS = (toy_section, landscape_section, metatrain_section, maps_section, tables_section)
+SECTIONS = (
+    toy_section,
+    landscape_section,
+    metatrain_section,
+    maps_section,
+    tables_section,
+    beyond_section,
+)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -36,6 +36,8 @@ from warp_critic.core.errors import FieldError
 from warp_critic.evaluation.presets import preset
 
 STAGES = ("toy", "landscape", "metatrain", "maps", "tables")
+#: the recipes beyond the paper (``--beyond``): kept apart, never part of the paper's stages
+BEYOND = "beyond"
 SCENES = ("reacher", "kuka")
 METHODS = ("ours", "ddpg", "meta-critic")
 METHOD_LABELS = {"ours": "L_critic (ours)", "ddpg": "DDPG", "meta-critic": "Meta-Critic"}
@@ -74,27 +76,58 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
                     iterations=BASELINE_ITERATIONS[scene],
                     checkpoint_every=BASELINE_CHECKPOINT_EVERY,
                 )
-            if (
-                quick
-            ):  # plumbing only: a handful of iterations on short rollouts with small networks
-                per[m].update(
-                    iterations=6,
-                    horizon=10,
-                    worlds_per_goal=2,
-                    critic_hidden=32,
-                    checkpoint_every=3,
-                    record_every=3,
-                )
-                if m != "ours":  # and one alpha search (at the last checkpoint) instead of two
-                    per[m].update(
-                        updates_per_iteration=4,
-                        warmup_iterations=1,
-                        batch_size=16,
-                        actor_hidden=16,
-                        checkpoint_every=6,
-                    )
+            if quick:
+                _quick_metatrain(per[m], m)
         out[scene] = per
     out["seeds"] = seeds
+    return out
+
+
+#: Beyond the paper (``reproduce --beyond``): dynamics-randomised meta-training, ours' preset with
+#: ``train_variants`` over the ranges the generalisation grids test (the reacher's 2-D mass and length
+#: maps; the KUKA's stress tables: a tip mass added, link 7 stretched), one variant per world and
+#: iteration. Everything else is the nominal preset's, so the nominal run is the comparison.
+RECIPES = {
+    "reacher": {
+        "randomised": (
+            "reacher",
+            "arm1.mass=0.25..6:keep; arm2.mass=0.25..6:keep; arm1.stretch=0.5..2; arm2.stretch=0.5..2",
+        )
+    },
+    "kuka": {"randomised": ("kuka-table1", "ee.stretch=0.2..2; ee.point-mass+=0..9")},
+}
+
+
+def _quick_metatrain(values: dict, method: str) -> None:
+    """Plumbing only: a handful of iterations on short rollouts with small networks."""
+    values.update(
+        iterations=6,
+        horizon=10,
+        worlds_per_goal=2,
+        critic_hidden=32,
+        checkpoint_every=3,
+        record_every=3,
+    )
+    if method != "ours":  # and one alpha search (at the last checkpoint) instead of two
+        values.update(
+            updates_per_iteration=4,
+            warmup_iterations=1,
+            batch_size=16,
+            actor_hidden=16,
+            checkpoint_every=6,
+        )
+
+
+def _beyond(quick: bool) -> dict:
+    out: dict[str, dict] = {}
+    for scene, recipes in RECIPES.items():
+        out[scene] = {}
+        for name, (base, variants) in recipes.items():
+            values = {**preset(base), "train_variants": variants, "record_every": 50}
+            values.pop("method", None)
+            if quick:
+                _quick_metatrain(values, "ours")
+            out[scene][name] = values
     return out
 
 
@@ -148,6 +181,7 @@ def default_settings(quick: bool, seeds: int) -> dict[str, dict]:
             },
         },
         "metatrain": _metatrain(quick, seed_list),
+        BEYOND: _beyond(quick),
         "tables": {
             "stds": [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0],
             "masses": [float(m) for m in range(10)],

@@ -130,10 +130,7 @@ def check_landscape(s: dict) -> None:
 def check_metatrain(m: dict) -> dict[str, int]:
     """Every method x robot config against its scene; returns each robot's number of training goals."""
     from warp_critic.core.runtime import MAX_SEED
-    from warp_critic.reproduce.metatrain import check_fields_known, make_config
     from warp_critic.reproduce.settings import METHODS, SCENES
-    from warp_critic.running.task import load_task_scene
-    from warp_critic.running.task_inputs import check_memory
 
     seeds = m["seeds"]
     if not isinstance(seeds, list) or not seeds or len(seeds) > MAX_SEEDS:
@@ -145,24 +142,34 @@ def check_metatrain(m: dict) -> dict[str, int]:
     goals = {}
     for scene in SCENES:
         for method in METHODS:
-            where = f"metatrain.{scene}.{method}"
-            values = m[scene][method]
-            for k in RESERVED:
-                if k in values:
-                    raise bad(f"{where}.{k}", values[k], "may not be set (reproduce sets it)")
-            check_fields_known(method, values, f"--set {where}")
-            try:
-                cfg = make_config(scene, method, values, seeds, Path("unused"), "cpu", False)
-                # the defaults filled from the scene, checked
-                cfg, robot = load_task_scene(replace(cfg, seeds=None))
-                check_memory(cfg, robot.dof, copies=len(seeds))
-            except FieldError as e:
-                raise _as_set(where, values, e) from None
-            except TypeError as e:  # a value of a type the config cannot take
-                raise FieldError("set", f"{where}: {e}") from None
+            cfg = _check_train(
+                scene, method, m[scene][method], seeds, f"metatrain.{scene}.{method}"
+            )
             if method == "ours":
                 goals[scene] = len(cfg.goals)
     return goals
+
+
+def _check_train(scene: str, method: str, values: dict, seeds: list, where: str):
+    """One meta-training config (``values``) against its scene; returns the filled config."""
+    from warp_critic.reproduce.metatrain import check_fields_known, make_config
+    from warp_critic.running.task import load_task_scene
+    from warp_critic.running.task_inputs import check_memory
+
+    for k in RESERVED:
+        if k in values:
+            raise bad(f"{where}.{k}", values[k], "may not be set (reproduce sets it)")
+    check_fields_known(method, values, f"--set {where}")
+    try:
+        cfg = make_config(scene, method, values, seeds, Path("unused"), "cpu", False)
+        # the defaults filled from the scene, checked
+        cfg, robot = load_task_scene(replace(cfg, seeds=None))
+        check_memory(cfg, robot.dof, copies=len(seeds))
+    except FieldError as e:
+        raise _as_set(where, values, e) from None
+    except TypeError as e:  # a value of a type the config cannot take
+        raise FieldError("set", f"{where}: {e}") from None
+    return cfg
 
 
 def _common(stage: str, s: dict) -> None:
@@ -209,6 +216,20 @@ def check_all(settings: dict, defaults: dict) -> None:
     goals = check_metatrain(settings["metatrain"])
     check_tables(settings["tables"], goals["kuka"])
     check_maps(settings["maps"])
+    check_beyond(settings["beyond"], settings["metatrain"]["seeds"])
+
+
+def check_beyond(b: dict, seeds: list) -> None:
+    """Every recipe beyond the paper: an ours config, against its robot's scene."""
+    from warp_critic.reproduce.settings import SCENES
+
+    for scene in SCENES:
+        if not isinstance(b.get(scene), dict) or not b[scene]:
+            raise bad(f"beyond.{scene}", b.get(scene), "must name at least one recipe")
+        for recipe, values in b[scene].items():
+            if not isinstance(values, dict):
+                raise bad(f"beyond.{scene}.{recipe}", values, "must be a meta-train config")
+            _check_train(scene, "ours", values, seeds, f"beyond.{scene}.{recipe}")
 
 
 __all__ = ["RESERVED", "check_all", "show"]

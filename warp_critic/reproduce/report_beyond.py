@@ -1,0 +1,183 @@
+"""Beyond the paper (``reproduce --beyond``): the nominal critic next to each recipe's, on the same
+goals, variants, policy initialisations and seeds, with the extra training cost, and each target
+checked from the numbers. Kept apart from the reproduction: none of it enters the paper's claims.
+
+Targets (met / not met, computed):
+
+* reacher: below 0.05 MSE on at least 90% of the goal grid (Figure 4), and on at least 80% of each
+  2-D map (Figures 5-6: both links' masses; both links' lengths);
+* KUKA: Table 1 at or below the paper's L_critic at every std; on each stress table, where the
+  open-loop floor is below the untrained policies' error, at most 2x the floor, and elsewhere never
+  worse than no update (the untrained policies).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from warp_critic.evaluation.paper import PAPER_TABLE1
+from warp_critic.reproduce import report_paper as rp
+from warp_critic.reproduce.report_draft import Draft, fmt
+from warp_critic.reproduce.settings import BEYOND, SCENES
+
+GOALS_TARGET, MAPS_TARGET, LEVEL = 0.9, 0.8, 0.05
+
+
+def _verdict(ok: bool) -> str:
+    return "**met**" if ok else "**not met**"
+
+
+def _training_rows(d: Draft) -> tuple[list[str], dict]:
+    lines = [
+        "| robot | critic | train_variants | iterations | training time (s) | final training "
+        "error (rad^2, mean over seeds) |",
+        "|---|---|---|---|---|---|",
+    ]
+    out: dict = {}
+    for scene in SCENES:
+        names = {"ours": f"metatrain-{scene}-ours"} | {
+            n.rsplit("-", 1)[-1]: n
+            for n in d.recs
+            if n.startswith(f"{BEYOND}-metatrain-{scene}-") and d.recs[n] is not None
+        }
+        for label, name in names.items():
+            rec = d.recs.get(name)
+            if rec is None:
+                continue
+            res = rec.data["result"]
+            seconds = next(iter(res["seeds"].values()))["seconds"]
+            final = float(
+                np.mean([rp.final_training_error(c["loss"]) for c in rp.seed_curves(res).values()])
+            )
+            variants = rec.data["settings"]["values"].get("train_variants") or "— (nominal)"
+            lines.append(
+                f"| {scene} | {label} | `{variants}` | {res['iterations']} | {seconds:.0f} | "
+                f"{fmt(final)} |"
+            )
+            out[f"{scene}/{label}"] = {
+                "iterations": res["iterations"],
+                "seconds": seconds,
+                "final_training_error": final,
+            }
+    return lines, out
+
+
+def _maps(d: Draft, res: dict, targets: list, out: dict) -> list[str]:
+    methods = list(res["goals"])
+    lines = [
+        "| critic | goal grid below 0.05 | mass map below 0.05 | length map below 0.05 |",
+        "|---|---|---|---|",
+    ]
+    for m in methods:
+        goals = float((np.asarray(res["goals"][m]["mse"]) < LEVEL).mean())
+        kinds = {
+            k: float(np.mean([c["mse_mean"] < LEVEL for c in res[k][m]]))
+            for k in ("mass", "length")
+        }
+        out[m] = {"goals": goals, **kinds}
+        lines.append(f"| {m} | {goals:.0%} | {kinds['mass']:.0%} | {kinds['length']:.0%} |")
+        if m == "ours":
+            continue
+        targets.append(
+            (
+                f"reacher, {m}: goal grid below {LEVEL} on >= {GOALS_TARGET:.0%}",
+                f"{goals:.0%} (nominal {out['ours']['goals']:.0%})",
+                goals >= GOALS_TARGET,
+            )
+        )
+        for k in ("mass", "length"):
+            targets.append(
+                (
+                    f"reacher, {m}: 2-D {k} map below {LEVEL} on >= {MAPS_TARGET:.0%}",
+                    f"{kinds[k]:.0%} (nominal {out['ours'][k]:.0%})",
+                    kinds[k] >= MAPS_TARGET,
+                )
+            )
+    return lines
+
+
+def _tables(res: dict, targets: list, out: dict) -> list[str]:
+    cells = {(c["table"], c["column"], c["method"]): c for c in res["cells"]}
+    methods = list(dict.fromkeys(c["method"] for c in res["cells"]))
+    lines: list[str] = []
+    for table, title in (
+        ("table1", "Table 1 (new goals, MSE)"),
+        ("stress_mass", "Stress table A (point mass ADDED at the tip, kg)"),
+        ("stress_length", "Stress table B (link 7 STRETCHED, m)"),
+    ):
+        values = res["columns"][table]
+        lines += [f"**{title}**", "", "| critic | " + " | ".join(f"{v:g}" for v in values) + " |"]
+        lines.append("|---" * (len(values) + 1) + "|")
+        floor = res.get("reach_floor", {}).get(table)
+        untrained = [cells[(table, ci, "ours")]["untrained_mse_mean"] for ci in range(len(values))]
+        if table == "table1":
+            paper = [PAPER_TABLE1["ours"].get(v, (None,))[0] for v in values]
+            lines.append(
+                "| paper: L_critic | "
+                + " | ".join("—" if p is None else f"{p:g}" for p in paper)
+                + " |"
+            )
+        lines.append("| untrained (no update) | " + " | ".join(fmt(u) for u in untrained) + " |")
+        if floor:
+            lines.append("| open-loop floor | " + " | ".join(fmt(x) for x in floor) + " |")
+        for m in methods:
+            row = [cells[(table, ci, m)]["mse_mean"] for ci in range(len(values))]
+            out.setdefault(m, {})[table] = row
+            lines.append(f"| {m} | " + " | ".join(fmt(x) for x in row) + " |")
+            if m == "ours":
+                continue
+            if table == "table1":
+                ok = [p is None or x <= p for x, p in zip(row, paper)]
+                targets.append(
+                    (
+                        f"KUKA, {m}: Table 1 at or below the paper's L_critic",
+                        f"{sum(ok)} of {len(ok)} stds",
+                        all(ok),
+                    )
+                )
+            elif floor:
+                ok = [x <= 2 * f if f < u else x <= u for x, f, u in zip(row, floor, untrained)]
+                targets.append(
+                    (
+                        f"KUKA, {m}: {title.split(' (')[0]}: <= 2x the floor where it is below the "
+                        "untrained error, else <= untrained",
+                        f"{sum(ok)} of {len(ok)} columns",
+                        all(ok),
+                    )
+                )
+        lines.append("")
+    return lines
+
+
+def beyond_section(d: Draft) -> None:
+    """The "Beyond the paper" section, when any of its stages is complete."""
+    if not any(n.startswith(f"{BEYOND}-") and r is not None for n, r in d.recs.items()):
+        return
+    d.md += [
+        "## Beyond the paper",
+        "",
+        "Recipes that the paper does not have (`reproduce --beyond`), kept apart from the "
+        "reproduction above: the nominal critic (`ours`, the paper-setting run) next to each recipe's "
+        "critic, on the same goals, variants, policy initialisations and seeds. A recipe is ours' "
+        "preset plus `train_variants`: a new dynamics variant for every world at every iteration.",
+        "",
+        "### Training cost",
+        "",
+    ]
+    rows, cost = _training_rows(d)
+    d.md += rows + [""]
+    targets: list[tuple[str, str, bool]] = []
+    result: dict = {"training": cost, "maps": {}, "tables": {}}
+    maps = d.recs.get(f"{BEYOND}-maps")
+    if maps is not None:
+        d.md += ["### Reacher: goal grid and 2-D maps (fraction below 0.05 MSE)", ""]
+        d.md += _maps(d, maps.data["result"], targets, result["maps"]) + [""]
+    tables = d.recs.get(f"{BEYOND}-tables")
+    if tables is not None:
+        d.md += ["### KUKA: Table 1 and the stress tables (MSE)", ""]
+        d.md += _tables(tables.data["result"], targets, result["tables"])
+    if targets:
+        d.md += ["### Targets", "", "| target | measured | verdict |", "|---|---|---|"]
+        d.md += [f"| {t} | {m} | {_verdict(ok)} |" for t, m, ok in targets] + [""]
+    result["targets"] = [{"target": t, "measured": m, "met": ok} for t, m, ok in targets]
+    d.results["beyond"] = result
