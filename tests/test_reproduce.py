@@ -176,6 +176,10 @@ def test_only_toy_and_changed_setting(tmp_path, capsys):
         (["--set", "toy.nope=1"], "unknown key"),
         (["--set", "metatrain.kuka.ours.nope=1"], "unknown ours setting"),
         (["--device", "tpu"], "--device"),
+        (["--only", "metatrain-kuka-bogus"], "one meta-training: metatrain-reacher-ours"),
+        (["--set", "beyond.kuka.randomised.train_variants=ee.mass=5..1"], "is empty (LO > HI)"),
+        (["--set", "beyond.reacher.randomised.train_variants=arm9.mass=1..2"], "unknown link"),
+        (["--set", "beyond.kuka.randomised.seeds=[1]"], "may not be set"),
     ],
 )
 def test_bad_input(tmp_path, capsys, argv, words):
