@@ -359,6 +359,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
         "beyond-maps",
         "beyond-metatrain-kuka-randomised",
         "beyond-metatrain-reacher-randomised",
+        "beyond-metatrain-reacher-wide",
         "beyond-tables",
     ]
     out, rc, _ = quick
@@ -369,13 +370,13 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     assert (
         reproduce_main(["--quick", "--out", str(other), "--only", "beyond", "--device", "cpu"]) == 0
     )
-    assert "4 stage(s) to run" in capsys.readouterr().err
+    assert "5 stage(s) to run" in capsys.readouterr().err
     report = (other / "REPORT.md").read_text()
     beyond = report[report.index("## Beyond the paper") :]
     assert "### Targets" in beyond and "randomised" in beyond
     results = json.loads((other / "results.json").read_text())
     targets = results["beyond"]["targets"]
-    assert len(targets) == 3 + 1 + 2  # reacher goals + 2 maps; KUKA Table 1 + 2 stress tables
+    assert len(targets) == 2 * 3 + 1 + 2  # 2 reacher recipes x (goals + 2 maps); KUKA 1 + 2
     for t in targets:
         assert isinstance(t["met"], bool)
         assert (
@@ -384,7 +385,13 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
         )
     assert not any("randomised" in c["claim"] for c in results["claims"])
     rows = results["beyond"]["training"]
-    assert set(rows) == {"reacher/ours", "reacher/randomised", "kuka/ours", "kuka/randomised"}
+    assert set(rows) == {
+        "reacher/ours",
+        "reacher/randomised",
+        "reacher/wide",
+        "kuka/ours",
+        "kuka/randomised",
+    }
     stage = next(other.glob("beyond-metatrain-kuka-randomised-*/stage.json"))
     run = stage.parent / json.loads(stage.read_text())["result"]["seeds"]["0"]["run_dir"]
     first = json.loads((run / "metrics.jsonl").read_text().splitlines()[0])

@@ -29,30 +29,31 @@ def _verdict(ok: bool) -> str:
 
 def _training_rows(d: Draft) -> tuple[list[str], dict]:
     lines = [
-        "| robot | critic | train_variants | iterations | training time (s) | final training "
+        "| robot | critic | changed from the nominal preset | iterations | training time (s) | final training "
         "error (rad^2, mean over seeds) |",
         "|---|---|---|---|---|---|",
     ]
     out: dict = {}
     for scene in SCENES:
         names = {"ours": f"metatrain-{scene}-ours"} | {
-            n.rsplit("-", 1)[-1]: n
+            n.removeprefix(f"{BEYOND}-metatrain-{scene}-"): n
             for n in d.recs
             if n.startswith(f"{BEYOND}-metatrain-{scene}-") and d.recs[n] is not None
         }
+        nominal = d.recs.get(names["ours"])
         for label, name in names.items():
             rec = d.recs.get(name)
             if rec is None:
                 continue
+            base = (nominal or rec).data["settings"]["values"]
             res = rec.data["result"]
             seconds = next(iter(res["seeds"].values()))["seconds"]
             final = float(
                 np.mean([rp.final_training_error(c["loss"]) for c in rp.seed_curves(res).values()])
             )
-            variants = rec.data["settings"]["values"].get("train_variants") or "— (nominal)"
             lines.append(
-                f"| {scene} | {label} | `{variants}` | {res['iterations']} | {seconds:.0f} | "
-                f"{fmt(final)} |"
+                f"| {scene} | {label} | {_changes(rec.data['settings']['values'], base)} | "
+                f"{res['iterations']} | {seconds:.0f} | {fmt(final)} |"
             )
             out[f"{scene}/{label}"] = {
                 "iterations": res["iterations"],
@@ -60,6 +61,12 @@ def _training_rows(d: Draft) -> tuple[list[str], dict]:
                 "final_training_error": final,
             }
     return lines, out
+
+
+def _changes(values: dict, nominal: dict) -> str:
+    """The settings a recipe changes from the nominal meta-training's (``—`` for the nominal)."""
+    diff = {k: v for k, v in values.items() if nominal.get(k) != v}
+    return ", ".join(f"`{k}={v}`" for k, v in diff.items()) or "— (nominal)"
 
 
 def _maps(d: Draft, res: dict, targets: list, out: dict) -> list[str]:

@@ -83,18 +83,28 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
     return out
 
 
-#: Beyond the paper (``reproduce --beyond``): dynamics-randomised meta-training, ours' preset with
-#: ``train_variants`` over the ranges the generalisation grids test (the reacher's 2-D mass and length
-#: maps; the KUKA's stress tables: a tip mass added, link 7 stretched), one variant per world and
-#: iteration. Everything else is the nominal preset's, so the nominal run is the comparison.
-RECIPES = {
+#: Beyond the paper (``reproduce --beyond``): recipe -> (ours' preset, the settings it changes).
+#: ``randomised``: dynamics-randomised meta-training, ``train_variants`` over the ranges the
+#: generalisation grids test (the reacher's 2-D mass and length maps; the KUKA's stress tables: a tip
+#: mass added, link 7 stretched), a new variant for every world at every iteration. ``wide`` (reacher,
+#: for the whole goal grid): the KUKA's recipe for new goals on the reacher -- the goal-relative
+#: critic (equivariant in q - g) with random starts 1.5 rad around home, 2 of 4 worlds per goal at
+#: home -- so that training shows the critic the |q - g| a far goal asks for. Everything else is the
+#: nominal preset's, so the nominal run is the comparison.
+RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
     "reacher": {
         "randomised": (
             "reacher",
-            "arm1.mass=0.25..6:keep; arm2.mass=0.25..6:keep; arm1.stretch=0.5..2; arm2.stretch=0.5..2",
-        )
+            {
+                "train_variants": "arm1.mass=0.25..6:keep; arm2.mass=0.25..6:keep; "
+                "arm1.stretch=0.5..2; arm2.stretch=0.5..2"
+            },
+        ),
+        "wide": ("reacher", {"critic_input": "relative", "start_std": 1.5, "home_starts": 2}),
     },
-    "kuka": {"randomised": ("kuka-table1", "ee.stretch=0.2..2; ee.point-mass+=0..9")},
+    "kuka": {
+        "randomised": ("kuka-table1", {"train_variants": "ee.stretch=0.2..2; ee.point-mass+=0..9"})
+    },
 }
 
 
@@ -122,8 +132,8 @@ def _beyond(quick: bool) -> dict:
     out: dict[str, dict] = {}
     for scene, recipes in RECIPES.items():
         out[scene] = {}
-        for name, (base, variants) in recipes.items():
-            values = {**preset(base), "train_variants": variants, "record_every": 50}
+        for name, (base, changes) in recipes.items():
+            values = {**preset(base), **changes, "record_every": 50}
             values.pop("method", None)
             if quick:
                 _quick_metatrain(values, "ours")
