@@ -16,7 +16,8 @@ Grid (a few values around the published ones, each a factor of 2-10):
 * ``updates_per_iteration`` horizon (published: 50), 2 x horizon;
 * ``reward_scale`` 1 (published), 10.
 
-Prints one line per setting, sorted by score, and the best; writes everything to ``--out`` as JSON,
+Prints one line per setting, sorted by score, and the best, and whether it is adopted
+(:data:`ADOPT_RULE`: better than the published setting by more than the seed noise); writes everything to ``--out`` as JSON,
 rewritten after every setting. The search resumes: a rerun with the same ``--out`` keeps every
 setting already scored there (same scene, method, setting, iterations and seeds) and continues an
 interrupted training from its last checkpoint (every quarter of the iterations).
@@ -190,17 +191,38 @@ def main(argv=None) -> int:
                 ),
                 key=lambda r: r["score"],
             )
-            published = next(r for r in mine if r["setting"] == PUBLISHED)
-            best[f"{scene}/{method}"] = {"best": mine[0], "published": published}
+            if not mine:
+                continue
+            published = next((r for r in mine if r["setting"] == PUBLISHED), None)
+            if published is None:
+                print(f"\n{scene} {method}: the published setting is not scored yet")
+                continue
+            adopt = adopted(mine[0], published)
+            best[f"{scene}/{method}"] = {"best": mine[0], "published": published, "adopt": adopt}
             print(f"\n{scene} {method}: sorted by score (rad^2, lower is better)")
             for r in mine:
                 print(f"  {r['score']:.4f}  {r['setting']}")
             print(
                 f"  best {mine[0]['setting']} {mine[0]['score']:.4f} vs published "
-                f"{published['score']:.4f}"
+                f"{published['score']:.4f}: adopt {'the best' if adopt else 'the published'} "
+                f"setting (rule: {ADOPT_RULE})"
             )
     _write(out, args, rows, best)
     return 0
+
+
+ADOPT_RULE = (
+    "a setting replaces the published one when its score is lower by more than half the spread "
+    "of the published setting's per-seed scores"
+)
+
+
+def adopted(best: dict, published: dict) -> bool:
+    """Whether ``best`` beats ``published`` by more than the seed noise (:data:`ADOPT_RULE`)."""
+    if best["setting"] == published["setting"]:
+        return False
+    spread = max(published["per_seed"]) - min(published["per_seed"])
+    return published["score"] - best["score"] > spread / 2
 
 
 def _key(row: dict) -> tuple:
