@@ -69,20 +69,30 @@ class ReproduceConfig:
         return settings
 
     def selected(self) -> list[str]:
-        """The selected stage groups, and single meta-trainings (``metatrain-<robot>-<method>``)."""
+        """The selected stage groups, and single meta-trainings (``metatrain-<robot>-<method>``,
+        ``beyond-metatrain-<robot>-<recipe>``)."""
         extra = [BEYOND] if self.beyond or BEYOND in (self.only or []) else []
         if self.only is None:
             return list(STAGES) + extra
-        return (
-            [s for s in STAGES if s in self.only]
-            + [s for s in metatrain_names() if s in self.only and "metatrain" not in self.only]
-            + extra
-        )
+        singles = [s for s in metatrain_names() if s in self.only]
+        if "metatrain" in self.only:
+            singles = [s for s in singles if not s.startswith("metatrain-")]
+        return [s for s in STAGES if s in self.only] + singles + extra
+
+    @property
+    def plans_beyond(self) -> bool:
+        """Whether this call's plan holds the stages beyond the paper."""
+        return any(s == BEYOND or s.startswith(f"{BEYOND}-") for s in self.selected())
 
 
 def metatrain_names() -> list[str]:
-    """The names of the single meta-trainings ``--only`` also accepts."""
-    return [f"metatrain-{scene}-{m}" for scene in SCENES for m in METHODS]
+    """The names of the single meta-trainings ``--only`` also accepts (the paper's and the
+    recipes beyond it)."""
+    from warp_critic.reproduce.settings import RECIPES
+
+    return [f"metatrain-{scene}-{m}" for scene in SCENES for m in METHODS] + [
+        f"{BEYOND}-metatrain-{scene}-{recipe}" for scene in SCENES for recipe in RECIPES[scene]
+    ]
 
 
 def scene_hashes() -> dict[str, str]:
@@ -190,8 +200,8 @@ def needed(rc: ReproduceConfig, stages: dict) -> list[list[str]]:
     for group in selected:
         if group in ("toy", "landscape"):
             first.append(group)
-        elif group == "metatrain":
-            first += [n for n, st in stages.items() if st["group"] == "metatrain"]
+        elif group == "metatrain":  # the paper's six
+            first += [n for n in stages if n.startswith("metatrain-")]
         elif group in stages and stages[group]["group"] == "metatrain":  # one meta-training
             first.append(group)
         elif group == BEYOND:
@@ -269,7 +279,7 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
     device = resolve_device(rc.device)
     runner = Runner(out)
     t0 = time.perf_counter()
-    stages = plan(settings, beyond=BEYOND in rc.selected())
+    stages = plan(settings, beyond=rc.plans_beyond)
 
     def done(unit, result, seconds):
         st = stages[unit.name]
