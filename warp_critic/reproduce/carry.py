@@ -75,33 +75,39 @@ def _copy_stage(src: Path, dst_parent: Path, slim: bool) -> None:
         raise UserError(f"{final}: cannot write ({e.strerror or e})") from None
 
 
+def _carry(src: Path, dst: Path, *, slim: bool, started: str) -> list[str]:
+    """Copy the complete stages of ``src`` that ``dst`` lacks; an identical stage there is skipped,
+    a different or unfinished one refused (``started`` says what an unfinished one is)."""
+    have = complete_stages(dst)
+    copied = []
+    for name, data in complete_stages(src).items():
+        if name in have:
+            if have[name] != data:
+                raise UserError(
+                    f"{dst / name}: holds another result of this stage than {src / name}; "
+                    "not replacing it"
+                )
+            continue
+        if (dst / name).exists():
+            raise UserError(f"{dst / name}: {started}")
+        _copy_stage(src / name, dst, slim=slim and data["group"] == "metatrain")
+        copied.append(name)
+    return copied
+
+
 def save(out: Path, archive: Path) -> list[str]:
     """Copy the complete stages of ``out`` into ``archive``; returns the names copied."""
     out, archive = Path(out), Path(archive)
     if not (out / MARKER).is_file():
         raise UserError(f"{out}: not a reproduce output (no {MARKER})")
-    stages = complete_stages(out)
+    complete_stages(out)  # an edited stage.json is refused before anything is written
     try:
         archive.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise UserError(f"{archive}: cannot create ({e.strerror or e})") from None
-    have = complete_stages(archive)
-    copied = []
-    for name, data in stages.items():
-        if name in have:
-            if have[name] != data:
-                raise UserError(
-                    f"{archive / name}: holds another result of this stage than {out / name}; "
-                    "not replacing it"
-                )
-            continue
-        if (archive / name).exists():
-            raise UserError(
-                f"{archive / name}: exists but is not a complete stage; not replacing it"
-            )
-        _copy_stage(out / name, archive, slim=data["group"] == "metatrain")
-        copied.append(name)
-    return copied
+    return _carry(
+        out, archive, slim=True, started="exists but is not a complete stage; not replacing it"
+    )
 
 
 def restore(archive: Path, out: Path) -> list[str]:
@@ -109,29 +115,17 @@ def restore(archive: Path, out: Path) -> list[str]:
     archive = Path(archive)
     if not archive.is_dir():
         raise UserError(f"{archive}: no such directory")
-    stages = complete_stages(archive)
-    if not stages:
+    if not complete_stages(archive):
         raise UserError(f"{archive}: holds no complete reproduce stage")
     out, lock = claim_out(Path(out))
     try:
-        have = complete_stages(out)
-        copied = []
-        for name, data in stages.items():
-            if name in have:
-                if have[name] != data:
-                    raise UserError(
-                        f"{out / name}: holds another result of this stage than {archive / name}; "
-                        "not replacing it"
-                    )
-                continue
-            if (out / name).exists():
-                raise UserError(
-                    f"{out / name}: this stage was started here and is not complete; remove it to "
-                    "take the archived one"
-                )
-            _copy_stage(archive / name, out, slim=False)
-            copied.append(name)
-        return copied
+        return _carry(
+            archive,
+            out,
+            slim=False,
+            started="this stage was started here and is not complete; remove it to take the "
+            "archived one",
+        )
     finally:
         lock.release()
 
