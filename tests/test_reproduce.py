@@ -358,6 +358,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     assert sorted(set(both) - set(paper)) == [
         "beyond-maps",
         "beyond-metatrain-kuka-randomised",
+        "beyond-metatrain-kuka-randomised-history",
         "beyond-metatrain-reacher-randomised",
         "beyond-metatrain-reacher-wide",
         "beyond-tables",
@@ -370,13 +371,13 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     assert (
         reproduce_main(["--quick", "--out", str(other), "--only", "beyond", "--device", "cpu"]) == 0
     )
-    assert "5 stage(s) to run" in capsys.readouterr().err
+    assert "6 stage(s) to run" in capsys.readouterr().err
     report = (other / "REPORT.md").read_text()
     beyond = report[report.index("## Beyond the paper") :]
     assert "### Targets" in beyond and "randomised" in beyond
     results = json.loads((other / "results.json").read_text())
     targets = results["beyond"]["targets"]
-    assert len(targets) == 2 * 3 + 1 + 2  # 2 reacher recipes x (goals + 2 maps); KUKA 1 + 2
+    assert len(targets) == 2 * 3 + 2 * 3  # 2 recipes per robot x (goals + 2 maps; Table 1 + 2)
     for t in targets:
         assert isinstance(t["met"], bool)
         assert (
@@ -391,8 +392,9 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
         "reacher/wide",
         "kuka/ours",
         "kuka/randomised",
+        "kuka/randomised-history",
     }
-    stage = next(other.glob("beyond-metatrain-kuka-randomised-*/stage.json"))
+    stage = next(other.glob("beyond-metatrain-kuka-randomised-[0-9a-f]*/stage.json"))
     run = stage.parent / json.loads(stage.read_text())["result"]["seeds"]["0"]["run_dir"]
     first = json.loads((run / "metrics.jsonl").read_text().splitlines()[0])
     assert len(first["train_variant_values"]) == 4 * 2  # quick: 4 goals x 2 worlds

@@ -191,3 +191,61 @@ def test_bad_train_variants_flag_is_one_line_exit_2(tmp_path, value, words):
     assert len(lines) == 1 and lines[0].startswith("warp-critic: error: --train-variants:"), lines
     assert words in lines[0]
     assert not out.exists()
+
+
+def test_history_features_and_the_history_critic():
+    """history = [qd_t - qd_{t-1}, tau_{t-1}] (zeros at t = 0); the history critic reads it (its
+    output changes with it), batched seeds evaluate as single critics, and critic_loss passes it."""
+    from warp_critic.learning.losses import critic_loss
+    from warp_critic.learning.networks import (
+        Critic,
+        MLPPolicy,
+        Normalizer,
+        StackedCritic,
+        history_features,
+    )
+    from warp_critic.learning.rollout import Trajectory
+
+    T, W, dof = 5, 3, 2
+    gen = torch.Generator().manual_seed(0)
+    qd = torch.randn(T + 1, W, dof, generator=gen)
+    tau = torch.randn(T, W, dof, generator=gen)
+    h = history_features(qd, tau)
+    assert h.shape == (T, W, 2 * dof)
+    assert torch.equal(h[0], torch.zeros(W, 2 * dof))
+    assert torch.equal(h[3, :, :dof], qd[3] - qd[2]) and torch.equal(h[3, :, dof:], tau[2])
+    norm = Normalizer(torch.zeros(dof), torch.full((dof,), 2.0), 5.0, torch.full((dof,), 3.0))
+    torch.manual_seed(1)
+    critics = [Critic(dof, norm, hidden=16, inputs="history") for _ in range(2)]
+    assert critics[0].uses_history and critics[0].net[0].in_features == 5 * dof
+    q = torch.randn(T, W, dof, generator=gen)
+    g = torch.zeros(T, W, dof)
+    a = critics[0](q, qd[:T], tau, g, h)
+    assert not torch.allclose(a, critics[0](q, qd[:T], tau, g, torch.zeros_like(h)))
+    with pytest.raises(ValueError, match="needs history"):
+        critics[0](q, qd[:T], tau, g)
+    stacked = StackedCritic(critics)
+    both = torch.cat([q, q], dim=1), torch.cat([qd[:T]] * 2, 1), torch.cat([tau] * 2, 1)
+    out = stacked(*both, torch.cat([g, g], 1), torch.cat([h, h], 1))
+    assert torch.allclose(out[:, :W], a, atol=1e-6)
+    assert torch.allclose(out[:, W:], critics[1](q, qd[:T], tau, g, h), atol=1e-6)
+    policy = MLPPolicy(norm)
+    params = policy.init(W, generator=gen)
+    traj = Trajectory(torch.randn(T + 1, W, dof, generator=gen), qd, tau)
+    policy_tau = policy(params, traj.q[:-1], traj.qd[:-1])
+    expect = critics[0](traj.q[:-1], traj.qd[:-1], policy_tau, g, h).sum(0)
+    assert torch.allclose(critic_loss(critics[0], policy, params, traj, g[0]), expect)
+
+
+def test_history_critic_trains_and_meta_tests(tmp_path):
+    from warp_critic.cli.main import main
+
+    run = tmp_path / "run"
+    argv = _train(run, "--critic-input", "history", iterations=2)
+    assert main(argv) == 0
+    ckpt = torch.load(run / "checkpoint.pt", weights_only=True)
+    assert ckpt["critic_input"] == "history"
+    out = tmp_path / "test.json"
+    test = ["meta-test", str(run), "--num-goals", "2", "--inits", "1", "--device", "cpu"]
+    assert main([*test, "--out", str(out)]) == 0
+    assert json.loads(out.read_text())

@@ -277,13 +277,21 @@ def readme_with_table(text: str) -> str:
 
 
 def main(argv: list[str]) -> int:
+    from warp_critic.cli.flags import ToolParser
+
     root = Path(__file__).resolve().parent.parent
-    if argv[1:] == ["--readme"]:
+    p = ToolParser(prog="make_scenes", description=__doc__.split("\n\n")[0])
+    p.add_argument("out_dir", nargs="?", metavar="OUT_DIR", help="where to write (default scenes/)")
+    p.add_argument("--readme", action="store_true", help="rewrite the README's attribute table")
+    args = p.parse_args(argv[1:])
+    if args.readme:
+        if args.out_dir is not None:
+            p.error("--readme takes no OUT_DIR")
         readme = root / "README.md"
         readme.write_text(readme_with_table(readme.read_text()))
         print(f"wrote the attribute table of {readme}")
         return 0
-    out_dir = Path(argv[1]) if len(argv) > 1 else root / "scenes"
+    out_dir = Path(args.out_dir) if args.out_dir is not None else root / "scenes"
     out_dir.mkdir(parents=True, exist_ok=True)
     for name, robot in ROBOTS.items():
         path = out_dir / f"{name}.usda"

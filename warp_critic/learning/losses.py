@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import torch
 
-from warp_critic.learning.networks import PolicyParams
+from warp_critic.learning.networks import PolicyParams, history_features
 from warp_critic.learning.protocols import CriticFn, Policy
 from warp_critic.learning.rollout import Trajectory
 
@@ -45,6 +45,8 @@ def critic_loss(
     q, qd = traj.q[:-1].detach(), traj.qd[:-1].detach()  # (T, W, dof)
     tau = policy(params, q, qd)
     g = goal.unsqueeze(0).expand_as(q)
+    if getattr(critic, "uses_history", False):  # the last step's response, observed (data)
+        return critic(q, qd, tau, g, history_features(traj.qd, traj.tau)).sum(0)
     return critic(q, qd, tau, g).sum(0)
 
 

@@ -6,7 +6,7 @@ batched matmul evaluates all policies, and an inner update is ``theta - alpha * 
 tensors (no module, no in-place mutation).
 
 Critic ``L_critic(s, a, g)``: MLP with two hidden layers of 400 units and ELU, one scalar output.
-Two input layouts (``CRITIC_INPUTS``, normalised as below):
+Three input layouts (``CRITIC_INPUTS``, normalised as below):
 
 * ``full``: ``[q, qd, a, g, q - g]`` -- everything; the goal-relative position ``q - g`` is a fixed
   feature of ``(s, g)`` that adds no information but makes goal generalisation easier to learn;
@@ -16,6 +16,12 @@ Two input layouts (``CRITIC_INPUTS``, normalised as below):
   ``q`` over the goal region, e.g. a gravity-compensated arm. On its own it generalises on the KUKA
   about as well as ``full``; with random start states (``--start-std``), which it reads as goal
   offsets, it reaches the paper's Table 1 (RESULTS.md has the measurements).
+* ``history``: ``[q - g, qd, a, qd_t - qd_{t-1}, a_{t-1}]`` -- ``relative`` plus the last control
+  step's response: the torque applied there and the velocity change it produced (zeros at the first
+  step), observed data like the states. Under ``qd_t - qd_{t-1} ~ dt M^-1 (a_{t-1} - bias)`` the
+  pair tells the critic about the inertia it acts on, so one critic can tell models apart (for
+  dynamics-randomised training, ``--train-variants``); :func:`history_features` builds it from a
+  trajectory.
 
 Input normalisation (documented, fixed from the scene, not learned):
   * joint positions and goals: ``(q - centre) / half_range`` of the joint limits; a continuous joint
@@ -184,7 +190,7 @@ class Critic(nn.Module):
         if inputs not in CRITIC_INPUTS:
             raise ValueError(f"critic inputs must be one of {CRITIC_INPUTS} (got {inputs!r})")
         self.dof, self.inputs, self.hidden = dof, inputs, hidden
-        n_in = 5 * dof if inputs == "full" else 3 * dof
+        n_in = 3 * dof if inputs == "relative" else 5 * dof
         self.net = nn.Sequential(
             nn.Linear(n_in, hidden),
             nn.ELU(),
@@ -205,20 +211,34 @@ class Critic(nn.Module):
         self._wraps = bool(wrap.any())
         self.qd_scale = norm.qd_scale
 
+    @property
+    def uses_history(self) -> bool:
+        """Whether :meth:`forward` takes ``history`` (:func:`history_features`)."""
+        return self.inputs == "history"
+
     def features(
-        self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor
+        self,
+        q: torch.Tensor,
+        qd: torch.Tensor,
+        tau: torch.Tensor,
+        goal: torch.Tensor,
+        history: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """The normalised input ``(..., n_in)`` of the input layout."""
+        """The normalised input ``(..., n_in)`` of the input layout (``history``: ``(..., 2*dof)``,
+        needed by the ``history`` layout only)."""
         wrap = self.q_wrap if self._wraps else None
-        if self.inputs == "relative":
-            return torch.cat(
-                [
-                    wrap_angles(q - goal, wrap) / self.q_half_range,
-                    qd / self.qd_scale,
-                    tau / self.max_torque,
-                ],
-                dim=-1,
-            )
+        if self.inputs in ("relative", "history"):
+            parts = [
+                wrap_angles(q - goal, wrap) / self.q_half_range,
+                qd / self.qd_scale,
+                tau / self.max_torque,
+            ]
+            if self.inputs == "history":
+                if history is None:
+                    raise ValueError("a history critic needs history (history_features)")
+                dqd, tau_prev = history.split(self.dof, dim=-1)
+                parts += [dqd / self.qd_scale, tau_prev / self.max_torque]
+            return torch.cat(parts, dim=-1)
         return torch.cat(
             [
                 wrap_angles(q - self.q_centre, wrap) / self.q_half_range,
@@ -231,10 +251,25 @@ class Critic(nn.Module):
         )
 
     def forward(
-        self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor
+        self,
+        q: torch.Tensor,
+        qd: torch.Tensor,
+        tau: torch.Tensor,
+        goal: torch.Tensor,
+        history: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """All ``(..., dof)`` -> ``(...)``."""
-        return self.net(self.features(q, qd, tau, goal)).squeeze(-1)
+        """All ``(..., dof)`` (``history`` ``(..., 2*dof)``) -> ``(...)``."""
+        return self.net(self.features(q, qd, tau, goal, history)).squeeze(-1)
+
+
+def history_features(qd: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
+    """``(T, W, 2*dof)``: at each step ``t`` of a trajectory, ``[qd_t - qd_{t-1}, tau_{t-1}]``
+    (zeros at ``t = 0``), detached. ``qd``: ``(T+1, W, dof)`` or ``(T, W, dof)``; ``tau``:
+    ``(T, W, dof)``, the applied torques."""
+    qd, tau = qd[: tau.shape[0]].detach(), tau.detach()
+    dqd = torch.cat([torch.zeros_like(qd[:1]), qd[1:] - qd[:-1]])
+    prev = torch.cat([torch.zeros_like(tau[:1]), tau[:-1]])
+    return torch.cat([dqd, prev], dim=-1)
 
 
 def _linear(module: nn.Module) -> nn.Linear:
@@ -269,11 +304,20 @@ class StackedCritic(nn.Module):
             self.weights.append(nn.Parameter(torch.stack([x.weight.detach() for x in layers])))
             self.biases.append(nn.Parameter(torch.stack([x.bias.detach() for x in layers])))
 
+    @property
+    def uses_history(self) -> bool:
+        return self.template[0].uses_history
+
     def forward(
-        self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor
+        self,
+        q: torch.Tensor,
+        qd: torch.Tensor,
+        tau: torch.Tensor,
+        goal: torch.Tensor,
+        history: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """All ``(..., S*W, dof)`` -> ``(..., S*W)``."""
-        x = self.template[0].features(q, qd, tau, goal)  # (..., S*W, n_in)
+        x = self.template[0].features(q, qd, tau, goal, history)  # (..., S*W, n_in)
         lead, sw, n_in = x.shape[:-2], x.shape[-2], x.shape[-1]
         S = self.seeds
         x = x.reshape(-1, S, sw // S, n_in).permute(1, 0, 2, 3).reshape(S, -1, n_in)  # (S, M, n_in)

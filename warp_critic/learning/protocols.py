@@ -16,10 +16,17 @@ from warp_critic.learning.networks import PolicyParams
 
 class CriticFn(Protocol):
     """The loss ``L(s, a, g)`` a policy descends: ``q, qd, tau, g`` all ``(..., W, dof)`` (rad, rad/s,
-    N·m, rad) -> ``(..., W)``."""
+    N·m, rad) -> ``(..., W)``. A critic whose ``uses_history`` is true also takes ``history``
+    ``(..., W, 2*dof)`` (:func:`~warp_critic.learning.networks.history_features`)."""
 
     def __call__(
-        self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, g: torch.Tensor, /
+        self,
+        q: torch.Tensor,
+        qd: torch.Tensor,
+        tau: torch.Tensor,
+        g: torch.Tensor,
+        history: torch.Tensor | None = None,
+        /,
     ) -> torch.Tensor: ...
 
 

@@ -73,8 +73,9 @@ class TrainConfig(TaskConfig):
     )
     critic_input: str | None = spec(
         None,
-        "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant); default: the scene's, else "
-        + schema.fallback_text("critic_input"),
+        "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant); "
+        "history = relative + the last step's velocity change and torque (tells models apart, for "
+        "--train-variants); default: the scene's, else " + schema.fallback_text("critic_input"),
         choices=schema.CRITIC_INPUTS,
     )
     critic_hidden: int = spec(400, "critic hidden units (2 ELU layers)", gt=0, cap=8192)

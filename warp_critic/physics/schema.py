@@ -56,7 +56,7 @@ EFFORT_ATTR = "warp_critic:effortLimit"
 EE_ATTR = "warp_critic:endEffectorBody"
 TIP_ATTR = "warp_critic:tipOffset"
 STANDARD_GRAVITY = 9.81  # m/s^2, along -z
-CRITIC_INPUTS = ("full", "relative")  # the critic's input layouts (warp_critic.learning.networks)
+CRITIC_INPUTS = ("full", "relative", "history")  # the critic's input layouts (learning.networks)
 
 # Sentinels for defaults that are not one value.
 REQUIRED = "required"  # the scene or the user must give it
@@ -99,7 +99,7 @@ RULES: dict[str, str] = {
     "positive": "> 0",
     "nonnegative": ">= 0",
     "finite": "finite",
-    "critic_input": " or ".join(CRITIC_INPUTS),
+    "critic_input": ", ".join(CRITIC_INPUTS[:-1]) + " or " + CRITIC_INPUTS[-1],
 }
 
 ATTRIBUTES: tuple[Attribute, ...] = (

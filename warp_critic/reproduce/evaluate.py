@@ -44,18 +44,22 @@ class Job:
 
 
 class MultiCritic(torch.nn.Module):
-    """Several critics over consecutive world slices: ``L(q, qd, tau, g)`` on ``(..., W, dof)`` inputs."""
+    """Several critics over consecutive world slices: ``L(q, qd, tau, g)`` on ``(..., W, dof)``
+    inputs; the trajectory's ``history`` reaches the critics that read it (``uses_history``)."""
 
     def __init__(self, segments: list[tuple[torch.nn.Module, int, int]]):
         super().__init__()
         self.critics = torch.nn.ModuleList([c for c, _, _ in segments])
         self.bounds = [(a, b) for _, a, b in segments]
+        self.uses_history = any(getattr(c, "uses_history", False) for c in self.critics)
 
-    def forward(self, q, qd, tau, g):
-        outs = [
-            c(q[..., a:b, :], qd[..., a:b, :], tau[..., a:b, :], g[..., a:b, :])
-            for c, (a, b) in zip(self.critics, self.bounds)
-        ]
+    def forward(self, q, qd, tau, g, history=None):
+        outs = []
+        for c, (a, b) in zip(self.critics, self.bounds):
+            args = [x[..., a:b, :] for x in (q, qd, tau, g)]
+            if getattr(c, "uses_history", False):
+                args.append(history[..., a:b, :])
+            outs.append(c(*args))
         return torch.cat(outs, dim=-1)
 
 

@@ -89,8 +89,11 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
 #: mass added, link 7 stretched), a new variant for every world at every iteration. ``wide`` (reacher,
 #: for the whole goal grid): the KUKA's recipe for new goals on the reacher -- the goal-relative
 #: critic (equivariant in q - g) with random starts 1.5 rad around home, 2 of 4 worlds per goal at
-#: home -- so that training shows the critic the |q - g| a far goal asks for. Everything else is the
-#: nominal preset's, so the nominal run is the comparison.
+#: home -- so that training shows the critic the |q - g| a far goal asks for. ``randomised-history``
+#: (KUKA): the same draws with the ``history`` critic input (the last step's velocity change and
+#: torque), so that the critic can tell the models apart. Everything else is the nominal preset's,
+#: so the nominal run is the comparison.
+KUKA_VARIANTS = "ee.stretch=0.2..2; ee.point-mass+=0..9"
 RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
     "reacher": {
         "randomised": (
@@ -103,7 +106,11 @@ RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
         "wide": ("reacher", {"critic_input": "relative", "start_std": 1.5, "home_starts": 2}),
     },
     "kuka": {
-        "randomised": ("kuka-table1", {"train_variants": "ee.stretch=0.2..2; ee.point-mass+=0..9"})
+        "randomised": ("kuka-table1", {"train_variants": KUKA_VARIANTS}),
+        "randomised-history": (
+            "kuka-table1",
+            {"train_variants": KUKA_VARIANTS, "critic_input": "history"},
+        ),
     },
 }
 
