@@ -237,3 +237,39 @@ def test_a_step_writes_the_swapped_in_scratch_and_leaves_the_solver_own(sim):
             own[name].numpy().tobytes() == before[name].tobytes(),
             f"a step wrote the solver's own {name} while it was swapped out",
         )
+
+
+def test_redraw_internals_present(sim):
+    """``physics/redraw.py`` (``--train-variants``): the inverse-inertia kernel finalize uses, and
+    Featherstone's re-derivation of its spatial inertias on BODY_INERTIAL_PROPERTIES."""
+    import newton
+
+    try:
+        from newton._src.geometry.inertia import compute_body_inverses_kernel
+    except ImportError:
+        compute_body_inverses_kernel = None
+    pin(
+        compute_body_inverses_kernel is not None,
+        "newton._src.geometry.inertia.compute_body_inverses_kernel",
+    )
+    solver = sim.bridge.solver
+    pin(
+        hasattr(newton.ModelFlags, "BODY_INERTIAL_PROPERTIES"),
+        "newton.ModelFlags.BODY_INERTIAL_PROPERTIES",
+    )
+    pin(
+        hasattr(solver, "body_I_m") and hasattr(solver, "_update_body_inertial_buffers"),
+        "SolverFeatherstone.body_I_m / _update_body_inertial_buffers",
+    )
+    solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)  # in sync first
+    before = solver.body_I_m.numpy().copy()
+    mass = sim.model.body_mass.numpy().copy()  # on the CPU numpy() is a view of the array
+    sim.model.body_mass.assign(mass * 2)
+    solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
+    pin(
+        not np.array_equal(solver.body_I_m.numpy(), before),
+        "notify_model_changed re-derives body_I_m",
+    )
+    sim.model.body_mass.assign(mass)
+    solver.notify_model_changed(newton.ModelFlags.BODY_INERTIAL_PROPERTIES)
+    pin(np.array_equal(solver.body_I_m.numpy(), before), "body_I_m follows body_mass back")

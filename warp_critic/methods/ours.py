@@ -92,7 +92,7 @@ class TrainConfig(TaskConfig):
         "may be ranges LO..HI, drawn uniformly for every world at every iteration (seeded by the "
         "seed and the iteration, so a resumed run draws the same; the draws are in the metrics as "
         "train_variant_values), applied after --variant; e.g. 'ee.point-mass+=0..9' or "
-        "'arm0.mass=0.25..6; arm1.mass=0.25..6' (default: none, the nominal model)",
+        "'arm1.mass=0.25..6; arm2.mass=0.25..6' (default: none, the nominal model)",
     )
 
     method = "ours"
@@ -175,11 +175,8 @@ def meta_train(
                     }
         params = _cat(seed_params)
         q0, qd0 = task.home, torch.zeros_like(task.home)
-        redraw = (
-            VariantRedraw(cfg, task, [r.cfg.seed for r in session.runs])
-            if cfg.train_variants
-            else None
-        )
+        seeds = [r.cfg.seed for r in session.runs]  # of the task's copies, in order
+        redraw = VariantRedraw(cfg, task, seeds) if cfg.train_variants else None
 
         def step(it: int):
             nonlocal params, q0
@@ -215,7 +212,7 @@ def meta_train(
             loss.sum().backward()  # seeds share no parameter: each gets its own gradient
             norms = [slice_norm(critic, i) for i in range(S)]
             bad = [
-                cfg.seeds[i] if cfg.seeds else cfg.seed
+                seeds[i]
                 for i in range(S)
                 if not (math.isfinite(loss[i].item()) and math.isfinite(norms[i]))
             ]

@@ -6,14 +6,14 @@ graphs); instead :func:`set_variants` rewrites, in place, the model arrays a var
 
 * the bodies' mass properties ``body_mass, body_com, body_inertia``, and their inverses computed by
   the kernel Newton's ``finalize`` uses (``compute_body_inverses_kernel``, a Newton internal:
-  ``tests/test_newton_internals.py`` catches its move); then
+  ``tests/test_newton_internals.py`` catches a move); then
   ``SolverFeatherstone.notify_model_changed(BODY_INERTIAL_PROPERTIES)`` re-derives the spatial
   inertias the solver keeps, in place;
 * the joints' parent frames ``joint_X_p`` (a length change moves the child joint).
 
 The values come from :meth:`Scene.world_builder` with the new variant, the same code path a model
 built with that variant takes, so an edited simulator steps bitwise like one built with the new
-variants (``tests/test_redraw.py``). The arrays keep their memory, so captured graphs and the
+variants (``tests/test_train_variants.py``). The arrays keep their memory, so captured graphs and the
 bridge's buffers stay valid. Visual shapes are not moved (they have no effect on the dynamics).
 """
 
@@ -50,7 +50,8 @@ def set_variants(sim, variants: Sequence[Variant]) -> None:
         return
     model = sim.model
     per_body, per_joint = model.body_count // sim.worlds, model.joint_count // sim.worlds
-    arrays = {f: getattr(model, f).numpy() for f in BODY_FIELDS + JOINT_FIELDS}
+    # copies (on the CPU numpy() is a view): a variant that fails half-way leaves the model as it was
+    arrays = {f: getattr(model, f).numpy().copy() for f in BODY_FIELDS + JOINT_FIELDS}
     builders: dict[Variant, object] = {}
     for w in changed:
         v = variants[w]
