@@ -69,7 +69,7 @@ def _changes(values: dict, nominal: dict) -> str:
     return ", ".join(f"`{k}={v}`" for k, v in diff.items()) or "— (nominal)"
 
 
-def _maps(d: Draft, res: dict, targets: list, out: dict) -> list[str]:
+def _maps(res: dict, targets: list, out: dict) -> list[str]:
     methods = list(res["goals"])
     lines = [
         "| critic | goal grid below 0.05 | mass map below 0.05 | length map below 0.05 |",
@@ -178,7 +178,7 @@ def beyond_section(d: Draft) -> None:
     maps = d.recs.get(f"{BEYOND}-maps")
     if maps is not None:
         d.md += ["### Reacher: goal grid and 2-D maps (fraction below 0.05 MSE)", ""]
-        d.md += _maps(d, maps.data["result"], targets, result["maps"]) + [""]
+        d.md += _maps(maps.data["result"], targets, result["maps"]) + [""]
     tables = d.recs.get(f"{BEYOND}-tables")
     if tables is not None:
         d.md += ["### KUKA: Table 1 and the stress tables (MSE)", ""]
