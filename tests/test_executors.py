@@ -189,3 +189,21 @@ def test_stopping_a_jobs_driver_stops_its_workers_cleanly(tmp_path, in_process):
             timeout=120,
         )
         assert v.returncode == 0, v.stderr
+
+
+def test_a_failing_unit_under_jobs_stops_the_driver(tmp_path):
+    """One unit diverges while another trains in the other worker: the driver reports the error and
+    exits (it used to hang at exit: the stopped worker blocked handing back its result)."""
+    out = tmp_path / "out"
+    argv = ["reproduce", "--quick", "--out", str(out), "--device", "cpu", "--jobs", "2"]
+    argv += ["--only", "metatrain-reacher-ours,metatrain-kuka-ours"]
+    argv += ["--set", "metatrain.reacher.ours.dt=0.5", "--set", "metatrain.kuka.ours.iterations=60"]
+    p = subprocess.run(
+        [sys.executable, "-m", "warp_critic.cli.main", *argv],
+        capture_output=True,
+        text=True,
+        timeout=240,
+    )
+    assert p.returncode == 1, p.stderr[-2000:]
+    assert "diverged: iteration 0" in p.stderr
+    assert not list(out.glob("metatrain-kuka-ours-*/stage.json"))  # stopped, left to resume

@@ -202,8 +202,19 @@ class LocalProcesses:
             # resumes from its checkpoints next time) instead of waiting for them to finish
             import multiprocessing
 
-            for child in multiprocessing.active_children():
+            children = multiprocessing.active_children()
+            for child in children:
                 child.terminate()
+            # A stopped worker hands its unit's end back through the pool's result queue, whose
+            # lock a terminated sibling can hold forever (seen: the driver hung at exit after one
+            # unit diverged while another trained). Each has WORKER_GRACE to close its run and
+            # exit; what is still there after that is killed, so the driver always returns.
+            deadline = time.monotonic() + WORKER_GRACE
+            for child in children:
+                child.join(max(0.0, deadline - time.monotonic()))
+                if child.is_alive():
+                    child.kill()
+                    child.join(WORKER_GRACE)
             if self._pool_now is not None:
                 self._pool_now.shutdown(wait=True, cancel_futures=True)
             raise
