@@ -309,8 +309,17 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     assert len(names) == 10 and not list(archive.rglob("*.rrd"))
     ckpts = list(archive.rglob("checkpoint.pt"))
     assert len(ckpts) == 6 * 2  # 6 meta-trainings x 2 quick seeds
+    from warp_critic.physics.scene import scenes_dir
+
+    shipped = str(scenes_dir().resolve())
     for c in ckpts:
-        assert not set(torch.load(c, weights_only=True)) & set(TRAINING_ONLY), c
+        ckpt = torch.load(c, weights_only=True)
+        assert not set(ckpt) & set(TRAINING_ONLY), c
+        # no machine's folders: a shipped scene is named scenes/NAME (found by its content hash)
+        assert ckpt["scene_file"].startswith("scenes/") and ckpt["config"]["scene"].startswith(
+            "scenes/"
+        ), c
+        assert shipped not in (c.parent / "config.json").read_text()
     # a second save copies nothing; a differing stage in the archive is refused on one line
     assert carry.main(["save", str(out), str(archive)]) == 0
     assert "0 stage(s) copied" in capsys.readouterr().out

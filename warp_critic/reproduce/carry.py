@@ -8,7 +8,8 @@ output folder on another machine, where ``reproduce`` then skips them and runs o
   into ``archive/<stage dir>``, without recordings (``*.rrd``) and locks. Meta-training checkpoints
   lose the state that only a resumed training needs (:data:`TRAINING_ONLY`: optimisers, ours' last
   policies, the baselines' target networks and replay buffers); what meta-test, the maps, the
-  tables and the report read stays (networks, config, scene identity, metrics). A stage already in
+  tables and the report read stays (networks, config, scene identity, metrics); a shipped scene's
+  absolute path is written ``scenes/NAME`` (the scene is found by its content hash). A stage already in
   the archive is skipped when its ``stage.json`` is the same, refused when it differs.
 * :func:`restore` copies every archived stage that ``out`` lacks into ``out`` (made a reproduce
   output if new; its lock is held while copying). A stage ``out`` already has complete is skipped;
@@ -20,6 +21,7 @@ call leaves no half-copied stage behind.
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -45,11 +47,47 @@ def complete_stages(folder: Path) -> dict[str, dict]:
     return found
 
 
+#: the entries of a run's checkpoint and config that name its scene file
+SCENE_KEYS = ("scene", "scene_path", "scene_file")
+
+
+def _portable(record: dict) -> dict:
+    """``record`` with a shipped scene's absolute path as ``scenes/NAME``: an archive names no
+    machine's folders, and a run's scene is found by its content hash wherever it is
+    (:func:`~warp_critic.running.scenefile.find_run_scene`)."""
+    from warp_critic.physics.scene import scenes_dir
+
+    shipped = scenes_dir().resolve()
+    out = dict(record)
+    for key in SCENE_KEYS:
+        value = out.get(key)
+        if isinstance(value, str) and Path(value).is_absolute():
+            path = Path(value).resolve()
+            if path.parent == shipped:
+                out[key] = f"scenes/{path.name}"
+    return out
+
+
 def _slim_checkpoint(src: Path, dst: Path) -> None:
     from warp_critic.running.rundir import atomic_torch_save, load_checkpoint_file
 
     ckpt = load_checkpoint_file(src)
-    atomic_torch_save({k: v for k, v in ckpt.items() if k not in TRAINING_ONLY}, dst)
+    slim = _portable({k: v for k, v in ckpt.items() if k not in TRAINING_ONLY})
+    if isinstance(slim.get("config"), dict):
+        slim["config"] = _portable(slim["config"])
+    atomic_torch_save(slim, dst)
+
+
+def _portable_config(src: Path, dst: Path) -> None:
+    from warp_critic.running.rundir import atomic_write_text
+
+    try:
+        config = json.loads(src.read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        shutil.copy2(src, dst)  # not a run's config: carried as it is
+        return
+    text = json.dumps(_portable(config) if isinstance(config, dict) else config, indent=2)
+    atomic_write_text(dst, text + "\n")
 
 
 def _copy_stage(src: Path, dst_parent: Path, slim: bool) -> None:
@@ -67,6 +105,8 @@ def _copy_stage(src: Path, dst_parent: Path, slim: bool) -> None:
             target.parent.mkdir(parents=True, exist_ok=True)
             if slim and path.name == "checkpoint.pt":
                 _slim_checkpoint(path, target)
+            elif slim and path.name == "config.json":
+                _portable_config(path, target)
             else:
                 shutil.copy2(path, target)
         tmp.rename(final)

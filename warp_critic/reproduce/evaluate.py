@@ -153,9 +153,9 @@ def evaluate(
     from warp_critic.learning.losses import final_error
     from warp_critic.learning.networks import MLPPolicy, Normalizer
     from warp_critic.learning.rollout import rollout
-    from warp_critic.physics.scene import load_scene
     from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
     from warp_critic.running.loop import progress_bar
+    from warp_critic.running.scenefile import find_run_scene
     from warp_critic.running.task_inputs import max_torque_tensor
 
     if not jobs:
@@ -163,12 +163,7 @@ def evaluate(
     runs = load_runs([j.run_dir for j in jobs])
     first = next(iter(runs.values()))
     cfg0 = first.cfg
-    scene = load_scene(cfg0.scene)
-    if getattr(scene, "content_hash", None) not in (
-        None,
-        first.ckpt.get("scene_hash"),
-    ) and first.ckpt.get("scene_hash"):
-        raise UserError(f"{cfg0.scene}: the scene file has changed since the runs were trained")
+    scene = find_run_scene(first.ckpt, jobs[0].run_dir)  # by content: a moved scene is found
     if horizon is None:
         hs = {r.cfg.horizon for r in runs.values()}
         if len(hs) > 1:

@@ -39,11 +39,11 @@ from warp_critic.running.task_inputs import inside_limits
 
 
 def _train_goals_and_limits(run_dir: str):
-    from warp_critic.physics.scene import load_scene
     from warp_critic.running.rundir import RunDir
+    from warp_critic.running.scenefile import find_run_scene
 
     ckpt = RunDir.open(run_dir).load_checkpoint(require=("config",))
-    scene = load_scene(ckpt["config"]["scene"])
+    scene = find_run_scene(ckpt, run_dir)
     goals = torch.tensor(ckpt["config"]["goals"], dtype=torch.float32)
     lo = torch.as_tensor(scene.q_lower, dtype=torch.float32)
     hi = torch.as_tensor(scene.q_upper, dtype=torch.float32)

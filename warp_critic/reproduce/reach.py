@@ -30,13 +30,14 @@ def open_loop_floor(
     with the run's scene, horizon, time step, gravity and torque bounds."""
     from warp_critic.learning.networks import Normalizer
     from warp_critic.learning.rollout import rollout
-    from warp_critic.physics.scene import load_scene
     from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
     from warp_critic.reproduce.evaluate import load_runs
+    from warp_critic.running.scenefile import find_run_scene
     from warp_critic.running.task_inputs import max_torque_tensor
 
-    cfg = load_runs([run_dir])[str(run_dir)].cfg
-    scene = load_scene(cfg.scene)
+    run = load_runs([run_dir])[str(run_dir)]
+    cfg = run.cfg
+    scene = find_run_scene(run.ckpt, run_dir)
     G, V = goals.shape[0], len(variants)
     sim = Simulator(
         scene,
