@@ -160,9 +160,14 @@ def test_newton_cartpole_usd_and_urdf_load_without_edits():
 # ------------------------------------------------------------------------------------------------
 
 
-def _hand_mass_diag(q2: float) -> np.ndarray:
+def _hand_mass(q2: float) -> np.ndarray:
     m11 = I1 + I2 + M1 * C1**2 + M2 * (L1**2 + C2**2 + 2 * L1 * C2 * math.cos(q2))
-    return np.array([m11, I2 + M2 * C2**2])
+    m12 = I2 + M2 * (C2**2 + L1 * C2 * math.cos(q2))
+    return np.array([[m11, m12], [m12, I2 + M2 * C2**2]])
+
+
+def _hand_mass_diag(q2: float) -> np.ndarray:
+    return np.diag(_hand_mass(q2))
 
 
 def _hand_gravity(q: np.ndarray, g: float = 9.81) -> np.ndarray:
@@ -182,8 +187,11 @@ def test_derived_home_goals_torques_and_energy_cap_by_hand(two_link):
     u = np.random.default_rng(0).uniform(-1.0, 1.0, size=(4, 2))
     goals = np.clip(home + u * np.minimum((HI - LO) / 4, 1.0), LO, HI)
     np.testing.assert_allclose(d["goals"], goals, atol=1e-6)
-    # torque bounds: min(effort, 50 M_jj(home) + max |g_j| over home and goals)
+    # torque bounds: min(effort, 50 M_jj(home) + max |g_j| over home and goals); this arm's pushes
+    # together stay below A_COUPLED, so the coupling cap is 1 here (checked by hand, tested below)
     hold = np.abs([_hand_gravity(q) for q in np.vstack([home, goals])]).max(axis=0)
+    push = np.minimum([E1, E2], 50.0 * _hand_mass_diag(home[1]))
+    assert (np.abs(np.linalg.inv(_hand_mass(home[1]))) @ push).max() < derive.A_COUPLED
     expect = np.minimum([E1, E2], 50.0 * _hand_mass_diag(home[1]) + hold)
     np.testing.assert_allclose(d["max_torque"], expect, rtol=1e-4)
     assert d["max_torque"][1] == pytest.approx(E2)  # the effort limit binds on the light joint
@@ -203,13 +211,39 @@ def test_derived_home_goals_torques_and_energy_cap_by_hand(two_link):
         assert d[key] == kuka[key], key
 
 
+def test_coupled_pushes_are_capped_by_hand(two_link, monkeypatch):
+    """c = min(1, A_COUPLED / max_i sum_j |M^-1|_ij p_j) scales the pushes, not the gravity hold."""
+    scene = load_robot(two_link)
+    home = scene.home
+    goals = np.array(scene.defaults["goals"])
+    hold = np.abs([_hand_gravity(q) for q in np.vstack([home, goals])]).max(axis=0)
+    push = np.minimum([E1, E2], 50.0 * _hand_mass_diag(home[1]))
+    worst = (np.abs(np.linalg.inv(_hand_mass(home[1]))) @ push).max()
+    monkeypatch.setattr(derive, "A_COUPLED", worst / 4)
+    expect = np.minimum([E1, E2], push / 4 + hold)
+    np.testing.assert_allclose(derive.torque_bounds(scene, goals), expect, rtol=1e-4)
+    assert derive.torque_bounds(scene, goals)[0] < 50.0 * _hand_mass_diag(home[1])[0] + hold[0]
+
+
+def test_urdf_limit_gains_are_critically_damped_springs_by_hand(two_link):
+    """ke = m w^2, kd = 2 m w with m = 1 / (M^-1(home))_jj, the inertia a joint moves with the
+    other free; a URDF authors no gains (newton would give 1e4 and 10 to every joint)."""
+    scene = load_robot(two_link)
+    m = 1.0 / np.diag(np.linalg.inv(_hand_mass(scene.home[1])))
+    w = derive.LIMIT_OMEGA
+    np.testing.assert_allclose(scene.limit_ke, m * w**2, rtol=1e-4)
+    np.testing.assert_allclose(scene.limit_kd, 2 * m * w, rtol=1e-4)
+    assert m[0] < _hand_mass_diag(scene.home[1])[0]  # joint 1 moves less with joint 2 free
+
+
 def test_derived_time_step_is_the_first_stable_halving(two_link):
     scene = load_robot(two_link)
     d = scene.defaults
     tau = np.array(d["max_torque"])
     assert d["dt"] * d["substeps"] == pytest.approx(derive.CONTROL_PERIOD)
     assert derive.stable(scene, d["dt"], d["substeps"], tau, 9.81)
-    if d["substeps"] > 1:  # the one before (twice the dt) was not stable
+    assert d["substeps"] >= 2**derive.MIN_HALVINGS  # at least the KUKA's 4 substeps
+    if d["substeps"] > 2**derive.MIN_HALVINGS:  # the one before (twice the dt) was not stable
         assert not derive.stable(scene, 2 * d["dt"], d["substeps"] // 2, tau, 9.81)
     # a stiffer limit needs a smaller dt: the probe sees the dynamics, not a constant
     assert not derive.stable(scene, 0.02, 1, tau * 50, 9.81)

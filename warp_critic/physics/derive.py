@@ -11,16 +11,25 @@ torque (``M qdd = tau - g(q)`` at rest):
   continuous joint);
 * goals: :data:`GOALS` draws ``U[q_h - d_j, q_h + d_j]`` (generator seeded with :data:`GOAL_SEED`),
   ``d_j = min(r_j / 4, GOAL_REACH)``, clipped to the limits;
-* torque bound ``tau_j = min(e_j, A_MAX * M_jj(q_h) + max |g_j|)``: joint ``j`` alone (the others
-  held) accelerates by at most ``A_MAX`` rad/s^2 beyond holding itself against gravity at the
-  home pose and every goal (``max |g_j|`` over them; gravity at its default magnitude). A joint
-  whose effort limit binds first accelerates less;
+* torque bound ``tau_j = min(e_j, c p_j + max |g_j|)`` with the push ``p_j = min(e_j, A_MAX *
+  M_jj(q_h))``: joint ``j`` alone (the others held) accelerates by at most ``A_MAX`` rad/s^2 beyond
+  holding itself against gravity at the home pose and every goal (``max |g_j|`` over them; gravity
+  at its default magnitude). A joint whose effort limit binds first accelerates less. The pushes
+  together are capped by ``c = min(1, A_COUPLED / max_i sum_j |M^-1(q_h)|_ij p_j)``: no combination
+  of signs accelerates a joint by more than ``A_COUPLED`` at the home pose. That matters where
+  joint axes line up at home (the Panda's joints 1 and 3 at mid-range: opposite pushes spin the
+  light link between them at 3,900 rad/s^2 without the cap);
 * ``dt`` and substeps: the control period is the KUKA's, ``T = 0.01`` s; ``dt = T / 2^k`` for the
-  smallest ``k`` (at most :data:`MAX_HALVINGS`) at which :data:`PROBE_WORLDS` rollouts of the
+  smallest ``k >=`` :data:`MIN_HALVINGS` (the KUKA's ``dt``; at most :data:`MAX_HALVINGS`) at which :data:`PROBE_WORLDS` rollouts of the
   horizon from the home pose under random saturated torques ``+-tau_j`` (random signs, seeded,
   redrawn every :data:`PROBE_HOLD` control steps, so that joints slam into their limits) stay finite with kinetic energy ``1/2 qd^T M(q) qd`` at most
   ``E_cap = 10 (sum_j tau_j min(r_j, 2 pi) + |gravity| sum_b m_b 2 R)`` (J), ``R`` the largest
   distance of a body's centre of mass from the first joint at the home pose;
+* joint-limit gains (a URDF only: it cannot author them, and newton's defaults, 1e4 N m/rad and
+  10 N m s/rad, are the same for a 0.0065 kg m^2 wrist and a 3 kg m^2 shoulder):
+  ``ke_j = m_j LIMIT_OMEGA^2``, ``kd_j = 2 m_j LIMIT_OMEGA``, ``m_j = 1 / (M^-1(q_h))_jj`` the
+  inertia joint ``j`` moves with the others free: each limit a critically damped spring of natural
+  frequency :data:`LIMIT_OMEGA`. MJCF and USD files keep the gains their importers read;
 * gravity: on (9.81 m/s^2 along -z); ``--gravity 0`` for torque-mode (gravity-compensated) arms;
 * horizon, learning rates, iterations, inner steps, critic input, start std, home starts, velocity
   scale: the KUKA's (``scenes/kuka.usda``).
@@ -39,7 +48,15 @@ GOALS = 4
 GOAL_SEED = 0
 GOAL_REACH = 1.0  # rad or m
 A_MAX = 50.0  # rad/s^2 (or m/s^2)
+# what shapes an imported model beyond the file (in its content hash: a change here is a new model)
+MODEL_RULES = "urdf-limit-gains-1"
+LIMIT_OMEGA = 100.0  # rad/s: a limit spring's natural frequency, 0.25 rad per control step
+# rad/s^2: 10 rad/s in one control period. The KUKA scene's hand-set bounds reach 870 at home
+A_COUPLED = 1000.0
 GRAVITY = 9.81
+# at least the KUKA's 4 substeps (dt 0.0025 s): the probe's held torques do not switch as a policy's
+# can; a Panda run at the probe's dt 0.005 s went non-finite at iteration 23 (measured)
+MIN_HALVINGS = 2
 MAX_HALVINGS = 6
 PROBE_WORLDS = 8
 PROBE_SEED = 0
@@ -60,10 +77,14 @@ KUKA = dict(
 )
 
 RULES: dict[str, str] = {
+    "limit_gains": f"a URDF's joint limits: critically damped springs at {LIMIT_OMEGA:g} rad/s on the "
+    "inertia each joint moves with the others free at home (ke = m w^2, kd = 2 m w)",
     "home": "the file's own non-zero initial pose inside the limits, else mid-range (0 for continuous joints)",
     "goals": f"{GOALS} seeded draws U[home - d, home + d], d = min(range/4, {GOAL_REACH}), inside the limits",
-    "max_torque": f"min(effort limit, {A_MAX:g} rad/s^2 x M_jj(home) + max |gravity torque| over home and goals)",
-    "dt": f"control period {CONTROL_PERIOD} s halved until {PROBE_WORLDS} rollouts under random +-max_torque "
+    "max_torque": f"min(effort limit, c x min(effort limit, {A_MAX:g} rad/s^2 x M_jj(home)) + max |gravity torque| "
+    f"over home and goals), c <= 1 so that no sign combination of those pushes accelerates a joint "
+    f"by more than {A_COUPLED:g} rad/s^2 at home",
+    "dt": f"control period {CONTROL_PERIOD} s halved at least {MIN_HALVINGS} times and until {PROBE_WORLDS} rollouts under random +-max_torque "
     f"(signs redrawn every {PROBE_HOLD} steps) stay finite "
     f"with kinetic energy <= {ENERGY_FACTOR:g} x (sum tau x range + weight x 2 x reach)",
     "substeps": "control period / dt",
@@ -143,10 +164,21 @@ def torque_bounds(scene, goals: np.ndarray, gravity: float = GRAVITY) -> np.ndar
     """``(dof,)`` policy torque bounds [N m or N] (rule: module docstring)."""
     home = scene.home[None]
     sim = _simulator(scene, 1, 1e-3, 1, 0.0)
-    m_home = np.diag(mass_matrices(sim, home)[0])
+    m_home = mass_matrices(sim, home)[0]
+    push = np.minimum(scene.effort_limit, A_MAX * np.diag(m_home))
+    worst = float((np.abs(np.linalg.inv(m_home)) @ push).max())  # every sign combination's peak
+    push = push * min(1.0, A_COUPLED / worst)
     poses = np.concatenate([home, goals])
     hold = np.abs(gravity_torques(scene, poses, gravity)).max(axis=0)
-    return np.minimum(scene.effort_limit, A_MAX * m_home + hold)
+    return np.minimum(scene.effort_limit, push + hold)
+
+
+def limit_gains(scene) -> tuple[np.ndarray, np.ndarray]:
+    """``(ke, kd)``, ``(dof,)`` each [N m/rad, N m s/rad or N/m, N s/m]: joint-limit springs
+    (rule: module docstring)."""
+    sim = _simulator(scene, 1, 1e-3, 1, 0.0)
+    m = 1.0 / np.diag(np.linalg.inv(mass_matrices(sim, scene.home[None])[0]))
+    return m * LIMIT_OMEGA**2, 2.0 * m * LIMIT_OMEGA
 
 
 def energy_cap(scene, max_torque: np.ndarray, gravity: float = GRAVITY) -> float:
@@ -206,7 +238,7 @@ def time_step(scene, max_torque: np.ndarray, gravity: float = GRAVITY) -> tuple[
     """``(dt, substeps)`` from the stability probe; raises SceneError when none is stable."""
     from warp_critic.core.errors import SceneError
 
-    for k in range(MAX_HALVINGS + 1):
+    for k in range(MIN_HALVINGS, MAX_HALVINGS + 1):
         substeps = 2**k
         dt = CONTROL_PERIOD / substeps
         if stable(scene, dt, substeps, max_torque, gravity):

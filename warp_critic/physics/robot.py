@@ -274,9 +274,21 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     digest = hashlib.sha256(
         path.read_bytes()
         + json.dumps(
-            {"options": [options.ee_body, options.tip_offset, options.joints]}, sort_keys=True
+            {
+                "options": [options.ee_body, options.tip_offset, options.joints],
+                "rules": derive.MODEL_RULES,
+            },
+            sort_keys=True,
         ).encode()
     ).hexdigest()
+    scene = RobotScene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
+    if path.suffix.lower() != ".urdf":
+        return scene
+    # a URDF authors no limit gains: derived from the robot (derive.limit_gains), then the scene
+    # is made again on them (it copies the builder's arrays)
+    ke, kd = derive.limit_gains(scene)
+    builder.joint_limit_ke = [float(f"{v:.6g}") for v in ke]
+    builder.joint_limit_kd = [float(f"{v:.6g}") for v in kd]
     return RobotScene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
 
 

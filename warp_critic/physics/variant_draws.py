@@ -12,6 +12,16 @@ Each range is drawn **uniformly and independently per world and per iteration**;
 fixed change. The drawn changes follow the world's own variant (``--variant`` and friends), in the
 order written.
 
+Groups joined by ``|`` are alternatives: at iteration ``it`` world ``w`` takes only the changes of
+group ``(w + it) mod G`` (``G`` groups), so every world and every goal sees each group in turn, and
+the others' values are not drawn into it (NaN in :func:`draw`, ``null`` in the metrics). One factor
+at a time, as the generalisation grids test them::
+
+    arm1.mass=0.25..6; arm2.mass=0.25..6 | arm1.stretch=0.5..2; arm2.stretch=0.5..2
+
+(all four at once put 6 kg on 2 m links next to 0.25 kg on 0.5 m ones, where the reacher's dt
+diverged, measured).
+
 The draws are a function of ``(seed, iteration)`` alone (a ``numpy`` PCG64 generator seeded with
 ``SeedSequence([seed, iteration, TAG])``), not of a generator's history: a resumed run redraws exactly
 the variants the uninterrupted run drew, and the draws do not shift any other random stream.
@@ -43,6 +53,7 @@ class ChangeRange:
     change: LinkChange  # with value lo
     lo: float
     hi: float
+    group: int = 0  # alternatives joined by '|' (module docstring)
 
     def at(self, value: float) -> LinkChange:
         return replace(self.change, value=float(value))
@@ -77,7 +88,16 @@ def parse_ranges(text: str | None) -> tuple[ChangeRange, ...]:
     if text is None or not str(text).strip():
         return ()
     out = []
-    for item in (s.strip() for s in str(text).split(";")):
+    for group, part in enumerate(str(text).split("|")):
+        if not part.strip():
+            raise FieldError(FIELD, f"{text!r}: an empty group between '|'")
+        out += [replace(r, group=group) for r in _parse_group(part, text)]
+    return tuple(out)
+
+
+def _parse_group(part: str, text: str) -> list[ChangeRange]:
+    out = []
+    for item in (s.strip() for s in part.split(";")):
         if not item:
             raise FieldError(FIELD, f"{text!r}: an empty item between ';'")
         m = _ITEM.match(item)
@@ -99,44 +119,61 @@ def parse_ranges(text: str | None) -> tuple[ChangeRange, ...]:
                 raise FieldError(FIELD, e.problem) from None
             ends.append(change)
         out.append(ChangeRange(ends[0], lo, hi))
-    return tuple(out)
+    return out
+
+
+def groups(ranges: tuple[ChangeRange, ...]) -> int:
+    """The number of alternative groups (1 without ``|``; 0 for no ranges)."""
+    return 1 + max(r.group for r in ranges) if ranges else 0
 
 
 def format_ranges(ranges: tuple[ChangeRange, ...]) -> str:
-    return "; ".join(r.text() for r in ranges)
+    parts = ["; ".join(r.text() for r in ranges if r.group == g) for g in range(groups(ranges))]
+    return " | ".join(parts)
 
 
 def draw(ranges: tuple[ChangeRange, ...], worlds: int, seed: int, iteration: int) -> np.ndarray:
-    """``(worlds, len(ranges))`` values drawn for ``iteration`` of ``seed`` (module docstring)."""
+    """``(worlds, len(ranges))`` values drawn for ``iteration`` of ``seed`` (module docstring); NaN
+    where a range's group is not the world's at this iteration."""
     rng = np.random.Generator(np.random.PCG64(np.random.SeedSequence([seed, iteration, TAG])))
     u = rng.random((worlds, len(ranges)))
     lo = np.array([r.lo for r in ranges], dtype=np.float64)
     hi = np.array([r.hi for r in ranges], dtype=np.float64)
-    return lo + (hi - lo) * u
+    values = lo + (hi - lo) * u
+    if groups(ranges) > 1:
+        world_group = (np.arange(worlds) + iteration) % groups(ranges)
+        member = world_group[:, None] == np.array([r.group for r in ranges])[None, :]
+        values = np.where(member, values, np.nan)
+    return values
 
 
 def with_draws(base: Variant, ranges: tuple[ChangeRange, ...], values) -> Variant:
-    """``base`` followed by ``ranges`` at ``values`` (one value per range)."""
-    drawn = tuple(r.at(v) for r, v in zip(ranges, values))
+    """``base`` followed by ``ranges`` at ``values`` (one value per range; a NaN value, a range of
+    another group, is left out)."""
+    drawn = tuple(r.at(v) for r, v in zip(ranges, values) if not np.isnan(v))
     return replace(base, changes=tuple(base.changes) + drawn)
 
 
 def check_on_scene(scene, base: Variant, ranges: tuple[ChangeRange, ...]) -> None:
-    """Apply both ends of every range to one robot copy (unknown links, lengths without an end,
-    negative masses): a :class:`FieldError` on ``train_variants`` for what does not apply."""
-    for values in ([r.lo for r in ranges], [r.hi for r in ranges]):
-        try:
-            scene.world_builder(with_draws(base, ranges, values))
-        except FieldError as e:
-            if e.field != "variant":
-                raise
-            raise FieldError(FIELD, e.problem) from None
+    """Apply both ends of every range, one group at a time, to one robot copy (unknown links,
+    lengths without an end, negative masses): a :class:`FieldError` on ``train_variants`` for what
+    does not apply."""
+    for g in range(groups(ranges)):
+        for end in ("lo", "hi"):
+            values = [getattr(r, end) if r.group == g else np.nan for r in ranges]
+            try:
+                scene.world_builder(with_draws(base, ranges, values))
+            except FieldError as e:
+                if e.field != "variant":
+                    raise
+                raise FieldError(FIELD, e.problem) from None
 
 
 __all__ = [
     "ChangeRange",
     "parse_ranges",
     "format_ranges",
+    "groups",
     "draw",
     "with_draws",
     "check_on_scene",
