@@ -17,7 +17,13 @@ from conftest import REACHER
 from warp_critic.core.errors import FieldError
 from warp_critic.physics.redraw import BODY_FIELDS, DERIVED_FIELDS, JOINT_FIELDS, set_variants
 from warp_critic.physics.scene import load_scene
-from warp_critic.physics.variant_draws import draw, format_ranges, parse_ranges, with_draws
+from warp_critic.physics.variant_draws import (
+    draw,
+    format_ranges,
+    groups,
+    parse_ranges,
+    with_draws,
+)
 from warp_critic.physics.variants import Variant
 
 RANGES = "arm1.mass=0.25..6; arm2.stretch=0.5..2; ee.point-mass+=0..1@0.1,0,0"
@@ -42,6 +48,8 @@ def test_range_text_round_trips_and_fixed_values():
         ("ee.point-mass+=-1..2", "a point mass is added"),
         ("arm1.mass=1..2;;arm2.mass=1", "an empty item"),
         ("arm1.mass", "expected LINK.WHAT=LO..HI"),
+        ("arm1.mass=1..2 | ", "an empty group"),
+        ("| arm1.mass=1..2", "an empty group"),
     ],
 )
 def test_bad_range_text_is_one_field_error(text, words):
@@ -66,6 +74,45 @@ def test_draws_are_seeded_per_world_and_per_iteration():
     assert abs(many.mean() - 3.125) < 0.05 and abs(many.std() - 5.75 / 12**0.5) < 0.05
     v = with_draws(Variant(changes="arm1.mass=2"), ranges, a[0])
     assert len(v.changes) == 4 and v.changes[0].value == 2.0 and v.changes[1].value == a[0, 0]
+
+
+def test_groups_are_alternatives_one_per_world_in_turn():
+    """'A | B': world w at iteration it takes group (w + it) mod 2 only; the other group's values
+    are NaN and left out of its variant; the draws of one group equal a flat draw's."""
+    text = "arm1.mass=0.25..6; arm2.mass=0.25..6 | arm1.stretch=0.5..2"
+    ranges = parse_ranges(text)
+    assert groups(ranges) == 2 and [r.group for r in ranges] == [0, 0, 1]
+    assert format_ranges(ranges).count(" | ") == 1
+    assert parse_ranges(format_ranges(ranges)) == ranges
+    flat = parse_ranges(text.replace("|", ";"))
+    assert groups(flat) == 1
+    for it in (0, 1, 6):
+        a = draw(ranges, 8, seed=2, iteration=it)
+        b = draw(flat, 8, seed=2, iteration=it)  # the same stream, masked
+        for w in range(8):
+            g = (w + it) % 2
+            member = np.array([r.group == g for r in ranges])
+            assert np.array_equal(a[w, member], b[w, member])
+            assert np.isnan(a[w, ~member]).all()
+            v = with_draws(Variant(), ranges, a[w])
+            assert [c.what for c in v.changes] == (["mass", "mass"] if g == 0 else ["stretch"])
+    assert not np.isnan(draw(flat, 8, seed=2, iteration=0)).any()
+
+
+def test_grouped_draws_train_with_nulls_in_the_metrics(tmp_path):
+    from warp_critic.cli.main import main
+
+    text = "arm1.mass=0.25..6 | arm2.stretch=0.5..2"
+    out = tmp_path / "run"
+    assert main(_train(out, "--seed", "1", ranges=text, iterations=2)) == 0
+    rows = _rows(out)
+    ranges = parse_ranges(text)
+    for it, row in enumerate(rows):
+        values = row["train_variant_values"]
+        expect = draw(ranges, 8, seed=1, iteration=it)
+        for w, world in enumerate(values):
+            assert [v is None for v in world] == list(np.isnan(expect[w]))
+            assert [v for v in world if v is not None] == list(expect[w][~np.isnan(expect[w])])
 
 
 def test_live_variants_step_bitwise_like_a_built_simulator():
@@ -121,7 +168,12 @@ def _rows(run: Path) -> list[dict]:
     return [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines() if line]
 
 
-def _train(out: Path, *extra: str, iterations: int = 4) -> list[str]:
+def _train(
+    out: Path,
+    *extra: str,
+    iterations: int = 4,
+    ranges: str = "arm1.mass=0.25..6; arm2.stretch=0.5..2",
+) -> list[str]:
     return [
         "meta-train",
         REACHER,
@@ -136,7 +188,7 @@ def _train(out: Path, *extra: str, iterations: int = 4) -> list[str]:
         "--checkpoint-every",
         "2",
         "--train-variants",
-        "arm1.mass=0.25..6; arm2.stretch=0.5..2",
+        ranges,
         "--device",
         "cpu",
         "--out",

@@ -92,7 +92,9 @@ class TrainConfig(TaskConfig):
         "may be ranges LO..HI, drawn uniformly for every world at every iteration (seeded by the "
         "seed and the iteration, so a resumed run draws the same; the draws are in the metrics as "
         "train_variant_values), applied after --variant; e.g. 'ee.point-mass+=0..9' or "
-        "'arm1.mass=0.25..6; arm2.mass=0.25..6' (default: none, the nominal model)",
+        "'arm1.mass=0.25..6; arm2.mass=0.25..6'. Groups joined by '|' are alternatives: at "
+        "iteration i world w takes group (w + i) mod (number of groups) only, one factor at a time, "
+        "e.g. 'ee.stretch=0.2..2 | ee.point-mass+=0..9' (default: none, the nominal model)",
     )
 
     method = "ours"
@@ -243,7 +245,10 @@ def meta_train(
                     }
                 )
                 if drawn is not None:
-                    rows[-1]["train_variant_values"] = drawn[i].tolist()
+                    # null: a range of another '|' group than the world's at this iteration
+                    rows[-1]["train_variant_values"] = [
+                        [None if v != v else v for v in world] for world in drawn[i].tolist()
+                    ]
             return rows, res
 
         def state(i: int) -> dict:

@@ -86,20 +86,21 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
 #: Beyond the paper (``reproduce --beyond``): recipe -> (ours' preset, the settings it changes).
 #: ``randomised``: dynamics-randomised meta-training, ``train_variants`` over the ranges the
 #: generalisation grids test (the reacher's 2-D mass and length maps; the KUKA's stress tables: a tip
-#: mass added, link 7 stretched), a new variant for every world at every iteration. ``wide`` (reacher,
+#: mass added, link 7 stretched), a new variant for every world at every iteration, one factor at a
+#: time as the grids vary them (``|`` groups: masses or lengths; tip mass or stretch). ``wide`` (reacher,
 #: for the whole goal grid): the KUKA's recipe for new goals on the reacher -- the goal-relative
 #: critic (equivariant in q - g) with random starts 1.5 rad around home, 2 of 4 worlds per goal at
 #: home -- so that training shows the critic the |q - g| a far goal asks for. ``randomised-history``
 #: (KUKA): the same draws with the ``history`` critic input (the last step's velocity change and
 #: torque), so that the critic can tell the models apart. Everything else is the nominal preset's,
 #: so the nominal run is the comparison.
-KUKA_VARIANTS = "ee.stretch=0.2..2; ee.point-mass+=0..9"
+KUKA_VARIANTS = "ee.stretch=0.2..2 | ee.point-mass+=0..9"
 RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
     "reacher": {
         "randomised": (
             "reacher",
             {
-                "train_variants": "arm1.mass=0.25..6:keep; arm2.mass=0.25..6:keep; "
+                "train_variants": "arm1.mass=0.25..6:keep; arm2.mass=0.25..6:keep | "
                 "arm1.stretch=0.5..2; arm2.stretch=0.5..2"
             },
         ),
