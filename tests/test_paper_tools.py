@@ -1,8 +1,10 @@
-"""tools/tune_baselines.py and tools/diagnose_reacher_map.py: their draws and their bad input."""
+"""tools/tune_baselines.py, tools/diagnose_reacher_map.py and tools/probe_variants.py: their draws,
+the probe's verdicts and their bad input."""
 
 from __future__ import annotations
 
 import pytest
+from conftest import REACHER
 from test_tools import load_tool
 
 
@@ -24,6 +26,8 @@ def test_tune_draws_the_published_setting_first_without_repetition():
         ("tune_baselines", ["--methods", "ppo"], "unknown method"),
         ("diagnose_reacher_map", ["/nonexistent/run"], "not a run directory"),
         ("diagnose_reacher_map", ["x", "--grid", "1"], "--grid >= 2"),
+        ("probe_variants", [REACHER, "--variants", "arm9.mass=1"], "unknown link 'arm9'"),
+        ("probe_variants", [REACHER, "--variants", "", "--hold", "0"], "--hold must be >= 1"),
     ],
 )
 def test_tools_bad_input_is_one_line_exit_2(name, argv, words, capsys):
@@ -32,3 +36,20 @@ def test_tools_bad_input_is_one_line_exit_2(name, argv, words, capsys):
     assert e.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and ": error: " in err and words in err, err
+
+
+def test_probe_finds_the_reachers_light_links_unstable_at_its_dt_and_stable_at_half():
+    """The reacher at its dt (0.01 s x 2): nominal stable, 0.25 kg links non-finite under saturated
+    switching torques; the same control period at dt 0.005 s x 4 keeps them finite."""
+    from warp_critic.core import runtime
+    from warp_critic.physics.scene import load_scene
+
+    runtime.init()
+    tool = load_tool("probe_variants")
+    scene = load_scene(REACHER)
+    light = "arm1.mass=0.25:keep; arm2.mass=0.25:keep"
+    kw = dict(worlds=16, hold=5, seed=0)
+    assert tool.probe(scene, "", dt=0.01, substeps=2, **kw)[0] == 0
+    assert tool.probe(scene, light, dt=0.01, substeps=2, **kw)[0] > 0
+    bad, fastest = tool.probe(scene, light, dt=0.005, substeps=4, **kw)
+    assert bad == 0 and fastest < 1e3

@@ -100,8 +100,11 @@ RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
         "randomised": (
             "reacher",
             {
-                "train_variants": "arm1.mass=0.25..6:keep; arm2.mass=0.25..6:keep | "
-                "arm1.stretch=0.5..2; arm2.stretch=0.5..2"
+                # the maps' grid where the reacher's dt (0.01 s) stays stable under saturated
+                # switching torques (tools/probe_variants.py): light (< 0.5 kg) or short (< 0.9 m)
+                # second links go non-finite there, and one such world stops a training run
+                "train_variants": "arm1.mass=0.5..6:keep; arm2.mass=0.5..6:keep | "
+                "arm1.stretch=0.5..2; arm2.stretch=0.9..2"
             },
         ),
         "wide": ("reacher", {"critic_input": "relative", "start_std": 1.5, "home_starts": 2}),

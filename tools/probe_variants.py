@@ -1,0 +1,114 @@
+#!/usr/bin/env python
+"""Which dynamics variants stay stable at a scene's dt? Prints one line per variant.
+
+Each variant (``--variant`` syntax, :mod:`warp_critic.physics.link_changes`) gets ``--worlds``
+rollouts of the scene's horizon from the home pose under saturated torques ``+-max_torque`` whose
+random signs (seeded) are redrawn every ``--hold`` control steps -- the bang-bang a badly trained
+policy plays, slamming the joints into their limits. Per variant: how many rollouts went non-finite
+and the largest joint speed |qd| [rad/s or m/s] any reached. One such world stops a training run
+(``warp-critic: diverged``), so a ``--train-variants`` range belongs inside what this finds stable.
+
+Usage::
+
+    python tools/probe_variants.py scenes/reacher.usda \\
+        --variants "arm1.mass=0.25:keep; arm2.mass=0.25:keep" "arm1.stretch=1; arm2.stretch=0.6"
+    python tools/probe_variants.py scenes/reacher.usda --substeps 4 --dt 0.005 --variants ...
+"""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import torch
+
+from warp_critic.cli.flags import ToolParser, user_message
+
+PROG = "probe_variants"
+
+
+def probe(scene, changes: str, *, worlds: int, hold: int, dt: float, substeps: int, seed: int):
+    """``(non-finite rollouts, max |qd|)`` of one variant (module docstring)."""
+    from warp_critic.physics.link_changes import parse_changes
+    from warp_critic.physics.simulator import Simulator
+    from warp_critic.physics.variants import Variant
+
+    d = scene.defaults
+    variant = Variant(changes=parse_changes(changes)) if changes.strip() else Variant()
+    sim = Simulator(
+        scene,
+        [variant] * worlds,
+        dt=dt,
+        substeps=substeps,
+        device="cpu",
+        differentiable=False,
+        gravity=float(d.get("gravity", 9.81)),
+        graphs=False,
+    )
+    bound = torch.tensor(np.broadcast_to(d["max_torque"], (scene.dof,)), dtype=torch.float32)
+    gen = torch.Generator().manual_seed(seed)
+    q = torch.as_tensor(scene.home, dtype=torch.float32).expand(worlds, -1).clone()
+    qd = torch.zeros_like(q)
+    bad = torch.zeros(worlds, dtype=torch.bool)
+    fastest = 0.0
+    with torch.no_grad():
+        for t in range(int(d.get("horizon", 50))):
+            if t % hold == 0:
+                sign = torch.randint(0, 2, q.shape, generator=gen).float() * 2 - 1
+            q, qd = sim.step(q, qd, sign * bound)
+            finite = torch.isfinite(q).all(-1) & torch.isfinite(qd).all(-1)
+            bad |= ~finite
+            if bool(finite.any()):
+                fastest = max(fastest, float(qd[finite].abs().max()))
+    return int(bad.sum()), fastest
+
+
+def main(argv=None) -> int:
+    p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    p.add_argument("scene", help="a scene file (scenes/*.usda) or a robot file")
+    p.add_argument("--variants", nargs="+", required=True, help="one variant per argument")
+    p.add_argument("--worlds", type=int, default=32, help="rollouts per variant")
+    p.add_argument("--hold", type=int, default=5, help="control steps a torque sign is held")
+    p.add_argument("--dt", type=float, default=None, help="physics step [s] (default: the scene's)")
+    p.add_argument("--substeps", type=int, default=None, help="default: the scene's")
+    p.add_argument("--seed", type=int, default=0)
+    args = p.parse_args(argv)
+    if args.worlds < 1 or args.hold < 1:
+        p.error("--worlds and --hold must be >= 1")
+    if args.dt is not None and not args.dt > 0:
+        p.error(f"--dt must be > 0 (got {args.dt})")
+    if args.substeps is not None and args.substeps < 1:
+        p.error(f"--substeps must be >= 1 (got {args.substeps})")
+    from warp_critic.core import runtime
+    from warp_critic.core.errors import UserError
+    from warp_critic.physics.robot import load_any
+
+    try:
+        runtime.init()
+        scene = load_any(args.scene)
+        d = scene.defaults
+        dt = args.dt if args.dt is not None else float(d["dt"])
+        substeps = args.substeps if args.substeps is not None else int(d.get("substeps", 1))
+        print(f"{scene.name}: dt {dt:g} s x {substeps}, {args.worlds} rollouts, hold {args.hold}")
+        for changes in args.variants:
+            bad, fastest = probe(
+                scene,
+                changes,
+                worlds=args.worlds,
+                hold=args.hold,
+                dt=dt,
+                substeps=substeps,
+                seed=args.seed,
+            )
+            verdict = "stable" if bad == 0 and fastest < 1e3 else "UNSTABLE"
+            print(
+                f"{changes or '(nominal)'}: non-finite {bad}/{args.worlds}, max |qd| "
+                f"{fastest:.3g}: {verdict}"
+            )
+    except UserError as e:
+        p.exit(2, f"{PROG}: error: {user_message(e)}\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
