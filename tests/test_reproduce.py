@@ -248,6 +248,47 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
         np.testing.assert_allclose(err, ref, rtol=1e-4, atol=1e-6)
 
 
+def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
+    """A variant whose worlds go non-finite (1/1000 of the reacher's masses and inertias at its dt)
+    does not stop the evaluation: its errors are inf and counted, and the job beside it gets
+    exactly the numbers it gets alone (the worlds are independent)."""
+    import torch
+
+    from warp_critic.physics.scene import Variant
+    from warp_critic.reproduce.evaluate import Job, evaluate
+    from warp_critic.reproduce.generalize import _pool
+
+    out, rc, _ = quick
+    run = str(sorted((next(out.glob("metatrain-reacher-ours-*")) / "run").glob("seed*"))[0])
+    goals = torch.tensor([[0.3, -0.2], [-1.0, 0.8]])
+    light = Variant(changes="arm1.mass=0.001:scale; arm2.mass=0.001:scale")
+    jobs = [Job("nominal", run, goals, Variant()), Job("light", run, goals, light)]
+    r = evaluate(jobs, inits=2, steps=2, seed=3, device="cpu", progress=False)
+    alone = evaluate(jobs[:1], inits=2, steps=2, seed=3, device="cpu", progress=False)
+    assert np.array_equal(r["errors"][0], alone["errors"][0]) and np.isfinite(r["errors"][0]).all()
+    assert np.isinf(r["errors"][1]).any() and r["diverged"] == int(np.isinf(r["errors"][1]).sum())
+    assert alone["diverged"] == 0
+    cell = _pool([r["errors"][1]], 2)
+    assert cell["mse_mean"] == float("inf") and cell["diverged"] == r["diverged"]
+
+
+def test_grid_figure_shows_a_diverged_cell_in_black(tmp_path):
+    from warp_critic.reproduce import report_paper as rp
+    from warp_critic.reproduce.report_plots import figure
+    from warp_critic.reproduce.settings import METHODS
+
+    values = [0.5, 1.0]
+    cells = [{"mse_mean": v} for v in (0.01, 0.2, float("inf"), 0.05)]
+    M = {"masses": values, "trained_mass": [1.0, 1.0], **{"mass": {m: cells for m in METHODS}}}
+    path = tmp_path / "grid.png"
+    rp.plot_grid_2d(path, M, "mass", figure)
+    import matplotlib.image
+
+    img = matplotlib.image.imread(path)
+    assert (img[..., :3].sum(-1) < 0.05).mean() > 0.05  # black cells drawn (text alone: 0.9%)
+    assert rp.diverged_line(3).startswith("3 evaluated world(s) went non-finite")
+
+
 def test_interrupted_metatrain_resumes(tmp_path, capsys):
     """A sub-stage without stage.json (killed mid-training) resumes its run directories to the end;
     seed directories without a checkpoint (killed before the first one) are started afresh."""

@@ -39,6 +39,7 @@ def inner_update(
     alpha: float | StepSize,
     steps: int = 1,
     create_graph: bool = False,
+    check: bool = True,
 ) -> tuple[PolicyParams, list[Trajectory]]:
     """``steps`` critic-gradient steps on ``W`` policies at once.
 
@@ -49,12 +50,16 @@ def inner_update(
         goal: ``(W, dof)`` goal per world.
         alpha: inner learning rate (or one per world, see :class:`~warp_critic.learning.protocols.StepSize`).
         create_graph: keep the graph of the update (meta-training); ``False`` at meta-test.
+        check: raise on a non-finite state (``False``: a diverged world's parameters turn
+            non-finite, the other worlds' are unaffected; see :func:`~.rollout.rollout`).
 
     Returns the updated parameters and the rollout used for each step.
     """
     trajs = []
     for _ in range(steps):
-        traj = rollout(sim, policy_fn(policy, params), q0, qd0, horizon, differentiable=False)
+        traj = rollout(
+            sim, policy_fn(policy, params), q0, qd0, horizon, differentiable=False, check=check
+        )
         loss = critic_loss(critic, policy, params, traj, goal).sum()  # worlds are independent
         grads = torch.autograd.grad(loss, list(params.values()), create_graph=create_graph)
         params = {k: v - alpha * g for (k, v), g in zip(params.items(), grads)}

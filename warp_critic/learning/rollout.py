@@ -56,12 +56,15 @@ def rollout(
     horizon: int,
     *,
     differentiable: bool = False,
+    check: bool = True,
 ) -> Trajectory:
     """Roll ``policy`` out for ``horizon`` control steps from ``(q0, qd0)`` in every world.
 
     With ``differentiable=False`` the simulator runs forward only (no tape) and the actions are
     detached data. With ``differentiable=True`` gradients flow from the states back into the actions,
-    the policy parameters and the initial state.
+    the policy parameters and the initial state. ``check``: raise :class:`DivergenceError` on a
+    non-finite state (``False``: leave it in the trajectory, for a caller that marks such worlds;
+    the worlds are independent, so the others are unaffected).
     """
     qs, qds, taus = [q0], [qd0], []
     q, qd = q0, qd0
@@ -82,5 +85,11 @@ def rollout(
                 qds.append(qd)
                 taus.append(tau)
     traj = Trajectory(torch.stack(qs), torch.stack(qds), torch.stack(taus))
-    check_finite(traj)
+    if check:
+        check_finite(traj)
     return traj
+
+
+def finite_worlds(traj: Trajectory) -> torch.Tensor:
+    """``(W,)`` bool: the worlds whose states stayed finite over the whole trajectory."""
+    return (torch.isfinite(traj.q).all(-1) & torch.isfinite(traj.qd).all(-1)).all(0)

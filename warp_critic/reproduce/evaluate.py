@@ -13,6 +13,11 @@ explicit goals), so the methods, seeds and variants see identical goals and init
 Per world this is exactly :func:`warp_critic.evaluation.metatest.meta_test` (tests compare the two): the worlds are
 independent, each critic sees only its own worlds, and the per-world learning rate multiplies each
 world's gradient.
+
+A world whose state goes non-finite (a light or short link at the scene's ``dt`` under a policy that
+slams it into its limits) does not stop the evaluation: its final error is ``inf`` (``before`` too
+when the untrained policy already diverged) and it is counted in ``"diverged"``. The other worlds
+are independent of it, so their numbers are what they would be without it.
 """
 
 from __future__ import annotations
@@ -147,12 +152,13 @@ def evaluate(
     progress: bool = True,
 ) -> dict:
     """Meta-test every job; returns ``{"errors": [(G, inits) final ||q_T-g||^2 per job], "before": [...],
-    "dof", "horizon", "steps", "alphas": {run_dir: alpha}, "worlds", "batches"}``."""
+    "dof", "horizon", "steps", "alphas": {run_dir: alpha}, "worlds", "batches", "diverged"}``
+    (``inf`` errors for diverged worlds, module docstring; ``"diverged"``: their count)."""
     from warp_critic.evaluation.metatest import build_test_critic
     from warp_critic.learning.inner import inner_update, policy_fn
     from warp_critic.learning.losses import final_error
     from warp_critic.learning.networks import MLPPolicy, Normalizer
-    from warp_critic.learning.rollout import rollout
+    from warp_critic.learning.rollout import finite_worlds, rollout
     from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
     from warp_critic.running.loop import progress_bar
     from warp_critic.running.scenefile import find_run_scene
@@ -174,6 +180,7 @@ def evaluate(
     errors: list[np.ndarray | None] = [None] * len(jobs)
     before: list[np.ndarray | None] = [None] * len(jobs)
     inits_cache: dict[int, dict] = {}
+    diverged = 0
     bar = progress_bar(len(groups), enabled=progress, desc="meta-test batches")
     try:
         for group in groups:
@@ -224,9 +231,9 @@ def evaluate(
             }
             q0, qd0 = sim.zeros(), sim.zeros()
             critic = MultiCritic(segments)
-            untrained = rollout(sim, policy_fn(policy, p), q0, qd0, horizon)
+            untrained = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
             err0 = final_error(untrained.q[-1], goal).detach().cpu().numpy()
-            p, _ = inner_update(
+            p, trajs = inner_update(
                 critic,
                 policy,
                 p,
@@ -238,9 +245,17 @@ def evaluate(
                 alpha=PerWorldRate(torch.cat(rates).to(dev)),
                 steps=steps,
                 create_graph=False,
+                check=False,
             )
-            after = rollout(sim, policy_fn(policy, p), q0, qd0, horizon)
+            after = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
             err = final_error(after.q[-1], goal).detach().cpu().numpy()
+            ok0 = finite_worlds(untrained)
+            ok = ok0 & finite_worlds(after)
+            for t in trajs:
+                ok &= finite_worlds(t)
+            err0 = np.where(ok0.cpu().numpy(), err0, np.inf)
+            err = np.where(ok.cpu().numpy(), err, np.inf)
+            diverged += int((~ok).sum())
             start = 0
             for i in group:
                 n = jobs[i].G * inits
@@ -259,6 +274,7 @@ def evaluate(
         "alphas": {rd: r.alpha for rd, r in runs.items()},
         "worlds": sum(j.G * inits for j in jobs),
         "batches": len(groups),
+        "diverged": diverged,
     }
 
 

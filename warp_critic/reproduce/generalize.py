@@ -60,11 +60,13 @@ def _sample(train_goals, lo, hi, num, std, around, noise, seed):
 
 
 def _pool(errs: list[np.ndarray], dof: int) -> dict:
-    """Pool final squared errors (one (G, K) array per seed) into a cell: MSE over joints."""
+    """Pool final squared errors (one (G, K) array per seed) into a cell: MSE over joints. A
+    diverged world (``inf``) makes the cell's mean ``inf``; ``diverged`` counts them."""
     mse = np.concatenate([e.ravel() for e in errs]) / dof
     return {
         "mse_mean": float(mse.mean()),
-        "mse_std": float(mse.std()),
+        "mse_std": float(mse.std()) if np.isfinite(mse).all() else float("nan"),
+        "diverged": int((~np.isfinite(mse)).sum()),
         "mse_per_seed": [float(e.mean() / dof) for e in errs],
         "mse_std_per_seed": [float((e / dof).std()) for e in errs],
         "n": int(mse.size),
@@ -219,6 +221,7 @@ def run_tables_stage(
         "alphas": {relpath(k, d.parent): v for k, v in r["alphas"].items()},
         "worlds": r["worlds"],
         "batches": r["batches"],
+        "diverged": r["diverged"],
         "raw_file": "errors.json",
         "dynamics_goals": dyn_goals.tolist(),
     }
@@ -298,6 +301,7 @@ def run_maps_stage(
         "dof": dof,
         "horizon": r["horizon"],
         "policy_updates": steps,
+        "diverged": r["diverged"],
         "tip_offset": [float(x) for x in scene.tip_offset],
         "raw_file": "errors.json",
         "goals": {},

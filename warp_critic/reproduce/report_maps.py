@@ -50,6 +50,8 @@ def maps_section(d: Draft) -> None:
         goal_rows = rp.method_rows(lambda ci, m: M["goals"][m], 1, sv, None)
         md += ["| goal grid | mean MSE over the grid |", "|---|---|"]
         md += [f"| {lab} | {fmt(v[0][0]) if v[0] else '—'} |" for lab, _, v in goal_rows] + [""]
+        if M.get("diverged"):
+            md += [rp.diverged_line(M["diverged"]), ""]
         md += [
             "Dynamics (Figures 5, 6): 2-D grids over both links at the four training goals. Masses: each "
             "link's mass SET at its centre of mass, its inertia about the centre kept (the paper's model "

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from warp_critic.reproduce.report_plots import diverged_cmap, log_limits
 from warp_critic.reproduce.settings import METHOD_LABELS, METHODS
 
 LEVELS = (0.3, 0.1, 0.03)
@@ -194,6 +195,15 @@ def beats_baselines(rows: list[tuple], n_cols: int, which: str) -> tuple[int, in
     return wins, comparable
 
 
+def diverged_line(n: int) -> str:
+    """The report's sentence for ``n`` evaluated worlds whose state went non-finite."""
+    return (
+        f"{n} evaluated world(s) went non-finite: the scene's dt is unstable for that variant under "
+        "that policy's torques (`tools/probe_variants.py` shows which variants are). Each counts as an "
+        "infinite error: its cell's mean is inf (black in the figures) and it is never below a threshold."
+    )
+
+
 # -- Figures 5-6: 2-D maps --------------------------------------------------------------------------
 
 
@@ -203,15 +213,19 @@ def plot_grid_2d(path: Path, M: dict, kind: str, figure) -> None:
 
     values = M["masses"] if kind == "mass" else M["lengths"]
     n = len(values)
-    grids = {m: np.array([c["mse_mean"] for c in M[kind][m]]).reshape(n, n) for m in METHODS}
-    lo = max(min(float(g[g > 0].min()) if (g > 0).any() else 1e-6 for g in grids.values()), 1e-8)
-    hi = max(max(float(g.max()) for g in grids.values()), lo * 1.0001)
+    grids = {
+        m: np.ma.masked_invalid(np.array([c["mse_mean"] for c in M[kind][m]]).reshape(n, n))
+        for m in METHODS
+    }
+    lo, hi = log_limits(grids.values())
     trained = M["trained_mass"] if kind == "mass" else M["trained_length"]
     fig = figure(13, 4.2)
     axes = fig.subplots(1, 3)
     im = None
     for ax, m in zip(axes, METHODS):
-        im = ax.imshow(grids[m].T, origin="lower", cmap="viridis", norm=LogNorm(vmin=lo, vmax=hi))
+        im = ax.imshow(
+            grids[m].T, origin="lower", cmap=diverged_cmap(), norm=LogNorm(vmin=lo, vmax=hi)
+        )
         ti = [int(np.argmin(np.abs(np.asarray(values) - t))) for t in trained]
         ax.plot(ti[0], ti[1], "x", color="red", markersize=12, mew=2.5, label="as trained")
         ax.set_xticks(range(n), [f"{v:g}" for v in values], fontsize=7)
@@ -219,7 +233,12 @@ def plot_grid_2d(path: Path, M: dict, kind: str, figure) -> None:
         unit = "kg" if kind == "mass" else "m"
         ax.set_xlabel(f"link 1 {kind} ({unit})")
         ax.set_ylabel(f"link 2 {kind} ({unit})")
-        ax.set_title(f"{METHOD_LABELS[m]}: mean MSE {grids[m].mean():.3g}", fontsize=9)
+        bad = int(np.ma.count_masked(grids[m]))
+        mean = f"{grids[m].filled(np.inf).mean():.3g}"
+        ax.set_title(
+            f"{METHOD_LABELS[m]}: mean MSE {mean}" + (f" ({bad} diverged, black)" if bad else ""),
+            fontsize=9,
+        )
     axes[0].legend(fontsize=7, loc="upper right")
     fig.subplots_adjust(left=0.05, right=0.84, bottom=0.15, top=0.9, wspace=0.3)
     cax = fig.add_axes([0.86, 0.15, 0.012, 0.75])  # one colour bar for the three panels

@@ -28,6 +28,23 @@ def save(fig, path: Path) -> Path:
     return path
 
 
+def log_limits(grids) -> tuple[float, float]:
+    """``(lo, hi)`` of a log colour scale over the finite, positive values of several grids."""
+    finite = [np.asarray(np.ma.filled(g, np.nan), dtype=float).ravel() for g in grids]
+    v = np.concatenate(finite)
+    v = v[np.isfinite(v)]
+    lo = max(float(v[v > 0].min()) if (v > 0).any() else 1e-6, 1e-8)
+    hi = float(v.max()) if v.size else lo
+    return lo, max(hi, lo * 1.0001)
+
+
+def diverged_cmap():
+    """viridis, with non-finite cells (a diverged world in the cell) in black."""
+    import matplotlib
+
+    return matplotlib.colormaps["viridis"].with_extremes(bad="black")
+
+
 def plot_metatrain(path: Path, scene: str, recs: dict[str, StageRecord]) -> dict:
     fig = figure(11, 4)
     ax_it, ax_env = fig.subplots(1, 2)
@@ -74,9 +91,8 @@ def plot_goal_maps(path: Path, res: dict) -> None:
     from matplotlib.colors import LogNorm
 
     ax0, ax1 = np.asarray(res["axis_q1"]), np.asarray(res["axis_q2"])
-    vals = [np.asarray(res["goals"][m]["mse"]) for m in METHODS]
-    lo = max(min(float(v[v > 0].min()) if (v > 0).any() else 1e-6 for v in vals), 1e-8)
-    hi = max(float(v.max()) for v in vals)
+    vals = [np.ma.masked_invalid(np.asarray(res["goals"][m]["mse"])) for m in METHODS]
+    lo, hi = log_limits(vals)
     fig = figure(13, 4.2)
     axes = fig.subplots(1, 3)
     tg = np.asarray(res["train_goals"])
@@ -90,8 +106,8 @@ def plot_goal_maps(path: Path, res: dict) -> None:
             origin="lower",
             extent=ext,
             aspect="auto",
-            cmap="viridis",
-            norm=LogNorm(vmin=lo, vmax=max(hi, lo * 1.0001)),
+            cmap=diverged_cmap(),
+            norm=LogNorm(vmin=lo, vmax=hi),
         )
         ax.plot(tg[:, 0], tg[:, 1], "x", color="red", markersize=10, mew=2, label="training goals")
         ax.set_title(f"{METHOD_LABELS[m]}: mean MSE {res['goals'][m]['mse_mean']:.3g}", fontsize=9)

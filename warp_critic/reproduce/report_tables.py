@@ -166,6 +166,8 @@ def tables_section(d: Draft) -> None:
             f"all {T['worlds']} worlds in {T['batches']} batched model(s). Raw errors: `{r.dir.name}/{T['raw_file']}`.",
             "",
         ]
+        if T.get("diverged"):
+            md += [rp.diverged_line(T["diverged"]), ""]
         sv = solved.get("kuka", {})
         md += [
             f"Baselines: each has two rows, all seeds and the seeds that solved the training task (final "
