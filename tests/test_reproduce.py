@@ -391,6 +391,21 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     assert "edited or damaged" in capsys.readouterr().err
 
 
+def test_only_one_beyond_evaluation_plans_it_and_what_it_reads():
+    from warp_critic.reproduce.pipeline import ReproduceConfig, needed, plan
+
+    rc = ReproduceConfig(out="unused", only=["beyond-maps"], quick=True)
+    settings = rc.validate()
+    assert rc.selected() == ["beyond-maps"] and rc.plans_beyond
+    first, second = needed(rc, plan(settings, beyond=True))
+    assert second == ["beyond-maps"]
+    assert sorted(first) == [
+        "beyond-metatrain-reacher-randomised",
+        "beyond-metatrain-reacher-wide",
+        "metatrain-reacher-ours",
+    ]
+
+
 def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     """--only beyond on a copy of the quick output: the paper's stages are found complete (their
     hashes do not depend on the recipes), the recipes train and are evaluated next to the nominal

@@ -49,8 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="STAGE,...",
         help=f"run only these stages (comma-separated: {', '.join(STAGES)}, or one meta-training such as "
-        "metatrain-kuka-ours); maps and tables also run the meta-training they read (skipped when "
-        "complete)",
+        "metatrain-kuka-ours, or beyond-maps / beyond-tables); maps and tables also run the "
+        "meta-training they read (skipped when complete)",
     )
     A(
         "--quick",

@@ -43,13 +43,13 @@ class ReproduceConfig:
             raise FieldError("seeds", f"must be an integer >= 1 (got {self.seeds!r})")
         if self.seeds > 1000:
             raise FieldError("seeds", f"must be <= 1000 (got {self.seeds})")
-        subs = metatrain_names()
+        subs = metatrain_names() + list(BEYOND_EVALS)
         for s in self.only or []:
             if s not in STAGES and s not in subs and s != BEYOND:
                 raise FieldError(
                     "only",
-                    f"unknown stage {s!r} (stages: {', '.join(STAGES)}, {BEYOND}; one "
-                    f"meta-training: {', '.join(subs)})",
+                    f"unknown stage {s!r} (stages: {', '.join(STAGES)}, {BEYOND}, "
+                    f"{', '.join(BEYOND_EVALS)}; one meta-training: {', '.join(metatrain_names())})",
                 )
         if self.only is not None and not self.only:
             raise UserError(f"--only: give one or more of {', '.join(STAGES)}")
@@ -77,12 +77,18 @@ class ReproduceConfig:
         singles = [s for s in metatrain_names() if s in self.only]
         if "metatrain" in self.only:
             singles = [s for s in singles if not s.startswith("metatrain-")]
+        if BEYOND not in self.only:  # one of the beyond evaluations alone (with what it reads)
+            singles += [s for s in BEYOND_EVALS if s in self.only]
         return [s for s in STAGES if s in self.only] + singles + extra
 
     @property
     def plans_beyond(self) -> bool:
         """Whether this call's plan holds the stages beyond the paper."""
         return any(s == BEYOND or s.startswith(f"{BEYOND}-") for s in self.selected())
+
+
+#: the beyond group's evaluations, each also accepted alone by ``--only``
+BEYOND_EVALS = (f"{BEYOND}-maps", f"{BEYOND}-tables")
 
 
 def metatrain_names() -> list[str]:

@@ -18,7 +18,7 @@ import numpy as np
 from warp_critic.evaluation.paper import PAPER_TABLE1
 from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.report_draft import Draft, fmt
-from warp_critic.reproduce.settings import BEYOND, SCENES
+from warp_critic.reproduce.settings import BEYOND, RECIPES, SCENES
 
 GOALS_TARGET, MAPS_TARGET, LEVEL = 0.9, 0.8, 0.05
 
@@ -45,14 +45,20 @@ def _training_rows(d: Draft) -> tuple[list[str], dict]:
             rec = d.recs.get(name)
             if rec is None:
                 continue
-            base = (nominal or rec).data["settings"]["values"]
+            values = rec.data["settings"]["values"]
+            if label == "ours":
+                changed = "— (nominal)"
+            elif nominal is not None:
+                changed = _changes(values, nominal.data["settings"]["values"])
+            else:  # the nominal stage is not in this output: the recipe's own definition
+                changed = _changes(RECIPES[scene][label][1], {})
             res = rec.data["result"]
             seconds = next(iter(res["seeds"].values()))["seconds"]
             final = float(
                 np.mean([rp.final_training_error(c["loss"]) for c in rp.seed_curves(res).values()])
             )
             lines.append(
-                f"| {scene} | {label} | {_changes(rec.data['settings']['values'], base)} | "
+                f"| {scene} | {label} | {changed} | "
                 f"{res['iterations']} | {seconds:.0f} | {fmt(final)} |"
             )
             out[f"{scene}/{label}"] = {
