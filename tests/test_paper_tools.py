@@ -27,7 +27,11 @@ def test_tune_draws_the_published_setting_first_without_repetition():
         ("diagnose_reacher_map", ["/nonexistent/run"], "not a run directory"),
         ("diagnose_reacher_map", ["x", "--grid", "1"], "--grid >= 2"),
         ("probe_variants", [REACHER, "--variants", "arm9.mass=1"], "unknown link 'arm9'"),
-        ("probe_variants", [REACHER, "--variants", "", "--hold", "0"], "--hold must be >= 1"),
+        (
+            "probe_variants",
+            [REACHER, "--variants", "nominal", "--hold", "0"],
+            "--hold must be >= 1",
+        ),
     ],
 )
 def test_tools_bad_input_is_one_line_exit_2(name, argv, words, capsys):

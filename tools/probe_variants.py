@@ -1,7 +1,8 @@
 #!/usr/bin/env python
 """Which dynamics variants stay stable at a scene's dt? Prints one line per variant.
 
-Each variant (``--variant`` syntax, :mod:`warp_critic.physics.link_changes`) gets ``--worlds``
+Each variant (``--variant`` syntax, :mod:`warp_critic.physics.link_changes`; several joined by ``|``,
+``nominal`` for the scene as it is) gets ``--worlds``
 rollouts of the scene's horizon from the home pose under saturated torques ``+-max_torque`` whose
 random signs (seeded) are redrawn every ``--hold`` control steps -- the bang-bang a badly trained
 policy plays, slamming the joints into their limits. Per variant: how many rollouts went non-finite
@@ -11,7 +12,7 @@ and the largest joint speed |qd| [rad/s or m/s] any reached. One such world stop
 Usage::
 
     python tools/probe_variants.py scenes/reacher.usda \\
-        --variants "arm1.mass=0.25:keep; arm2.mass=0.25:keep" "arm1.stretch=1; arm2.stretch=0.6"
+        --variants "nominal | arm1.mass=0.25:keep; arm2.mass=0.25:keep | arm1.stretch=1; arm2.stretch=0.6"
     python tools/probe_variants.py scenes/reacher.usda --substeps 4 --dt 0.005 --variants ...
 """
 
@@ -34,7 +35,9 @@ def probe(scene, changes: str, *, worlds: int, hold: int, dt: float, substeps: i
     from warp_critic.physics.variants import Variant
 
     d = scene.defaults
-    variant = Variant(changes=parse_changes(changes)) if changes.strip() else Variant()
+    variant = (
+        Variant(changes=parse_changes(changes)) if changes.strip() else Variant()
+    )  # '': nominal
     sim = Simulator(
         scene,
         [variant] * worlds,
@@ -66,7 +69,11 @@ def probe(scene, changes: str, *, worlds: int, hold: int, dt: float, substeps: i
 def main(argv=None) -> int:
     p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
     p.add_argument("scene", help="a scene file (scenes/*.usda) or a robot file")
-    p.add_argument("--variants", nargs="+", required=True, help="one variant per argument")
+    p.add_argument(
+        "--variants",
+        required=True,
+        help="variants joined by '|' ('nominal': the scene as it is)",
+    )
     p.add_argument("--worlds", type=int, default=32, help="rollouts per variant")
     p.add_argument("--hold", type=int, default=5, help="control steps a torque sign is held")
     p.add_argument("--dt", type=float, default=None, help="physics step [s] (default: the scene's)")
@@ -90,7 +97,8 @@ def main(argv=None) -> int:
         dt = args.dt if args.dt is not None else float(d["dt"])
         substeps = args.substeps if args.substeps is not None else int(d.get("substeps", 1))
         print(f"{scene.name}: dt {dt:g} s x {substeps}, {args.worlds} rollouts, hold {args.hold}")
-        for changes in args.variants:
+        for changes in [v.strip() for v in args.variants.split("|")]:
+            changes = "" if changes == "nominal" else changes
             bad, fastest = probe(
                 scene,
                 changes,

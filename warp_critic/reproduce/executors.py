@@ -98,12 +98,15 @@ class InProcess:
 
 
 _IN_UNIT = False  # a worker process: is a unit running (set around it by _process_unit)?
+_STOPPING = False  # a worker process: SIGTERM came; start no further unit
 
 
 def _worker_stop(signum, frame) -> None:
     """SIGTERM in a worker (the driver stopping, or dying: PDEATHSIG). Mid-unit it stops the unit the way
     Ctrl-C stops a CLI run: the run's ``finally`` blocks close its recording and release its lock, so the
     next call resumes without a stale lock. An idle worker just exits."""
+    global _STOPPING
+    _STOPPING = True
     if _IN_UNIT:
         raise KeyboardInterrupt
     os._exit(128 + signum)
@@ -156,12 +159,16 @@ def _quiet(unit: Unit) -> Unit:
 
 def _process_unit(unit: Unit, root: str) -> tuple[dict, float]:
     global _IN_UNIT
+    if _STOPPING:  # the driver is stopping: a unit the pool had queued must not start
+        os._exit(128 + signal.SIGTERM)
     t = time.perf_counter()
     _IN_UNIT = True
     try:
         return call_unit(_quiet(unit), Path(root)), time.perf_counter() - t
     finally:
         _IN_UNIT = False
+        if _STOPPING:  # its run is closed (the finally blocks above ran): leave, take no next unit
+            os._exit(128 + signal.SIGTERM)
 
 
 def check_jobs(jobs) -> int:
