@@ -46,14 +46,16 @@ def test_probe_finds_the_reachers_light_links_unstable_at_its_dt_and_stable_at_h
     """The reacher at its dt (0.01 s x 2): nominal stable, 0.25 kg links non-finite under saturated
     switching torques; the same control period at dt 0.005 s x 4 keeps them finite."""
     from warp_critic.core import runtime
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.running.task import TaskConfig, load_task_scene
 
     runtime.init()
     tool = load_tool("probe_variants")
-    scene = load_scene(REACHER)
+    own, scene = load_task_scene(TaskConfig(scene=REACHER), announce=False)
+    half, _ = load_task_scene(TaskConfig(scene=REACHER, dt=0.005, substeps=4), announce=False)
+    assert (own.dt, own.substeps) == (0.01, 2)
     light = "arm1.mass=0.25:keep; arm2.mass=0.25:keep"
     kw = dict(worlds=16, hold=5, seed=0)
-    assert tool.probe(scene, "", dt=0.01, substeps=2, **kw)[0] == 0
-    assert tool.probe(scene, light, dt=0.01, substeps=2, **kw)[0] > 0
-    bad, fastest = tool.probe(scene, light, dt=0.005, substeps=4, **kw)
+    assert tool.probe(own, scene, "", **kw)[0] == 0
+    assert tool.probe(own, scene, light, **kw)[0] > 0
+    bad, fastest = tool.probe(half, scene, light, **kw)
     assert bad == 0 and fastest < 1e3

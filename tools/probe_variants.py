@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import sys
 
-import numpy as np
 import torch
 
 from warp_critic.cli.flags import ToolParser, user_message
@@ -28,34 +27,34 @@ from warp_critic.cli.flags import ToolParser, user_message
 PROG = "probe_variants"
 
 
-def probe(scene, changes: str, *, worlds: int, hold: int, dt: float, substeps: int, seed: int):
-    """``(non-finite rollouts, max |qd|)`` of one variant (module docstring)."""
+def probe(task, scene, changes: str, *, worlds: int, hold: int, seed: int):
+    """``(non-finite rollouts, max |qd|)`` of one variant (module docstring); ``task``: the scene's
+    filled :class:`~warp_critic.running.task.TaskConfig` (dt, substeps, gravity, torque bounds,
+    horizon)."""
     from warp_critic.physics.link_changes import parse_changes
     from warp_critic.physics.simulator import Simulator
     from warp_critic.physics.variants import Variant
+    from warp_critic.running.task_inputs import max_torque_tensor
 
-    d = scene.defaults
-    variant = (
-        Variant(changes=parse_changes(changes)) if changes.strip() else Variant()
-    )  # '': nominal
+    variant = Variant(changes=parse_changes(changes)) if changes else Variant()
     sim = Simulator(
         scene,
         [variant] * worlds,
-        dt=dt,
-        substeps=substeps,
+        dt=task.dt,
+        substeps=task.substeps,
         device="cpu",
         differentiable=False,
-        gravity=float(d.get("gravity", 9.81)),
+        gravity=task.gravity,
         graphs=False,
     )
-    bound = torch.tensor(np.broadcast_to(d["max_torque"], (scene.dof,)), dtype=torch.float32)
+    bound = max_torque_tensor(task.max_torque, scene)
     gen = torch.Generator().manual_seed(seed)
     q = torch.as_tensor(scene.home, dtype=torch.float32).expand(worlds, -1).clone()
     qd = torch.zeros_like(q)
     bad = torch.zeros(worlds, dtype=torch.bool)
     fastest = 0.0
     with torch.no_grad():
-        for t in range(int(d.get("horizon", 50))):
+        for t in range(task.horizon):
             if t % hold == 0:
                 sign = torch.randint(0, 2, q.shape, generator=gen).float() * 2 - 1
             q, qd = sim.step(q, qd, sign * bound)
@@ -82,31 +81,23 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     if args.worlds < 1 or args.hold < 1:
         p.error("--worlds and --hold must be >= 1")
-    if args.dt is not None and not args.dt > 0:
-        p.error(f"--dt must be > 0 (got {args.dt})")
-    if args.substeps is not None and args.substeps < 1:
-        p.error(f"--substeps must be >= 1 (got {args.substeps})")
     from warp_critic.core import runtime
     from warp_critic.core.errors import UserError
-    from warp_critic.physics.robot import load_any
+    from warp_critic.running.task import TaskConfig, load_task_scene
 
     try:
         runtime.init()
-        scene = load_any(args.scene)
-        d = scene.defaults
-        dt = args.dt if args.dt is not None else float(d["dt"])
-        substeps = args.substeps if args.substeps is not None else int(d.get("substeps", 1))
-        print(f"{scene.name}: dt {dt:g} s x {substeps}, {args.worlds} rollouts, hold {args.hold}")
+        task, scene = load_task_scene(
+            TaskConfig(scene=args.scene, dt=args.dt, substeps=args.substeps), announce=False
+        )
+        print(
+            f"{scene.name}: dt {task.dt:g} s x {task.substeps}, {args.worlds} rollouts, "
+            f"hold {args.hold}"
+        )
         for changes in [v.strip() for v in args.variants.split("|")]:
             changes = "" if changes == "nominal" else changes
             bad, fastest = probe(
-                scene,
-                changes,
-                worlds=args.worlds,
-                hold=args.hold,
-                dt=dt,
-                substeps=substeps,
-                seed=args.seed,
+                task, scene, changes, worlds=args.worlds, hold=args.hold, seed=args.seed
             )
             verdict = "stable" if bad == 0 and fastest < 1e3 else "UNSTABLE"
             print(
