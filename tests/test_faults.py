@@ -193,6 +193,40 @@ def test_a_second_run_into_a_locked_directory_is_refused_at_once(tmp_path):
     assert json.loads((run / "config.json").read_text())["iterations"] == 100000
 
 
+def test_a_signal_whose_interrupt_a_callback_swallows_still_stops_the_run(tmp_path):
+    """SIGTERM raises KeyboardInterrupt wherever the main thread is; a callback that swallows it (a
+    finaliser, a C extension's callback) must not leave the run going with the handler already in its
+    "stopping" phase (seen in CI: a SIGTERM'd run never exited)."""
+    from test_train import tiny_cfg
+
+    from warp_critic.cli import signals
+    from warp_critic.methods.ours import meta_train
+
+    swallowed = []
+
+    def swallow(info):
+        if info.iteration == 1:
+            try:
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(5)  # the handler runs here and raises
+            except KeyboardInterrupt:
+                swallowed.append(info.iteration)
+
+    previous = signals.install()
+    signals.running()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            meta_train(
+                tiny_cfg(tmp_path / "run", iterations=40), callbacks=[swallow], progress=False
+            )
+    finally:
+        signals.restore(previous)
+    assert swallowed == [1]
+    # it stopped at the end of the iteration that took the signal, and says so
+    assert [r["iteration"] for r in rows(tmp_path / "run")] == [0, 1]
+    assert not (tmp_path / "run" / ".lock").exists()
+
+
 def test_lock_is_refused_within_a_second_in_process(tmp_path):
     from warp_critic.core.errors import UserError
     from warp_critic.running.rundir import RunDir

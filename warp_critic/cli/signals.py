@@ -6,16 +6,20 @@ The handlers are installed first thing in :func:`warp_critic.cli.main.main`, bef
 * ``starting`` (imports, Warp start-up; nothing written yet): exit at once. Raising into an import
   that runs inside C++ (torch's, pybind11) would abort the process instead;
 * ``running`` (the command): raise ``KeyboardInterrupt``, so that a run closes its files, releases its
-  lock and says what it kept (the command's own one line); a second signal meanwhile is ignored;
+  lock and says what it kept (the command's own one line); a second signal meanwhile is ignored.
+  The request is also recorded (:mod:`warp_critic.core.interrupts`): a raise that lands in a callback
+  which swallows it is raised again at the run's next step;
 * ``exiting`` (after the command, while the interpreter shuts down): exit at once.
 
-This module imports only the standard library.
+This module imports only the standard library (and the stdlib-only ``core.interrupts``).
 """
 
 from __future__ import annotations
 
 import os
 import signal
+
+from warp_critic.core import interrupts
 
 EXIT_INTERRUPTED = 130
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
@@ -28,6 +32,7 @@ def _handler(signum, frame) -> None:
     global _phase
     if _phase == "running":
         _phase = "stopping"
+        interrupts.request()  # the loops raise again at their next step if this raise is swallowed
         raise KeyboardInterrupt
     if _phase == "stopping":
         return  # the first signal's clean-up is under way
@@ -51,6 +56,7 @@ def install() -> dict:
     if _phase in ("starting", "running", "stopping") and signal.getsignal(SIGNALS[0]) is _handler:
         return {}
     _phase, _said = "starting", False
+    interrupts.clear()
     return {s: signal.signal(s, _handler) for s in SIGNALS}
 
 
@@ -70,6 +76,7 @@ def restore(previous: dict) -> None:
     """Put the previous handlers back (an in-process call of ``main`` leaves nothing behind)."""
     global _phase
     _phase = "off"
+    interrupts.clear()
     for s, h in previous.items():
         signal.signal(s, h)
 

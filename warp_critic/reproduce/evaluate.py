@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from warp_critic.core import interrupts
 from warp_critic.core.errors import UserError
 from warp_critic.physics.scene import Variant
 
@@ -263,6 +264,7 @@ def evaluate(
                 before[i] = err0[start : start + n].reshape(jobs[i].G, inits).astype(np.float64)
                 start += n
             bar.update(1)
+            interrupts.check()  # a signal whose KeyboardInterrupt a callback swallowed
     finally:
         bar.close()
     return {

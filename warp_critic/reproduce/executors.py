@@ -33,6 +33,7 @@ from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from warp_critic.core import interrupts
 from warp_critic.core.errors import FieldError, UserError
 
 UNIT_FAULT_ENV = "WARP_CRITIC_UNIT_FAULT"  # tests: "<unit name>:<marker file>" kills its first try
@@ -108,6 +109,7 @@ def _worker_stop(signum, frame) -> None:
     global _STOPPING
     _STOPPING = True
     if _IN_UNIT:
+        interrupts.request()  # raised again at the unit's next step if this raise is swallowed
         raise KeyboardInterrupt
     os._exit(128 + signum)
 

@@ -27,6 +27,7 @@ from typing import Any
 
 import torch
 
+from warp_critic.core import interrupts
 from warp_critic.core.errors import DivergenceError, UserError
 from warp_critic.core.runtime import restore_rng, seed_everything, set_threads
 from warp_critic.running.config import check_fields
@@ -248,6 +249,7 @@ class Session:
                         self._checkpoint(r, it, state(i))
                 bar.set_description_str(f"{describe(rows[0])} {seconds:.2f}s/it", refresh=False)
                 bar.update(1)
+                interrupts.check()  # a signal whose KeyboardInterrupt a callback swallowed
         except KeyboardInterrupt as e:
             if isinstance(e, Interrupted):
                 raise

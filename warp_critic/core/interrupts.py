@@ -1,0 +1,40 @@
+"""A stop request that survives a swallowed ``KeyboardInterrupt``.
+
+A signal handler raises ``KeyboardInterrupt`` wherever the main thread happens to be. If that is a
+finaliser, a weakref callback or a C extension's callback, Python prints "Exception ignored in ..."
+and carries on: the run would go on forever with the handler already in its "stopping" phase (seen
+in CI: a SIGTERM'd meta-train blocked on a full stderr pipe took the signal inside such a callback).
+So a handler also records the request here, and the long loops (:mod:`warp_critic.running.loop`,
+the evaluation) call :func:`check` at each step boundary, which raises again.
+
+Standard library only (the CLI's signal handlers import it before torch and Warp).
+"""
+
+from __future__ import annotations
+
+_requested = False
+
+
+def request() -> None:
+    """A signal asked the process to stop (called by a signal handler)."""
+    global _requested
+    _requested = True
+
+
+def requested() -> bool:
+    return _requested
+
+
+def clear() -> None:
+    """Forget a request (a new in-process command starts)."""
+    global _requested
+    _requested = False
+
+
+def check() -> None:
+    """Raise ``KeyboardInterrupt`` if a stop was requested; a no-op otherwise."""
+    if _requested:
+        raise KeyboardInterrupt
+
+
+__all__ = ["request", "requested", "clear", "check"]
