@@ -18,6 +18,40 @@ def test_tune_draws_the_published_setting_first_without_repetition():
     assert tool.settings(6, seed=0) == drawn and tool.settings(6, seed=1) != drawn
 
 
+def test_reproduce_adopts_exactly_what_the_committed_baseline_search_adopts():
+    """``settings.TUNED`` against ``docs/paper/tuning/*.json``: for every scene and method whose
+    one-at-a-time search is complete there, the values that differ from the published setting in the
+    adopted setting; nothing where the search is incomplete or keeps the published setting."""
+    import json
+    from pathlib import Path
+
+    from warp_critic.reproduce.settings import TUNED
+
+    tool = load_tool("tune_baselines")
+    design = tool.one_at_a_time()
+    expected: dict = {}
+    for f in sorted((Path(__file__).parents[1] / "docs" / "paper" / "tuning").glob("*.json")):
+        data = json.loads(f.read_text())
+        if data["args"].get("design") != "one-at-a-time":
+            continue
+        keys = {(r["scene"], r["method"]) for r in data["rows"]}
+        for scene, method in sorted(keys):
+            mine = sorted(
+                (r for r in data["rows"] if (r["scene"], r["method"]) == (scene, method)),
+                key=lambda r: r["score"],
+            )
+            if not all(any(r["setting"] == d for r in mine) for d in design):
+                continue  # incomplete: nothing may be adopted from it
+            published = next(r for r in mine if r["setting"] == tool.PUBLISHED)
+            if tool.adopted(mine[0], published):
+                change = {
+                    k: v for k, v in mine[0]["setting"].items() if v != tool.PUBLISHED[k]
+                }
+                expected.setdefault(scene, {})[method] = change
+    assert expected, "no complete search committed"
+    assert TUNED == expected
+
+
 @pytest.mark.parametrize(
     "name, argv, words",
     [

@@ -12,7 +12,8 @@ Paper settings (non-quick):
   the same with the ``generalising`` values (relative goal input, random initial states: the closest
   setting whose critic generalises to unseen goals, ``docs/landscape.md``).
 * ``metatrain``: ours with the presets ``reacher`` and ``kuka-table1`` (:mod:`warp_critic.evaluation.presets`);
-  DDPG and Meta-Critic with their published defaults (presets ``ddpg`` / ``meta-critic``) on the SAME
+  DDPG and Meta-Critic with their published defaults (presets ``ddpg`` / ``meta-critic``), except the
+  values our search adopted (:data:`TUNED`), on the SAME
   task: the training-distribution fields of ours' preset (``start_std``, ``home_starts``) and ours'
   number of policy updates at meta-test (``inner_steps``, which also sizes the baselines' alpha
   search) -- so that the three methods meet the same goals, starts and number of updates.
@@ -52,6 +53,13 @@ TASK_FIELDS = ("start_std", "home_starts")
 BASELINE_ITERATIONS = {"reacher": 1600, "kuka": 1500}
 #: Baseline alpha searches every this many iterations (was every 10, at 300 iterations).
 BASELINE_CHECKPOINT_EVERY = 50
+#: The baselines' settings adopted from the committed search (``tools/tune_baselines.py``, its output in
+#: ``docs/paper/tuning/``): scene -> method -> the published values replaced, only where a complete
+#: one-at-a-time search found a setting that passes the tool's adoption rule (better than the published
+#: setting by more than half its seed spread). Reacher DDPG, 100 iterations, seeds 100-101: actor lr
+#: 1e-3 scored 0.0336 rad^2 against the published 0.0804 (per seed 0.0944, 0.0664). A test checks
+#: this table against the committed search.
+TUNED: dict[str, dict[str, dict[str, float]]] = {"reacher": {"ddpg": {"actor_lr": 1e-3}}}
 
 
 def _metatrain(quick: bool, seeds: list[int]) -> dict:
@@ -59,15 +67,14 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
     for scene, name in (("reacher", "reacher"), ("kuka", "kuka-table1")):
         ours = preset(name)
         task = {k: ours[k] for k in TASK_FIELDS if k in ours}
-        per = {
-            "ours": ours,
-            "ddpg": {**preset("ddpg"), **task, "inner_steps": ours.get("inner_steps", 1)},
-            "meta-critic": {
-                **preset("meta-critic"),
+        per = {"ours": ours}
+        for m in ("ddpg", "meta-critic"):
+            per[m] = {
+                **preset(m),
                 **task,
                 "inner_steps": ours.get("inner_steps", 1),
-            },
-        }
+                **TUNED.get(scene, {}).get(m, {}),
+            }
         for m in METHODS:
             per[m].pop("method", None)
             per[m]["record_every"] = 50
