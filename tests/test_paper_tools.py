@@ -44,9 +44,7 @@ def test_reproduce_adopts_exactly_what_the_committed_baseline_search_adopts():
                 continue  # incomplete: nothing may be adopted from it
             published = next(r for r in mine if r["setting"] == tool.PUBLISHED)
             if tool.adopted(mine[0], published):
-                change = {
-                    k: v for k, v in mine[0]["setting"].items() if v != tool.PUBLISHED[k]
-                }
+                change = {k: v for k, v in mine[0]["setting"].items() if v != tool.PUBLISHED[k]}
                 expected.setdefault(scene, {})[method] = change
     assert expected, "no complete search committed"
     assert TUNED == expected
