@@ -222,7 +222,7 @@ def test_a_signal_whose_interrupt_a_callback_swallows_still_stops_the_run(tmp_pa
     finally:
         signals.restore(previous)
     assert swallowed == [1]
-    # it stopped at the end of the iteration that took the signal, and says so
+    # it stopped at the end of the iteration that took the signal, and released its lock
     assert [r["iteration"] for r in rows(tmp_path / "run")] == [0, 1]
     assert not (tmp_path / "run" / ".lock").exists()
 

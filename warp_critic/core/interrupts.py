@@ -3,7 +3,7 @@
 A signal handler raises ``KeyboardInterrupt`` wherever the main thread happens to be. If that is a
 finaliser, a weakref callback or a C extension's callback, Python prints "Exception ignored in ..."
 and carries on: the run would go on forever with the handler already in its "stopping" phase (seen
-in CI: a SIGTERM'd meta-train blocked on a full stderr pipe took the signal inside such a callback).
+in CI: a SIGTERM'd meta-train printed its KeyboardInterrupt as ignored and kept training).
 So a handler also records the request here, and the long loops (:mod:`warp_critic.running.loop`,
 the evaluation) call :func:`check` at each step boundary, which raises again.
 
@@ -21,10 +21,6 @@ def request() -> None:
     _requested = True
 
 
-def requested() -> bool:
-    return _requested
-
-
 def clear() -> None:
     """Forget a request (a new in-process command starts)."""
     global _requested
@@ -37,4 +33,4 @@ def check() -> None:
         raise KeyboardInterrupt
 
 
-__all__ = ["request", "requested", "clear", "check"]
+__all__ = ["request", "clear", "check"]
