@@ -12,6 +12,7 @@ Usage::
     python tools/carry_stages.py restore docs/paper/stages runs/paper   # on the next machine
     warp-critic reproduce --out runs/paper                              # runs what is left
     python tools/carry_stages.py list docs/paper/stages
+    python tools/carry_stages.py publish runs/paper docs/paper          # the report, to commit
 """
 
 from __future__ import annotations
@@ -36,12 +37,25 @@ def main(argv: list[str] | None = None) -> int:
     r.add_argument("out", metavar="OUT", help="a reproduce output folder (created if new)")
     ls = sub.add_parser("list", help="the archived stages")
     ls.add_argument("archive", metavar="ARCHIVE")
+    pb = sub.add_parser(
+        "publish",
+        help="copy OUT's report, figures and the records of the stages it read into DEST",
+    )
+    pb.add_argument("out", metavar="OUT", help="a reproduce output folder with its report")
+    pb.add_argument("dest", metavar="DEST", help="the folder to commit (created if new)")
     args = p.parse_args(argv)
     from warp_critic.reproduce import carry
 
     try:
         if args.what == "list":
             print(carry.summary(Path(args.archive)))
+            return 0
+        if args.what == "publish":
+            names, pruned = carry.publish(Path(args.out), Path(args.dest))
+            print(
+                f"{PROG}: the report and {len(names)} stage record(s) written to {args.dest}"
+                + "".join(f"\n  removed the earlier report's {n}" for n in pruned)
+            )
             return 0
         if args.what == "save":
             names = carry.save(Path(args.out), Path(args.archive))

@@ -15,6 +15,9 @@ output folder on another machine, where ``reproduce`` then skips them and runs o
   output if new; its lock is held while copying). A stage ``out`` already has complete is skipped;
   one that ``out`` holds incomplete (started there) is refused, never overwritten.
 
+* :func:`publish` copies a finished report (``REPORT.md``, ``results.json``, figures, and the
+  records of the stages it read) into a folder to commit, such as ``docs/paper``.
+
 Each stage is copied into a temporary sibling directory and renamed into place, so an interrupted
 call leaves no half-copied stage behind.
 """
@@ -170,6 +173,74 @@ def restore(archive: Path, out: Path) -> list[str]:
         lock.release()
 
 
+#: what :func:`publish` copies of a stage the report read: its record, raw cells and figures
+PUBLISHED_SUFFIXES = (".json", ".png")
+
+
+def _published_record(d: Path) -> bool:
+    """Whether ``d`` is what :func:`publish` writes for a stage: a ``stage.json`` and nothing but
+    :data:`PUBLISHED_SUFFIXES` files (never a carried stage, which holds its runs)."""
+    if not (d / "stage.json").is_file():
+        return False
+    return all(p.is_dir() or p.suffix in PUBLISHED_SUFFIXES for p in d.rglob("*"))
+
+
+def publish(out: Path, dest: Path) -> tuple[list[str], list[str]]:
+    """Copy the report of ``out`` into ``dest``, for committing: ``REPORT.md``, ``results.json``,
+    ``figures/*.png`` and, of each stage the report read (``results.json``'s ``stages``), its
+    ``*.json`` and ``*.png`` files outside its runs (``stage.json``, the raw ``errors.json`` cells,
+    the landscapes), so every number in the report traces to a file in ``dest``.
+
+    ``dest``'s figures and stage records from an earlier report that this one did not read are
+    removed (they no longer match the report beside them); anything else in ``dest`` (a README,
+    carried stages, search rows) is left alone. Returns (stage dirs written, stage dirs removed)."""
+    from warp_critic.running.rundir import atomic_write_bytes
+
+    out, dest = Path(out), Path(dest)
+    if not (out / MARKER).is_file():
+        raise UserError(f"{out}: not a reproduce output (no {MARKER})")
+    try:
+        results = json.loads((out / "results.json").read_text())
+        stages = sorted(v["dir"] for v in results["stages"].values())
+        report = (out / "REPORT.md").read_bytes()
+    except FileNotFoundError as e:
+        raise UserError(f"{e.filename}: missing; run reproduce to write its report first") from None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        raise UserError(f"{out / 'results.json'}: not a reproduce report's results") from None
+    for name in stages:
+        if Path(name).name != name or not (out / name / "stage.json").is_file():
+            raise UserError(f"{out / 'results.json'}: names stage {name!r}, which {out} lacks")
+    try:
+        dest.mkdir(parents=True, exist_ok=True)
+        figures = sorted((out / "figures").glob("*.png"))
+        (dest / "figures").mkdir(exist_ok=True)
+        keep = {p.name for p in figures}
+        for old in (dest / "figures").glob("*.png"):
+            if old.name not in keep:
+                old.unlink()
+        for png in figures:
+            atomic_write_bytes(dest / "figures" / png.name, png.read_bytes())
+        for name in stages:
+            for path in sorted((out / name).rglob("*")):
+                rel = path.relative_to(out / name)
+                if rel.parts[0] == "run" or path.is_dir() or path.suffix not in PUBLISHED_SUFFIXES:
+                    continue
+                (dest / name / rel).parent.mkdir(parents=True, exist_ok=True)
+                atomic_write_bytes(dest / name / rel, path.read_bytes())
+        pruned = [
+            d.name
+            for d in sorted(dest.iterdir())
+            if d.is_dir() and d.name not in stages and _published_record(d)
+        ]
+        for name in pruned:
+            shutil.rmtree(dest / name)
+        atomic_write_bytes(dest / "results.json", (out / "results.json").read_bytes())
+        atomic_write_bytes(dest / "REPORT.md", report)  # last: a report only beside its files
+    except OSError as e:
+        raise UserError(f"{dest}: cannot write ({e.strerror or e})") from None
+    return stages, pruned
+
+
 def summary(archive: Path) -> str:
     """One line per archived stage: name, group, seconds (for the tool's listing)."""
     rows = [
@@ -179,4 +250,4 @@ def summary(archive: Path) -> str:
     return "\n".join(rows) if rows else f"{archive}: no complete stage"
 
 
-__all__ = ["TRAINING_ONLY", "complete_stages", "save", "restore", "summary"]
+__all__ = ["TRAINING_ONLY", "complete_stages", "save", "restore", "publish", "summary"]

@@ -87,6 +87,7 @@ def maps_section(d: Draft) -> None:
             }
         )
         for fig_no, kind, png in ((5, "mass", p5), (6, "length", p6)):
+            kinds = {"mass": "masses", "length": "lengths"}[kind]
             means = grid_means[kind]
             ours_mean = next((v for k, v in means.items() if "(ours)" in k), None)
             others = {k: v for k, v in means.items() if "(ours)" not in k}
@@ -95,7 +96,7 @@ def maps_section(d: Draft) -> None:
                 (
                     f"Figure {fig_no}: reacher {kind}",
                     png,
-                    f"Figure {fig_no}: MSE at the training goals over the {kind}s of both links (red cross: "
+                    f"Figure {fig_no}: MSE at the training goals over the {kinds} of both links (red cross: "
                     f"as trained; one colour scale); grid mean: "
                     + ", ".join(f"{k.replace('this run: ', '')} {fmt(v)}" for k, v in means.items())
                     + ".",
@@ -106,7 +107,7 @@ def maps_section(d: Draft) -> None:
                     "claim": f"Figure {fig_no}: ours generalises to "
                     + ("heavier / lighter links" if kind == "mass" else "new link lengths")
                     + " better than the baselines",
-                    "paper": f"2-D map over the {kind}s of both links; ours lowest",
+                    "paper": f"2-D map over the {kinds} of both links; ours lowest",
                     "ours": "grid mean MSE: "
                     + ", ".join(
                         f"{k.replace('this run: ', '')} {fmt(v)}" for k, v in means.items()
