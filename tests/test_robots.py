@@ -225,6 +225,24 @@ def test_coupled_pushes_are_capped_by_hand(two_link, monkeypatch):
     assert derive.torque_bounds(scene, goals)[0] < 50.0 * _hand_mass_diag(home[1])[0] + hold[0]
 
 
+def test_derived_torques_follow_the_runs_gravity_by_hand(two_link, tmp_path):
+    """--gravity 0 (a torque-mode arm): the bounds lose the holding share, min(effort, push), and a
+    run under it trains with those bounds; the defaults at 9.81 stay as they were."""
+    import json
+
+    scene = load_robot(two_link)
+    push = np.minimum([E1, E2], 50.0 * _hand_mass_diag(scene.home[1]))
+    at_zero = scene.defaults_at(0.0)
+    np.testing.assert_allclose(at_zero["max_torque"], push, rtol=1e-4)
+    assert at_zero["gravity"] == 0.0 and at_zero["goals"] == scene.defaults["goals"]
+    assert scene.defaults_at(9.81) == scene.defaults
+    assert at_zero["max_torque"][0] < scene.defaults["max_torque"][0]  # the held shoulder
+    _first_iteration(str(two_link), tmp_path / "run", "--gravity", "0")
+    config = json.loads((tmp_path / "run" / "config.json").read_text())
+    np.testing.assert_allclose(config["max_torque"], at_zero["max_torque"])
+    assert config["derived_defaults"]["max_torque"]["value"] == config["max_torque"]
+
+
 def test_urdf_limit_gains_are_critically_damped_springs_by_hand(two_link):
     """ke = m w^2, kd = 2 m w with m = 1 / (M^-1(home))_jj, the inertia a joint moves with the
     other free; a URDF authors no gains (newton would give 1e4 and 10 to every joint)."""

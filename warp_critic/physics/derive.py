@@ -13,8 +13,8 @@ torque (``M qdd = tau - g(q)`` at rest):
   ``d_j = min(r_j / 4, GOAL_REACH)``, clipped to the limits;
 * torque bound ``tau_j = min(e_j, c p_j + max |g_j|)`` with the push ``p_j = min(e_j, A_MAX *
   M_jj(q_h))``: joint ``j`` alone (the others held) accelerates by at most ``A_MAX`` rad/s^2 beyond
-  holding itself against gravity at the home pose and every goal (``max |g_j|`` over them; gravity
-  at its default magnitude). A joint whose effort limit binds first accelerates less. The pushes
+  holding itself against gravity at the home pose and every goal (``max |g_j|`` over them, under the
+  run's gravity: ``--gravity 0`` drops the holding share, and the probe below runs at it too). A joint whose effort limit binds first accelerates less. The pushes
   together are capped by ``c = min(1, A_COUPLED / max_i sum_j |M^-1(q_h)|_ij p_j)``: no combination
   of signs accelerates a joint by more than ``A_COUPLED`` at the home pose. That matters where
   joint axes line up at home (the Panda's joints 1 and 3 at mid-range: opposite pushes spin the
@@ -82,7 +82,7 @@ RULES: dict[str, str] = {
     "home": "the file's own non-zero initial pose inside the limits, else mid-range (0 for continuous joints)",
     "goals": f"{GOALS} seeded draws U[home - d, home + d], d = min(range/4, {GOAL_REACH}), inside the limits",
     "max_torque": f"min(effort limit, c x min(effort limit, {A_MAX:g} rad/s^2 x M_jj(home)) + max |gravity torque| "
-    f"over home and goals), c <= 1 so that no sign combination of those pushes accelerates a joint "
+    f"over home and goals under the run's gravity), c <= 1 so that no sign combination of those pushes accelerates a joint "
     f"by more than {A_COUPLED:g} rad/s^2 at home",
     "dt": f"control period {CONTROL_PERIOD} s halved at least {MIN_HALVINGS} times and until {PROBE_WORLDS} rollouts under random +-max_torque "
     f"(signs redrawn every {PROBE_HOLD} steps) stay finite "
@@ -249,11 +249,13 @@ def time_step(scene, max_torque: np.ndarray, gravity: float = GRAVITY) -> tuple[
     )
 
 
-def derive_defaults(scene) -> dict[str, Any]:
-    """The training defaults of ``scene`` (``Scene.defaults`` keys) by the rules of this module."""
+def derive_defaults(scene, gravity: float = GRAVITY) -> dict[str, Any]:
+    """The training defaults of ``scene`` (``Scene.defaults`` keys) by the rules of this module, at
+    ``gravity`` [m/s^2]: the torque bounds hold the arm against that gravity, and the probe runs
+    under it (``--gravity 0``: no holding share, a torque-mode arm's bounds)."""
     goals = draw_goals(scene)
-    max_torque = torque_bounds(scene, goals)
-    dt, substeps = time_step(scene, max_torque)
+    max_torque = torque_bounds(scene, goals, gravity)
+    dt, substeps = time_step(scene, max_torque, gravity)
     # short decimals for config.json and an imported scene, never past a limit by rounding
     lo, hi = limits(scene)
     goals = np.clip([[round(float(v), 6) for v in g] for g in goals], lo, hi)
@@ -263,7 +265,7 @@ def derive_defaults(scene) -> dict[str, Any]:
         "max_torque": [float(v) for v in torques],
         "dt": dt,
         "substeps": substeps,
-        "gravity": GRAVITY,
+        "gravity": float(gravity),
         **KUKA,
     }
 

@@ -25,6 +25,7 @@ see its angle wrapped to ``[-pi, pi)`` (:class:`warp_critic.learning.networks.No
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import threading
@@ -314,3 +315,16 @@ class RobotScene(Scene):
     def _defaults(self, value: dict[str, Any]) -> None:  # Scene.__init__ sets {}: derive instead
         self._derived_values = value or None
         self._derive_lock = threading.Lock()
+        self._at_gravity: dict[float, dict[str, Any]] = {}
+
+    def defaults_at(self, gravity: float) -> dict[str, Any]:
+        """The derived defaults (a copy) for a run under ``gravity`` [m/s^2] instead of the rules'
+        9.81: the torque bounds and the time step depend on it (``derive.derive_defaults``)."""
+        from warp_critic.physics import derive
+
+        if float(gravity) == derive.GRAVITY:
+            return self.defaults
+        with self._derive_lock:
+            if float(gravity) not in self._at_gravity:
+                self._at_gravity[float(gravity)] = derive.derive_defaults(self, float(gravity))
+        return copy.deepcopy(self._at_gravity[float(gravity)])
