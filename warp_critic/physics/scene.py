@@ -139,6 +139,11 @@ class Scene:
         """The training defaults authored in the file (a fresh deep copy; see the class docstring)."""
         return copy.deepcopy(self._defaults)
 
+    def defaults_at(self, gravity: float) -> dict[str, Any]:
+        """The defaults for a run under ``gravity`` [m/s^2]: an authored scene's are the file's,
+        whatever the gravity (a robot file's derived ones depend on it: ``RobotScene``)."""
+        return self.defaults
+
     def __repr__(self) -> str:
         return f"Scene({self.name!r}, dof={self.dof}, ee={self.body_names[self.ee_body]!r})"
 
