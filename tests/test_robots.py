@@ -8,8 +8,10 @@ arm whose derived defaults are computed here by hand.
 from __future__ import annotations
 
 import math
+import sysconfig
 from pathlib import Path
 
+import newton.examples
 import numpy as np
 import pytest
 import torch
@@ -19,30 +21,15 @@ from warp_critic.core.errors import SceneError
 from warp_critic.physics import derive
 from warp_critic.physics.robot import RobotOptions, load_robot
 
-NEWTON_ASSETS = None
-ROBOT_DATA = None
-try:
-    import newton.examples
+# newton ships its example assets and the test extra installs example-robot-data: no fallbacks
+NEWTON_ASSETS = Path(newton.examples.get_asset("cartpole.urdf")).parent
+ROBOT_DATA = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots"
 
-    NEWTON_ASSETS = Path(newton.examples.get_asset("cartpole.urdf")).parent
-except Exception:  # pragma: no cover - newton without its examples
-    pass
-try:
-    import importlib.util
-
-    spec = importlib.util.find_spec("cmeel")
-    if spec is not None:
-        import sysconfig
-
-        base = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix" / "share"
-        if (base / "example-robot-data" / "robots").is_dir():
-            ROBOT_DATA = base / "example-robot-data" / "robots"
-except Exception:  # pragma: no cover
-    pass
-
-needs_assets = pytest.mark.skipif(NEWTON_ASSETS is None, reason="newton example assets missing")
+needs_assets = pytest.mark.skipif(
+    not NEWTON_ASSETS.is_dir(), reason="newton example assets missing"
+)
 needs_robot_data = pytest.mark.skipif(
-    ROBOT_DATA is None, reason="example-robot-data not installed (pip install -e '.[test]')"
+    not ROBOT_DATA.is_dir(), reason="example-robot-data not installed (pip install -e '.[test]')"
 )
 PANDA_ARM = ",".join(f"panda_joint{i}" for i in range(1, 8))
 

@@ -163,10 +163,9 @@ class TaskConfig(SerializableConfig):
 
     def fill_defaults(self, scene: Scene) -> Self:
         """A copy with the ``None`` fields filled from the scene's content, then the generic defaults."""
-        authored = dict(getattr(scene, "defaults", {}) or {})
         gravity = getattr(self, "gravity", None)
-        if getattr(scene, "derived", False) and gravity is not None:
-            authored = scene.defaults_at(gravity)  # derived bounds and dt follow the run's gravity
+        # a robot file's derived torque bounds and dt follow the run's gravity (Scene.defaults_at)
+        authored = scene.defaults if gravity is None else scene.defaults_at(gravity)
         filled: dict[str, Any] = {}
         for name in self.scene_fields:
             if getattr(self, name) is not None:
