@@ -182,6 +182,39 @@ def test_resume_is_exact_on_cpu(tmp_path, method):
     assert a == b
 
 
+def test_aux_grad_ratio_and_aux_alive_by_hand():
+    from warp_critic.methods.meta_critic import aux_alive, aux_grad_ratio
+
+    g_main = (torch.tensor([3.0, 0.0]), torch.tensor([[4.0]]))  # norm 5
+    g_aux = (torch.tensor([0.0, 0.6]), torch.tensor([[0.8]]))  # norm 1
+    assert aux_grad_ratio(g_main, g_aux, 2.0) == pytest.approx(0.4)
+    assert aux_grad_ratio(g_main, tuple(torch.zeros_like(g) for g in g_aux), 1.0) == 0.0
+    warmup = [{"task_loss": 1.0}] * 4  # no actor updates yet: not counted
+    rows = [{"aux_loss": 0.7, "aux_grad_ratio": r} for r in [1, 1, 1, 1, 1, 1, 1e-6, 1e-7]]
+    assert aux_alive(warmup + rows) == 0.5  # the last quarter of the 8 actor iterations
+    assert aux_alive(warmup + rows[:-1] + [{"aux_loss": 0.7, "aux_grad_ratio": 0.0}]) == 0.5
+    old = [{"aux_loss": 0.69, "meta_improvement": m} for m in [1e-3, 2e-4, 0.0, 0.0]]
+    assert aux_alive(old) == 0.0  # written before the ratio: judged by meta_improvement
+    assert aux_alive(old[:2] + old[:1] + old[1:2]) == 1.0
+    assert aux_alive(warmup) is None
+
+
+def test_meta_critic_logs_the_aux_ratio_and_warns_when_h_omega_no_longer_moves_the_actor(
+    tmp_path, capsys
+):
+    live = train_meta_critic(tiny_cfg(tmp_path / "a", "meta-critic"), progress=False, record=False)
+    ratios = [r["aux_grad_ratio"] for r in live.metrics if "aux_grad_ratio" in r]
+    assert len(ratios) == 2 and all(r > 1e-6 for r in ratios), ratios  # a fresh h_omega moves it
+    assert "trained as DDPG" not in capsys.readouterr().err
+    # aux weight 0: h_omega is still trained, but its gradient never reaches the actor
+    dead = train_meta_critic(
+        tiny_cfg(tmp_path / "b", "meta-critic", aux_weight=0.0), progress=False, record=False
+    )
+    assert all(r["aux_grad_ratio"] == 0.0 for r in dead.metrics if "aux_loss" in r)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(tmp_path / "b") in err[0] and "trained as DDPG" in err[0], err
+
+
 # ------------------------------------------------------------------------------------------------
 # command line
 # ------------------------------------------------------------------------------------------------

@@ -18,6 +18,20 @@ def test_tune_draws_the_published_setting_first_without_repetition():
     assert tool.settings(6, seed=0) == drawn and tool.settings(6, seed=1) != drawn
 
 
+def test_tune_one_at_a_time_adds_meta_critics_virtual_step_and_adopts_only_a_live_h_omega():
+    tool = load_tool("tune_baselines")
+    ddpg, mc = tool.one_at_a_time("ddpg"), tool.one_at_a_time("meta-critic")
+    assert len(ddpg) == 7 and ddpg[0] == tool.PUBLISHED and mc[:7] == ddpg
+    assert [s.get("virtual_lr") for s in mc[7:]] == [1e-3, 1e-2]
+    row = {"method": "meta-critic", "setting": mc[7]}
+    assert not tool.eligible_row(row)  # no record of h_omega: not adoptable
+    assert not tool.eligible_row({**row, "aux_alive": [1.0, 0.0]})  # one seed's h_omega collapsed
+    assert not tool.eligible_row({**row, "aux_alive": [0.4, 0.5]})
+    assert not tool.eligible_row({**row, "aux_alive": [1.0, None]})
+    assert tool.eligible_row({**row, "aux_alive": [0.5, 0.6]})
+    assert tool.eligible_row({"method": "ddpg", "setting": ddpg[1]})
+
+
 def test_reproduce_adopts_exactly_what_the_committed_baseline_search_adopts():
     """``settings.TUNED`` against ``docs/paper/tuning/*.json``: for every scene and method whose
     one-at-a-time search is complete there, the values that differ from the published setting in the
@@ -28,7 +42,6 @@ def test_reproduce_adopts_exactly_what_the_committed_baseline_search_adopts():
     from warp_critic.reproduce.settings import TUNED
 
     tool = load_tool("tune_baselines")
-    design = tool.one_at_a_time()
     expected: dict = {}
     for f in sorted((Path(__file__).parents[1] / "docs" / "paper" / "tuning").glob("*.json")):
         data = json.loads(f.read_text())
@@ -40,11 +53,13 @@ def test_reproduce_adopts_exactly_what_the_committed_baseline_search_adopts():
                 (r for r in data["rows"] if (r["scene"], r["method"]) == (scene, method)),
                 key=lambda r: r["score"],
             )
+            design = tool.one_at_a_time(method)
             if not all(any(r["setting"] == d for r in mine) for d in design):
                 continue  # incomplete: nothing may be adopted from it
             published = next(r for r in mine if r["setting"] == tool.PUBLISHED)
-            if tool.adopted(mine[0], published):
-                change = {k: v for k, v in mine[0]["setting"].items() if v != tool.PUBLISHED[k]}
+            top = next((r for r in mine if tool.eligible_row(r)), published)
+            if tool.adopted(top, published):
+                change = {k: v for k, v in top["setting"].items() if v != tool.PUBLISHED.get(k)}
                 expected.setdefault(scene, {})[method] = change
     assert expected, "no complete search committed"
     assert TUNED == expected

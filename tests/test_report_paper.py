@@ -60,3 +60,28 @@ def test_error_at_budget_reads_the_curve_at_equal_steps():
     res = _result({"0": [1.0, 0.5, 0.2, 0.1]}, per=100)
     assert rp.error_at_budget(res, 250) == [0.5]
     assert rp.error_at_budget(res, 50) == [1.0]
+
+
+def test_meta_critic_aux_alive_from_the_record_else_the_run_directory(tmp_path):
+    import json
+    from types import SimpleNamespace
+
+    from warp_critic.reproduce.report_training import aux_alive_of, aux_alive_sentence
+
+    (tmp_path / "run" / "seed1").mkdir(parents=True)
+    rows = [{"aux_loss": 0.69, "meta_improvement": m} for m in [1e-3, 1e-4, 0.0, 0.0]]
+    (tmp_path / "run" / "seed1" / "metrics.jsonl").write_text(
+        "".join(json.dumps(r) + "\n" for r in rows)
+    )
+    seeds = {
+        "0": {"run_dir": "run/seed0", "aux_alive": 1.0},  # recorded by the stage
+        "1": {"run_dir": "run/seed1"},  # read from its metrics
+        "2": {"run_dir": "run/seed2"},  # neither: not recorded
+    }
+    rec = SimpleNamespace(dir=tmp_path, data={"result": {"seeds": seeds}})
+    alive = aux_alive_of(rec)
+    assert alive == [1.0, 0.0, None]
+    line = aux_alive_sentence(alive)
+    assert "100%, 0%, not recorded" in line and "In 1 of 2 recorded seeds" in line
+    assert "stayed alive in every recorded seed" in aux_alive_sentence([0.9, 1.0])
+    assert "not recorded for these seeds" in aux_alive_sentence([None, None])

@@ -14,7 +14,16 @@ Grid (a few values around the published ones, each a factor of 2-10):
 * ``noise_std`` 0.1, 0.2 (published), 0.4 -- exploration noise, fraction of the torque bound;
 * ``actor_lr`` 1e-4 (published), 1e-3; ``critic_lr`` 3e-4, 1e-3 (published);
 * ``updates_per_iteration`` horizon (published: 50), 2 x horizon;
-* ``reward_scale`` 1 (published), 10.
+* ``reward_scale`` 1 (published), 10;
+* Meta-Critic only, in the one-at-a-time design: ``virtual_lr`` 1e-3, 1e-2 (published: the actor
+  lr, 1e-4), the SGD step of the two virtual actor updates whose difference trains ``h_omega``.
+
+Meta-Critic's auxiliary loss can collapse to a constant (every published-setting run does within
+a few iterations: the virtual steps of size 1e-4 give a meta-gradient far below ``h_omega``'s weight
+decay), after which the run trains as DDPG. Each Meta-Critic row therefore records ``aux_alive``
+(:func:`~warp_critic.methods.meta_critic.aux_alive`: the fraction of the last quarter's
+iterations in which ``h_omega`` still moved the actor), and only settings with ``aux_alive`` of at
+least 0.5 in every seed can be adopted for Meta-Critic: a collapsed one is DDPG under another name.
 
 Prints one line per setting, sorted by score, and the best, and whether it is adopted
 (:data:`ADOPT_RULE`: better than the published setting by more than the seed noise); writes everything to ``--out`` as JSON,
@@ -50,6 +59,7 @@ GRID = {
     "updates_per_iteration": [1.0, 2.0],  # x the horizon
     "reward_scale": [1.0, 10.0],
 }
+METHOD_GRID = {"meta-critic": {"virtual_lr": [1e-3, 1e-2]}}  # published: None (= the actor lr)
 PUBLISHED = {
     "noise_std": 0.2,
     "actor_lr": 1e-4,
@@ -59,11 +69,14 @@ PUBLISHED = {
 }
 
 
-def one_at_a_time() -> list[dict]:
-    """The published setting, then each single change of one value to another of :data:`GRID`."""
+def one_at_a_time(method: str) -> list[dict]:
+    """The published setting, then each single change of one value to another of :data:`GRID`,
+    then (Meta-Critic) each of its own :data:`METHOD_GRID` values added to the published setting."""
     out = [dict(PUBLISHED)]
     for key, values in GRID.items():
         out += [{**PUBLISHED, key: v} for v in values if v != PUBLISHED[key]]
+    for key, values in METHOD_GRID.get(method, {}).items():
+        out += [{**PUBLISHED, key: v} for v in values]
     return out
 
 
@@ -78,7 +91,7 @@ def settings(n: int, seed: int) -> list[dict]:
 
 def train_one(scene: str, method: str, setting: dict, args, out: Path) -> dict:
     from warp_critic.methods.ddpg import train_ddpg
-    from warp_critic.methods.meta_critic import train_meta_critic
+    from warp_critic.methods.meta_critic import aux_alive, train_meta_critic
     from warp_critic.physics.scene import load_scene
     from warp_critic.reproduce.metatrain import make_config, scene_file
     from warp_critic.reproduce.settings import default_settings
@@ -105,6 +118,9 @@ def train_one(scene: str, method: str, setting: dict, args, out: Path) -> dict:
         losses = [float(x["task_loss"]) for x in r.metrics]
         tail = losses[-max(1, len(losses) // 4) :]
         scores.append(sum(tail) / len(tail))
+    extra = {}
+    if method == "meta-critic":
+        extra["aux_alive"] = [aux_alive(r.metrics) for r in result.seeds or [result]]
     return {
         "scene": scene,
         "method": method,
@@ -115,6 +131,7 @@ def train_one(scene: str, method: str, setting: dict, args, out: Path) -> dict:
         "score": sum(scores) / len(scores),
         "per_seed": scores,
         "seconds": seconds,
+        **extra,
     }
 
 
@@ -130,7 +147,8 @@ def main(argv=None) -> int:
         choices=("draw", "one-at-a-time"),
         default="draw",
         help="draw: the published setting and --configs - 1 seeded draws from the grid; "
-        "one-at-a-time: the published setting and each single change of one value (7 settings)",
+        "one-at-a-time: the published setting and each single change of one value (7 settings; "
+        "9 for Meta-Critic, with its virtual step)",
     )
     p.add_argument("--iterations", type=int, default=120)
     p.add_argument("--seeds", type=comma_list(int), default=[100, 101])
@@ -151,10 +169,11 @@ def main(argv=None) -> int:
     out = Path(args.out)
     try:
         rows = _done_rows(out)
+        _backfill_alive(out, rows)
         for scene in args.scenes:
             for method in args.methods:
                 chosen = (
-                    one_at_a_time()
+                    one_at_a_time(method)
                     if args.design == "one-at-a-time"
                     else settings(args.configs, args.draw_seed)
                 )
@@ -162,10 +181,7 @@ def main(argv=None) -> int:
                     key = (scene, method, setting, args.iterations, list(args.seeds))
                     if any(_key(r) == key for r in rows):
                         continue  # scored by an earlier call
-                    run = out.parent / (
-                        f"{scene}-{method}-{args.iterations}it-"
-                        + "-".join(f"{v:g}" for v in setting.values())
-                    )
+                    run = _run_dir(out, scene, method, args.iterations, setting)
                     row = train_one(scene, method, setting, args, run)
                     rows.append(row)
                     _write(out, args, rows, {})
@@ -197,13 +213,17 @@ def main(argv=None) -> int:
             if published is None:
                 print(f"\n{scene} {method}: the published setting is not scored yet")
                 continue
-            adopt = adopted(mine[0], published)
-            best[f"{scene}/{method}"] = {"best": mine[0], "published": published, "adopt": adopt}
+            eligible = [r for r in mine if eligible_row(r)]
+            top = eligible[0] if eligible else published
+            adopt = adopted(top, published)
+            best[f"{scene}/{method}"] = {"best": top, "published": published, "adopt": adopt}
             print(f"\n{scene} {method}: sorted by score (rad^2, lower is better)")
             for r in mine:
-                print(f"  {r['score']:.4f}  {r['setting']}")
+                alive = r.get("aux_alive")
+                note = "" if alive is None else f"  h_omega alive {_mean(alive):.0%}"
+                print(f"  {r['score']:.4f}  {r['setting']}{note}")
             print(
-                f"  best {mine[0]['setting']} {mine[0]['score']:.4f} vs published "
+                f"  best eligible {top['setting']} {top['score']:.4f} vs published "
                 f"{published['score']:.4f}: adopt {'the best' if adopt else 'the published'} "
                 f"setting (rule: {ADOPT_RULE})"
             )
@@ -213,8 +233,47 @@ def main(argv=None) -> int:
 
 ADOPT_RULE = (
     "a setting replaces the published one when its score is lower by more than half the spread "
-    "of the published setting's per-seed scores"
+    "of the published setting's per-seed scores; for Meta-Critic only among settings whose "
+    "h_omega stayed alive (aux_alive >= 0.5 in every seed)"
 )
+
+
+def eligible_row(row: dict) -> bool:
+    """Whether a row may be adopted: any DDPG row; a Meta-Critic row only where ``h_omega`` was
+    alive in at least half of the last quarter's iterations, in every one of its seeds (a row
+    without that record, its runs gone, is not eligible)."""
+    if row["method"] != "meta-critic":
+        return True
+    alive = row.get("aux_alive")
+    return bool(alive) and None not in alive and min(alive) >= 0.5
+
+
+def _mean(xs: list) -> float:
+    vals = [float(x) for x in xs if x is not None]
+    return sum(vals) / len(vals) if vals else float("nan")
+
+
+def _run_dir(out: Path, scene: str, method: str, iterations: int, setting: dict) -> Path:
+    return out.parent / (
+        f"{scene}-{method}-{iterations}it-" + "-".join(f"{v:g}" for v in setting.values())
+    )
+
+
+def _backfill_alive(out: Path, rows: list[dict]) -> None:
+    """Give Meta-Critic rows scored before ``aux_alive`` was recorded their value, read from
+    their runs' metrics where those are still on disk."""
+    from warp_critic.methods.meta_critic import aux_alive
+
+    for r in rows:
+        if r["method"] != "meta-critic" or "aux_alive" in r:
+            continue
+        run = _run_dir(out, r["scene"], r["method"], r["iterations"], r["setting"])
+        files = [run / f"seed{s}" / "metrics.jsonl" for s in r["seeds"]]
+        if all(f.is_file() for f in files):
+            r["aux_alive"] = [
+                aux_alive([json.loads(line) for line in f.read_text().splitlines() if line])
+                for f in files
+            ]
 
 
 def adopted(best: dict, published: dict) -> bool:

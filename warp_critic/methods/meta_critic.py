@@ -38,6 +38,7 @@ import torch
 from torch import nn
 from torch.func import functional_call
 
+from warp_critic.core.errors import warn
 from warp_critic.learning.networks import Normalizer
 from warp_critic.methods.baseline import train_baseline
 from warp_critic.methods.baseline_config import BaselineConfig
@@ -67,6 +68,42 @@ class AuxiliaryLoss(_GoalInput):
     ) -> torch.Tensor:
         x = torch.cat([self.obs(q, qd, goal), tau / self.max_torque], dim=-1)
         return self.net(x).squeeze(-1)
+
+
+def aux_grad_ratio(
+    g_main: tuple[torch.Tensor, ...], g_aux: tuple[torch.Tensor, ...], w: float
+) -> float:
+    """``||w grad_phi h_omega|| / ||grad_phi L_main||`` over all actor parameters: how much the
+    auxiliary loss moves the actor, relative to DDPG's own gradient.
+
+    0 means ``h_omega`` no longer depends on the actor's action: it has collapsed to a constant
+    (every ReLU dead, or the softplus saturated) and the actor update is plain DDPG. Every run
+    logs it, so a collapse is visible in the metrics and in the run's summary line.
+    """
+    with torch.no_grad():
+        aux = torch.sqrt(sum((ga.detach() ** 2).sum() for ga in g_aux))
+        main = torch.sqrt(sum((gm**2).sum() for gm in g_main))
+        return float(w * aux / main.clamp_min(torch.finfo(main.dtype).tiny))
+
+
+ALIVE_RATIO = 1e-6
+"""A Meta-Critic update whose :func:`aux_grad_ratio` is below this is counted as DDPG's."""
+
+
+def aux_alive(metrics: list[dict]) -> float | None:
+    """The fraction of the last quarter of a run's iterations in which ``h_omega`` still moved the
+    actor (``aux_grad_ratio`` of at least :data:`ALIVE_RATIO`); ``None`` for a run that logged no
+    ratio. Runs written before the ratio was logged are judged by ``meta_improvement``: a collapsed
+    ``h_omega`` makes the two virtual steps equal, so exactly 0."""
+    rows = [m for m in metrics if "aux_loss" in m]
+    if not rows:
+        return None
+    tail = rows[-max(1, len(rows) // 4) :]
+    if "aux_grad_ratio" in tail[0]:
+        alive = [float(m["aux_grad_ratio"]) >= ALIVE_RATIO for m in tail]
+    else:
+        alive = [float(m["meta_improvement"]) != 0.0 for m in tail]
+    return sum(alive) / len(alive)
 
 
 class MetaCriticAgent(DDPGAgent):
@@ -125,6 +162,7 @@ class MetaCriticAgent(DDPGAgent):
             "aux_loss": aux.item(),
             "meta_loss": meta.item(),
             "meta_improvement": (val_old - val_new).item(),
+            "aux_grad_ratio": aux_grad_ratio(g_main, g_aux, w),
         }
 
     def state_dict(self) -> dict:
@@ -140,4 +178,12 @@ class MetaCriticAgent(DDPGAgent):
 
 def train_meta_critic(cfg: BaselineConfig, **kwargs) -> TrainResult:
     """Train (or resume) Meta-Critic; ``kwargs`` go to :func:`~warp_critic.methods.baseline.train_baseline`."""
-    return train_baseline(replace(cfg, method="meta-critic"), MetaCriticAgent, **kwargs)
+    result = train_baseline(replace(cfg, method="meta-critic"), MetaCriticAgent, **kwargs)
+    for r in result.seeds or [result]:
+        alive = aux_alive(r.metrics)
+        if alive is not None and alive < 0.5:
+            warn(
+                f"{r.run_dir}: h_omega moved the actor in only {alive:.0%} of the last quarter's "
+                "iterations (aux_grad_ratio < 1e-6): this Meta-Critic run trained as DDPG"
+            )
+    return result

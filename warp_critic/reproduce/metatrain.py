@@ -112,7 +112,7 @@ def run_metatrain_stage(
     progress: bool = True,
 ) -> dict:
     from warp_critic.methods.ddpg import train_ddpg
-    from warp_critic.methods.meta_critic import train_meta_critic
+    from warp_critic.methods.meta_critic import aux_alive, train_meta_critic
     from warp_critic.methods.ours import meta_train
     from warp_critic.running.config import filled
 
@@ -151,6 +151,8 @@ def run_metatrain_stage(
             # each is the whole batch's time for that iteration)
             "seconds_each": [float(x.get("seconds", 0.0)) for x in rows],
         }
+        if method == "meta-critic":  # whether h_omega still moved the actor, or it trained as DDPG
+            per_seed[str(seed)]["aux_alive"] = aux_alive(rows)
     first = result.seeds[0].config
     assert first is not None
     return {

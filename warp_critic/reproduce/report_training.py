@@ -43,6 +43,10 @@ def metatrain_section(d: Draft) -> None:
                 ],
             }
         md.append("")
+        if "meta-critic" in got:
+            alive = aux_alive_of(got["meta-critic"])
+            results["metatrain"][f"{scene}/meta-critic"]["aux_alive"] = alive
+            md += [aux_alive_sentence(alive), ""]
         lines, levels = rp.steps_table(got)
         budget = min(s["env_steps"] for s in summary.values())
         at_budget = {m: rp.error_at_budget(got[m].data["result"], budget) for m in got}
@@ -99,3 +103,47 @@ def metatrain_section(d: Draft) -> None:
         else:
             sentence = f"Figure 3 ({scene}): training curves of the methods that ran."
         figures.append((f"Figure 3: meta-training {scene}", png, sentence))
+
+
+def aux_alive_of(rec) -> list[float | None]:
+    """Per seed, the fraction of the last quarter's iterations in which Meta-Critic's ``h_omega``
+    still moved the actor (:func:`~warp_critic.methods.meta_critic.aux_alive`): from the stage
+    record, else from the seed's ``metrics.jsonl`` where the run directory is still there (records
+    written before 2026-12-03 do not hold it), else ``None``."""
+    import json
+
+    from warp_critic.methods.meta_critic import aux_alive
+
+    out: list[float | None] = []
+    for _, v in sorted(rec.data["result"]["seeds"].items(), key=lambda kv: int(kv[0])):
+        if "aux_alive" in v:
+            out.append(v["aux_alive"])
+            continue
+        f = rec.dir / v["run_dir"] / "metrics.jsonl"
+        rows = (
+            [json.loads(line) for line in f.read_text().splitlines() if line] if f.is_file() else []
+        )
+        out.append(aux_alive(rows) if rows else None)
+    return out
+
+
+def aux_alive_sentence(alive: list[float | None]) -> str:
+    """One line on whether the Meta-Critic rows are Meta-Critic or, with ``h_omega`` collapsed, DDPG."""
+    known = [a for a in alive if a is not None]
+    if not known:
+        return (
+            "Meta-Critic's auxiliary loss: not recorded for these seeds (stage record and run "
+            "directories without it)."
+        )
+    dead = sum(a < 0.5 for a in known)
+    per = ", ".join("not recorded" if a is None else f"{a:.0%}" for a in alive)
+    return (
+        f"Meta-Critic's auxiliary loss h_omega moved the actor (aux_grad_ratio >= 1e-6) in this share "
+        f"of the last quarter's iterations, per seed: {per}. "
+        + (
+            f"In {dead} of {len(known)} recorded seeds it had collapsed to a constant, so those "
+            "seeds trained as DDPG with their own draws (docs/paper/README.md: the baselines' search)."
+            if dead
+            else "It stayed alive in every recorded seed."
+        )
+    )
