@@ -81,8 +81,8 @@ def aux_grad_ratio(
     logs it, so a collapse is visible in the metrics and in the run's summary line.
     """
     with torch.no_grad():
-        aux = torch.sqrt(sum((ga.detach() ** 2).sum() for ga in g_aux))
-        main = torch.sqrt(sum((gm**2).sum() for gm in g_main))
+        aux = torch.stack([ga.detach().square().sum() for ga in g_aux]).sum().sqrt()
+        main = torch.stack([gm.square().sum() for gm in g_main]).sum().sqrt()
         return float(w * aux / main.clamp_min(torch.finfo(main.dtype).tiny))
 
 
