@@ -182,6 +182,43 @@ def test_resume_is_exact_on_cpu(tmp_path, method):
     assert a == b
 
 
+def test_actor_features_are_its_last_hidden_layer_and_forward_is_their_final_layer():
+    norm = Normalizer.from_limits(
+        torch.tensor([-2.0, -2.0]), torch.tensor([2.0, 2.0]), torch.tensor([5.0, 3.0]), 4.0
+    )
+    actor = baseline_networks.Actor(2, norm, hidden=16)
+    q, qd, g = torch.randn(7, 2), torch.randn(7, 2), torch.randn(7, 2)
+    feats = actor.features(q, qd, g)
+    assert feats.shape == (7, 16) and bool((feats.abs() <= 1).all())  # after a tanh
+    assert torch.equal(actor.max_torque * torch.tanh(actor.net[-1](feats)), actor(q, qd, g))
+
+
+def test_meta_critic_features_input_sees_the_actors_features_and_the_stored_action(tmp_path):
+    from warp_critic.methods.meta_critic import MetaCriticAgent
+
+    cfg = tiny_cfg(tmp_path / "f", "meta-critic", aux_input="features", actor_hidden=16)
+    res = train_meta_critic(cfg, progress=False, record=False)
+    agent = res.model
+    assert isinstance(agent, MetaCriticAgent)
+    assert agent.aux.net[0].in_features == 16 + 3 * 2
+    ratios = [r["aux_grad_ratio"] for r in res.metrics if "aux_grad_ratio" in r]
+    assert len(ratios) == 2 and all(r > 1e-6 for r in ratios), ratios
+    # h_omega reads the features (its only path to the actor's parameters)
+    b = {k: torch.randn(5, 2) for k in ("q", "qd", "tau", "goal")}
+    feats = agent.actor.features(b["q"], b["qd"], b["goal"])
+    h = agent.aux.of_features(feats, b["q"], b["qd"], b["tau"], b["goal"])
+    assert not torch.equal(
+        h, agent.aux.of_features(feats + 0.1, b["q"], b["qd"], b["tau"], b["goal"])
+    )
+    # a run saved with one input resumes with it
+    again = train_meta_critic(
+        tiny_cfg(tmp_path / "f", "meta-critic", iterations=4, resume=True),
+        progress=False,
+        record=False,
+    )
+    assert again.model.aux.net[0].in_features == 16 + 3 * 2
+
+
 def test_aux_grad_ratio_and_aux_alive_by_hand():
     from warp_critic.methods.meta_critic import aux_alive, aux_grad_ratio
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from warp_critic.methods.q_networks import METHODS
+from warp_critic.methods.q_networks import AUX_INPUTS, METHODS
 from warp_critic.methods.replay import NOISE_KINDS, REWARD_KINDS
 from warp_critic.physics import schema
 from warp_critic.running.config import filled, spec
@@ -74,6 +74,14 @@ class BaselineConfig(TaskConfig):
     aux_weight_decay: float = spec(1e-4, "meta-critic only: weight decay of h_omega", ge=0)
     aux_hidden: int = spec(
         100, "meta-critic only: h_omega hidden units (2 ReLU layers)", gt=0, cap=8192
+    )
+    aux_input: str = spec(
+        "action",
+        "meta-critic only: what h_omega sees besides s - g. action: the actor's action mu(s), "
+        "so its gradient reaches the actor through the action; features: the actor's last hidden "
+        "layer and the stored action (Zhou et al.'s DDPG_MC_sa), so it reaches the actor through "
+        "its features",
+        choices=AUX_INPUTS,
     )
     aux_weight: float = spec(
         1.0, "meta-critic only: weight of the auxiliary loss in the actor update", ge=0

@@ -3,11 +3,19 @@ Methods") on top of DDPG.
 
 Variant implemented (documented choice):
 
-* **Auxiliary loss** ``h_omega(s, a)``: an MLP over the goal-conditioned state and the actor's
-  action, ``[(q - g)/q_half_range, qd/qd_scale, mu(s)/max_torque] -> 2 x 100 ReLU -> softplus``
-  (non-negative, as in the authors' code), averaged over the batch. This is the paper's
-  "(s, a)"-input MLP design (``DDPG_MC_sa``) without the actor's hidden features; not the set-based
-  (permutation-invariant over the batch) design.
+* **Auxiliary loss** ``h_omega``: an MLP ``-> 2 x 100 ReLU -> softplus`` (non-negative, as in the
+  authors' code), averaged over the batch; not the set-based (permutation-invariant over the
+  batch) design. Its input (``--aux-input``):
+
+  - ``action`` (default): the goal-conditioned state and the actor's action,
+    ``[(q - g)/q_half_range, qd/qd_scale, mu(s)/max_torque]``; ``h_omega`` reaches the actor through
+    its action.
+  - ``features``: Zhou et al.'s ``DDPG_MC_sa`` input, the actor's last hidden layer, the state and
+    the STORED action ``[features(s), (q - g)/q_half_range, qd/qd_scale, tau/max_torque]``;
+    ``h_omega`` reaches the actor through its features.
+
+  Either can collapse to a constant that no longer moves the actor (then the run is DDPG): every
+  run logs :func:`aux_grad_ratio` and warns when that happened.
 * **Meta-objective**: the clipped-difference (``tanh``) variant. Each update, with the actor's
   parameters ``phi``, a training batch ``d_trn`` and a separate validation batch ``d_val`` from
   the replay buffer, and SGD virtual steps of size ``eta`` (``--virtual-lr``, default the actor lr):
@@ -49,13 +57,17 @@ from warp_critic.running.loop import TrainResult
 
 
 class AuxiliaryLoss(_GoalInput):
-    """``h_omega(s - g, a) >= 0`` per sample (2 x ``hidden`` ReLU, softplus output)."""
+    """``h_omega(s - g, a) >= 0`` per sample (2 x ``hidden`` ReLU, softplus output).
 
-    def __init__(self, dof: int, norm: Normalizer, hidden: int = 100):
+    ``features`` > 0 (``aux_input`` features): the input also holds that many actor features,
+    ``[phi_features, (q - g)/q_half_range, qd/qd_scale, tau/max_torque]``, ``tau`` the stored action.
+    """
+
+    def __init__(self, dof: int, norm: Normalizer, hidden: int = 100, features: int = 0):
         super().__init__()
         self._init_norm(norm)
         self.net = nn.Sequential(
-            nn.Linear(3 * dof, hidden),
+            nn.Linear(features + 3 * dof, hidden),
             nn.ReLU(),
             nn.Linear(hidden, hidden),
             nn.ReLU(),
@@ -67,6 +79,18 @@ class AuxiliaryLoss(_GoalInput):
         self, q: torch.Tensor, qd: torch.Tensor, tau: torch.Tensor, goal: torch.Tensor
     ) -> torch.Tensor:
         x = torch.cat([self.obs(q, qd, goal), tau / self.max_torque], dim=-1)
+        return self.net(x).squeeze(-1)
+
+    def of_features(
+        self,
+        feats: torch.Tensor,
+        q: torch.Tensor,
+        qd: torch.Tensor,
+        tau: torch.Tensor,
+        goal: torch.Tensor,
+    ) -> torch.Tensor:
+        """``h_omega([feats, s - g, tau])`` per sample (``aux_input`` features)."""
+        x = torch.cat([feats, self.obs(q, qd, goal), tau / self.max_torque], dim=-1)
         return self.net(x).squeeze(-1)
 
 
@@ -111,7 +135,8 @@ class MetaCriticAgent(DDPGAgent):
 
     def __init__(self, cfg: BaselineConfig, dof: int, norm: Normalizer, device):
         super().__init__(cfg, dof, norm, device)
-        self.aux = AuxiliaryLoss(dof, norm, cfg.aux_hidden).to(device)
+        feats = cfg.actor_hidden if cfg.aux_input == "features" else 0
+        self.aux = AuxiliaryLoss(dof, norm, cfg.aux_hidden, feats).to(device)
         self.aux_opt = torch.optim.Adam(
             self.aux.parameters(), lr=cfg.aux_lr, weight_decay=cfg.aux_weight_decay, foreach=True
         )
@@ -129,13 +154,23 @@ class MetaCriticAgent(DDPGAgent):
         phi = dict(self.actor.named_parameters())
         w = self.cfg.aux_weight
         # actor losses on the training batch
-        a = self.actor(b["q"], b["qd"], b["goal"])
+        if self.cfg.aux_input == "features":  # Zhou et al.: [actor features, s, stored action]
+            feats = self.actor.features(b["q"], b["qd"], b["goal"])
+            a = self.actor.max_torque * torch.tanh(self.actor.net[-1](feats))
+            aux = self.aux.of_features(feats, b["q"], b["qd"], b["tau"], b["goal"]).mean()
+        else:
+            a = self.actor(b["q"], b["qd"], b["goal"])
+            aux = self.aux(b["q"], b["qd"], a, b["goal"]).mean()
         main = -self.q(b["q"], b["qd"], a, b["goal"]).mean()
-        aux = self.aux(b["q"], b["qd"], a, b["goal"]).mean()
         g_main = torch.autograd.grad(main, list(phi.values()), retain_graph=True)
-        g_aux = torch.autograd.grad(
-            aux, list(phi.values()), create_graph=True
-        )  # a function of omega
+        g_aux = tuple(  # a function of omega; zero where h_omega does not reach (features input:
+            # the final layer)
+            torch.zeros_like(p) if g is None else g
+            for p, g in zip(
+                phi.values(),
+                torch.autograd.grad(aux, list(phi.values()), create_graph=True, allow_unused=True),
+            )
+        )
         # virtual steps, evaluated on the validation batch with the main Q
         phi_old = {n: (p - self.eta * gm).detach() for (n, p), gm in zip(phi.items(), g_main)}
         phi_new = {

@@ -14,6 +14,7 @@ from warp_critic.core.errors import UserError
 from warp_critic.learning.networks import Normalizer, wrap_angles
 
 METHODS = ("ddpg", "meta-critic")
+AUX_INPUTS = ("action", "features")  # what Meta-Critic's h_omega sees (BaselineConfig.aux_input)
 
 
 class _GoalInput(nn.Module):
@@ -68,6 +69,11 @@ class Actor(_GoalInput):
 
     def forward(self, q: torch.Tensor, qd: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
         return self.max_torque * torch.tanh(self.net(self.obs(q, qd, goal)))
+
+    def features(self, q: torch.Tensor, qd: torch.Tensor, goal: torch.Tensor) -> torch.Tensor:
+        """The last hidden layer's activations ``(..., hidden)`` (Meta-Critic's ``h_omega`` input in
+        Zhou et al.'s design); ``forward`` is its final layer on them, the same operations."""
+        return self.net[:-1](self.obs(q, qd, goal))
 
 
 class QNetwork(_GoalInput):
