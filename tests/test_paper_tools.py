@@ -72,6 +72,7 @@ def test_reproduce_adopts_exactly_what_the_committed_baseline_search_adopts():
         ("tune_baselines", ["--seeds", "0,100"], "other than the reported"),
         ("tune_baselines", ["--methods", "ppo"], "unknown method"),
         ("diagnose_reacher_map", ["/nonexistent/run"], "not a run directory"),
+        ("reference_runs", ["--compare", "/nonexistent/a", "/nonexistent/b"], "does not exist"),
         ("diagnose_reacher_map", ["x", "--grid", "1"], "--grid >= 2"),
         ("probe_variants", [REACHER, "--variants", "arm9.mass=1"], "unknown link 'arm9'"),
         (

@@ -16,7 +16,6 @@ About 1-2 minutes on a 2-core CPU.
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
 import math
@@ -171,7 +170,9 @@ def compare(a: dict, b: dict) -> tuple[float, list[str]]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    from warp_critic.cli.flags import ToolParser
+
+    parser = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
     parser.add_argument(
         "--out", type=Path, help="new directory for the five runs and fingerprint.json"
     )
@@ -189,6 +190,11 @@ def main(argv: list[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     if args.compare:
+        for d in args.compare:
+            if not (d / "fingerprint.json").is_file():
+                parser.error(
+                    f"--compare: {d / 'fingerprint.json'} does not exist (run --out {d} first)"
+                )
         a, b = (json.loads((d / "fingerprint.json").read_text()) for d in args.compare)
         worst, missing = compare(a, b)
         print(f"maximum relative difference: {worst}; differing or missing entries: {len(missing)}")
