@@ -84,9 +84,18 @@ def test_diagnose_tool_runs_on_a_run_directory(tmp_path, capsys):
     )
     text = capsys.readouterr().out
     assert "step 2: mean" in text and "goal  1" in text
-    reach = [float(x) for x in text.split("final sq. error per goal")[1].strip(" []\n").split()]
+
+    def per_goal(label: str) -> list[float]:
+        line = text.split(f"{label}: best final sq. error per goal")[1].split("\n")[0]
+        return [float(x) for x in line.strip(" []").split()]
+
+    reach = per_goal("from zero torques")
     # zero torque leaves the arm at home (error ||g||^2 = 0.34, 0.2); 60 Adam steps must do far better
     assert len(reach) == 2 and reach[0] < 0.2 * 0.34 and reach[1] < 0.2 * 0.2, reach
+    # started from the best policy's torques (its own error counted): never above that policy
+    policy_means = [float(ln.split()[-2]) for ln in text.splitlines() if ln.startswith("  goal ")]
+    warm = per_goal("from the policy's torques")
+    assert len(warm) == 2 and all(w <= m + 1e-6 for w, m in zip(warm, policy_means)), (warm, text)
     assert tool.main([str(tmp_path / "missing")]) == 2
     assert tool.main([str(out), "--around", "7"]) == 2
     assert "--around" in capsys.readouterr().err
