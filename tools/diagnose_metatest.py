@@ -96,7 +96,6 @@ def main(argv=None) -> int:
     from warp_critic.learning.networks import MLPPolicy
     from warp_critic.learning.rollout import rollout
     from warp_critic.physics.scene import Variant
-    from warp_critic.physics.simulator import Simulator
 
     around = args.around or None
     try:
@@ -175,45 +174,23 @@ def main(argv=None) -> int:
         )
 
     if args.reachability:
+        from warp_critic.reproduce.reach import open_loop_floor
+
         variant = Variant(ee_mass=args.ee_mass, link_length=args.link_length)
-        dsim = Simulator(
-            scene,
-            [variant] * G,
-            dt=sim.dt,
-            substeps=sim.substeps,
-            device="cpu",
-            differentiable=True,
-            gravity=sim.gravity,
-        )
         home = torch.as_tensor(scene.home, dtype=torch.float32).expand(G, -1).clone()
 
         def optimise(u0: torch.Tensor) -> torch.Tensor:
-            """Adam on open-loop torques ``max_torque * tanh(u)`` from ``u0`` ``(T, G, dof)``; per
-            goal the best final error seen (the start's own error included), not the last."""
-            u = u0.clone().requires_grad_(True)
-            opt = torch.optim.Adam([u], lr=0.1)
-            best = torch.full((G,), float("inf"))
-            for _ in range(args.reach_iterations + 1):
-                t = iter(range(horizon))
-                traj = rollout(
-                    dsim,
-                    lambda q, qd, t=t: norm.max_torque * torch.tanh(u[next(t)]),
-                    home,  # from the home pose, as the policies start
-                    dsim.zeros(),
-                    horizon,
-                    differentiable=True,
-                )
-                err = ((traj.q[-1] - goals) ** 2).sum(-1)
-                best = torch.minimum(best, err.detach())
-                opt.zero_grad()
-                err.sum().backward()
-                opt.step()
-            return best
+            """Per goal the best final error of open-loop torques optimised from ``u0``."""
+            best = open_loop_floor(
+                args.run_dir, [variant], goals, iterations=args.reach_iterations, u0=u0
+            )
+            return torch.as_tensor(best[0])
 
         from_zero = optimise(torch.zeros(horizon, G, scene.dof))
         # a second start: the torques of each goal's best critic-trained policy, replayed open
         # loop (the same trajectory from the home pose at rest), so that the optimum found is never
-        # above what a policy already reached -- a local optimiser from zero torques can be
+        # above what a policy already reached; from zero torques a local optimiser can stall above
+        # it (the Panda: RESULTS.md)
         at_home = bool(
             torch.allclose(q0, home.repeat_interleave(K, 0)) and not bool(qd0.abs().any())
         )

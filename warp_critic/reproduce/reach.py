@@ -25,9 +25,12 @@ def open_loop_floor(
     iterations: int,
     lr: float = 0.1,
     device: str = "cpu",
+    u0: torch.Tensor | None = None,
 ) -> np.ndarray:
     """``(len(variants), G)`` best final ``||q_T - g||^2`` [rad^2] per variant and goal ``(G, dof)``,
-    with the run's scene, horizon, time step, gravity and torque bounds."""
+    with the run's scene, horizon, time step, gravity and torque bounds. ``u0`` ``(T, V*G, dof)``,
+    variant-major: the start of the pre-tanh torques (default zeros: no torque); the start's own
+    error counts, so a start replaying a policy's torques gives at most that policy's error."""
     from warp_critic.learning.networks import Normalizer
     from warp_critic.learning.rollout import rollout
     from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
@@ -54,7 +57,11 @@ def open_loop_floor(
     )
     target = goals.to(dev).repeat(V, 1)
     home = torch.as_tensor(scene.home, dtype=torch.float32, device=dev).expand(V * G, -1)
-    u = torch.zeros(cfg.horizon, V * G, scene.dof, device=dev, requires_grad=True)
+    shape = (cfg.horizon, V * G, scene.dof)
+    if u0 is not None and tuple(u0.shape) != shape:
+        raise ValueError(f"u0: shape {tuple(u0.shape)}, expected {shape}")
+    start = torch.zeros(shape, device=dev) if u0 is None else u0.detach().to(dev, torch.float32)
+    u = start.clone().requires_grad_(True)
     opt = torch.optim.Adam([u], lr=lr)
     best = torch.full((V * G,), float("inf"), device=dev)
     for _ in range(max(1, int(iterations))):
