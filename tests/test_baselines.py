@@ -190,7 +190,7 @@ def test_actor_features_are_its_last_hidden_layer_and_forward_is_their_final_lay
     q, qd, g = torch.randn(7, 2), torch.randn(7, 2), torch.randn(7, 2)
     feats = actor.features(q, qd, g)
     assert feats.shape == (7, 16) and bool((feats.abs() <= 1).all())  # after a tanh
-    assert torch.equal(actor.max_torque * torch.tanh(actor.net[-1](feats)), actor(q, qd, g))
+    assert torch.equal(actor.head(feats), actor(q, qd, g))
 
 
 def test_meta_critic_features_input_sees_the_actors_features_and_the_stored_action(tmp_path):

@@ -179,14 +179,15 @@ def main(argv=None) -> int:
         variant = Variant(ee_mass=args.ee_mass, link_length=args.link_length)
         home = torch.as_tensor(scene.home, dtype=torch.float32).expand(G, -1).clone()
 
-        def optimise(u0: torch.Tensor) -> torch.Tensor:
-            """Per goal the best final error of open-loop torques optimised from ``u0``."""
+        def optimise(u0: torch.Tensor | None) -> torch.Tensor:
+            """Per goal the best final error of open-loop torques optimised from ``u0`` (``None``:
+            zero torques)."""
             best = open_loop_floor(
                 args.run_dir, [variant], goals, iterations=args.reach_iterations, u0=u0
             )
             return torch.as_tensor(best[0])
 
-        from_zero = optimise(torch.zeros(horizon, G, scene.dof))
+        from_zero = optimise(None)
         # a second start: the torques of each goal's best critic-trained policy, replayed open
         # loop (the same trajectory from the home pose at rest), so that the optimum found is never
         # above what a policy already reached; from zero torques a local optimiser can stall above

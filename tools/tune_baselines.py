@@ -244,8 +244,10 @@ def eligible_row(row: dict) -> bool:
     without that record, its runs gone, is not eligible)."""
     if row["method"] != "meta-critic":
         return True
+    from warp_critic.methods.meta_critic import ALIVE_SHARE
+
     alive = row.get("aux_alive")
-    return bool(alive) and None not in alive and min(alive) >= 0.5
+    return bool(alive) and None not in alive and min(alive) >= ALIVE_SHARE
 
 
 def _mean(xs: list) -> float:

@@ -113,6 +113,10 @@ def aux_grad_ratio(
 ALIVE_RATIO = 1e-6
 """A Meta-Critic update whose :func:`aux_grad_ratio` is below this is counted as DDPG's."""
 
+ALIVE_SHARE = 0.5
+"""A seed whose :func:`aux_alive` is below this trained as DDPG: it is warned about, reported as
+collapsed, and its setting cannot be adopted by the baselines' search."""
+
 
 def aux_alive(metrics: list[dict]) -> float | None:
     """The fraction of the last quarter of a run's iterations in which ``h_omega`` still moved the
@@ -156,7 +160,7 @@ class MetaCriticAgent(DDPGAgent):
         # actor losses on the training batch
         if self.cfg.aux_input == "features":  # Zhou et al.: [actor features, s, stored action]
             feats = self.actor.features(b["q"], b["qd"], b["goal"])
-            a = self.actor.max_torque * torch.tanh(self.actor.net[-1](feats))
+            a = self.actor.head(feats)
             aux = self.aux.of_features(feats, b["q"], b["qd"], b["tau"], b["goal"]).mean()
         else:
             a = self.actor(b["q"], b["qd"], b["goal"])
@@ -216,7 +220,7 @@ def train_meta_critic(cfg: BaselineConfig, **kwargs) -> TrainResult:
     result = train_baseline(replace(cfg, method="meta-critic"), MetaCriticAgent, **kwargs)
     for r in result.seeds or [result]:
         alive = aux_alive(r.metrics)
-        if alive is not None and alive < 0.5:
+        if alive is not None and alive < ALIVE_SHARE:
             warn(
                 f"{r.run_dir}: h_omega moved the actor in only {alive:.0%} of the last quarter's "
                 "iterations (aux_grad_ratio < 1e-6): this Meta-Critic run trained as DDPG"

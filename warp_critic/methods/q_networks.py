@@ -75,6 +75,11 @@ class Actor(_GoalInput):
         Zhou et al.'s design); ``forward`` is its final layer on them, the same operations."""
         return self.net[:-1](self.obs(q, qd, goal))
 
+    def head(self, feats: torch.Tensor) -> torch.Tensor:
+        """The torques ``(..., dof)`` [N m] from :meth:`features`: ``head(features(s)) == forward(s)``,
+        bitwise."""
+        return self.max_torque * torch.tanh(self.net[-1](feats))
+
 
 class QNetwork(_GoalInput):
     """``Q(s - g, a)``: 2 x ``hidden`` ELU (the same body as our critic), inputs normalised."""

@@ -135,7 +135,9 @@ def aux_alive_sentence(alive: list[float | None]) -> str:
             "Meta-Critic's auxiliary loss: not recorded for these seeds (stage record and run "
             "directories without it)."
         )
-    dead = sum(a < 0.5 for a in known)
+    from warp_critic.methods.meta_critic import ALIVE_SHARE
+
+    dead = sum(a < ALIVE_SHARE for a in known)
     per = ", ".join("not recorded" if a is None else f"{a:.0%}" for a in alive)
     return (
         f"Meta-Critic's auxiliary loss h_omega moved the actor (aux_grad_ratio >= 1e-6) in this share "
