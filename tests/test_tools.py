@@ -566,3 +566,18 @@ def test_unknown_preset_lists_the_known_ones():
         with pytest.raises(FieldError) as e:
             lookup("kuka")
         assert e.value.field == "preset" and all(name in e.value.problem for name in PRESETS)
+
+
+def test_cpu_thread_probe_splits_the_worlds_into_two_shards_bitwise(capsys):
+    probe = load_tool("probe_cpu_threads")
+    # in this process: both shards, one after the other and in two threads, equal one simulator
+    r = probe.run_case(tile=False, worlds=3, steps=2, repeats=1)
+    assert r["serial_bitwise"] and r["threads_bitwise"], r
+    assert min(r["one"], r["serial"], r["threads"]) > 0
+    # the tool's table, each case in its own process
+    assert probe.main(["--paths", "dense", "--worlds", "2", "--steps", "1", "--repeats", "1"]) == 0
+    rows = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("dense")]
+    assert len(rows) == 1 and rows[0].count("(bitwise)") == 2, rows
+    with pytest.raises(SystemExit) as e:
+        probe.main(["--paths", "gemm"])
+    assert e.value.code == 2 and "--paths" in capsys.readouterr().err
