@@ -9,8 +9,10 @@ For a run directory of ``warp-critic meta-train`` on the reacher:
 2. **What the goal grid needs**: meta-test on a ``grid x grid`` goal grid over 95% of the joint
    limits; per goal, binned by its distance ``|g - q_0|`` from the start: how many reach MSE < 0.05,
    the median MSE, how far the updates moved the final state (``|q_T' - q_T|``) against how far it
-   had to go (``|g - q_T|``), whether they moved it towards the goal (cosine between the two) and
-   the mean torque as a fraction of its bound after the updates.
+   had to go (``|g - q_T|``), whether they moved it towards the goal (cosine between the two),
+   the mean torque as a fraction of its bound after the updates, and the final miss split into how
+   far the move fell short along the direction to the goal and how far it went across it, both as
+   fractions of ``|g - q_T|`` (MSE < 0.05 over the two joints is a miss below 0.32 rad).
 
 Usage::
 
@@ -103,19 +105,28 @@ def main(argv=None) -> int:
     need = goal - before.q[-1]  # how far the final state had to move
     moved = after.q[-1] - before.q[-1]
     cos = (need * moved).sum(-1) / (need.norm(dim=-1) * moved.norm(dim=-1) + 1e-9)
+    # the final miss g - q_T' split along the direction to the goal and across it, relative to
+    # the distance: MSE < 0.05 over two joints is a miss below sqrt(0.1) = 0.32 rad
+    unit = need / (need.norm(dim=-1, keepdim=True) + 1e-9)
+    along = (moved * unit).sum(-1)
+    short = (need.norm(dim=-1) - along) / (need.norm(dim=-1) + 1e-9)
+    across = (moved - along[:, None] * unit).norm(dim=-1) / (need.norm(dim=-1) + 1e-9)
     torque = (after.tau.abs() / g.norm.max_torque).mean((0, 2))
     d0 = (torch.tensor(grid) - g.q0[0].cpu()).norm(dim=-1)
     per = lambda x: x.view(G, K).mean(1)  # noqa: E731
-    need_n, moved_n, cos_g, torque_g = (
+    need_n, moved_n, cos_g, torque_g, short_g, across_g = (
         per(need.norm(dim=-1)),
         per(moved.norm(dim=-1)),
         per(cos),
         per(torque),
+        per(short),
+        per(across),
     )
     print(f"\n2. goal grid {args.grid} x {args.grid} over 95% of the limits, {K} inits per goal")
     print(
         "   |g - q0| (rad)  goals  MSE<0.05  median MSE  median |g - q_T|  median |q_T' - q_T|"
-        "  median cos(toward goal)  mean torque/bound"
+        "  median cos(toward goal)  mean torque/bound  median short/|g - q_T|"
+        "  median across/|g - q_T|"
     )
     edges = [0.0, 1.0, 1.5, 2.0, 2.5, 3.0, 5.0]
     for a, b in zip(edges[:-1], edges[1:]):
@@ -126,7 +137,8 @@ def main(argv=None) -> int:
             f"   [{a:.1f}, {b:.1f})      {int(sel.sum()):5d}  {float((mse[sel] < 0.05).float().mean()):7.0%}"
             f"  {float(mse[sel].median()):10.3f}  {float(need_n[sel].median()):16.2f}"
             f"  {float(moved_n[sel].median()):19.2f}  {float(cos_g[sel].median()):23.2f}"
-            f"  {float(torque_g[sel].mean()):17.2f}"
+            f"  {float(torque_g[sel].mean()):17.2f}  {float(short_g[sel].median()):+22.2f}"
+            f"  {float(across_g[sel].median()):23.2f}"
         )
     print(f"   all: MSE<0.05 on {float((mse < 0.05).float().mean()):.0%} of the grid")
     return 0
