@@ -107,10 +107,11 @@ def main(argv=None) -> int:
     cos = (need * moved).sum(-1) / (need.norm(dim=-1) * moved.norm(dim=-1) + 1e-9)
     # the final miss g - q_T' split along the direction to the goal and across it, relative to
     # the distance: MSE < 0.05 over two joints is a miss below sqrt(0.1) = 0.32 rad
-    unit = need / (need.norm(dim=-1, keepdim=True) + 1e-9)
+    dist = need.norm(dim=-1) + 1e-9
+    unit = need / dist[:, None]
     along = (moved * unit).sum(-1)
-    short = (need.norm(dim=-1) - along) / (need.norm(dim=-1) + 1e-9)
-    across = (moved - along[:, None] * unit).norm(dim=-1) / (need.norm(dim=-1) + 1e-9)
+    short = (dist - along) / dist
+    across = (moved - along[:, None] * unit).norm(dim=-1) / dist
     torque = (after.tau.abs() / g.norm.max_torque).mean((0, 2))
     d0 = (torch.tensor(grid) - g.q0[0].cpu()).norm(dim=-1)
     per = lambda x: x.view(G, K).mean(1)  # noqa: E731

@@ -97,10 +97,9 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
 #: time as the grids vary them (``|`` groups: masses or lengths; tip mass or stretch). ``wide`` (reacher,
 #: for the whole goal grid): the KUKA's recipe for new goals on the reacher -- the goal-relative
 #: critic (equivariant in q - g) with random starts 1.5 rad around home, 2 of 4 worlds per goal at
-#: home -- so that training shows the critic the |q - g| a far goal asks for; ``wide-long``: the same for
-#: 3000 iterations instead of 400, and ``randomised-long`` likewise (``randomised-6000``: 6000).
-#: ``randomised-history``
-#: (KUKA): the same draws with the ``history`` critic input (the last step's velocity change and
+#: home -- so that training shows the critic the |q - g| a far goal asks for. ``wide-long`` and
+#: ``randomised-long``: the same for 3000 iterations instead of 400 (``randomised-6000``: 6000).
+#: ``randomised-history`` (KUKA): the same draws with the ``history`` critic input (the last step's velocity change and
 #: torque), so that the critic can tell the models apart. Everything else is the nominal preset's,
 #: so the nominal run is the comparison.
 KUKA_VARIANTS = "ee.stretch=0.2..2 | ee.point-mass+=0..9"
@@ -110,6 +109,7 @@ KUKA_VARIANTS = "ee.stretch=0.2..2 | ee.point-mass+=0..9"
 REACHER_VARIANTS = (
     "arm1.mass=0.5..6:keep; arm2.mass=0.5..6:keep | arm1.stretch=0.5..2; arm2.stretch=0.9..2"
 )
+WIDE = {"critic_input": "relative", "start_std": 1.5, "home_starts": 2}
 RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
     "reacher": {
         "randomised": ("reacher", {"train_variants": REACHER_VARIANTS}),
@@ -118,13 +118,10 @@ RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
         "randomised-long": ("reacher", {"train_variants": REACHER_VARIANTS, "iterations": 3000}),
         # and 15x: 3000 iterations took the maps from 22% / 33% to 55% / 61% of their cells
         "randomised-6000": ("reacher", {"train_variants": REACHER_VARIANTS, "iterations": 6000}),
-        "wide": ("reacher", {"critic_input": "relative", "start_std": 1.5, "home_starts": 2}),
+        "wide": ("reacher", WIDE),
         # the same, trained 7.5x longer: on seed 0, 2000 iterations took the share of a 9 x 9 goal
         # grid below 0.05 from 20% to 36% and 6000 to 38% (RESULTS, "Longer wide trainings")
-        "wide-long": (
-            "reacher",
-            {"critic_input": "relative", "start_std": 1.5, "home_starts": 2, "iterations": 3000},
-        ),
+        "wide-long": ("reacher", {**WIDE, "iterations": 3000}),
     },
     "kuka": {
         "randomised": ("kuka-table1", {"train_variants": KUKA_VARIANTS}),
