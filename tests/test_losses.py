@@ -38,6 +38,28 @@ def test_relative_critic_is_equivariant_to_moving_goal_and_state_together():
     assert not torch.allclose(rel(q, qd, tau, goal + shift), rel(q, qd, tau, goal), atol=1e-3)
 
 
+def test_pose_critic_sees_the_goal_only_relative_to_the_state_and_the_state_itself():
+    """``pose``: ``[q - g, qd, a, q]``: its features are the relative layout's plus the normalised
+    ``q``, so shifting state and goal together changes it (it sees where the arm is), and the goal
+    enters through ``q - g`` only."""
+    torch.manual_seed(0)
+    q, qd, tau, goal = _batch()
+    norm = _norm()
+    rel, pose = (
+        Critic(3, norm, hidden=32, inputs="relative"),
+        Critic(3, norm, hidden=32, inputs="pose"),
+    )
+    f = pose.features(q, qd, tau, goal)
+    assert f.shape == (16, 12)
+    assert torch.equal(f[:, :9], rel.features(q, qd, tau, goal))
+    assert torch.allclose(f[:, 9:], norm.q(q))
+    shift = torch.tensor([0.3, -0.7, 0.2])
+    assert torch.equal(pose.features(q, qd, tau, goal + shift)[:, 9:], f[:, 9:])
+    assert not torch.allclose(
+        pose(q + shift, qd, tau, goal + shift), pose(q, qd, tau, goal), atol=1e-3
+    )
+
+
 def test_critic_rejects_unknown_input_layout():
     with pytest.raises(ValueError, match="relative"):
         Critic(3, _norm(), inputs="absolute")

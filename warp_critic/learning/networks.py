@@ -6,7 +6,7 @@ batched matmul evaluates all policies, and an inner update is ``theta - alpha * 
 tensors (no module, no in-place mutation).
 
 Critic ``L_critic(s, a, g)``: MLP with two hidden layers of 400 units and ELU, one scalar output.
-Three input layouts (``CRITIC_INPUTS``, normalised as below):
+Four input layouts (``CRITIC_INPUTS``, normalised as below):
 
 * ``full``: ``[q, qd, a, g, q - g]`` -- everything; the goal-relative position ``q - g`` is a fixed
   feature of ``(s, g)`` that adds no information but makes goal generalisation easier to learn;
@@ -22,6 +22,11 @@ Three input layouts (``CRITIC_INPUTS``, normalised as below):
   pair tells the critic about the inertia it acts on, so one critic can tell models apart (for
   dynamics-randomised training, ``--train-variants``); :func:`history_features` builds it from a
   trajectory.
+* ``pose``: ``[q - g, qd, a, q]`` -- ``relative`` plus the arm's own configuration. The goal still
+  enters through ``q - g`` only, but the critic sees the joint angles the dynamics depend on: an
+  arm's inertia ``M(q)`` changes with every joint but the first (the reacher's elbow), which a
+  ``relative`` critic cannot see, so it applies near far goals the field it learned near the
+  training goals (RESULTS.md, "Why the far goals miss").
 
 Input normalisation (documented, fixed from the scene, not learned):
   * joint positions and goals: ``(q - centre) / half_range`` of the joint limits; a continuous joint
@@ -190,7 +195,7 @@ class Critic(nn.Module):
         if inputs not in CRITIC_INPUTS:
             raise ValueError(f"critic inputs must be one of {CRITIC_INPUTS} (got {inputs!r})")
         self.dof, self.inputs, self.hidden = dof, inputs, hidden
-        n_in = 3 * dof if inputs == "relative" else 5 * dof
+        n_in = {"relative": 3, "pose": 4}.get(inputs, 5) * dof
         self.net = nn.Sequential(
             nn.Linear(n_in, hidden),
             nn.ELU(),
@@ -227,12 +232,14 @@ class Critic(nn.Module):
         """The normalised input ``(..., n_in)`` of the input layout (``history``: ``(..., 2*dof)``,
         needed by the ``history`` layout only)."""
         wrap = self.q_wrap if self._wraps else None
-        if self.inputs in ("relative", "history"):
+        if self.inputs in ("relative", "history", "pose"):
             parts = [
                 wrap_angles(q - goal, wrap) / self.q_half_range,
                 qd / self.qd_scale,
                 tau / self.max_torque,
             ]
+            if self.inputs == "pose":
+                parts.append(wrap_angles(q - self.q_centre, wrap) / self.q_half_range)
             if self.inputs == "history":
                 if history is None:
                     raise ValueError("a history critic needs history (history_features)")
