@@ -448,6 +448,7 @@ def test_only_one_beyond_evaluation_plans_it_and_what_it_reads():
     first, second = needed(rc, plan(settings, beyond=True))
     assert second == ["beyond-maps"]
     assert sorted(first) == [
+        "beyond-metatrain-reacher-pose-long",
         "beyond-metatrain-reacher-randomised",
         "beyond-metatrain-reacher-randomised-6000",
         "beyond-metatrain-reacher-randomised-long",
@@ -475,6 +476,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
         "beyond-maps",
         "beyond-metatrain-kuka-randomised",
         "beyond-metatrain-kuka-randomised-history",
+        "beyond-metatrain-reacher-pose-long",
         "beyond-metatrain-reacher-randomised",
         "beyond-metatrain-reacher-randomised-6000",
         "beyond-metatrain-reacher-randomised-long",
@@ -490,13 +492,13 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     assert (
         reproduce_main(["--quick", "--out", str(other), "--only", "beyond", "--device", "cpu"]) == 0
     )
-    assert "9 stage(s) to run" in capsys.readouterr().err
+    assert "10 stage(s) to run" in capsys.readouterr().err
     report = (other / "REPORT.md").read_text()
     beyond = report[report.index("## Beyond the paper") :]
     assert "### Targets" in beyond and "randomised" in beyond
     results = json.loads((other / "results.json").read_text())
     targets = results["beyond"]["targets"]
-    assert len(targets) == 5 * 3 + 2 * 3  # 5 / 2 recipes x (goals + 2 maps; Table 1 + 2 tables)
+    assert len(targets) == 6 * 3 + 2 * 3  # 6 / 2 recipes x (goals + 2 maps; Table 1 + 2 tables)
     for t in targets:
         assert isinstance(t["met"], bool)
         assert (
@@ -507,6 +509,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     rows = results["beyond"]["training"]
     assert set(rows) == {
         "reacher/ours",
+        "reacher/pose-long",
         "reacher/randomised",
         "reacher/randomised-long",
         "reacher/randomised-6000",
