@@ -107,3 +107,29 @@ def test_probe_finds_the_reachers_light_links_unstable_at_its_dt_and_stable_at_h
     assert tool.probe(own, scene, light, **kw)[0] > 0
     bad, fastest = tool.probe(half, scene, light, **kw)
     assert bad == 0 and fastest < 1e3
+
+
+def test_reacher_map_shifts_keep_the_offsets_and_the_response_is_reciprocal(finished_run, capsys):
+    """``diagnose_reacher_map --shifts`` on a tiny run: the unshifted row repeats the grid's own
+    share, a shift moves start and goal together (same ``q0 - g``), and the measured one-step
+    response to unit torques is symmetric (``dt M(q)^-1``) and changes with the elbow angle."""
+    import re
+
+    import torch
+
+    tool = load_tool("diagnose_reacher_map")
+    grid = [[0.5, 0.3], [-0.4, 2.0]]
+    plain, _, _ = tool._run(str(finished_run), grid, 1, 1)
+    moved, _, _ = tool._run(str(finished_run), grid, 1, 1, (1,))
+    assert torch.allclose(moved.q0 - moved.goal, plain.q0 - plain.goal, atol=1e-6)
+    assert torch.allclose(moved.goal[:, 1], torch.zeros(2)) and not torch.equal(moved.q0, plain.q0)
+    assert tool.main([str(finished_run), "--grid", "3", "--inits", "1", "--shifts"]) == 0
+    out = capsys.readouterr().out
+    share = re.search(r"all: MSE<0.05 on (\d+)%", out).group(1)
+    assert re.search(rf"no joint\s+{share}%", out)
+    rows = re.findall(r"elbow\s+([\d.]+) rad: \[(\S+), (\S+)\] / \[(\S+), (\S+)\]", out)
+    assert len(rows) == 4
+    for _, a11, a21, a12, a22 in rows:
+        assert float(a21) == pytest.approx(float(a12), abs=2e-3)
+        assert float(a11) > 0 and float(a22) > 0
+    assert float(rows[0][4]) > 2 * float(rows[2][4])  # the elbow's own response falls as it bends
