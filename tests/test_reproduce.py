@@ -456,6 +456,10 @@ def test_only_one_beyond_evaluation_plans_it_and_what_it_reads():
         "beyond-metatrain-reacher-wide-long",
         "metatrain-reacher-ours",
     ]
+    # --beyond as well (the group, and the stage named alone): each stage runs once
+    both = ReproduceConfig(out="unused", only=["beyond-maps"], quick=True, beyond=True)
+    first, second = needed(both, plan(both.validate(), beyond=True))
+    assert second == ["beyond-maps", "beyond-tables"] and len(first) == len(set(first))
 
 
 def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):

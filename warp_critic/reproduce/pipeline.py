@@ -217,7 +217,8 @@ def needed(rc: ReproduceConfig, stages: dict) -> list[list[str]]:
         else:
             first += [n for n in stages[group]["depends"]]
             second.append(group)
-    return [list(dict.fromkeys(first)), second]
+    # each stage once: --beyond with --only beyond-maps names that stage twice
+    return [list(dict.fromkeys(first)), list(dict.fromkeys(second))]
 
 
 def stages_method(name: str) -> str:
