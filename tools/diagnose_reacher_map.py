@@ -44,8 +44,8 @@ PROG = "diagnose_reacher_map"
 
 
 def _run(run_dir: str, goals, inits: int, seed: int, shift_joints: tuple[int, ...] = ()):
-    """(setup, before, after) rollouts of meta-test with ``goals`` ``(G, dof)``; start and goal
-    moved together by minus the goal's ``shift_joints`` components (the goal is home there)."""
+    """(setup, before, after) rollouts of meta-test with ``goals`` ``(G, dof)``; on the joints
+    ``shift_joints`` start and goal are moved together by ``q0 - g``, so the goal is home there."""
     import dataclasses
 
     from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
@@ -193,8 +193,10 @@ def main(argv=None) -> int:
             ("joint 2", (1,)),
             ("both", (0, 1)),
         ):
-            s, _, moved_after = _run(args.run_dir, grid, K, args.seed, joints)
-            err = ((moved_after.q[-1] - s.goal) ** 2).mean(-1).view(G, K).mean(1)
+            err = mse  # no shift: the grid measured above
+            if joints:
+                s, _, moved_after = _run(args.run_dir, grid, K, args.seed, joints)
+                err = ((moved_after.q[-1] - s.goal) ** 2).mean(-1).view(G, K).mean(1)
             bins = "  ".join(
                 f"{float((err[sel] < 0.05).float().mean()):10.0%}"
                 for a, b in zip(edges[:-1], edges[1:])

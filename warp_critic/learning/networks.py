@@ -216,6 +216,10 @@ class Critic(nn.Module):
         self._wraps = bool(wrap.any())
         self.qd_scale = norm.qd_scale
 
+    def _angles(self, x: torch.Tensor, wrap: torch.Tensor | None) -> torch.Tensor:
+        """Joint positions ``(..., dof)`` normalised by the joint limits (continuous ones wrapped)."""
+        return wrap_angles(x - self.q_centre, wrap) / self.q_half_range
+
     @property
     def uses_history(self) -> bool:
         """Whether :meth:`forward` takes ``history`` (:func:`history_features`)."""
@@ -239,7 +243,7 @@ class Critic(nn.Module):
                 tau / self.max_torque,
             ]
             if self.inputs == "pose":
-                parts.append(wrap_angles(q - self.q_centre, wrap) / self.q_half_range)
+                parts.append(self._angles(q, wrap))
             if self.inputs == "history":
                 if history is None:
                     raise ValueError("a history critic needs history (history_features)")
@@ -248,10 +252,10 @@ class Critic(nn.Module):
             return torch.cat(parts, dim=-1)
         return torch.cat(
             [
-                wrap_angles(q - self.q_centre, wrap) / self.q_half_range,
+                self._angles(q, wrap),
                 qd / self.qd_scale,
                 tau / self.max_torque,
-                wrap_angles(goal - self.q_centre, wrap) / self.q_half_range,
+                self._angles(goal, wrap),
                 wrap_angles(q - goal, wrap) / self.q_half_range,
             ],
             dim=-1,

@@ -56,12 +56,8 @@ EFFORT_ATTR = "warp_critic:effortLimit"
 EE_ATTR = "warp_critic:endEffectorBody"
 TIP_ATTR = "warp_critic:tipOffset"
 STANDARD_GRAVITY = 9.81  # m/s^2, along -z
-CRITIC_INPUTS = (
-    "full",
-    "relative",
-    "history",
-    "pose",
-)  # the critic's input layouts (learning.networks)
+# the critic's input layouts (learning.networks)
+CRITIC_INPUTS = ("full", "relative", "history", "pose")
 
 # Sentinels for defaults that are not one value.
 REQUIRED = "required"  # the scene or the user must give it
