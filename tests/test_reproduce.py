@@ -84,6 +84,12 @@ def test_quick_end_to_end(quick):
     }
     floors = [c["reach_floor"] for c in results["tables"] if c["table"].startswith("stress")]
     assert all(f is not None and f >= 0 for f in floors)
+    # the maps' open-loop floor: every goal of the 4 x 4 grid and every cell of the 3 x 3 maps
+    maps = json.loads(next(out.glob("maps-*/stage.json")).read_text())["result"]
+    floor = {k: np.asarray(v) for k, v in maps["reach_floor"].items()}
+    assert floor["goals"].shape == (4, 4) and floor["mass"].shape == floor["length"].shape == (9,)
+    assert all(np.isfinite(v).all() and (v >= 0).all() for v in floor.values())
+    assert "Open-loop reachability floor" in report
     # every claim has a verdict computed from numbers, shown in the claims table
     assert len(results["claims"]) >= 9
     for claim in results["claims"]:
@@ -448,7 +454,9 @@ def test_only_one_beyond_evaluation_plans_it_and_what_it_reads():
     first, second = needed(rc, plan(settings, beyond=True))
     assert second == ["beyond-maps"]
     assert sorted(first) == [
+        "beyond-metatrain-reacher-history-randomised-long",
         "beyond-metatrain-reacher-pose-long",
+        "beyond-metatrain-reacher-pose-randomised-long",
         "beyond-metatrain-reacher-randomised",
         "beyond-metatrain-reacher-randomised-6000",
         "beyond-metatrain-reacher-randomised-long",
@@ -480,7 +488,9 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
         "beyond-maps",
         "beyond-metatrain-kuka-randomised",
         "beyond-metatrain-kuka-randomised-history",
+        "beyond-metatrain-reacher-history-randomised-long",
         "beyond-metatrain-reacher-pose-long",
+        "beyond-metatrain-reacher-pose-randomised-long",
         "beyond-metatrain-reacher-randomised",
         "beyond-metatrain-reacher-randomised-6000",
         "beyond-metatrain-reacher-randomised-long",
@@ -496,13 +506,16 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     assert (
         reproduce_main(["--quick", "--out", str(other), "--only", "beyond", "--device", "cpu"]) == 0
     )
-    assert "10 stage(s) to run" in capsys.readouterr().err
+    assert "12 stage(s) to run" in capsys.readouterr().err
     report = (other / "REPORT.md").read_text()
     beyond = report[report.index("## Beyond the paper") :]
     assert "### Targets" in beyond and "randomised" in beyond
     results = json.loads((other / "results.json").read_text())
     targets = results["beyond"]["targets"]
-    assert len(targets) == 6 * 3 + 2 * 3  # 6 / 2 recipes x (goals + 2 maps; Table 1 + 2 tables)
+    assert len(targets) == 8 * 3 + 2 * 3  # 8 / 2 recipes x (goals + 2 maps; Table 1 + 2 tables)
+    # each reacher target names the share the open-loop floor reaches, from the stage's own floor
+    assert all("open-loop floor" in t["measured"] for t in targets if "reacher" in t["target"])
+    assert "| open-loop floor |" in beyond
     for t in targets:
         assert isinstance(t["met"], bool)
         assert (
@@ -513,7 +526,9 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     rows = results["beyond"]["training"]
     assert set(rows) == {
         "reacher/ours",
+        "reacher/history-randomised-long",
         "reacher/pose-long",
+        "reacher/pose-randomised-long",
         "reacher/randomised",
         "reacher/randomised-long",
         "reacher/randomised-6000",

@@ -22,7 +22,9 @@ method, as ``mean_j (q_T,j - g_j)^2`` (MSE over the joints); ``mean(std)`` over 
 Maps (reacher, 2 joints): (a) a ``grid x grid`` goal grid over ``limit_fraction`` of the joint
 limits, MSE per goal over ``seeds x inits``; (b) a 2-D grid over the masses (m1, m2) of both links
 (SET at the centre of mass, inertia kept) and (c) a 2-D grid over the lengths (l1, l2) of both links
-(stretched links: a longer link 1 moves joint 2 out), each at the four training goals.
+(stretched links: a longer link 1 moves joint 2 out), each at the four training goals. With
+``reach_iterations`` > 0, each goal and each cell also gets the open-loop reachability floor (the best
+over the Adam learning rates ``reach_lrs``).
 """
 
 from __future__ import annotations
@@ -308,6 +310,8 @@ def run_maps_stage(
         "mass": {},
         "length": {},
     }
+    if int(s["reach_iterations"]) > 0:
+        out.update(_maps_floor(first, s, grid.view(n, n, 2), train_goals, pairs, variant, device))
     for m in runs:
         errs = [r["errors"][k] for k, j in enumerate(jobs) if j.key[0] == "goals" and j.key[2] == m]
         per_goal = (
@@ -321,3 +325,27 @@ def run_maps_stage(
                 cells.append({"value": list(v), **_pool(errs, dof)})
             out[kind][m] = cells
     return out
+
+
+def _maps_floor(
+    run_dir: str, s: dict, grid, train_goals, pairs: dict, variant, device: str
+) -> dict:
+    """The open-loop reachability floor (MSE over the joints) of every goal of the goal grid ``(n, n,
+    dof)`` and of every cell of the 2-D maps (mean over the training goals): what the best open-loop
+    torques within the policy's bounds and horizon reach from home
+    (:func:`~.reach.best_open_loop_floor`)."""
+    from warp_critic.reproduce.reach import best_open_loop_floor
+
+    its, lrs = int(s["reach_iterations"]), [float(x) for x in s["reach_lrs"]]
+
+    def floor(variants: list, goals) -> np.ndarray:
+        dof = goals.shape[1]
+        return (
+            best_open_loop_floor(run_dir, variants, goals, iterations=its, lrs=lrs, device=device)
+            / dof
+        )
+
+    out = {"goals": floor([Variant()], grid.flatten(0, 1))[0].reshape(grid.shape[:2]).tolist()}
+    for kind, values in pairs.items():
+        out[kind] = floor([variant(kind, a, b) for a, b in values], train_goals).mean(1).tolist()
+    return {"reach_floor": out, "reach_iterations": its, "reach_lrs": lrs}

@@ -3,7 +3,8 @@ torque bounds and horizon can bring the robot to a goal.
 
 For every (variant, goal) world, open-loop torques ``(T, dof)`` are optimised through the
 *differentiable* model (Adam on ``max_torque * tanh(u)``, from the meta-test start: the home pose at
-rest), keeping the best final error seen per world. This is the computation of
+rest), keeping the best final error seen per world. A world whose state goes non-finite (torques
+the integrator cannot follow, e.g. on very light links) backtracks to half its best torques. This is the computation of
 ``tools/diagnose_metatest.py --reachability``, batched over many variants. It is an upper bound of
 the true floor (a local optimiser), so an error near it means the goal is hard, not that the critic
 failed.
@@ -16,6 +17,8 @@ from collections.abc import Iterator
 import numpy as np
 import torch
 
+from warp_critic.core.errors import DivergenceError
+
 
 def open_loop_floor(
     run_dir: str,
@@ -26,13 +29,16 @@ def open_loop_floor(
     lr: float = 0.1,
     device: str = "cpu",
     u0: torch.Tensor | None = None,
+    substeps: int | None = None,
 ) -> np.ndarray:
     """``(len(variants), G)`` best final ``||q_T - g||^2`` [rad^2] per variant and goal ``(G, dof)``,
     with the run's scene, horizon, time step, gravity and torque bounds. ``u0`` ``(T, V*G, dof)``,
     variant-major: the start of the pre-tanh torques (default zeros: no torque); the start's own
-    error counts, so a start replaying a policy's torques gives at most that policy's error."""
+    error counts, so a start replaying a policy's torques gives at most that policy's error.
+    ``substeps``: physics sub-steps per control step (default the run's): more integrate the same
+    physics more finely, for variants whose saturated torques the run's sub-step cannot integrate."""
     from warp_critic.learning.networks import Normalizer
-    from warp_critic.learning.rollout import rollout
+    from warp_critic.learning.rollout import finite_worlds, rollout
     from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
     from warp_critic.reproduce.evaluate import load_runs
     from warp_critic.running.scenefile import find_run_scene
@@ -46,7 +52,7 @@ def open_loop_floor(
         scene,
         [v for v in variants for _ in range(G)],
         dt=cfg.dt,
-        substeps=cfg.substeps,
+        substeps=cfg.substeps if substeps is None else int(substeps),
         device=device,
         differentiable=True,
         gravity=cfg.gravity if cfg.gravity is not None else STANDARD_GRAVITY,
@@ -64,6 +70,7 @@ def open_loop_floor(
     u = start.clone().requires_grad_(True)
     opt = torch.optim.Adam([u], lr=lr)
     best = torch.full((V * G,), float("inf"), device=dev)
+    best_u = start.clone()  # each world's torques at its best error so far
     for _ in range(max(1, int(iterations))):
         steps = iter(range(cfg.horizon))
 
@@ -77,10 +84,47 @@ def open_loop_floor(
             torch.zeros_like(home),
             cfg.horizon,
             differentiable=True,
+            check=False,
         )
+        ok = finite_worlds(traj)
         err = ((traj.q[-1] - target) ** 2).sum(-1)
-        best = torch.minimum(best, err.detach())
+        better = ok & (err.detach() < best)
+        best = torch.where(better, err.detach(), best)
+        best_u[:, better] = u.detach()[:, better]
         opt.zero_grad()
-        err.sum().backward()
+        err[ok].sum().backward()
         opt.step()
+        if not bool(ok.all()):
+            # backtrack: saturated torques that the integrator cannot follow (light links) are no
+            # controller's; such a world restarts from half its best torques, its moments cleared
+            _backtrack(opt, u, best_u, ~ok)
+    if not bool(torch.isfinite(best).all()):
+        raise DivergenceError("open-loop floor: a world diverged even without torques")
     return best.view(V, G).cpu().numpy()
+
+
+def best_open_loop_floor(
+    run_dir: str,
+    variants: list,
+    goals: torch.Tensor,
+    *,
+    iterations: int,
+    lrs: list[float],
+    device: str = "cpu",
+) -> np.ndarray:
+    """``(len(variants), G)``: per world, the best :func:`open_loop_floor` over the Adam learning
+    rates ``lrs``. One rate does not suit every robot: on the reacher, 0.1 leaves goals that 0.03
+    reaches to 1e-11 at the start's error, its elbow being too responsive for steps that size."""
+    floors = [
+        open_loop_floor(run_dir, variants, goals, iterations=iterations, lr=lr, device=device)
+        for lr in lrs
+    ]
+    return np.minimum.reduce(floors)
+
+
+def _backtrack(opt: torch.optim.Adam, u: torch.Tensor, best_u: torch.Tensor, bad) -> None:
+    """Worlds ``bad`` ``(W,)`` of ``u`` ``(T, W, dof)``: back to half their best, Adam's moments zero."""
+    with torch.no_grad():
+        u[:, bad] = 0.5 * best_u[:, bad]
+        for key in ("exp_avg", "exp_avg_sq"):
+            opt.state[u][key][:, bad] = 0.0

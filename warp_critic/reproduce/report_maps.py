@@ -47,6 +47,18 @@ def maps_section(d: Draft) -> None:
             + ".",
             "",
         ]
+        shares = floor_shares(M)
+        if shares:
+            md += [
+                f"Open-loop reachability floor (the best open-loop torques within the policy's bounds "
+                f"and horizon, from home; {M['reach_iterations']} Adam steps at each learning rate "
+                f"{', '.join(str(x) for x in M['reach_lrs'])}): below 0.05 MSE on "
+                f"{shares['goals']:.0%} of the goal grid, {shares['mass']:.0%} of the mass grid's "
+                f"cells and {shares['length']:.0%} of the length grid's (mean over the training goals). "
+                "A goal or cell whose floor is above 0.05 is out of any controller's reach; a critic's "
+                "miss elsewhere is the critic's.",
+                "",
+            ]
         goal_rows = rp.method_rows(lambda ci, m: M["goals"][m], 1, sv, None)
         md += ["| goal grid | mean MSE over the grid |", "|---|---|"]
         md += [f"| {lab} | {fmt(v[0][0]) if v[0] else '—'} |" for lab, _, v in goal_rows] + [""]
@@ -134,3 +146,12 @@ def maps_section(d: Draft) -> None:
             "file": f"{r.dir.name}/{STAGE_FILE}",
             "raw_file": f"{r.dir.name}/{M['raw_file']}",
         }
+
+
+def floor_shares(maps: dict, level: float = 0.05) -> dict[str, float] | None:
+    """The share of the goal grid's goals and of each 2-D map's cells whose open-loop reachability
+    floor is below ``level`` MSE (``None``: the maps stage computed no floor)."""
+    floor = maps.get("reach_floor")
+    if not floor:
+        return None
+    return {k: float((np.asarray(floor[k]) < level).mean()) for k in ("goals", "mass", "length")}

@@ -21,7 +21,9 @@ Paper settings (non-quick):
   ``N(g, std^2)`` around training goals 0 and 1; Tables 2-3 use 10 goals drawn the same way at
   ``dynamics_goal_std`` (0.1: the paper does not say which goals it used there).
 * ``maps``: reacher Figures 4-6: a goal grid over the joint space and 2-D grids over the masses
-  (m1, m2) and the lengths (l1, l2) of both links (:mod:`warp_critic.reproduce.generalize`).
+  (m1, m2) and the lengths (l1, l2) of both links (:mod:`warp_critic.reproduce.generalize`), each goal
+  and cell with its open-loop reachability floor (``reach_iterations`` Adam steps at each of
+  ``reach_lrs``; 0 = none).
 * ``tables``: also two stress tables (added tip mass, stretched link 7) with their open-loop
   reachability floors (``reach_iterations`` Adam steps; 0 = none).
 """
@@ -99,7 +101,9 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
 #: critic (equivariant in q - g) with random starts 1.5 rad around home, 2 of 4 worlds per goal at
 #: home -- so that training shows the critic the |q - g| a far goal asks for. ``wide-long`` and
 #: ``randomised-long``: the same for 3000 iterations instead of 400 (``randomised-6000``: 6000).
-#: ``pose-long``: ``wide-long`` with the ``pose`` critic input, which adds the arm's joint angles.
+#: ``pose-long``: ``wide-long`` with the ``pose`` critic input, which adds the arm's joint angles;
+#: ``pose-randomised-long``: ``pose-long`` over ``randomised``'s draws; ``history-randomised-long``:
+#: ``randomised-long`` with the ``history`` critic input.
 #: ``randomised-history`` (KUKA): the same draws with the ``history`` critic input (the last step's velocity change and
 #: torque), so that the critic can tell the models apart. Everything else is the nominal preset's,
 #: so the nominal run is the comparison.
@@ -127,6 +131,22 @@ RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
         # inertia a far goal is reached with, which the relative input hides (RESULTS, "Why the far
         # goals miss"); on seed 0, 2000 iterations: 42% of the 9 x 9 grid against 36%
         "pose-long": ("reacher", {**WIDE, "critic_input": "pose", "iterations": 3000}),
+        # randomised-long with the history input (the last step's velocity change and torque): the
+        # response to the fresh policy's small torques tells the critic the inertia it acts on
+        "history-randomised-long": (
+            "reacher",
+            {"critic_input": "history", "train_variants": REACHER_VARIANTS, "iterations": 3000},
+        ),
+        # both: pose-long trained over the randomised models, for the goal grid and the maps at once
+        "pose-randomised-long": (
+            "reacher",
+            {
+                **WIDE,
+                "critic_input": "pose",
+                "train_variants": REACHER_VARIANTS,
+                "iterations": 3000,
+            },
+        ),
     },
     "kuka": {
         "randomised": ("kuka-table1", {"train_variants": KUKA_VARIANTS}),
@@ -247,6 +267,10 @@ def default_settings(quick: bool, seeds: int) -> dict[str, dict]:
             "inits": 5,
             "seed": 1,
             "max_worlds": 4096,
+            # the open-loop reachability floor of every goal and cell: Adam steps (0: none), and the
+            # learning rates whose best counts
+            "reach_iterations": 200,
+            "reach_lrs": [0.1, 0.03, 0.01],
         },
     }
     if quick:
@@ -262,7 +286,14 @@ def default_settings(quick: bool, seeds: int) -> dict[str, dict]:
             stress_lengths=[0.2, 2.0],
             reach_iterations=1,
         )
-        s["maps"].update(grid=4, masses=[0.5, 1.0, 2.0], lengths=[0.75, 1.0, 1.5], inits=2)
+        s["maps"].update(
+            grid=4,
+            masses=[0.5, 1.0, 2.0],
+            lengths=[0.75, 1.0, 1.5],
+            inits=2,
+            reach_iterations=1,
+            reach_lrs=[0.1],
+        )
     return s
 
 

@@ -205,6 +205,9 @@ def check_maps(s: dict) -> None:
     _common("maps", s)
     number("maps.grid", s["grid"], lo=1, hi=MAX_GRID, integer=True)
     number("maps.limit_fraction", s["limit_fraction"], lo=0, open_lo=True, hi=1)
+    # the open-loop reachability floor: Adam steps (0: none) at each learning rate
+    number("maps.reach_iterations", s["reach_iterations"], lo=0, hi=10**6, integer=True)
+    numbers("maps.reach_lrs", s["reach_lrs"], lo=0, open_lo=True, hi=100)
 
 
 def check_all(settings: dict, defaults: dict) -> None:
