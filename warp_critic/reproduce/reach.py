@@ -4,8 +4,8 @@ torque bounds and horizon can bring the robot to a goal.
 For every (variant, goal) world, open-loop torques ``(T, dof)`` are optimised through the
 *differentiable* model (Adam on ``max_torque * tanh(u)``, from the meta-test start: the home pose at
 rest), keeping the best final error seen per world. A world whose state goes non-finite (torques
-the integrator cannot follow, e.g. on very light links) backtracks to half its best torques. This is the computation of
-``tools/diagnose_metatest.py --reachability``, batched over many variants. It is an upper bound of
+the integrator cannot follow, e.g. on very light links) backtracks to half its best torques. This
+is the computation of ``tools/diagnose_metatest.py --reachability``, batched over many variants. It is an upper bound of
 the true floor (a local optimiser), so an error near it means the goal is hard, not that the critic
 failed.
 """
@@ -29,14 +29,11 @@ def open_loop_floor(
     lr: float = 0.1,
     device: str = "cpu",
     u0: torch.Tensor | None = None,
-    substeps: int | None = None,
 ) -> np.ndarray:
     """``(len(variants), G)`` best final ``||q_T - g||^2`` [rad^2] per variant and goal ``(G, dof)``,
     with the run's scene, horizon, time step, gravity and torque bounds. ``u0`` ``(T, V*G, dof)``,
     variant-major: the start of the pre-tanh torques (default zeros: no torque); the start's own
-    error counts, so a start replaying a policy's torques gives at most that policy's error.
-    ``substeps``: physics sub-steps per control step (default the run's): more integrate the same
-    physics more finely, for variants whose saturated torques the run's sub-step cannot integrate."""
+    error counts, so a start replaying a policy's torques gives at most that policy's error."""
     from warp_critic.learning.networks import Normalizer
     from warp_critic.learning.rollout import finite_worlds, rollout
     from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
@@ -52,7 +49,7 @@ def open_loop_floor(
         scene,
         [v for v in variants for _ in range(G)],
         dt=cfg.dt,
-        substeps=cfg.substeps if substeps is None else int(substeps),
+        substeps=cfg.substeps,
         device=device,
         differentiable=True,
         gravity=cfg.gravity if cfg.gravity is not None else STANDARD_GRAVITY,
@@ -99,7 +96,10 @@ def open_loop_floor(
             # controller's; such a world restarts from half its best torques, its moments cleared
             _backtrack(opt, u, best_u, ~ok)
     if not bool(torch.isfinite(best).all()):
-        raise DivergenceError("open-loop floor: a world diverged even without torques")
+        bad = int(torch.nonzero(~torch.isfinite(best))[0])
+        raise DivergenceError(
+            f"open-loop floor: world {bad} went non-finite at every step of the search", world=bad
+        )
     return best.view(V, G).cpu().numpy()
 
 
