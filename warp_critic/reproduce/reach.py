@@ -5,9 +5,9 @@ For every (variant, goal) world, open-loop torques ``(T, dof)`` are optimised th
 *differentiable* model (Adam on ``max_torque * tanh(u)``, from the meta-test start: the home pose at
 rest), keeping the best final error seen per world. A world whose state goes non-finite (torques
 the integrator cannot follow, e.g. on very light links) backtracks to half its best torques. This
-is the computation of ``tools/diagnose_metatest.py --reachability``, batched over many variants. It is an upper bound of
-the true floor (a local optimiser), so an error near it means the goal is hard, not that the critic
-failed.
+is the computation of ``tools/diagnose_metatest.py --reachability``, batched over many variants.
+It is an upper bound of the true floor (a local optimiser), so an error near it means the goal is
+hard, not that the critic failed.
 """
 
 from __future__ import annotations
