@@ -12,7 +12,7 @@ from collections.abc import Callable
 
 import torch
 
-from warp_critic.learning.losses import critic_loss
+from warp_critic.learning.losses import critic_loss, critic_loss_at
 from warp_critic.learning.networks import PolicyParams
 from warp_critic.learning.protocols import CriticFn, Policy, StepSize
 from warp_critic.learning.rollout import Trajectory, rollout
@@ -24,6 +24,35 @@ def policy_fn(
 ) -> Callable[[torch.Tensor, torch.Tensor], torch.Tensor]:
     """Bind parameters: ``policy(params, q, qd)`` -> a rollout's ``(q, qd) -> tau``."""
     return lambda q, qd: policy(params, q, qd)
+
+
+def critic_gradient(
+    critic: CriticFn,
+    policy: Policy,
+    params: PolicyParams,
+    traj: Trajectory,
+    goal: torch.Tensor,
+    create_graph: bool,
+) -> tuple[torch.Tensor, ...]:
+    """The step direction for each of ``params``: ``grad_theta sum_t L(s_t, pi_theta(s_t), g)``.
+
+    A critic with a torque metric ``P(q)`` (``torque_metric``, e.g. the ``inertial`` layout) steps
+    the torques in that metric: ``sum_t J_t^T P(q_t) dL/dtau_t``, ``J_t = dtau_t / dtheta``. Still a
+    descent direction of the same loss (``P`` is positive definite), and the exact function of the
+    critic that the outer loop differentiates (``P`` is data: the states are).
+    """
+    metric = getattr(critic, "torque_metric", None)
+    P = metric(traj.q[:-1].detach()) if metric is not None else None
+    if P is None:
+        loss = critic_loss(critic, policy, params, traj, goal).sum()  # worlds are independent
+        return torch.autograd.grad(loss, list(params.values()), create_graph=create_graph)
+    tau = policy(params, traj.q[:-1].detach(), traj.qd[:-1].detach())  # (T, W, dof)
+    loss = critic_loss_at(critic, traj, tau, goal).sum()
+    (dtau,) = torch.autograd.grad(loss, tau, create_graph=create_graph)
+    step = (P @ dtau.unsqueeze(-1)).squeeze(-1)
+    return torch.autograd.grad(
+        tau, list(params.values()), grad_outputs=step, create_graph=create_graph
+    )
 
 
 def inner_update(
@@ -60,8 +89,7 @@ def inner_update(
         traj = rollout(
             sim, policy_fn(policy, params), q0, qd0, horizon, differentiable=False, check=check
         )
-        loss = critic_loss(critic, policy, params, traj, goal).sum()  # worlds are independent
-        grads = torch.autograd.grad(loss, list(params.values()), create_graph=create_graph)
+        grads = critic_gradient(critic, policy, params, traj, goal, create_graph)
         params = {k: v - alpha * g for (k, v), g in zip(params.items(), grads)}
         if not create_graph:
             params = {k: v.detach().requires_grad_(True) for k, v in params.items()}

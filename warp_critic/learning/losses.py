@@ -43,7 +43,15 @@ def critic_loss(
     actions only, so no model gradient is needed (the paper's model-free policy update).
     """
     q, qd = traj.q[:-1].detach(), traj.qd[:-1].detach()  # (T, W, dof)
-    tau = policy(params, q, qd)
+    return critic_loss_at(critic, traj, policy(params, q, qd), goal)
+
+
+def critic_loss_at(
+    critic: CriticFn, traj: Trajectory, tau: torch.Tensor, goal: torch.Tensor
+) -> torch.Tensor:
+    """Per-world ``sum_t L_critic(s_t, tau_t, g)`` ``(W,)`` for the actions ``tau (T, W, dof)``
+    taken at the trajectory's states (:func:`critic_loss` with the policy's actions given)."""
+    q, qd = traj.q[:-1].detach(), traj.qd[:-1].detach()  # (T, W, dof)
     g = goal.unsqueeze(0).expand_as(q)
     if getattr(critic, "uses_history", False):  # the last step's response, observed (data)
         return critic(q, qd, tau, g, history_features(traj.qd, traj.tau)).sum(0)

@@ -6,7 +6,7 @@ batched matmul evaluates all policies, and an inner update is ``theta - alpha * 
 tensors (no module, no in-place mutation).
 
 Critic ``L_critic(s, a, g)``: MLP with two hidden layers of 400 units and ELU, one scalar output.
-Four input layouts (``CRITIC_INPUTS``, normalised as below):
+Five input layouts (``CRITIC_INPUTS``, normalised as below):
 
 * ``full``: ``[q, qd, a, g, q - g]`` -- everything; the goal-relative position ``q - g`` is a fixed
   feature of ``(s, g)`` that adds no information but makes goal generalisation easier to learn;
@@ -28,6 +28,16 @@ Four input layouts (``CRITIC_INPUTS``, normalised as below):
   ``relative`` critic cannot see, so it applies near far goals the field it learned near the
   training goals (RESULTS.md, "Why the far goals miss").
 
+* ``inertial``: ``[q - g, qd, M(q_h) M(q)^-1 a]`` -- ``relative`` with the torque seen as the torque
+  that gives the same joint acceleration at the home pose ``q_h`` (``M``: the nominal model's
+  inertia, :class:`~warp_critic.physics.inertia.NominalInertia`, evaluated as data). Its inner update
+  steps the torques in the metric ``P(q) = M(q) M(q_h)^-2 M(q)`` (:meth:`Critic.torque_metric`), so
+  that one critic gradient changes the joint acceleration by the same amount in every pose:
+  ``M(q)^-1 P(q) d/dtau = M(q_h)^-1 d/dx`` with ``x`` the home-equivalent torque. Where the dynamics
+  depend on the pose only through ``M(q)`` (the reacher: its joint axes are parallel to gravity),
+  the inner loop is then the same at every goal and a field learned near the training goals holds
+  at all of them. At the home pose it is the ``relative`` critic with the paper's update.
+
 Input normalisation (documented, fixed from the scene, not learned):
   * joint positions and goals: ``(q - centre) / half_range`` of the joint limits; a continuous joint
     (no limits: a half range of at least ``CONTINUOUS_HALF_RANGE``) is an angle, seen wrapped:
@@ -41,6 +51,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import torch
 from torch import nn
@@ -53,6 +64,15 @@ POLICY_INIT_SCHEMES = ("fresh", "fixed", "persistent")
 
 
 CONTINUOUS_HALF_RANGE = 1e6  # rad: a joint whose limits are this far apart has none
+
+
+class Inertia(Protocol):
+    """A model's joint-space inertia as data: ``q (..., dof)`` -> ``M(q) (..., dof, dof)``, and
+    ``home()`` -> ``M(q_h) (dof, dof)`` (e.g. :class:`~warp_critic.physics.inertia.NominalInertia`)."""
+
+    def __call__(self, q: torch.Tensor, /) -> torch.Tensor: ...
+
+    def home(self) -> torch.Tensor: ...
 
 
 def wrap_angles(x: torch.Tensor, wrap: torch.Tensor | None) -> torch.Tensor:
@@ -71,18 +91,25 @@ class Normalizer:
     qd_scale: float
     max_torque: torch.Tensor
     wrap: torch.Tensor | None = None
+    # the nominal model's M(q) (:class:`~warp_critic.physics.inertia.NominalInertia`), for the
+    # ``inertial`` critic; evaluated lazily, so carrying it costs nothing
+    inertia: Inertia | None = None
 
     @staticmethod
     def from_limits(
-        q_lower: torch.Tensor, q_upper: torch.Tensor, max_torque: torch.Tensor, qd_scale: float
+        q_lower: torch.Tensor,
+        q_upper: torch.Tensor,
+        max_torque: torch.Tensor,
+        qd_scale: float,
+        inertia: Inertia | None = None,
     ) -> Normalizer:
         centre, half = (q_upper + q_lower) / 2, (q_upper - q_lower) / 2
         wrap = half >= CONTINUOUS_HALF_RANGE
         if not bool(wrap.any()):
-            return Normalizer(centre, half, float(qd_scale), max_torque)
+            return Normalizer(centre, half, float(qd_scale), max_torque, None, inertia)
         centre = torch.where(wrap, torch.zeros_like(centre), centre)
         half = torch.where(wrap, torch.full_like(half, math.pi), half)
-        return Normalizer(centre, half, float(qd_scale), max_torque, wrap)
+        return Normalizer(centre, half, float(qd_scale), max_torque, wrap, inertia)
 
     def q(self, q: torch.Tensor) -> torch.Tensor:
         return wrap_angles(q - self.q_centre, self.wrap) / self.q_half_range
@@ -195,7 +222,10 @@ class Critic(nn.Module):
         if inputs not in CRITIC_INPUTS:
             raise ValueError(f"critic inputs must be one of {CRITIC_INPUTS} (got {inputs!r})")
         self.dof, self.inputs, self.hidden = dof, inputs, hidden
-        n_in = {"relative": 3, "pose": 4}.get(inputs, 5) * dof
+        n_in = {"relative": 3, "inertial": 3, "pose": 4}.get(inputs, 5) * dof
+        self.inertia = norm.inertia if inputs == "inertial" else None
+        if inputs == "inertial" and self.inertia is None:
+            raise ValueError("an inertial critic needs the scene's nominal inertia (norm.inertia)")
         self.net = nn.Sequential(
             nn.Linear(n_in, hidden),
             nn.ELU(),
@@ -225,6 +255,22 @@ class Critic(nn.Module):
         """Whether :meth:`forward` takes ``history`` (:func:`history_features`)."""
         return self.inputs == "history"
 
+    def torque_metric(self, q: torch.Tensor) -> torch.Tensor | None:
+        """The metric ``P(q) (..., dof, dof)`` the inner update steps torques in at the states ``q
+        (..., dof)`` (data): ``M(q) M(q_h)^-2 M(q)`` for the ``inertial`` layout, ``None`` (the
+        identity: the paper's plain gradient) for the others."""
+        if self.inertia is None:
+            return None
+        M = self.inertia(q)
+        left = torch.linalg.solve(self.inertia.home(), M)  # M(q_h)^-1 M(q)
+        return left.transpose(-1, -2) @ left
+
+    def _home_equivalent(self, q: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
+        """``M(q_h) M(q)^-1 tau`` ``(..., dof)``: the torque with the same acceleration at home."""
+        assert self.inertia is not None
+        acc = torch.linalg.solve(self.inertia(q), tau.unsqueeze(-1))
+        return (self.inertia.home() @ acc).squeeze(-1)
+
     def features(
         self,
         q: torch.Tensor,
@@ -236,7 +282,9 @@ class Critic(nn.Module):
         """The normalised input ``(..., n_in)`` of the input layout (``history``: ``(..., 2*dof)``,
         needed by the ``history`` layout only)."""
         wrap = self.q_wrap if self._wraps else None
-        if self.inputs in ("relative", "history", "pose"):
+        if self.inputs in ("relative", "history", "pose", "inertial"):
+            if self.inputs == "inertial":
+                tau = self._home_equivalent(q, tau)
             parts = [
                 wrap_angles(q - goal, wrap) / self.q_half_range,
                 qd / self.qd_scale,
@@ -319,6 +367,10 @@ class StackedCritic(nn.Module):
     def uses_history(self) -> bool:
         return self.template[0].uses_history
 
+    def torque_metric(self, q: torch.Tensor) -> torch.Tensor | None:
+        """:meth:`Critic.torque_metric` (one scene for every seed)."""
+        return self.template[0].torque_metric(q)
+
     def forward(
         self,
         q: torch.Tensor,
@@ -363,6 +415,7 @@ class StackedCritic(nn.Module):
                 c.qd_scale,
                 c.max_torque,
                 c.q_wrap if c._wraps else None,
+                c.inertia,
             ),
             hidden=c.hidden,
             inputs=c.inputs,

@@ -31,6 +31,7 @@ import torch
 
 from warp_critic.core import interrupts
 from warp_critic.core.errors import UserError
+from warp_critic.physics.inertia import NominalInertia
 from warp_critic.physics.scene import Variant
 
 #: Task fields every run of one evaluation must share (they define the dynamics and the policy's scaling).
@@ -58,6 +59,22 @@ class MultiCritic(torch.nn.Module):
         self.critics = torch.nn.ModuleList([c for c, _, _ in segments])
         self.bounds = [(a, b) for _, a, b in segments]
         self.uses_history = any(getattr(c, "uses_history", False) for c in self.critics)
+
+    def torque_metric(self, q: torch.Tensor) -> torch.Tensor | None:
+        """Each critic's torque metric on its worlds (the identity where it has none), or
+        ``None`` where no critic has one: ``q (..., W, dof)`` -> ``(..., W, dof, dof)``."""
+        parts = [getattr(c, "torque_metric", lambda _: None) for c in self.critics]
+        metrics = [m(q[..., a:b, :]) for m, (a, b) in zip(parts, self.bounds)]
+        if all(m is None for m in metrics):
+            return None
+        eye = torch.eye(q.shape[-1], dtype=q.dtype, device=q.device)
+        return torch.cat(
+            [
+                m if m is not None else eye.expand(*q.shape[:-2], b - a, -1, -1)
+                for m, (a, b) in zip(metrics, self.bounds)
+            ],
+            dim=-3,
+        )
 
     def forward(self, q, qd, tau, g, history=None):
         outs = []
@@ -201,6 +218,7 @@ def evaluate(
                 sim.q_upper,
                 max_torque_tensor(cfg0.max_torque, scene, dev),
                 cfg0.qd_scale,
+                NominalInertia(scene, device),
             )
             policy = MLPPolicy(norm)
             segments, rates, goals, params = [], [], [], []

@@ -28,6 +28,7 @@ from warp_critic.core.errors import FieldError
 from warp_critic.core.runtime import MAX_SEED, check_threads
 from warp_critic.learning.networks import Normalizer
 from warp_critic.physics import schema
+from warp_critic.physics.inertia import NominalInertia
 from warp_critic.physics.link_changes import parse_changes
 from warp_critic.physics.scene import Scene, Variant
 from warp_critic.running.config import SerializableConfig, check_fields, filled, spec
@@ -365,6 +366,7 @@ def build_task(cfg: TaskConfig, scene: Scene, *, differentiable: bool, copies: i
         sim.q_upper,
         max_torque_tensor(filled(cfg.max_torque, "max_torque"), scene, dev),
         filled(cfg.qd_scale, "qd_scale"),
+        NominalInertia(scene, cfg.device),
     )
     home = torch.as_tensor(
         getattr(scene, "home", [0.0] * scene.dof), dtype=torch.float32, device=dev
