@@ -101,6 +101,31 @@ def test_diagnose_tool_runs_on_a_run_directory(tmp_path, capsys):
     assert "--around" in capsys.readouterr().err
 
 
+def test_maps_tool_prints_the_three_shares_per_run_set(tmp_path, capsys):
+    tool = load_tool("maps_of_runs")
+    a, b = tmp_path / "a", tmp_path / "b"
+    meta_train(tiny_cfg(a, iterations=1))
+    meta_train(tiny_cfg(b, iterations=1, seed=1))
+    assert tool.main([f"one={a}", f"both={a},{b}", "--grid", "2", "--inits", "1"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    rows = {ln.split()[0]: ln for ln in lines[2:]}
+    assert lines[0].startswith("2 x 2 goal grid") and set(rows) == {"one", "both"}, lines
+    for row in rows.values():  # three "share, mean" cells
+        shares = [float(x.rstrip("%,")) for x in row.split()[2::2]]
+        assert len(shares) == 3 and all(0 <= x <= 100 for x in shares), row
+    for argv in (
+        [f"{a}"],
+        [f"x={a}", f"x={b}"],
+        [f"x={tmp_path / 'none'}"],
+        [f"x={a}", "--grid", "1"],
+    ):
+        with pytest.raises(SystemExit) as e:
+            tool.main(argv)
+        assert e.value.code == 2
+        err = capsys.readouterr().err
+        assert err.startswith("maps_of_runs: error: ") and err.count("\n") == 1, err
+
+
 def test_paper_table_tool_pools_seeds_and_reports_the_mean_over_joints(tmp_path, capsys):
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
 

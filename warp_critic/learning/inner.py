@@ -15,7 +15,7 @@ import torch
 from warp_critic.learning.losses import critic_loss, critic_loss_at
 from warp_critic.learning.networks import PolicyParams
 from warp_critic.learning.protocols import CriticFn, Policy, StepSize
-from warp_critic.learning.rollout import Trajectory, rollout
+from warp_critic.learning.rollout import Trajectory, hold_diverged, rollout, settled_worlds
 from warp_critic.physics.simulator import Simulator
 
 
@@ -69,6 +69,7 @@ def inner_update(
     steps: int = 1,
     create_graph: bool = False,
     check: bool = True,
+    guard: bool = False,
 ) -> tuple[PolicyParams, list[Trajectory]]:
     """``steps`` critic-gradient steps on ``W`` policies at once.
 
@@ -81,6 +82,10 @@ def inner_update(
         create_graph: keep the graph of the update (meta-training); ``False`` at meta-test.
         check: raise on a non-finite state (``False``: a diverged world's parameters turn
             non-finite, the other worlds' are unaffected; see :func:`~.rollout.rollout`).
+        guard: with ``check=False``, a world that diverges (:func:`~.rollout.settled_worlds`) is
+            stepped on its start state held still (:func:`~.rollout.hold_diverged`), so that its
+            parameters and the graph through them stay finite; its rollouts are returned as they
+            ran, for the caller to drop it.
 
     Returns the updated parameters and the rollout used for each step.
     """
@@ -89,7 +94,8 @@ def inner_update(
         traj = rollout(
             sim, policy_fn(policy, params), q0, qd0, horizon, differentiable=False, check=check
         )
-        grads = critic_gradient(critic, policy, params, traj, goal, create_graph)
+        seen = hold_diverged(traj, settled_worlds(traj)) if guard else traj
+        grads = critic_gradient(critic, policy, params, seen, goal, create_graph)
         params = {k: v - alpha * g for (k, v), g in zip(params.items(), grads)}
         if not create_graph:
             params = {k: v.detach().requires_grad_(True) for k, v in params.items()}

@@ -75,7 +75,9 @@ class TrainConfig(TaskConfig):
         None,
         "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant); "
         "history = relative + the last step's velocity change and torque (tells models apart, for "
-        "--train-variants); default: the scene's, else " + schema.fallback_text("critic_input"),
+        "--train-variants); pose = relative + the joint angles q; inertial = relative with the "
+        "torque in home-pose acceleration units, M(q_h) M(q)^-1 a, and inner steps in that metric; "
+        "default: the scene's, else " + schema.fallback_text("critic_input"),
         choices=schema.CRITIC_INPUTS,
     )
     critic_hidden: int = spec(400, "critic hidden units (2 ELU layers)", gt=0, cap=8192)
@@ -86,6 +88,15 @@ class TrainConfig(TaskConfig):
         0.0, "weight (s^2) of the final-velocity term ||qd_T||^2 added to the task loss", ge=0
     )
     clip_grad: float = spec(10.0, "clip the critic's gradient norm (0 = off)", ge=0)
+    on_divergence: str = spec(
+        "stop",
+        "a world whose state goes non-finite (or beyond 1e4 rad, rad/s) in training: stop = stop "
+        "the run naming world and step, keeping the last checkpoint; drop = leave that world out "
+        "of this iteration's task loss and gradient (exactly zero) and go on, counting it in the "
+        "metrics as diverged_worlds (a seed whose worlds all diverge still stops). For "
+        "--train-variants over models that an integrator step cannot always hold",
+        choices=("stop", "drop"),
+    )
     train_variants: str | None = spec(
         None,
         "dynamics-randomised meta-training: ';'-separated link changes (as --variant) whose values "
@@ -179,6 +190,8 @@ def meta_train(
         q0, qd0 = task.home, torch.zeros_like(task.home)
         seeds = [r.cfg.seed for r in session.runs]  # of the task's copies, in order
         redraw = VariantRedraw(cfg, task, seeds) if cfg.train_variants else None
+        drop = cfg.on_divergence == "drop"
+        mean = torch.nanmean if drop else torch.mean  # drop: over the settled worlds (others nan)
 
         def step(it: int):
             nonlocal params, q0
@@ -208,8 +221,17 @@ def meta_train(
                 inner_steps=filled(cfg.inner_steps, "inner_steps"),
                 running_weight=cfg.running_weight,
                 velocity_weight=cfg.velocity_weight,
+                drop_diverged=drop,
             )
-            loss = res.losses.view(S, -1).mean(1)  # (S,) each seed's task loss
+            settled = res.settled.view(S, -1)
+            if drop:  # each seed's mean over its settled worlds
+                kept = settled.sum(1)
+                if bool((kept == 0).any()):
+                    gone = [str(seeds[i]) for i in range(S) if int(kept[i]) == 0]
+                    raise DivergenceError(f"every world diverged (seed {', '.join(gone)})")
+                loss = res.losses.view(S, -1).sum(1) / kept
+            else:
+                loss = res.losses.view(S, -1).mean(1)  # (S,) each seed's task loss
             opt.zero_grad(set_to_none=True)
             loss.sum().backward()  # seeds share no parameter: each gets its own gradient
             norms = [slice_norm(critic, i) for i in range(S)]
@@ -236,14 +258,26 @@ def meta_train(
             rows = []
             for i in range(S):
                 sl = task.copy(i)
+                after_i, before_i = res.per_world[sl], before[sl]
+                if drop:  # the means over the settled worlds (a goal with none: nan)
+                    ok = settled[i]
+                    nan = torch.full_like(after_i, math.nan)
+                    after_i, before_i = (torch.where(ok, x, nan) for x in (after_i, before_i))
                 rows.append(
                     {
-                        "task_loss": res.per_world[sl].mean().item(),
-                        "task_loss_before": before[sl].mean().item(),
-                        "task_loss_per_goal": task.per_goal(res.per_world[sl]).tolist(),
+                        "task_loss": mean(after_i).item(),
+                        "task_loss_before": mean(before_i).item(),
+                        "task_loss_per_goal": [  # null: a goal whose worlds all diverged
+                            None if v != v else v
+                            for v in (
+                                _settled_per_goal(task, after_i) if drop else task.per_goal(after_i)
+                            ).tolist()
+                        ],
                         "grad_norm": norms[i],
                     }
                 )
+                if drop:
+                    rows[-1]["diverged_worlds"] = int((~settled[i]).sum())
                 if drawn is not None:
                     # null: a range of another '|' group than the world's at this iteration
                     rows[-1]["train_variant_values"] = [
@@ -307,6 +341,17 @@ class VariantRedraw:
 # ------------------------------------------------------------------------------------------------
 # one seed's slice of the stacked critic: gradient norm, clipping, optimiser state
 # ------------------------------------------------------------------------------------------------
+
+
+def _settled_per_goal(task, per_world: torch.Tensor) -> torch.Tensor:
+    """``(Wc,) -> (G,)``: each goal's mean over its worlds that are not ``nan`` (``nan``: none)."""
+    idx = task.goal_index[: per_world.shape[0]]
+    ok = ~per_world.isnan()
+    total = torch.zeros(task.G, device=per_world.device).index_add_(
+        0, idx, torch.where(ok, per_world, torch.zeros_like(per_world))
+    )
+    count = torch.zeros(task.G, device=per_world.device).index_add_(0, idx, ok.float())
+    return total / count
 
 
 def _cat(per_seed: list[PolicyParams]) -> PolicyParams:

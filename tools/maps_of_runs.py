@@ -1,0 +1,89 @@
+#!/usr/bin/env python
+"""The reacher's maps (Figure 4's goal grid, Figures 5-6's 2-D mass and length maps) for any runs.
+
+``reproduce`` computes the maps for the 5 seeds of its stages; this tool computes the same maps, with
+the paper's settings (``reproduce``'s ``maps`` stage: 15 x 15 goals, 7 x 7 masses and lengths, 5
+inits, 3 updates), for the run directories named on the command line: a seed-0 run of a new recipe
+next to a stage's seed 0, without training 5 seeds first. Prints, per run set, the share of each
+grid below 0.05 MSE and the mean MSE over it (the mean over the set's runs, as in the report). The
+first set's first run sets the scene, the training goals and the grids; every run must be of the
+same scene. No reachability floor (``reproduce --only maps`` has it).
+
+Usage::
+
+    python tools/maps_of_runs.py nominal=runs/paper/metatrain-reacher-ours-HASH/run/seed0 \\
+        mine=runs/my-recipe-s0 --grid 9
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from warp_critic.cli.flags import ToolParser, user_message
+
+PROG = "maps_of_runs"
+LEVEL = 0.05
+
+
+def main(argv=None) -> int:
+    p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    sets_help = "NAME=RUN_DIR[,RUN_DIR...]: a named set of run directories (one recipe's seeds)"
+    p.add_argument("run_dirs", nargs="+", metavar="NAME=RUN_DIRS", help=sets_help)
+    p.add_argument(
+        "--grid", type=int, default=None, help="goal grid side (default: the paper's 15)"
+    )
+    p.add_argument("--inits", type=int, default=None, help="policy inits (default: the paper's 5)")
+    p.add_argument("--device", default="cpu")
+    args = p.parse_args(argv)
+    sets: dict[str, list[str]] = {}
+    for item in args.run_dirs:
+        name, sep, dirs = item.partition("=")
+        if not sep or not name or not dirs:
+            p.error(f"{item!r}: expected NAME=RUN_DIR[,RUN_DIR...]")
+        if name in sets:
+            p.error(f"{name!r}: named twice")
+        sets[name] = [d for d in dirs.split(",") if d]
+        for d in sets[name]:
+            if not (Path(d) / "checkpoint.pt").is_file():
+                p.error(f"{d}: not a run directory (no checkpoint.pt)")
+    for flag in ("grid", "inits"):
+        if getattr(args, flag) is not None and getattr(args, flag) < 1 + (flag == "grid"):
+            p.error(f"--{flag} must be >= {1 + (flag == 'grid')}")
+    from warp_critic.core import runtime
+    from warp_critic.core.errors import UserError
+    from warp_critic.reproduce.generalize import run_maps_stage
+    from warp_critic.reproduce.settings import default_settings
+
+    s = dict(default_settings(quick=False, seeds=1)["maps"], reach_iterations=0)
+    if args.grid is not None:
+        s["grid"] = args.grid
+    if args.inits is not None:
+        s["inits"] = args.inits
+    first = next(iter(sets))
+    runs = {"ours": sets[first], **{k: v for k, v in sets.items() if k != first}}
+    try:
+        runtime.init()
+        with tempfile.TemporaryDirectory() as tmp:
+            out = run_maps_stage(Path(tmp), s, runs, args.device, progress=False)
+    except UserError as e:
+        p.exit(2, f"{PROG}: error: {user_message(e)}\n")
+    print(
+        f"{s['grid']} x {s['grid']} goal grid, 7 x 7 mass and length maps, {s['inits']} inits: "
+        f"share below {LEVEL} MSE, mean MSE"
+    )
+    print(f"{'runs':<28} {'goal grid':>16} {'mass map':>16} {'length map':>16}")
+    for name in sets:
+        m = "ours" if name == first else name
+        cols = [np.asarray(out["goals"][m]["mse"]).ravel()]
+        cols += [np.array([c["mse_mean"] for c in out[kind][m]]) for kind in ("mass", "length")]
+        text = [f"{(x < LEVEL).mean():>6.0%}, {x.mean():7.3f}" for x in cols]
+        print(f"{name + f' ({len(sets[name])})':<28} " + " ".join(f"{t:>16}" for t in text))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
