@@ -538,7 +538,36 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
         "kuka/randomised",
         "kuka/randomised-history",
     }
+    # the floors depend on no critic: beyond-maps takes the paper's maps stage's, not computes them
+    (maps,) = [json.loads(p.read_text()) for p in other.glob("maps-*/stage.json")]
+    (bmaps,) = [json.loads(p.read_text()) for p in other.glob("beyond-maps-*/stage.json")]
+    assert bmaps["result"]["reach_floor_from"] == f"maps-{maps['hash']}"
+    assert bmaps["result"]["reach_floor"] == maps["result"]["reach_floor"]
     stage = next(other.glob("beyond-metatrain-kuka-randomised-[0-9a-f]*/stage.json"))
     run = stage.parent / json.loads(stage.read_text())["result"]["seeds"]["0"]["run_dir"]
     first = json.loads((run / "metrics.jsonl").read_text().splitlines()[0])
     assert len(first["train_variant_values"]) == 4 * 2  # quick: 4 goals x 2 worlds
+
+
+def test_beyond_maps_takes_floors_only_from_a_maps_stage_of_the_same_inputs(tmp_path):
+    """The floors of a maps stage are reused only with the same settings and nominal runs."""
+    from warp_critic.reproduce.pipeline import paper_maps_floors
+    from warp_critic.reproduce.stages import STAGE_FILE, STAGE_KIND
+
+    nominal = {"metatrain-reacher-ours": "metatrain-reacher-ours-aaaa"}
+    st = {"settings": {"grid": 3, "reach_iterations": 5}, "depends": dict(nominal, other="x")}
+
+    def stage(name, settings, depends, floor=True):
+        d = tmp_path / name
+        d.mkdir()
+        result = {"reach_floor": {"goals": [[0.0]]}} if floor else {}
+        record = {"kind": STAGE_KIND, "group": "maps", "settings": settings, "depends": depends}
+        (d / STAGE_FILE).write_text(json.dumps({**record, "result": result}))
+
+    assert paper_maps_floors(tmp_path, st) is None
+    stage("maps-1", {"grid": 4, "reach_iterations": 5}, nominal)  # other grid
+    stage("maps-2", st["settings"], {"metatrain-reacher-ours": "metatrain-reacher-ours-bbbb"})
+    stage("maps-3", st["settings"], nominal, floor=False)  # computed no floor
+    assert paper_maps_floors(tmp_path, st) is None
+    stage("maps-4", st["settings"], {**nominal, "metatrain-reacher-ddpg": "d"})
+    assert paper_maps_floors(tmp_path, st) == "maps-4"

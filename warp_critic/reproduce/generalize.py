@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from warp_critic.core.errors import UserError
 from warp_critic.physics.link_changes import parse_changes
 from warp_critic.physics.scene import Variant
 from warp_critic.reproduce.evaluate import Job, default_steps, evaluate, relpath
@@ -230,9 +231,18 @@ def run_tables_stage(
 
 
 def run_maps_stage(
-    d: Path, s: dict, runs: dict[str, list[Path]], device: str, progress: bool = True
+    d: Path,
+    s: dict,
+    runs: dict[str, list[Path]],
+    device: str,
+    progress: bool = True,
+    floors_from: str | None = None,
 ) -> dict:
-    """``runs``: method (ours, the baselines, or a recipe) -> per-seed run directories (reacher)."""
+    """``runs``: method (ours, the baselines, or a recipe) -> per-seed run directories (reacher).
+
+    ``floors_from``: a complete maps stage directory next to ``d`` that computed the reachability
+    floors of the same grids from the same nominal runs (:func:`~.pipeline.paper_maps_floors`); its
+    floors are taken instead of computed again (``reach_floor_from`` names it)."""
     import json
 
     first = str(runs["ours"][0])
@@ -310,7 +320,15 @@ def run_maps_stage(
         "mass": {},
         "length": {},
     }
-    if int(s["reach_iterations"]) > 0:
+    if int(s["reach_iterations"]) > 0 and floors_from is not None:
+        from warp_critic.reproduce.stages import read_stage
+
+        done = (read_stage(d.parent / floors_from) or {}).get("result", {})
+        keys = ("reach_floor", "reach_iterations", "reach_lrs")
+        if not all(k in done for k in keys):
+            raise UserError(f"{d.parent / floors_from}: no reachability floors to take")
+        out.update({k: done[k] for k in keys}, reach_floor_from=floors_from)
+    elif int(s["reach_iterations"]) > 0:
         out.update(_maps_floor(first, s, grid.view(n, n, 2), train_goals, pairs, variant, device))
     for m in runs:
         errs = [r["errors"][k] for k, j in enumerate(jobs) if j.key[0] == "goals" and j.key[2] == m]

@@ -256,13 +256,33 @@ def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, 
                 str(p.relative_to(out)) for p in run_dirs(out / dep_dir, data)
             ]
         kwargs = {"s": settings[group], "runs": runs, "device": device, "progress": progress}
-    return Unit(
-        name=name,
-        dir_name=dir_name,
-        fn=STAGE_FUNCTIONS[group],
-        kwargs=kwargs,
-        reads=tuple(st["depends"].values()),
-    )
+    reads = tuple(st["depends"].values())
+    if group == "maps" and name != "maps":  # beyond-maps: the paper's maps' floors, if complete
+        floors = paper_maps_floors(out, st)
+        if floors is not None:
+            kwargs["floors_from"] = floors
+            reads += (floors,)
+    return Unit(name=name, dir_name=dir_name, fn=STAGE_FUNCTIONS[group], kwargs=kwargs, reads=reads)
+
+
+def paper_maps_floors(out: Path, st: dict) -> str | None:
+    """A complete ``maps`` stage directory under ``out`` whose reachability floors are exactly the
+    ones the maps stage ``st`` would compute: the same settings and the same nominal reacher runs
+    (the floors depend on nothing else: not on any critic). ``None``: none there."""
+    from warp_critic.reproduce.stages import read_stage
+
+    nominal = "metatrain-reacher-ours"
+    for d in sorted(out.glob("maps-*")):
+        data = read_stage(d)
+        if (
+            data is not None
+            and data.get("group") == "maps"
+            and data.get("settings") == st["settings"]
+            and data.get("depends", {}).get(nominal) == st["depends"].get(nominal)
+            and isinstance(data.get("result", {}).get("reach_floor"), dict)
+        ):
+            return d.name
+    return None
 
 
 def reproduce(rc: ReproduceConfig, executor=None) -> dict:
