@@ -456,6 +456,7 @@ def test_only_one_beyond_evaluation_plans_it_and_what_it_reads():
     assert sorted(first) == [
         "beyond-metatrain-reacher-history-randomised-long",
         "beyond-metatrain-reacher-pose-long",
+        "beyond-metatrain-reacher-pose-randomised-full",
         "beyond-metatrain-reacher-pose-randomised-long",
         "beyond-metatrain-reacher-randomised",
         "beyond-metatrain-reacher-randomised-6000",
@@ -490,6 +491,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
         "beyond-metatrain-kuka-randomised-history",
         "beyond-metatrain-reacher-history-randomised-long",
         "beyond-metatrain-reacher-pose-long",
+        "beyond-metatrain-reacher-pose-randomised-full",
         "beyond-metatrain-reacher-pose-randomised-long",
         "beyond-metatrain-reacher-randomised",
         "beyond-metatrain-reacher-randomised-6000",
@@ -506,13 +508,13 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     assert (
         reproduce_main(["--quick", "--out", str(other), "--only", "beyond", "--device", "cpu"]) == 0
     )
-    assert "12 stage(s) to run" in capsys.readouterr().err
+    assert "13 stage(s) to run" in capsys.readouterr().err
     report = (other / "REPORT.md").read_text()
     beyond = report[report.index("## Beyond the paper") :]
     assert "### Targets" in beyond and "randomised" in beyond
     results = json.loads((other / "results.json").read_text())
     targets = results["beyond"]["targets"]
-    assert len(targets) == 8 * 3 + 2 * 3  # 8 / 2 recipes x (goals + 2 maps; Table 1 + 2 tables)
+    assert len(targets) == 9 * 3 + 2 * 3  # 9 / 2 recipes x (goals + 2 maps; Table 1 + 2 tables)
     # each reacher target names the share the open-loop floor reaches, from the stage's own floor
     assert all("open-loop floor" in t["measured"] for t in targets if "reacher" in t["target"])
     assert "| open-loop floor |" in beyond
@@ -528,6 +530,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
         "reacher/ours",
         "reacher/history-randomised-long",
         "reacher/pose-long",
+        "reacher/pose-randomised-full",
         "reacher/pose-randomised-long",
         "reacher/randomised",
         "reacher/randomised-long",

@@ -106,8 +106,10 @@ def test_maps_tool_prints_the_three_shares_per_run_set(tmp_path, capsys):
     a, b = tmp_path / "a", tmp_path / "b"
     meta_train(tiny_cfg(a, iterations=1))
     meta_train(tiny_cfg(b, iterations=1, seed=1))
-    assert tool.main([f"one={a}", f"both={a},{b}", "--grid", "2", "--inits", "1"]) == 0
-    lines = capsys.readouterr().out.splitlines()
+    assert tool.main([f"one={a}", f"both={a},{b}", "--grid", "2", "--inits", "1", "--cells"]) == 0
+    text = capsys.readouterr().out
+    assert text.count("map (MSE;") == 4 and "\n   0.25" in text, text
+    lines = text.split("\n\n")[0].splitlines()
     rows = {ln.split()[0]: ln for ln in lines[2:]}
     assert lines[0].startswith("2 x 2 goal grid") and set(rows) == {"one", "both"}, lines
     for row in rows.values():  # three "share, mean" cells

@@ -38,6 +38,11 @@ def main(argv=None) -> int:
     )
     p.add_argument("--inits", type=int, default=None, help="policy inits (default: the paper's 5)")
     p.add_argument("--device", default="cpu")
+    p.add_argument(
+        "--cells",
+        action="store_true",
+        help="also print each set's mass and length maps, cell by cell",
+    )
     args = p.parse_args(argv)
     sets: dict[str, list[str]] = {}
     for item in args.run_dirs:
@@ -82,6 +87,18 @@ def main(argv=None) -> int:
         cols += [np.array([c["mse_mean"] for c in out[kind][m]]) for kind in ("mass", "length")]
         text = [f"{(x < LEVEL).mean():>6.0%}, {x.mean():7.3f}" for x in cols]
         print(f"{name + f' ({len(sets[name])})':<28} " + " ".join(f"{t:>16}" for t in text))
+    if args.cells:
+        for name in sets:
+            m = "ours" if name == first else name
+            for kind, axis in (("mass", out["masses"]), ("length", out["lengths"])):
+                print(f"\n{name}, {kind} map (MSE; '.' below {LEVEL}): rows link 1, columns link 2")
+                print(" " * 7 + "".join(f"{v:>7g}" for v in axis))
+                cells = np.array([c["mse_mean"] for c in out[kind][m]]).reshape(len(axis), -1)
+                for v, row in zip(axis, cells):
+                    print(
+                        f"{v:>7g}"
+                        + "".join(f"{x:>7.3f}" if x >= LEVEL else f"{'.':>7}" for x in row)
+                    )
     return 0
 
 
