@@ -78,13 +78,14 @@ def meta_loss(
         guard=guard,
     )
     per_world = task_loss(after, goal, running_weight, velocity_weight)
-    settled = settled_worlds(after)
-    for t in trajs:
-        settled &= settled_worlds(t)
     if guard:
+        settled = settled_worlds(after)
+        for t in trajs:
+            settled &= settled_worlds(t)
         per_world = torch.where(settled, per_world, torch.zeros_like(per_world))
         loss = per_world.sum() / settled.sum().clamp(min=1)
-    else:
+    else:  # the rollouts were checked: every world settled
+        settled = torch.ones_like(per_world, dtype=torch.bool)
         loss = per_world.mean()
     return OuterResult(
         loss=loss,

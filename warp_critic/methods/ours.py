@@ -191,7 +191,6 @@ def meta_train(
         seeds = [r.cfg.seed for r in session.runs]  # of the task's copies, in order
         redraw = VariantRedraw(cfg, task, seeds) if cfg.train_variants else None
         drop = cfg.on_divergence == "drop"
-        mean = torch.nanmean if drop else torch.mean  # drop: over the settled worlds (others nan)
 
         def step(it: int):
             nonlocal params, q0
@@ -259,19 +258,15 @@ def meta_train(
             for i in range(S):
                 sl = task.copy(i)
                 after_i, before_i = res.per_world[sl], before[sl]
-                if drop:  # the means over the settled worlds (a goal with none: nan)
-                    ok = settled[i]
-                    nan = torch.full_like(after_i, math.nan)
-                    after_i, before_i = (torch.where(ok, x, nan) for x in (after_i, before_i))
+                keep = settled[i] if drop else None  # drop: means over the settled worlds
                 rows.append(
                     {
-                        "task_loss": mean(after_i).item(),
-                        "task_loss_before": mean(before_i).item(),
+                        "task_loss": (after_i if keep is None else after_i[keep]).mean().item(),
+                        "task_loss_before": (before_i if keep is None else before_i[keep])
+                        .mean()
+                        .item(),
                         "task_loss_per_goal": [  # null: a goal whose worlds all diverged
-                            None if v != v else v
-                            for v in (
-                                _settled_per_goal(task, after_i) if drop else task.per_goal(after_i)
-                            ).tolist()
+                            None if v != v else v for v in task.per_goal(after_i, keep).tolist()
                         ],
                         "grad_norm": norms[i],
                     }
@@ -341,17 +336,6 @@ class VariantRedraw:
 # ------------------------------------------------------------------------------------------------
 # one seed's slice of the stacked critic: gradient norm, clipping, optimiser state
 # ------------------------------------------------------------------------------------------------
-
-
-def _settled_per_goal(task, per_world: torch.Tensor) -> torch.Tensor:
-    """``(Wc,) -> (G,)``: each goal's mean over its worlds that are not ``nan`` (``nan``: none)."""
-    idx = task.goal_index[: per_world.shape[0]]
-    ok = ~per_world.isnan()
-    total = torch.zeros(task.G, device=per_world.device).index_add_(
-        0, idx, torch.where(ok, per_world, torch.zeros_like(per_world))
-    )
-    count = torch.zeros(task.G, device=per_world.device).index_add_(0, idx, ok.float())
-    return total / count
 
 
 def _cat(per_seed: list[PolicyParams]) -> PolicyParams:

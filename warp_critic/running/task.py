@@ -280,10 +280,17 @@ class Task:
         lo, hi = inside_limits(self.sim.q_lower, self.sim.q_upper, 0.95)
         return torch.clamp(home + noise, lo, hi)
 
-    def per_goal(self, per_world: torch.Tensor) -> torch.Tensor:
-        """``(Wc,) -> (G,)`` mean over each goal's worlds (one copy's worlds)."""
+    def per_goal(self, per_world: torch.Tensor, keep: torch.Tensor | None = None) -> torch.Tensor:
+        """``(Wc,) -> (G,)`` mean over each goal's worlds (one copy's worlds); with ``keep (Wc,)``
+        bool, over its kept worlds only (``nan`` for a goal with none)."""
         idx = self.goal_index[: per_world.shape[0]]
-        return torch.zeros(self.G, device=per_world.device).index_add_(0, idx, per_world) / self.K
+        zeros = torch.zeros(self.G, device=per_world.device)
+        if keep is None:
+            return zeros.index_add_(0, idx, per_world) / self.K
+        kept = torch.where(keep, per_world, torch.zeros_like(per_world))
+        return zeros.index_add_(0, idx, kept) / torch.zeros_like(zeros).index_add_(
+            0, idx, keep.to(zeros.dtype)
+        )
 
 
 def scene_of(cfg) -> Scene:
