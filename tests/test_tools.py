@@ -128,6 +128,33 @@ def test_maps_tool_prints_the_three_shares_per_run_set(tmp_path, capsys):
         assert err.startswith("maps_of_runs: error: ") and err.count("\n") == 1, err
 
 
+def test_goal_grid_tool_writes_the_maps_goals_as_a_goals_file(tmp_path, capsys):
+    from warp_critic.cli.flags import parse_goals
+    from warp_critic.reproduce.settings import default_settings
+
+    tool = load_tool("goal_grid")
+    out = tmp_path / "g.txt"
+    assert tool.main([str(REACHER), "--grid", "3", "--out", str(out)]) == 0
+    goals = parse_goals(str(out))
+    f = default_settings(False, 5)["maps"]["limit_fraction"]
+    edge = f * np.radians(170.0)  # the reacher's limits are +-170 degrees
+    axis = [-edge, 0.0, edge]
+    want = [[a, b] for a in axis for b in axis]  # q1 major, as the maps stage's grid
+    assert np.allclose(goals, want, atol=1e-6), goals
+    for argv in (
+        [str(REACHER), "--grid", "1", "--out", str(out)],
+        [str(REACHER), "--fraction", "0", "--out", str(out)],
+        [str(REACHER), "--out", str(tmp_path / "g.json")],
+        [str(REACHER), "--out", str(tmp_path / "none" / "g.txt")],
+        [str(ROOT / "scenes" / "kuka.usda"), "--out", str(out)],
+    ):
+        with pytest.raises(SystemExit) as e:
+            tool.main(argv)
+        assert e.value.code == 2
+        err = capsys.readouterr().err
+        assert err.startswith("goal_grid: error: ") and err.count("\n") == 1, err
+
+
 def test_paper_table_tool_pools_seeds_and_reports_the_mean_over_joints(tmp_path, capsys):
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
 

@@ -230,6 +230,20 @@ def run_tables_stage(
     }
 
 
+def goal_grid(
+    lower: torch.Tensor, upper: torch.Tensor, n: int, fraction: float
+) -> tuple[torch.Tensor, tuple[np.ndarray, np.ndarray]]:
+    """The maps' goal grid: ``(n * n, 2)`` joint angles (rad), float32, row-major with ``q1``
+    major, and its two axes ``(n,)`` (float64): ``n`` evenly spaced angles per joint over the
+    middle ``fraction`` of its limits ``lower, upper (2,)`` (rad)."""
+    (lo0, lo1), (hi0, hi1) = (
+        inside_limits(lower.double(), upper.double(), fraction)[k].tolist() for k in (0, 1)
+    )
+    ax0, ax1 = np.linspace(lo0, hi0, n), np.linspace(lo1, hi1, n)
+    grid = torch.tensor([[a, b] for a in ax0 for b in ax1], dtype=torch.float32)
+    return grid, (ax0, ax1)
+
+
 def run_maps_stage(
     d: Path,
     s: dict,
@@ -248,15 +262,8 @@ def run_maps_stage(
     first = str(runs["ours"][0])
     scene, train_goals, lo, hi = _train_goals_and_limits(first)
     steps = default_steps(first)
-    n, f = int(s["grid"]), float(s["limit_fraction"])
-    (lo0, lo1), (hi0, hi1) = (
-        inside_limits(lo.double(), hi.double(), f)[k].tolist() for k in (0, 1)
-    )
-    ax0 = np.linspace(lo0, hi0, n)
-    ax1 = np.linspace(lo1, hi1, n)
-    grid = torch.tensor(
-        [[a, b] for a in ax0 for b in ax1], dtype=torch.float32
-    )  # row-major: q1 major
+    n = int(s["grid"])
+    grid, (ax0, ax1) = goal_grid(lo, hi, n, float(s["limit_fraction"]))
     masses = [float(x) for x in s["masses"]]
     lengths = [float(x) for x in s["lengths"]]
     links = list(scene.body_names)  # the two links, in chain order (arm1, arm2)
