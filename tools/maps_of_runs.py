@@ -59,6 +59,8 @@ def main(argv=None) -> int:
         if getattr(args, flag) is not None and getattr(args, flag) < 1 + (flag == "grid"):
             p.error(f"--{flag} must be >= {1 + (flag == 'grid')}")
     from warp_critic.core import runtime
+
+    runtime.init()  # before the imports below, which would start Warp with its banner
     from warp_critic.core.errors import UserError
     from warp_critic.reproduce.generalize import run_maps_stage
     from warp_critic.reproduce.settings import default_settings
@@ -71,7 +73,6 @@ def main(argv=None) -> int:
     first = next(iter(sets))
     runs = {"ours": sets[first], **{k: v for k, v in sets.items() if k != first}}
     try:
-        runtime.init()
         with tempfile.TemporaryDirectory() as tmp:
             out = run_maps_stage(Path(tmp), s, runs, args.device, progress=False)
     except UserError as e:
