@@ -109,6 +109,9 @@ def test_maps_tool_prints_the_three_shares_per_run_set(tmp_path, capsys):
     assert tool.main([f"one={a}", f"both={a},{b}", "--grid", "2", "--inits", "1", "--cells"]) == 0
     text = capsys.readouterr().out
     assert text.count("map (MSE;") == 4 and "\n   0.25" in text, text
+    assert text.count("goal grid (MSE;") == 2, text  # 2 x 2 goals: two rows under the axis
+    grid_rows = text.split("one, goal grid (MSE;")[1].split("\n\n")[0].splitlines()[2:]
+    assert len(grid_rows) == 2 and all(len(r.split()) == 3 for r in grid_rows), grid_rows
     lines = text.split("\n\n")[0].splitlines()
     rows = {ln.split()[0]: ln for ln in lines[2:]}
     assert lines[0].startswith("2 x 2 goal grid") and set(rows) == {"one", "both"}, lines

@@ -41,7 +41,7 @@ def main(argv=None) -> int:
     p.add_argument(
         "--cells",
         action="store_true",
-        help="also print each set's mass and length maps, cell by cell",
+        help="also print each set's goal grid and mass and length maps, cell by cell",
     )
     args = p.parse_args(argv)
     sets: dict[str, list[str]] = {}
@@ -91,13 +91,17 @@ def main(argv=None) -> int:
     if args.cells:
         for name in sets:
             m = "ours" if name == first else name
+            goals = np.asarray(out["goals"][m]["mse"]).reshape(s["grid"], s["grid"])
+            maps = [("goal grid", "q1 (rad)", "q2", out["axis_q1"], out["axis_q2"], goals)]
             for kind, axis in (("mass", out["masses"]), ("length", out["lengths"])):
-                print(f"\n{name}, {kind} map (MSE; '.' below {LEVEL}): rows link 1, columns link 2")
-                print(" " * 7 + "".join(f"{v:>7g}" for v in axis))
                 cells = np.array([c["mse_mean"] for c in out[kind][m]]).reshape(len(axis), -1)
-                for v, row in zip(axis, cells):
+                maps.append((f"{kind} map", "link 1", "link 2", axis, axis, cells))
+            for title, rows, columns, axis_r, axis_c, cells in maps:
+                print(f"\n{name}, {title} (MSE; '.' below {LEVEL}): rows {rows}, columns {columns}")
+                print(" " * 7 + "".join(f"{v:>7.3g}" for v in axis_c))
+                for v, row in zip(axis_r, cells):
                     print(
-                        f"{v:>7g}"
+                        f"{v:>7.3g}"
                         + "".join(f"{x:>7.3f}" if x >= LEVEL else f"{'.':>7}" for x in row)
                     )
     return 0
