@@ -259,12 +259,13 @@ def meta_train(
                 sl = task.copy(i)
                 after_i, before_i = res.per_world[sl], before[sl]
                 keep = settled[i] if drop else None  # drop: means over the settled worlds
+                mean_after, mean_before = (
+                    (x if keep is None else x[keep]).mean().item() for x in (after_i, before_i)
+                )
                 rows.append(
                     {
-                        "task_loss": (after_i if keep is None else after_i[keep]).mean().item(),
-                        "task_loss_before": (before_i if keep is None else before_i[keep])
-                        .mean()
-                        .item(),
+                        "task_loss": mean_after,
+                        "task_loss_before": mean_before,
                         "task_loss_per_goal": [  # null: a goal whose worlds all diverged
                             None if v != v else v for v in task.per_goal(after_i, keep).tolist()
                         ],

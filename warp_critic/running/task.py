@@ -286,11 +286,9 @@ class Task:
         idx = self.goal_index[: per_world.shape[0]]
         zeros = torch.zeros(self.G, device=per_world.device)
         if keep is None:
-            return zeros.index_add_(0, idx, per_world) / self.K
-        kept = torch.where(keep, per_world, torch.zeros_like(per_world))
-        return zeros.index_add_(0, idx, kept) / torch.zeros_like(zeros).index_add_(
-            0, idx, keep.to(zeros.dtype)
-        )
+            return zeros.index_add(0, idx, per_world) / self.K
+        total = zeros.index_add(0, idx, torch.where(keep, per_world, torch.zeros_like(per_world)))
+        return total / zeros.index_add(0, idx, keep.to(zeros.dtype))
 
 
 def scene_of(cfg) -> Scene:
