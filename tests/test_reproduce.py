@@ -455,6 +455,7 @@ def test_only_one_beyond_evaluation_plans_it_and_what_it_reads():
     assert second == ["beyond-maps"]
     assert sorted(first) == [
         "beyond-metatrain-reacher-history-randomised-long",
+        "beyond-metatrain-reacher-pose-dynamics-long",
         "beyond-metatrain-reacher-pose-long",
         "beyond-metatrain-reacher-pose-randomised-full",
         "beyond-metatrain-reacher-pose-randomised-long",
@@ -490,6 +491,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
         "beyond-metatrain-kuka-randomised",
         "beyond-metatrain-kuka-randomised-history",
         "beyond-metatrain-reacher-history-randomised-long",
+        "beyond-metatrain-reacher-pose-dynamics-long",
         "beyond-metatrain-reacher-pose-long",
         "beyond-metatrain-reacher-pose-randomised-full",
         "beyond-metatrain-reacher-pose-randomised-long",
@@ -508,13 +510,13 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     assert (
         reproduce_main(["--quick", "--out", str(other), "--only", "beyond", "--device", "cpu"]) == 0
     )
-    assert "13 stage(s) to run" in capsys.readouterr().err
+    assert "14 stage(s) to run" in capsys.readouterr().err
     report = (other / "REPORT.md").read_text()
     beyond = report[report.index("## Beyond the paper") :]
     assert "### Targets" in beyond and "randomised" in beyond
     results = json.loads((other / "results.json").read_text())
     targets = results["beyond"]["targets"]
-    assert len(targets) == 9 * 3 + 2 * 3  # 9 / 2 recipes x (goals + 2 maps; Table 1 + 2 tables)
+    assert len(targets) == 10 * 3 + 2 * 3  # 10 / 2 recipes x (goals + 2 maps; Table 1 + 2 tables)
     # each reacher target names the share the open-loop floor reaches, from the stage's own floor
     assert all("open-loop floor" in t["measured"] for t in targets if "reacher" in t["target"])
     assert "| open-loop floor |" in beyond
@@ -529,6 +531,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     assert set(rows) == {
         "reacher/ours",
         "reacher/history-randomised-long",
+        "reacher/pose-dynamics-long",
         "reacher/pose-long",
         "reacher/pose-randomised-full",
         "reacher/pose-randomised-long",

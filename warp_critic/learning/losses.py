@@ -53,9 +53,14 @@ def critic_loss_at(
     taken at the trajectory's states (:func:`critic_loss` with the policy's actions given)."""
     q, qd = traj.q[:-1].detach(), traj.qd[:-1].detach()  # (T, W, dof)
     g = goal.unsqueeze(0).expand_as(q)
+    extra = {}
     if getattr(critic, "uses_history", False):  # the last step's response, observed (data)
-        return critic(q, qd, tau, g, history_features(traj.qd, traj.tau)).sum(0)
-    return critic(q, qd, tau, g).sum(0)
+        extra["history"] = history_features(traj.qd, traj.tau)
+    if getattr(critic, "uses_dynamics", False):  # the worlds' models, told (privileged data)
+        if traj.dynamics is None:
+            raise ValueError("this critic reads the worlds' dynamics; the trajectory carries none")
+        extra["dynamics"] = traj.dynamics  # (W, K), the same at every step
+    return critic(q, qd, tau, g, **extra).sum(0)
 
 
 def td_loss(

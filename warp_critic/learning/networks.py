@@ -6,7 +6,7 @@ batched matmul evaluates all policies, and an inner update is ``theta - alpha * 
 tensors (no module, no in-place mutation).
 
 Critic ``L_critic(s, a, g)``: MLP with two hidden layers of 400 units and ELU, one scalar output.
-Five input layouts (``CRITIC_INPUTS``, normalised as below):
+Six input layouts (``CRITIC_INPUTS``, normalised as below):
 
 * ``full``: ``[q, qd, a, g, q - g]`` -- everything; the goal-relative position ``q - g`` is a fixed
   feature of ``(s, g)`` that adds no information but makes goal generalisation easier to learn;
@@ -37,6 +37,12 @@ Five input layouts (``CRITIC_INPUTS``, normalised as below):
   depend on the pose only through ``M(q)`` (the reacher: its joint axes are parallel to gravity),
   the inner loop is then the same at every goal and a field learned near the training goals holds
   at all of them. At the home pose it is the ``relative`` critic with the paper's update.
+* ``pose-dynamics``: ``[q - g, qd, a, q, d]`` -- ``pose`` plus the world's dynamics ``d (K,)``
+  relative to the scene's nominal model (:class:`~warp_critic.physics.descriptor.DynamicsDescriptor`:
+  masses, centres of mass, inertias, joint offsets). Privileged: the critic is told the model
+  instead of identifying it, at training and at meta-test alike (the trajectory carries ``d``,
+  :attr:`~warp_critic.learning.rollout.Trajectory.dynamics`). It measures how far identifying the
+  model alone takes one critic across dynamics-randomised training's range.
 
 Input normalisation (documented, fixed from the scene, not learned):
   * joint positions and goals: ``(q - centre) / half_range`` of the joint limits; a continuous joint
@@ -94,6 +100,9 @@ class Normalizer:
     # the nominal model's M(q) (:class:`~warp_critic.physics.inertia.NominalInertia`), for the
     # ``inertial`` critic; evaluated lazily, so carrying it costs nothing
     inertia: Inertia | None = None
+    # K, the numbers of a world's dynamics descriptor (Simulator.dynamics_size), for the
+    # ``pose-dynamics`` critic; 0 where the caller has none
+    dynamics_size: int = 0
 
     @staticmethod
     def from_limits(
@@ -102,14 +111,17 @@ class Normalizer:
         max_torque: torch.Tensor,
         qd_scale: float,
         inertia: Inertia | None = None,
+        dynamics_size: int = 0,
     ) -> Normalizer:
         centre, half = (q_upper + q_lower) / 2, (q_upper - q_lower) / 2
         wrap = half >= CONTINUOUS_HALF_RANGE
         if not bool(wrap.any()):
-            return Normalizer(centre, half, float(qd_scale), max_torque, None, inertia)
+            return Normalizer(
+                centre, half, float(qd_scale), max_torque, None, inertia, dynamics_size
+            )
         centre = torch.where(wrap, torch.zeros_like(centre), centre)
         half = torch.where(wrap, torch.full_like(half, math.pi), half)
-        return Normalizer(centre, half, float(qd_scale), max_torque, wrap, inertia)
+        return Normalizer(centre, half, float(qd_scale), max_torque, wrap, inertia, dynamics_size)
 
     def q(self, q: torch.Tensor) -> torch.Tensor:
         return wrap_angles(q - self.q_centre, self.wrap) / self.q_half_range
@@ -222,10 +234,16 @@ class Critic(nn.Module):
         if inputs not in CRITIC_INPUTS:
             raise ValueError(f"critic inputs must be one of {CRITIC_INPUTS} (got {inputs!r})")
         self.dof, self.inputs, self.hidden = dof, inputs, hidden
-        n_in = {"relative": 3, "inertial": 3, "pose": 4}.get(inputs, 5) * dof
+        n_in = {"relative": 3, "inertial": 3, "pose": 4, "pose-dynamics": 4}.get(inputs, 5) * dof
         self.inertia = norm.inertia if inputs == "inertial" else None
         if inputs == "inertial" and self.inertia is None:
             raise ValueError("an inertial critic needs the scene's nominal inertia (norm.inertia)")
+        self.dynamics_size = norm.dynamics_size if inputs == "pose-dynamics" else 0
+        if inputs == "pose-dynamics" and self.dynamics_size <= 0:
+            raise ValueError(
+                "a pose-dynamics critic needs the worlds' descriptor size (norm.dynamics_size)"
+            )
+        n_in += self.dynamics_size
         self.net = nn.Sequential(
             nn.Linear(n_in, hidden),
             nn.ELU(),
@@ -255,6 +273,11 @@ class Critic(nn.Module):
         """Whether :meth:`forward` takes ``history`` (:func:`history_features`)."""
         return self.inputs == "history"
 
+    @property
+    def uses_dynamics(self) -> bool:
+        """Whether :meth:`forward` takes ``dynamics`` (the worlds' descriptor, ``(..., K)``)."""
+        return self.dynamics_size > 0
+
     def torque_metric(self, q: torch.Tensor) -> torch.Tensor | None:
         """The metric ``P(q) (..., dof, dof)`` the inner update steps torques in at the states ``q
         (..., dof)`` (data): ``M(q) M(q_h)^-2 M(q)`` for the ``inertial`` layout, ``None`` (the
@@ -278,11 +301,12 @@ class Critic(nn.Module):
         tau: torch.Tensor,
         goal: torch.Tensor,
         history: torch.Tensor | None = None,
+        dynamics: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """The normalised input ``(..., n_in)`` of the input layout (``history``: ``(..., 2*dof)``,
-        needed by the ``history`` layout only)."""
+        needed by the ``history`` layout only; ``dynamics``: ``(..., K)``, by ``pose-dynamics``)."""
         wrap = self.q_wrap if self._wraps else None
-        if self.inputs in ("relative", "history", "pose", "inertial"):
+        if self.inputs in ("relative", "history", "pose", "inertial", "pose-dynamics"):
             if self.inputs == "inertial":
                 tau = self._home_equivalent(q, tau)
             parts = [
@@ -290,8 +314,14 @@ class Critic(nn.Module):
                 qd / self.qd_scale,
                 tau / self.max_torque,
             ]
-            if self.inputs == "pose":
+            if self.inputs in ("pose", "pose-dynamics"):
                 parts.append(self._angles(q, wrap))
+            if self.inputs == "pose-dynamics":
+                if dynamics is None or dynamics.shape[-1] != self.dynamics_size:
+                    raise ValueError(
+                        f"a pose-dynamics critic needs the worlds' dynamics (..., {self.dynamics_size})"
+                    )
+                parts.append(dynamics.expand(*q.shape[:-1], -1))
             if self.inputs == "history":
                 if history is None:
                     raise ValueError("a history critic needs history (history_features)")
@@ -316,9 +346,10 @@ class Critic(nn.Module):
         tau: torch.Tensor,
         goal: torch.Tensor,
         history: torch.Tensor | None = None,
+        dynamics: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """All ``(..., dof)`` (``history`` ``(..., 2*dof)``) -> ``(...)``."""
-        return self.net(self.features(q, qd, tau, goal, history)).squeeze(-1)
+        """All ``(..., dof)`` (``history`` ``(..., 2*dof)``, ``dynamics`` ``(..., K)``) -> ``(...)``."""
+        return self.net(self.features(q, qd, tau, goal, history, dynamics)).squeeze(-1)
 
 
 def history_features(qd: torch.Tensor, tau: torch.Tensor) -> torch.Tensor:
@@ -367,6 +398,10 @@ class StackedCritic(nn.Module):
     def uses_history(self) -> bool:
         return self.template[0].uses_history
 
+    @property
+    def uses_dynamics(self) -> bool:
+        return self.template[0].uses_dynamics
+
     def torque_metric(self, q: torch.Tensor) -> torch.Tensor | None:
         """:meth:`Critic.torque_metric` (one scene for every seed)."""
         return self.template[0].torque_metric(q)
@@ -378,9 +413,10 @@ class StackedCritic(nn.Module):
         tau: torch.Tensor,
         goal: torch.Tensor,
         history: torch.Tensor | None = None,
+        dynamics: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """All ``(..., S*W, dof)`` -> ``(..., S*W)``."""
-        x = self.template[0].features(q, qd, tau, goal, history)  # (..., S*W, n_in)
+        x = self.template[0].features(q, qd, tau, goal, history, dynamics)  # (..., S*W, n_in)
         lead, sw, n_in = x.shape[:-2], x.shape[-2], x.shape[-1]
         S = self.seeds
         x = x.reshape(-1, S, sw // S, n_in).permute(1, 0, 2, 3).reshape(S, -1, n_in)  # (S, M, n_in)
@@ -416,6 +452,7 @@ class StackedCritic(nn.Module):
                 c.max_torque,
                 c.q_wrap if c._wraps else None,
                 c.inertia,
+                c.dynamics_size,
             ),
             hidden=c.hidden,
             inputs=c.inputs,

@@ -92,7 +92,7 @@ def meta_loss(
         losses=per_world,
         per_world=per_world.detach(),
         before=trajs[0],
-        after=Trajectory(after.q.detach(), after.qd.detach(), after.tau.detach()),
+        after=Trajectory(after.q.detach(), after.qd.detach(), after.tau.detach(), after.dynamics),
         params_new={k: v.detach() for k, v in params_new.items()},
         settled=settled,
     )

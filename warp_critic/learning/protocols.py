@@ -17,7 +17,9 @@ from warp_critic.learning.networks import PolicyParams
 class CriticFn(Protocol):
     """The loss ``L(s, a, g)`` a policy descends: ``q, qd, tau, g`` all ``(..., W, dof)`` (rad, rad/s,
     N·m, rad) -> ``(..., W)``. A critic whose ``uses_history`` is true also takes ``history``
-    ``(..., W, 2*dof)`` (:func:`~warp_critic.learning.networks.history_features`)."""
+    ``(..., W, 2*dof)`` (:func:`~warp_critic.learning.networks.history_features`), one whose
+    ``uses_dynamics`` is true ``dynamics`` ``(W, K)`` (:attr:`~warp_critic.learning.rollout.Trajectory.dynamics`),
+    both by keyword."""
 
     def __call__(
         self,
@@ -25,8 +27,8 @@ class CriticFn(Protocol):
         qd: torch.Tensor,
         tau: torch.Tensor,
         g: torch.Tensor,
-        history: torch.Tensor | None = None,
         /,
+        **extra: torch.Tensor,
     ) -> torch.Tensor: ...
 
 

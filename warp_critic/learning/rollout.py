@@ -27,6 +27,9 @@ class Trajectory:
     q: torch.Tensor  # (T+1, W, dof) rad or m
     qd: torch.Tensor  # (T+1, W, dof) rad/s or m/s
     tau: torch.Tensor  # (T, W, dof) N·m or N
+    # (W, K): each world's dynamics relative to the nominal model (Simulator.dynamics), data; for
+    # critics told the model (``pose-dynamics``)
+    dynamics: torch.Tensor | None = None
 
     @property
     def horizon(self) -> int:
@@ -109,7 +112,10 @@ def rollout(
                 qs.append(q)
                 qds.append(qd)
                 taus.append(tau)
-    traj = Trajectory(torch.stack(qs), torch.stack(qds), torch.stack(taus))
+    describe = getattr(sim, "dynamics", None)  # a stand-in simulator may not describe its worlds
+    traj = Trajectory(
+        torch.stack(qs), torch.stack(qds), torch.stack(taus), describe() if describe else None
+    )
     if check:
         check_finite(traj)
     return traj
@@ -144,6 +150,7 @@ def hold_diverged(traj: Trajectory, settled: torch.Tensor) -> Trajectory:
         torch.where(keep, traj.q, _finite(traj.q[:1])),
         torch.where(keep, traj.qd, _finite(traj.qd[:1])),
         torch.where(keep, traj.tau, torch.zeros_like(traj.tau)),
+        traj.dynamics,
     )
 
 

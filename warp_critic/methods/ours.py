@@ -77,6 +77,8 @@ class TrainConfig(TaskConfig):
         "history = relative + the last step's velocity change and torque (tells models apart, for "
         "--train-variants); pose = relative + the joint angles q; inertial = relative with the "
         "torque in home-pose acceleration units, M(q_h) M(q)^-1 a, and inner steps in that metric; "
+        "pose-dynamics = pose + each world's masses, inertias and link offsets relative to the "
+        "nominal model (privileged: the critic is told the model, at meta-test too); "
         "default: the scene's, else " + schema.fallback_text("critic_input"),
         choices=schema.CRITIC_INPUTS,
     )

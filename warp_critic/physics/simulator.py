@@ -99,6 +99,31 @@ class Simulator:
         self.effort_limit = torch.as_tensor(
             np.asarray(scene.effort_limit), dtype=torch.float32, device=tdev
         )
+        self._describe = None  # DynamicsDescriptor, built on first use
+        self._dynamics: tuple[tuple, torch.Tensor] | None = None
+
+    # -- the worlds' dynamics as data ---------------------------------------------------------------
+    @property
+    def dynamics_size(self) -> int:
+        """``K``: the numbers per world of :meth:`dynamics`."""
+        return self._descriptor().size
+
+    def dynamics(self) -> torch.Tensor:
+        """``(W, K)``: each world's dynamics relative to the scene's nominal model
+        (:class:`~warp_critic.physics.descriptor.DynamicsDescriptor`), read from the model arrays
+        and cached until the worlds' variants change (:func:`~warp_critic.physics.redraw.set_variants`)."""
+        key = tuple(self.variants)
+        if self._dynamics is None or self._dynamics[0] != key:
+            values = self._descriptor().of(self.model, self.worlds)
+            self._dynamics = (key, torch.as_tensor(values, device=self.torch_device))
+        return self._dynamics[1]
+
+    def _descriptor(self):
+        if self._describe is None:
+            from warp_critic.physics.descriptor import DynamicsDescriptor
+
+            self._describe = DynamicsDescriptor(self.scene)
+        return self._describe
 
     # -- stepping --------------------------------------------------------------------------------
     def begin_rollout(self) -> DiffRollout:

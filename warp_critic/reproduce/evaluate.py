@@ -52,13 +52,15 @@ class Job:
 
 class MultiCritic(torch.nn.Module):
     """Several critics over consecutive world slices: ``L(q, qd, tau, g)`` on ``(..., W, dof)``
-    inputs; the trajectory's ``history`` reaches the critics that read it (``uses_history``)."""
+    inputs; the trajectory's ``history`` and ``dynamics`` reach the critics that read them
+    (``uses_history``, ``uses_dynamics``)."""
 
     def __init__(self, segments: list[tuple[torch.nn.Module, int, int]]):
         super().__init__()
         self.critics = torch.nn.ModuleList([c for c, _, _ in segments])
         self.bounds = [(a, b) for _, a, b in segments]
         self.uses_history = any(getattr(c, "uses_history", False) for c in self.critics)
+        self.uses_dynamics = any(getattr(c, "uses_dynamics", False) for c in self.critics)
 
     def torque_metric(self, q: torch.Tensor) -> torch.Tensor | None:
         """Each critic's torque metric on its worlds (the identity where it has none), or
@@ -76,13 +78,16 @@ class MultiCritic(torch.nn.Module):
             dim=-3,
         )
 
-    def forward(self, q, qd, tau, g, history=None):
+    def forward(self, q, qd, tau, g, history=None, dynamics=None):
         outs = []
         for c, (a, b) in zip(self.critics, self.bounds):
             args = [x[..., a:b, :] for x in (q, qd, tau, g)]
+            extra = {}
             if getattr(c, "uses_history", False):
-                args.append(history[..., a:b, :])
-            outs.append(c(*args))
+                extra["history"] = history[..., a:b, :]
+            if getattr(c, "uses_dynamics", False):
+                extra["dynamics"] = dynamics[..., a:b, :]
+            outs.append(c(*args, **extra))
         return torch.cat(outs, dim=-1)
 
 
@@ -219,6 +224,7 @@ def evaluate(
                 max_torque_tensor(cfg0.max_torque, scene, dev),
                 cfg0.qd_scale,
                 NominalInertia(scene, device),
+                sim.dynamics_size,
             )
             policy = MLPPolicy(norm)
             segments, rates, goals, params = [], [], [], []

@@ -372,6 +372,7 @@ def build_task(cfg: TaskConfig, scene: Scene, *, differentiable: bool, copies: i
         max_torque_tensor(filled(cfg.max_torque, "max_torque"), scene, dev),
         filled(cfg.qd_scale, "qd_scale"),
         NominalInertia(scene, cfg.device),
+        sim.dynamics_size,
     )
     home = torch.as_tensor(
         getattr(scene, "home", [0.0] * scene.dof), dtype=torch.float32, device=dev
