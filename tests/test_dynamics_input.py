@@ -92,6 +92,8 @@ def test_pose_dynamics_critic_reads_the_descriptor():
     critics = [Critic(dof, norm, hidden=16, inputs="pose-dynamics") for _ in range(2)]
     assert critics[0].uses_dynamics and critics[0].net[0].in_features == 4 * dof + K
     assert not Critic(dof, norm, hidden=16, inputs="pose").uses_dynamics
+    relative = Critic(dof, norm, hidden=16, inputs="relative-dynamics")
+    assert relative.uses_dynamics and relative.net[0].in_features == 3 * dof + K
     q, qd, tau = (torch.randn(T, W, dof, generator=gen) for _ in range(3))
     g = torch.zeros(T, W, dof)
     d = torch.randn(W, K, generator=gen)

@@ -6,7 +6,7 @@ batched matmul evaluates all policies, and an inner update is ``theta - alpha * 
 tensors (no module, no in-place mutation).
 
 Critic ``L_critic(s, a, g)``: MLP with two hidden layers of 400 units and ELU, one scalar output.
-Six input layouts (``CRITIC_INPUTS``, normalised as below):
+Seven input layouts (``CRITIC_INPUTS``, normalised as below):
 
 * ``full``: ``[q, qd, a, g, q - g]`` -- everything; the goal-relative position ``q - g`` is a fixed
   feature of ``(s, g)`` that adds no information but makes goal generalisation easier to learn;
@@ -43,6 +43,7 @@ Six input layouts (``CRITIC_INPUTS``, normalised as below):
   instead of identifying it, at training and at meta-test alike (the trajectory carries ``d``,
   :attr:`~warp_critic.learning.rollout.Trajectory.dynamics`). It measures how far identifying the
   model alone takes one critic across dynamics-randomised training's range.
+* ``relative-dynamics``: ``[q - g, qd, a, d]`` -- the same for the ``relative`` layout (the KUKA's).
 
 Input normalisation (documented, fixed from the scene, not learned):
   * joint positions and goals: ``(q - centre) / half_range`` of the joint limits; a continuous joint
@@ -101,7 +102,7 @@ class Normalizer:
     # ``inertial`` critic; evaluated lazily, so carrying it costs nothing
     inertia: Inertia | None = None
     # K, the numbers of a world's dynamics descriptor (Simulator.dynamics_size), for the
-    # ``pose-dynamics`` critic; 0 where the caller has none
+    # ``pose-dynamics`` and ``relative-dynamics`` critics; 0 where the caller has none
     dynamics_size: int = 0
 
     @staticmethod
@@ -234,14 +235,22 @@ class Critic(nn.Module):
         if inputs not in CRITIC_INPUTS:
             raise ValueError(f"critic inputs must be one of {CRITIC_INPUTS} (got {inputs!r})")
         self.dof, self.inputs, self.hidden = dof, inputs, hidden
-        n_in = {"relative": 3, "inertial": 3, "pose": 4, "pose-dynamics": 4}.get(inputs, 5) * dof
+        widths = {
+            "relative": 3,
+            "inertial": 3,
+            "relative-dynamics": 3,
+            "pose": 4,
+            "pose-dynamics": 4,
+        }
+        n_in = widths.get(inputs, 5) * dof
         self.inertia = norm.inertia if inputs == "inertial" else None
         if inputs == "inertial" and self.inertia is None:
             raise ValueError("an inertial critic needs the scene's nominal inertia (norm.inertia)")
-        self.dynamics_size = norm.dynamics_size if inputs == "pose-dynamics" else 0
-        if inputs == "pose-dynamics" and self.dynamics_size <= 0:
+        told = inputs in ("pose-dynamics", "relative-dynamics")
+        self.dynamics_size = norm.dynamics_size if told else 0
+        if told and self.dynamics_size <= 0:
             raise ValueError(
-                "a pose-dynamics critic needs the worlds' descriptor size (norm.dynamics_size)"
+                f"a {inputs} critic needs the worlds' descriptor size (norm.dynamics_size)"
             )
         n_in += self.dynamics_size
         self.net = nn.Sequential(
@@ -304,9 +313,9 @@ class Critic(nn.Module):
         dynamics: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """The normalised input ``(..., n_in)`` of the input layout (``history``: ``(..., 2*dof)``,
-        needed by the ``history`` layout only; ``dynamics``: ``(..., K)``, by ``pose-dynamics``)."""
+        needed by the ``history`` layout only; ``dynamics``: ``(..., K)``, by the ``*-dynamics`` ones)."""
         wrap = self.q_wrap if self._wraps else None
-        if self.inputs in ("relative", "history", "pose", "inertial", "pose-dynamics"):
+        if self.inputs != "full":
             if self.inputs == "inertial":
                 tau = self._home_equivalent(q, tau)
             parts = [
@@ -316,10 +325,10 @@ class Critic(nn.Module):
             ]
             if self.inputs in ("pose", "pose-dynamics"):
                 parts.append(self._angles(q, wrap))
-            if self.inputs == "pose-dynamics":
+            if self.dynamics_size:
                 if dynamics is None or dynamics.shape[-1] != self.dynamics_size:
                     raise ValueError(
-                        f"a pose-dynamics critic needs the worlds' dynamics (..., {self.dynamics_size})"
+                        f"a {self.inputs} critic needs the worlds' dynamics (..., {self.dynamics_size})"
                     )
                 parts.append(dynamics.expand(*q.shape[:-1], -1))
             if self.inputs == "history":

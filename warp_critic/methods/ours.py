@@ -79,6 +79,7 @@ class TrainConfig(TaskConfig):
         "torque in home-pose acceleration units, M(q_h) M(q)^-1 a, and inner steps in that metric; "
         "pose-dynamics = pose + each world's masses, inertias and link offsets relative to the "
         "nominal model (privileged: the critic is told the model, at meta-test too); "
+        "relative-dynamics = relative + the same; "
         "default: the scene's, else " + schema.fallback_text("critic_input"),
         choices=schema.CRITIC_INPUTS,
     )

@@ -57,7 +57,15 @@ EE_ATTR = "warp_critic:endEffectorBody"
 TIP_ATTR = "warp_critic:tipOffset"
 STANDARD_GRAVITY = 9.81  # m/s^2, along -z
 # the critic's input layouts (learning.networks)
-CRITIC_INPUTS = ("full", "relative", "history", "pose", "inertial", "pose-dynamics")
+CRITIC_INPUTS = (
+    "full",
+    "relative",
+    "history",
+    "pose",
+    "inertial",
+    "pose-dynamics",
+    "relative-dynamics",
+)
 
 # Sentinels for defaults that are not one value.
 REQUIRED = "required"  # the scene or the user must give it
