@@ -3,12 +3,11 @@
 The descriptor is zero at the nominal model and moves exactly the numbers of what a variant changes;
 a live simulator whose variants were redrawn describes its worlds as one built with those variants;
 the critic reads the descriptor (its output changes with it), batched seeds evaluate as single
-critics, the critic loss passes the trajectory's descriptor, and a run trains, resumes and
-meta-tests on a new model through the command line."""
+critics, and the critic loss passes the trajectory's descriptor (a run trains, resumes and meta-tests
+on a new model through the command line: tests/test_train_variants.py)."""
 
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
@@ -129,29 +128,3 @@ def test_rollout_carries_the_worlds_dynamics(scene):
     traj = rollout(sim, lambda q, qd: torch.zeros_like(q), q0, q0, 3)
     assert traj.dynamics is not None and torch.equal(traj.dynamics, sim.dynamics())
     assert not traj.dynamics[0].any() and traj.dynamics[1].any()
-
-
-def test_pose_dynamics_run_trains_resumes_and_meta_tests(tmp_path):
-    from test_train_variants import _train
-
-    from warp_critic.cli.main import main
-
-    run = tmp_path / "run"
-    argv = _train(run, "--critic-input", "pose-dynamics", iterations=2)
-    assert main(argv) == 0
-    ckpt = torch.load(run / "checkpoint.pt", weights_only=True)
-    assert ckpt["critic_input"] == "pose-dynamics"
-    assert ckpt["critic_state"]["net.0.weight"].shape[1] == 4 * 2 + 20
-    resumed = [
-        *argv[: argv.index("--iterations") + 1],
-        "3",
-        *argv[argv.index("--iterations") + 2 :],
-    ]
-    assert main([*resumed, "--resume"]) == 0
-    rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
-    assert [r["iteration"] for r in rows][-1] == 2 and len(rows) == 3
-    out = tmp_path / "test.json"
-    test = ["meta-test", str(run), "--num-goals", "2", "--inits", "1", "--device", "cpu"]
-    assert main([*test, "--variant", "arm2.mass=4", "--out", str(out)]) == 0
-    result = json.loads(out.read_text())
-    assert "arm2.mass=4" in json.dumps(result["variant"]) and math.isfinite(result["mse_mean"])

@@ -289,15 +289,26 @@ def test_history_features_and_the_history_critic():
     assert torch.allclose(critic_loss(critics[0], policy, params, traj, g[0]), expect)
 
 
-def test_history_critic_trains_and_meta_tests(tmp_path):
+@pytest.mark.parametrize("inputs, width", [("history", 5 * 2), ("pose-dynamics", 4 * 2 + 20)])
+def test_history_and_told_critics_train_resume_and_meta_test(tmp_path, inputs, width):
+    """The critics that read more than the states (the last step's response; the world's model,
+    tests/test_dynamics_input.py) train, resume and meta-test on a new model from the command line."""
+    import math
+
     from warp_critic.cli.main import main
 
     run = tmp_path / "run"
-    argv = _train(run, "--critic-input", "history", iterations=2)
+    argv = _train(run, "--critic-input", inputs, iterations=2)
     assert main(argv) == 0
     ckpt = torch.load(run / "checkpoint.pt", weights_only=True)
-    assert ckpt["critic_input"] == "history"
+    assert ckpt["critic_input"] == inputs
+    assert ckpt["critic_state"]["net.0.weight"].shape[1] == width
+    at = argv.index("--iterations") + 1
+    assert main([*argv[:at], "3", *argv[at + 1 :], "--resume"]) == 0
+    rows = [json.loads(x) for x in (run / "metrics.jsonl").read_text().splitlines()]
+    assert [r["iteration"] for r in rows] == [0, 1, 2]
     out = tmp_path / "test.json"
     test = ["meta-test", str(run), "--num-goals", "2", "--inits", "1", "--device", "cpu"]
-    assert main([*test, "--out", str(out)]) == 0
-    assert json.loads(out.read_text())
+    assert main([*test, "--variant", "arm2.mass=4", "--out", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert "arm2.mass=4" in json.dumps(result["variant"]) and math.isfinite(result["mse_mean"])

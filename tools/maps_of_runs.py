@@ -18,12 +18,10 @@ Usage::
 from __future__ import annotations
 
 import sys
-import tempfile
-from pathlib import Path
 
 import numpy as np
 
-from warp_critic.cli.flags import ToolParser, user_message
+from warp_critic.cli.flags import RUN_SETS_HELP, ToolParser, run_sets, stage_on_sets
 
 PROG = "maps_of_runs"
 LEVEL = 0.05
@@ -31,8 +29,7 @@ LEVEL = 0.05
 
 def main(argv=None) -> int:
     p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
-    sets_help = "NAME=RUN_DIR[,RUN_DIR...]: a named set of run directories (one recipe's seeds)"
-    p.add_argument("run_dirs", nargs="+", metavar="NAME=RUN_DIRS", help=sets_help)
+    p.add_argument("run_dirs", nargs="+", metavar="NAME=RUN_DIRS", help=RUN_SETS_HELP)
     p.add_argument(
         "--grid", type=int, default=None, help="goal grid side (default: the paper's 15)"
     )
@@ -44,24 +41,13 @@ def main(argv=None) -> int:
         help="also print each set's goal grid and mass and length maps, cell by cell",
     )
     args = p.parse_args(argv)
-    sets: dict[str, list[str]] = {}
-    for item in args.run_dirs:
-        name, sep, dirs = item.partition("=")
-        if not sep or not name or not dirs:
-            p.error(f"{item!r}: expected NAME=RUN_DIR[,RUN_DIR...]")
-        if name in sets:
-            p.error(f"{name!r}: named twice")
-        sets[name] = [d for d in dirs.split(",") if d]
-        for d in sets[name]:
-            if not (Path(d) / "checkpoint.pt").is_file():
-                p.error(f"{d}: not a run directory (no checkpoint.pt)")
+    sets = run_sets(p, args.run_dirs)
     for flag in ("grid", "inits"):
         if getattr(args, flag) is not None and getattr(args, flag) < 1 + (flag == "grid"):
             p.error(f"--{flag} must be >= {1 + (flag == 'grid')}")
     from warp_critic.core import runtime
 
     runtime.init()  # before the imports below, which would start Warp with its banner
-    from warp_critic.core.errors import UserError
     from warp_critic.reproduce.generalize import run_maps_stage
     from warp_critic.reproduce.settings import default_settings
 
@@ -70,13 +56,8 @@ def main(argv=None) -> int:
         s["grid"] = args.grid
     if args.inits is not None:
         s["inits"] = args.inits
+    out = stage_on_sets(p, run_maps_stage, s, sets, args.device)
     first = next(iter(sets))
-    runs = {"ours": sets[first], **{k: v for k, v in sets.items() if k != first}}
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            out = run_maps_stage(Path(tmp), s, runs, args.device, progress=False)
-    except UserError as e:
-        p.exit(2, f"{PROG}: error: {user_message(e)}\n")
     print(
         f"{s['grid']} x {s['grid']} goal grid, 7 x 7 mass and length maps, {s['inits']} inits: "
         f"share below {LEVEL} MSE, mean MSE"

@@ -20,10 +20,9 @@ from __future__ import annotations
 
 import json
 import sys
-import tempfile
 from pathlib import Path
 
-from warp_critic.cli.flags import ToolParser, user_message
+from warp_critic.cli.flags import RUN_SETS_HELP, ToolParser, run_sets, stage_on_sets
 
 PROG = "tables_of_runs"
 TABLES = ("table1", "stress_mass", "stress_length")
@@ -52,8 +51,7 @@ def _floors(stage_dir: str, settings: dict) -> dict:
 
 def main(argv=None) -> int:
     p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
-    sets_help = "NAME=RUN_DIR[,RUN_DIR...]: a named set of run directories (one recipe's seeds)"
-    p.add_argument("run_dirs", nargs="+", metavar="NAME=RUN_DIRS", help=sets_help)
+    p.add_argument("run_dirs", nargs="+", metavar="NAME=RUN_DIRS", help=RUN_SETS_HELP)
     p.add_argument("--inits", type=int, default=None, help="policy inits (default: the paper's 5)")
     p.add_argument(
         "--goals", type=int, default=None, help="goals per column (default: the paper's 10)"
@@ -63,24 +61,13 @@ def main(argv=None) -> int:
     )
     p.add_argument("--device", default="cpu")
     args = p.parse_args(argv)
-    sets: dict[str, list[str]] = {}
-    for item in args.run_dirs:
-        name, sep, dirs = item.partition("=")
-        if not sep or not name or not dirs:
-            p.error(f"{item!r}: expected NAME=RUN_DIR[,RUN_DIR...]")
-        if name in sets:
-            p.error(f"{name!r}: named twice")
-        sets[name] = [d for d in dirs.split(",") if d]
-        for d in sets[name]:
-            if not (Path(d) / "checkpoint.pt").is_file():
-                p.error(f"{d}: not a run directory (no checkpoint.pt)")
+    sets = run_sets(p, args.run_dirs)
     for flag in ("inits", "goals"):
         if getattr(args, flag) is not None and getattr(args, flag) < 1:
             p.error(f"--{flag} must be >= 1")
     from warp_critic.core import runtime
 
     runtime.init()  # before the imports below, which would start Warp with its banner
-    from warp_critic.core.errors import UserError
     from warp_critic.reproduce.generalize import run_tables_stage
     from warp_critic.reproduce.settings import default_settings
 
@@ -95,13 +82,8 @@ def main(argv=None) -> int:
         floors = _floors(args.floors, s) if args.floors else {}
     except ValueError as e:
         p.exit(2, f"{PROG}: error: {e}\n")
+    out = stage_on_sets(p, run_tables_stage, s, sets, args.device)
     first = next(iter(sets))
-    runs = {"ours": sets[first], **{k: v for k, v in sets.items() if k != first}}
-    try:
-        with tempfile.TemporaryDirectory() as tmp:
-            out = run_tables_stage(Path(tmp), s, runs, args.device, progress=False)
-    except UserError as e:
-        p.exit(2, f"{PROG}: error: {user_message(e)}\n")
     cells = {(c["table"], c["column"], c["method"]): c for c in out["cells"]}
     for table in TABLES:
         values = out["columns"][table]

@@ -35,6 +35,42 @@ class ToolParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())}\n")
 
 
+RUN_SETS_HELP = "NAME=RUN_DIR[,RUN_DIR...]: a named set of run directories (one recipe's seeds)"
+
+
+def run_sets(parser: argparse.ArgumentParser, items: list[str]) -> dict[str, list[str]]:
+    """A tool's ``NAME=RUN_DIR[,RUN_DIR...]`` arguments as ``{name: run dirs}`` in order; a bad
+    item (no name, a name twice, a folder without ``checkpoint.pt``) is ``parser.error`` (exit 2)."""
+    sets: dict[str, list[str]] = {}
+    for item in items:
+        name, sep, dirs = item.partition("=")
+        if not sep or not name or not dirs:
+            parser.error(f"{item!r}: expected NAME=RUN_DIR[,RUN_DIR...]")
+        if name in sets:
+            parser.error(f"{name!r}: named twice")
+        sets[name] = [d for d in dirs.split(",") if d]
+        for d in sets[name]:
+            if not (Path(d) / "checkpoint.pt").is_file():
+                parser.error(f"{d}: not a run directory (no checkpoint.pt)")
+    return sets
+
+
+def stage_on_sets(parser, stage, settings: dict, sets: dict[str, list[str]], device: str) -> dict:
+    """A ``reproduce`` evaluation stage (``run_maps_stage``, ``run_tables_stage``) of ``settings``
+    on a tool's run sets, in a scratch folder; the first set is the stage's ``ours`` (it sets the
+    scene and goals). A user mistake it finds is ``parser.exit(2)`` with its one line."""
+    import tempfile
+
+    first = next(iter(sets))
+    runs = {"ours": sets[first], **{k: v for k, v in sets.items() if k != first}}
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            return stage(Path(tmp), settings, runs, device, progress=False)
+    except UserError as e:
+        parser.exit(2, f"{parser.prog}: error: {user_message(e)}\n")
+        raise  # unreachable: exit raises SystemExit
+
+
 def comma_list(kind):
     """An argparse type: comma-separated values of ``kind`` (``int``, ``float`` or ``str``); ``''`` is
     the empty list (a tool's "all")."""
