@@ -146,7 +146,7 @@ def test_tables_of_runs_prints_the_stress_tables_and_their_rule(tmp_path, capsys
     stage = tmp_path / "stage"
     stage.mkdir()
     (stage / "stage.json").write_text(
-        json.dumps({"settings": {"values": s}, "result": {"reach_floor": floors}})
+        json.dumps({"settings": s, "result": {"reach_floor": floors}})
     )
     argv = [f"one={a}", f"both={a},{b}", "--goals", "2", "--inits", "1"]
     assert tool.main([*argv, "--floors", str(stage)]) == 0
@@ -167,7 +167,7 @@ def test_tables_of_runs_prints_the_stress_tables_and_their_rule(tmp_path, capsys
         assert met == (0 if table == "stress_mass" else 10), (mse, untrained)
     s["seed"] = 99
     (stage / "stage.json").write_text(
-        json.dumps({"settings": {"values": s}, "result": {"reach_floor": floors}})
+        json.dumps({"settings": s, "result": {"reach_floor": floors}})
     )
     for bad in (
         [f"x={a}", "--floors", str(stage)],

@@ -38,7 +38,7 @@ def _floors(stage_dir: str, settings: dict) -> dict:
     path = Path(stage_dir) / "stage.json"
     try:
         stage = json.loads(path.read_text())
-        theirs, floors = stage["settings"]["values"], stage["result"]["reach_floor"]
+        theirs, floors = stage["settings"], stage["result"]["reach_floor"]
     except (OSError, ValueError, KeyError, TypeError):
         raise ValueError(f"--floors {stage_dir}: not a finished tables stage") from None
     keys = ("stress_masses", "stress_lengths", "num_goals", "dynamics_goal_std", "seed", "around")
