@@ -8,6 +8,7 @@ on a new model through the command line: tests/test_train_variants.py)."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -128,3 +129,100 @@ def test_rollout_carries_the_worlds_dynamics(scene):
     traj = rollout(sim, lambda q, qd: torch.zeros_like(q), q0, q0, 3)
     assert traj.dynamics is not None and torch.equal(traj.dynamics, sim.dynamics())
     assert not traj.dynamics[0].any() and traj.dynamics[1].any()
+
+
+def test_identified_critic_feeds_the_told_critic_its_estimate():
+    """The identifier maps a trajectory's observed steps to ``(W, K)`` with fixed input scales; the
+    identified critic is the told critic at that estimate, never at the trajectory's true model."""
+    from warp_critic.learning.identify import (
+        IdentifiedCritic,
+        Identifier,
+        identifier_inputs,
+        trajectory_inputs,
+    )
+    from warp_critic.learning.losses import critic_loss_at
+    from warp_critic.learning.networks import Critic, Normalizer, history_features
+    from warp_critic.learning.rollout import Trajectory
+
+    T, W, dof, K = 5, 3, 2, 4
+    gen = torch.Generator().manual_seed(0)
+    norm = Normalizer(
+        torch.zeros(dof), torch.full((dof,), 2.0), 5.0, torch.full((dof,), 3.0), dynamics_size=K
+    )
+    torch.manual_seed(0)
+    told = Critic(dof, norm, hidden=16, inputs="pose-dynamics")
+    ident = Identifier(dof, K, hidden=8)
+    with pytest.raises(ValueError, match="reads the dynamics"):
+        IdentifiedCritic(Critic(dof, norm, hidden=16, inputs="pose"), ident)
+    traj = Trajectory(
+        torch.randn(T + 1, W, dof, generator=gen),
+        torch.randn(T + 1, W, dof, generator=gen),
+        torch.randn(T, W, dof, generator=gen),
+        torch.randn(W, K, generator=gen),  # the truth, which the identified critic must not read
+    )
+    x = trajectory_inputs(traj)
+    assert x.shape == (T, W, 4 * dof)
+    assert torch.equal(
+        x, identifier_inputs(traj.q[:T], traj.qd[:T], history_features(traj.qd, traj.tau))
+    )
+    ident.standardise_from(x)
+    assert torch.allclose(ident.x_mean, x.reshape(-1, 4 * dof).mean(0))
+    d_hat = ident.of_trajectory(traj)
+    assert d_hat.shape == (W, K)
+    critic = IdentifiedCritic(told, ident)
+    assert critic.uses_history and not critic.uses_dynamics
+    g = torch.zeros(W, dof)
+    tau = torch.randn(T, W, dof, generator=gen)
+    got = critic_loss_at(critic, traj, tau, g)
+    want = told(traj.q[:T], traj.qd[:T], tau, g.expand(T, W, dof), dynamics=d_hat).sum(0)
+    assert torch.allclose(got, want, atol=1e-6)
+    truth = told(traj.q[:T], traj.qd[:T], tau, g.expand(T, W, dof), dynamics=traj.dynamics).sum(0)
+    assert not torch.allclose(got, truth)
+
+
+def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, capsys):
+    """tools/identify.py on a told run: a new run whose critic is the identified one (meta-test
+    loads it and tests a new model), the regression's losses written; misuse is one line, exit 2."""
+    from test_tools import load_tool
+    from test_train_variants import _train
+
+    from warp_critic.cli.main import main
+    from warp_critic.evaluation.metatest import build_test_critic
+    from warp_critic.learning.identify import IdentifiedCritic
+
+    told, plain = tmp_path / "told", tmp_path / "plain"
+    assert main(_train(told, "--critic-input", "pose-dynamics", iterations=1)) == 0
+    assert main(_train(plain, "--critic-input", "pose", iterations=1)) == 0
+    tool = load_tool("identify")
+    out = tmp_path / "identified"
+    argv = [str(told), "--out", str(out), "--iterations", "3", "--goals", "2", "--inits", "2"]
+    assert tool.main(argv) == 0
+    text = capsys.readouterr().out
+    assert "varied entries" in text and f"run: {out}" in text
+    rows = [json.loads(x) for x in (out / "identify.jsonl").read_text().splitlines()]
+    assert [r["iteration"] for r in rows] == [0, 1, 2] and all(
+        math.isfinite(r["loss"]) for r in rows
+    )
+    ckpt = torch.load(out / "checkpoint.pt", weights_only=True)
+    from warp_critic.learning.networks import Normalizer
+
+    norm = Normalizer(
+        torch.zeros(2), torch.ones(2), 5.0, torch.ones(2), dynamics_size=ckpt["identifier"]["size"]
+    )
+    critic, _ = build_test_critic(ckpt, norm)
+    assert isinstance(critic, IdentifiedCritic)
+    result = tmp_path / "test.json"
+    test = ["meta-test", str(out), "--num-goals", "2", "--inits", "1", "--device", "cpu"]
+    assert main([*test, "--variant", "arm2.mass=4", "--out", str(result)]) == 0
+    assert math.isfinite(json.loads(result.read_text())["mse_mean"])
+    for bad, words in (
+        ([str(plain), "--out", str(tmp_path / "x")], "not told the model"),
+        ([str(told), "--out", str(out)], "not an empty folder"),
+        ([str(told), "--out", str(tmp_path / "y"), "--iterations", "0"], "--iterations"),
+    ):
+        with pytest.raises(SystemExit) as e:
+            tool.main(bad)
+        assert e.value.code == 2
+        err = capsys.readouterr().err
+        assert err.startswith("identify: error: ") and err.count("\n") == 1 and words in err, err
+    assert not (tmp_path / "x").exists()

@@ -455,6 +455,7 @@ def test_only_one_beyond_evaluation_plans_it_and_what_it_reads():
     assert second == ["beyond-maps"]
     assert sorted(first) == [
         "beyond-metatrain-reacher-history-randomised-long",
+        "beyond-metatrain-reacher-pose-dynamics-full",
         "beyond-metatrain-reacher-pose-dynamics-long",
         "beyond-metatrain-reacher-pose-long",
         "beyond-metatrain-reacher-pose-randomised-full",
@@ -491,6 +492,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
         "beyond-metatrain-kuka-randomised",
         "beyond-metatrain-kuka-randomised-history",
         "beyond-metatrain-reacher-history-randomised-long",
+        "beyond-metatrain-reacher-pose-dynamics-full",
         "beyond-metatrain-reacher-pose-dynamics-long",
         "beyond-metatrain-reacher-pose-long",
         "beyond-metatrain-reacher-pose-randomised-full",
@@ -510,13 +512,13 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     assert (
         reproduce_main(["--quick", "--out", str(other), "--only", "beyond", "--device", "cpu"]) == 0
     )
-    assert "14 stage(s) to run" in capsys.readouterr().err
+    assert "15 stage(s) to run" in capsys.readouterr().err
     report = (other / "REPORT.md").read_text()
     beyond = report[report.index("## Beyond the paper") :]
     assert "### Targets" in beyond and "randomised" in beyond
     results = json.loads((other / "results.json").read_text())
     targets = results["beyond"]["targets"]
-    assert len(targets) == 10 * 3 + 2 * 3  # 10 / 2 recipes x (goals + 2 maps; Table 1 + 2 tables)
+    assert len(targets) == 11 * 3 + 2 * 3  # 11 / 2 recipes x (goals + 2 maps; Table 1 + 2 tables)
     # each reacher target names the share the open-loop floor reaches, from the stage's own floor
     assert all("open-loop floor" in t["measured"] for t in targets if "reacher" in t["target"])
     assert "| open-loop floor |" in beyond
@@ -531,6 +533,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     assert set(rows) == {
         "reacher/ours",
         "reacher/history-randomised-long",
+        "reacher/pose-dynamics-full",
         "reacher/pose-dynamics-long",
         "reacher/pose-long",
         "reacher/pose-randomised-full",

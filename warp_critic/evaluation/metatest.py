@@ -98,13 +98,20 @@ class MetaTestConfig(SerializableConfig):
 def load_our_critic(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, dict]:
     """Our meta-learned critic; meta-test defaults: its inner lr, inner steps x policy lifetime."""
     cfg = ckpt["config"]
-    critic = Critic(
+    critic: torch.nn.Module = Critic(
         ckpt["dof"],
         norm,
         hidden=ckpt.get("critic_hidden", 400),
         inputs=ckpt.get("critic_input", "full"),
     )
     critic.load_state_dict(ckpt["critic_state"])
+    if "identifier_state" in ckpt:  # a told critic fed the model identified from its rollouts
+        from warp_critic.learning.identify import IdentifiedCritic, Identifier
+
+        meta = ckpt["identifier"]
+        identifier = Identifier(ckpt["dof"], int(meta["size"]), hidden=int(meta["hidden"]))
+        identifier.load_state_dict(ckpt["identifier_state"])
+        critic = IdentifiedCritic(critic, identifier)
     # a critic trained on policies of every age up to the policy lifetime keeps improving them that long
     steps = int(cfg.get("inner_steps", 1)) * int(cfg.get("policy_lifetime", 1))
     return critic, {"alpha": cfg.get("alpha"), "steps": steps}

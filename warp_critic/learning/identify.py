@@ -1,0 +1,101 @@
+"""Identify the model from what a rollout shows, for a critic that was told it (``*-dynamics``).
+
+A ``pose-dynamics`` critic (:mod:`warp_critic.learning.networks`) reads each world's dynamics
+descriptor ``d`` (:class:`~warp_critic.physics.descriptor.DynamicsDescriptor`), privileged data. An
+:class:`Identifier` estimates ``d`` from one trajectory's observed states and applied torques alone,
+``[q_t, qd_t, qd_t - qd_{t-1}, tau_{t-1}]`` at every step: under ``qd_t - qd_{t-1} ~ dt M(q)^-1
+(tau_{t-1} - bias)`` the response to the torques shows the inertia. It is trained by regression on
+simulated rollouts whose ``d`` is known (:mod:`warp_critic.methods.identify`); at meta-test the
+:class:`IdentifiedCritic` feeds the told critic the estimate instead of the truth, so the policy
+update needs no model, no model gradient and no privileged data -- the teacher/adaptation split of
+rapid motor adaptation (Kumar et al., 2021) applied to a meta-learned critic.
+
+Shapes: a trajectory's steps ``(T, W, dof)`` -> ``d_hat (W, K)``: a per-step MLP, the mean over the
+steps, a linear head. The inputs are standardised with fixed buffers (``x_mean``, ``x_std``) set
+from the first training batch and stored in the checkpoint.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from warp_critic.learning.networks import history_features
+
+
+def identifier_inputs(q: torch.Tensor, qd: torch.Tensor, history: torch.Tensor) -> torch.Tensor:
+    """``(T, W, 4*dof)``: ``[q_t, qd_t, qd_t - qd_{t-1}, tau_{t-1}]`` (``history`` from
+    :func:`~warp_critic.learning.networks.history_features`), detached: observed data."""
+    return torch.cat([q.detach(), qd.detach(), history.detach()], dim=-1)
+
+
+def trajectory_inputs(traj) -> torch.Tensor:
+    """:func:`identifier_inputs` at the steps where a trajectory's actions were taken."""
+    T = traj.tau.shape[0]
+    return identifier_inputs(traj.q[:T], traj.qd[:T], history_features(traj.qd, traj.tau))
+
+
+class Identifier(nn.Module):
+    """``d_hat`` ``(W, K)`` from a trajectory's steps (module docstring).
+
+    Args:
+        dof: joints.
+        size: ``K``, the descriptor's length.
+        hidden: units of the per-step MLP's two ELU layers.
+    """
+
+    x_mean: torch.Tensor
+    x_std: torch.Tensor
+
+    def __init__(self, dof: int, size: int, hidden: int = 128):
+        super().__init__()
+        self.dof, self.size, self.hidden = dof, size, hidden
+        self.step = nn.Sequential(
+            nn.Linear(4 * dof, hidden), nn.ELU(), nn.Linear(hidden, hidden), nn.ELU()
+        )
+        self.head = nn.Linear(hidden, size)
+        self.register_buffer("x_mean", torch.zeros(4 * dof))
+        self.register_buffer("x_std", torch.ones(4 * dof))
+
+    def standardise_from(self, x: torch.Tensor) -> None:
+        """Fix the input scales from a batch ``x (..., 4*dof)`` (once, before training)."""
+        flat = x.reshape(-1, x.shape[-1])
+        self.x_mean.copy_(flat.mean(0))
+        self.x_std.copy_(flat.std(0).clamp(min=1e-6))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        """``x (T, W, 4*dof)`` (:func:`identifier_inputs`) -> ``(W, K)``."""
+        h = self.step((x - self.x_mean) / self.x_std)
+        return self.head(h.mean(0))
+
+    def of_trajectory(self, traj) -> torch.Tensor:
+        """``(W, K)`` from a :class:`~warp_critic.learning.rollout.Trajectory`."""
+        return self(trajectory_inputs(traj))
+
+
+class IdentifiedCritic(nn.Module):
+    """A told critic fed the :class:`Identifier`'s estimate: ``L(q, qd, tau, g, history)`` on one
+    trajectory's steps ``(T, W, dof)``, ``history`` as for the ``history`` critic. Reads no model."""
+
+    uses_history = True  # the trajectory's observed responses: the identifier's input
+    uses_dynamics = False  # never the true model
+
+    def __init__(self, critic: nn.Module, identifier: Identifier):
+        super().__init__()
+        if not getattr(critic, "uses_dynamics", False):
+            raise ValueError("an identified critic wraps a critic that reads the dynamics")
+        self.critic, self.identifier = critic, identifier
+
+    def torque_metric(self, q: torch.Tensor) -> torch.Tensor | None:
+        return None
+
+    def forward(self, q, qd, tau, g, history=None):
+        if history is None or q.dim() != 3:
+            raise ValueError(
+                "an identified critic needs one trajectory's steps (T, W, dof) and history"
+            )
+        d_hat = self.identifier(identifier_inputs(q, qd, history)).detach()
+        return self.critic(q, qd, tau, g, dynamics=d_hat)
+
+
+__all__ = ["Identifier", "IdentifiedCritic", "identifier_inputs", "trajectory_inputs"]

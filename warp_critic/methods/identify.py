@@ -1,0 +1,141 @@
+"""Train an :class:`~warp_critic.learning.identify.Identifier` for a run whose critic was told the
+model (``--critic-input pose-dynamics`` / ``relative-dynamics``), and write the run with it.
+
+Every iteration draws a new model for every world from the run's own ``train_variants`` (seeded by
+``(seed, iteration)``, apart from training's draws), rolls fresh policies out from home towards goals
+sampled around the training goals, and updates them with the told critic as meta-test does (the
+teacher: the true model told). Each of those rollouts -- the ones a meta-test's critic evaluates --
+is a regression sample: the identifier's estimate from the rollout's observed states and torques
+against the world's true descriptor (mean squared error; worlds that diverge are left out). The run
+written to ``out`` is the input run with the identifier in its checkpoint: ``meta-test``, the maps
+and the tables then use the :class:`~warp_critic.learning.identify.IdentifiedCritic`, which never
+reads the model.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import torch
+
+from warp_critic.core.errors import UserError
+
+#: separates the identifier's model draws from training's (``variant_draws.draw``'s seed)
+DRAW_SEED_OFFSET = 7_919
+IDENTIFY_FILE = "identify.jsonl"
+
+
+def train_identifier(
+    run_dir: str,
+    out: str,
+    *,
+    iterations: int = 1000,
+    goals: int = 8,
+    inits: int = 16,
+    lr: float = 1e-3,
+    hidden: int = 128,
+    seed: int = 0,
+    device: str = "cpu",
+    progress: Callable[[int, float], None] | None = None,
+) -> dict:
+    """Train on ``goals x inits`` worlds per iteration; write ``out`` (a new folder) and return
+    ``{"loss": final training loss, "held_out": per-entry mean |d_hat - d| on a fresh draw}``."""
+    from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
+    from warp_critic.learning.identify import Identifier, trajectory_inputs
+    from warp_critic.learning.inner import inner_update
+    from warp_critic.learning.rollout import settled_worlds
+    from warp_critic.physics.redraw import set_variants
+    from warp_critic.physics.variant_draws import draw, parse_ranges, with_draws
+    from warp_critic.running.rundir import atomic_torch_save, atomic_write_text
+    from warp_critic.running.task import task_variant
+
+    dst = Path(out)
+    if dst.exists() and (not dst.is_dir() or any(dst.iterdir())):
+        raise UserError(f"--out {out}: exists and is not an empty folder")
+    tc = MetaTestConfig(
+        run_dir=run_dir, num_goals=goals, inits=inits, goal_std=0.3, seed=seed, device=device
+    )
+    m = setup_meta_test(tc)
+    if not getattr(m.critic, "uses_dynamics", False):
+        raise UserError(
+            f"{run_dir}: its critic is not told the model (critic input "
+            f"{m.ckpt.get('critic_input')!r}); identify a pose-dynamics or relative-dynamics run"
+        )
+    ranges = parse_ranges(m.ckpt["config"].get("train_variants"))
+    if not ranges:
+        raise UserError(f"{run_dir}: trained on one model (no train_variants): nothing to identify")
+    base, W, dev = task_variant(m.cfg), m.sim.worlds, m.sim.torch_device
+    ident = Identifier(m.scene.dof, m.sim.dynamics_size, hidden).to(dev)
+    opt = torch.optim.Adam(ident.parameters(), lr=lr)
+    gen = torch.Generator().manual_seed(seed)
+
+    def samples(it: int):
+        """The rollouts of one iteration's fresh and updated policies, and their settled worlds."""
+        values = draw(ranges, W, DRAW_SEED_OFFSET + seed, it)
+        set_variants(m.sim, [with_draws(base, ranges, v) for v in values])
+        params = {
+            k: v.requires_grad_(True)
+            for k, v in m.policy.init(W, generator=gen, device=dev).items()
+        }
+        _, trajs = inner_update(
+            m.critic,
+            m.policy,
+            params,
+            m.sim,
+            m.q0,
+            m.qd0,
+            m.goal,
+            horizon=m.horizon,
+            alpha=m.alpha,
+            steps=m.steps,
+            check=False,
+            guard=True,
+        )
+        settled = torch.stack([settled_worlds(t) for t in trajs]).all(0)
+        return trajs, settled
+
+    def loss_of(trajs, settled) -> torch.Tensor:
+        errs = [((ident.of_trajectory(t) - t.dynamics) ** 2).mean(-1) for t in trajs]
+        return torch.stack(errs).mean(0)[settled].mean()
+
+    rows = []
+    for it in range(iterations):
+        trajs, settled = samples(it)
+        if not bool(settled.any()):
+            continue
+        if it == 0:
+            with torch.no_grad():
+                ident.standardise_from(
+                    torch.cat([trajectory_inputs(t)[:, settled] for t in trajs], dim=1)
+                )
+        loss = loss_of(trajs, settled)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        rows.append({"iteration": it, "loss": float(loss.detach())})
+        if progress is not None:
+            progress(it, rows[-1]["loss"])
+    trajs, settled = samples(iterations)  # a draw never trained on
+    with torch.no_grad():
+        err = torch.stack([(ident.of_trajectory(t) - t.dynamics).abs() for t in trajs])
+        held_out = err[:, settled].mean((0, 1))
+        varied = torch.stack([t.dynamics for t in trajs]).abs().amax((0, 1)) > 0
+    shutil.copytree(
+        run_dir,
+        dst,
+        ignore=shutil.ignore_patterns("recording.rrd", "metatest.json", ".lock"),
+        dirs_exist_ok=True,
+    )
+    ckpt = dict(m.ckpt)
+    ckpt["identifier_state"] = {k: v.detach().cpu() for k, v in ident.state_dict().items()}
+    ckpt["identifier"] = {"hidden": hidden, "size": ident.size, "iterations": iterations}
+    atomic_torch_save(ckpt, dst / "checkpoint.pt")
+    atomic_write_text(dst / IDENTIFY_FILE, "".join(json.dumps(r) + "\n" for r in rows))
+    return {
+        "loss": rows[-1]["loss"] if rows else float("nan"),
+        "held_out": float(held_out[varied].mean()) if bool(varied.any()) else 0.0,
+        "varied": int(varied.sum()),
+    }
