@@ -49,7 +49,7 @@ def _run(run_dir: str, goals, inits: int, seed: int, shift_joints: tuple[int, ..
     import dataclasses
 
     from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
-    from warp_critic.learning.inner import inner_update, policy_fn
+    from warp_critic.learning.inner import policy_fn
     from warp_critic.learning.rollout import rollout
 
     m = setup_meta_test(MetaTestConfig(run_dir=run_dir, goals=goals, inits=inits, seed=seed))
@@ -60,19 +60,7 @@ def _run(run_dir: str, goals, inits: int, seed: int, shift_joints: tuple[int, ..
             m, q0=(m.q0 - shift).contiguous(), goal=(m.goal - shift).contiguous()
         )
     before = rollout(m.sim, policy_fn(m.policy, m.params), m.q0, m.qd0, m.horizon)
-    params, _ = inner_update(
-        m.critic,
-        m.policy,
-        m.params,
-        m.sim,
-        m.q0,
-        m.qd0,
-        m.goal,
-        horizon=m.horizon,
-        alpha=m.alpha,
-        steps=m.steps,
-        create_graph=False,
-    )
+    params, _ = m.update(m.params, create_graph=False)
     with torch.no_grad():
         after = rollout(m.sim, policy_fn(m.policy, params), m.q0, m.qd0, m.horizon)
     return m, before, after

@@ -175,6 +175,24 @@ class MetaTestSetup:
     horizon: int
     alpha: float
 
+    def update(self, params: dict, **kw) -> tuple[dict, list]:
+        """Meta-test's policy update of ``params`` (:func:`~warp_critic.learning.inner.inner_update`
+        with this setup's critic, model, starts, goals, horizon, rate and steps; ``kw`` as there):
+        the updated parameters and the rollout each step evaluated."""
+        return inner_update(
+            self.critic,
+            self.policy,
+            params,
+            self.sim,
+            self.q0,
+            self.qd0,
+            self.goal,
+            horizon=self.horizon,
+            alpha=self.alpha,
+            steps=self.steps,
+            **kw,
+        )
+
 
 def setup_meta_test(tc: MetaTestConfig, gen: torch.Generator | None = None) -> MetaTestSetup:
     """Load the run, check ``tc``, sample the goals and build the gradient-free model and fresh policies.
@@ -283,31 +301,11 @@ def meta_test(tc: MetaTestConfig, progress: Callable[[str], None] | None = None)
     """
     out = check_output_file(Path(tc.out) if tc.out else Path(tc.run_dir) / "metatest.json", "out")
     m = setup_meta_test(tc)
-    ckpt, scene, goals, goal, sim, critic, policy = (
-        m.ckpt,
-        m.scene,
-        m.goals,
-        m.goal,
-        m.sim,
-        m.critic,
-        m.policy,
-    )
+    ckpt, scene, goals, goal, sim, policy = m.ckpt, m.scene, m.goals, m.goal, m.sim, m.policy
     params, q0, qd0, steps, horizon, alpha = m.params, m.q0, m.qd0, m.steps, m.horizon, m.alpha
     G, K = goals.shape[0], m.inits
     before = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
-    params, _ = inner_update(
-        critic,
-        policy,
-        params,
-        sim,
-        q0,
-        qd0,
-        goal,
-        horizon=horizon,
-        alpha=alpha,
-        steps=steps,
-        create_graph=False,
-    )
+    params, _ = m.update(params, create_graph=False)
     after = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
     err = final_error(after.q[-1], goal).view(G, K).cpu()
     err0 = final_error(before.q[-1], goal).view(G, K).cpu()

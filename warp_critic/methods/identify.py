@@ -45,7 +45,6 @@ def train_identifier(
     ``{"loss": final training loss, "held_out": per-entry mean |d_hat - d| on a fresh draw}``."""
     from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
     from warp_critic.learning.identify import Identifier, trajectory_inputs
-    from warp_critic.learning.inner import inner_update
     from warp_critic.learning.rollout import settled_worlds
     from warp_critic.physics.redraw import set_variants
     from warp_critic.physics.variant_draws import draw, parse_ranges, with_draws
@@ -80,20 +79,7 @@ def train_identifier(
             k: v.requires_grad_(True)
             for k, v in m.policy.init(W, generator=gen, device=dev).items()
         }
-        _, trajs = inner_update(
-            m.critic,
-            m.policy,
-            params,
-            m.sim,
-            m.q0,
-            m.qd0,
-            m.goal,
-            horizon=m.horizon,
-            alpha=m.alpha,
-            steps=m.steps,
-            check=False,
-            guard=True,
-        )
+        _, trajs = m.update(params, check=False, guard=True)
         settled = torch.stack([settled_worlds(t) for t in trajs]).all(0)
         return trajs, settled
 
