@@ -42,7 +42,8 @@ def train_identifier(
     progress: Callable[[int, float], None] | None = None,
 ) -> dict:
     """Train on ``goals x inits`` worlds per iteration; write ``out`` (a new folder) and return
-    ``{"loss": final training loss, "held_out": per-entry mean |d_hat - d| on a fresh draw}``."""
+    ``{"loss": the last training loss, "held_out": the mean |d_hat - d| over the descriptor entries
+    the draws vary, on a draw never trained on, "varied": how many entries they vary}``."""
     from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
     from warp_critic.learning.identify import Identifier, trajectory_inputs
     from warp_critic.learning.rollout import settled_worlds
@@ -92,7 +93,7 @@ def train_identifier(
         trajs, settled = samples(it)
         if not bool(settled.any()):
             continue
-        if it == 0:
+        if not rows:  # the first batch fixes the input scales
             with torch.no_grad():
                 ident.standardise_from(
                     torch.cat([trajectory_inputs(t)[:, settled] for t in trajs], dim=1)
