@@ -88,7 +88,7 @@ def train_identifier(
         errs = [((ident.of_trajectory(t) - t.dynamics) ** 2).mean(-1) for t in trajs]
         return torch.stack(errs).mean(0)[settled].mean()
 
-    rows = []
+    rows: list[dict] = []
     for it in range(iterations):
         trajs, settled = samples(it)
         if not bool(settled.any()):
