@@ -86,9 +86,6 @@ class IdentifiedCritic(nn.Module):
             raise ValueError("an identified critic wraps a critic that reads the dynamics")
         self.critic, self.identifier = critic, identifier
 
-    def torque_metric(self, q: torch.Tensor) -> torch.Tensor | None:
-        return None
-
     def forward(self, q, qd, tau, g, history=None):
         if history is None or q.dim() != 3:
             raise ValueError(

@@ -70,6 +70,7 @@ class Simulator:
         for v in variants:
             v.validate()
         self.scene = scene
+        self._describe = None  # DynamicsDescriptor, built on first use
         self.variants = list(variants)
         self.worlds = len(self.variants)
         self.dof = scene.dof
@@ -99,10 +100,19 @@ class Simulator:
         self.effort_limit = torch.as_tensor(
             np.asarray(scene.effort_limit), dtype=torch.float32, device=tdev
         )
-        self._describe = None  # DynamicsDescriptor, built on first use
-        self._dynamics: tuple[tuple, torch.Tensor] | None = None
 
     # -- the worlds' dynamics as data ---------------------------------------------------------------
+    @property
+    def variants(self) -> list[Variant]:
+        """Each world's dynamics variant; setting them (:func:`~warp_critic.physics.redraw.set_variants`,
+        after it has rewritten the model arrays) drops the cached :meth:`dynamics`."""
+        return self._variants
+
+    @variants.setter
+    def variants(self, variants: list[Variant]) -> None:
+        self._variants = variants
+        self._dynamics: torch.Tensor | None = None
+
     @property
     def dynamics_size(self) -> int:
         """``K``: the numbers per world of :meth:`dynamics`."""
@@ -111,12 +121,11 @@ class Simulator:
     def dynamics(self) -> torch.Tensor:
         """``(W, K)``: each world's dynamics relative to the scene's nominal model
         (:class:`~warp_critic.physics.descriptor.DynamicsDescriptor`), read from the model arrays
-        and cached until the worlds' variants change (:func:`~warp_critic.physics.redraw.set_variants`)."""
-        key = tuple(self.variants)
-        if self._dynamics is None or self._dynamics[0] != key:
+        once per set of variants (every rollout asks for it)."""
+        if self._dynamics is None:
             values = self._descriptor().of(self.model, self.worlds)
-            self._dynamics = (key, torch.as_tensor(values, device=self.torch_device))
-        return self._dynamics[1]
+            self._dynamics = torch.as_tensor(values, device=self.torch_device)
+        return self._dynamics
 
     def _descriptor(self):
         if self._describe is None:
