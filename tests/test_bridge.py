@@ -7,6 +7,7 @@ the same semi-implicit Euler integrator, damping and gravity, in float64 where i
 from __future__ import annotations
 
 import functools
+from contextlib import nullcontext
 from pathlib import Path
 
 import pytest
@@ -301,5 +302,36 @@ def test_policy_rollout_replay_is_bitwise_the_direct_path():
             grads = torch.autograd.grad(loss, [q0g, *p.values()])
         assert (traj.q[-1] - traj.q[0]).abs().max() > 0.1, "the test needs motion"
         results.append([fw.q, fw.qd, fw.tau, traj.q.detach(), traj.qd.detach(), *grads])
+    for a, b in zip(*results):
+        assert torch.equal(a, b)
+
+
+def test_failed_capture_falls_back_to_direct_launches(monkeypatch):
+    """A graph capture that cannot begin (on CUDA: a stream Warp cannot capture) warns once per
+    replay and runs the direct launches: the same results as a simulator without graphs."""
+    import warp_critic.physics.replay as replay
+
+    def refuse(*args, **kwargs):
+        raise RuntimeError("Warp error: unknown stream")
+
+    scene = load_scene(ROOT / "scenes" / "kuka.usda")
+    gen = torch.Generator().manual_seed(5)
+    q0, taus = torch.rand(2, 7, generator=gen) * 0.4, torch.randn(4, 2, 7, generator=gen) * 8
+    results = []
+    for graphs in (False, True):
+        sim = Simulator(scene, [Variant()] * 2, dt=0.0025, substeps=2, device="cpu", graphs=graphs)
+        with monkeypatch.context() as m:
+            m.setattr(replay.wp, "capture_begin", refuse)
+            with pytest.warns(RuntimeWarning, match="unknown stream") if graphs else nullcontext():
+                for _ in range(3):  # direct, (failed) capture, then direct again
+                    tg = taus.clone().requires_grad_()
+                    q, qd = q0, sim.zeros()
+                    with sim.begin_rollout() as ro:
+                        for t in range(len(tg)):
+                            q, qd = ro.step(q, qd, tg[t])
+                    ((q**2).sum() + (qd**2).sum()).backward()
+        assert sim.bridge._controls[0].forward.graph is None
+        assert not sim.bridge._controls[0].forward.enabled
+        results.append([q.detach(), qd.detach(), tg.grad])
     for a, b in zip(*results):
         assert torch.equal(a, b)

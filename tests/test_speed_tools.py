@@ -24,6 +24,8 @@ def load_tool(name: str):
         ["--seeds", "a,b"],
         ["--repeats", "0"],
         ["--against", "no-such-commit-0123", "--seeds", "0"],
+        ["--worlds-per-goal", "0"],
+        ["--worlds-per-goal", "8", "--method", "ddpg"],
     ],
 )
 def test_bench_speed_refuses_bad_arguments_in_one_line(argv, capsys):

@@ -23,7 +23,8 @@ Python, Newton's Python, torch's backward engine, torch ops, other Python; plus 
 ``warp/`` with the most own time). Read as proportions: profiling slows Python-heavy parts more.
 
 Usage: ``python tools/bench_speed.py [--scene scenes/kuka.usda] [--iterations 8] [--seeds 0,1,2,3,4]
-[--preset kuka-table1] [--method ours] [--device cpu] [--repeats 1] [--against COMMIT]
+[--preset kuka-table1] [--method ours] [--device cpu] [--worlds-per-goal N] [--repeats 1]
+[--against COMMIT]
 [--profile]``.
 """
 
@@ -112,6 +113,8 @@ def measure(job: dict) -> dict:
             t0 = time.perf_counter()
             result = _train_baseline(job, Path(tmp) / "run", start_profile)
             return _result(result, time.perf_counter() - t0, prof, warp_critic.__file__)
+        if job.get("worlds_per_goal"):
+            settings["worlds_per_goal"] = job["worlds_per_goal"]
         cfg = TrainConfig(
             scene=job["scene"],
             **{**settings, "iterations": job["iterations"]},
@@ -238,7 +241,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--iterations", type=int, default=8,
                    help=f"iterations per run (the first {WARMUP} are not timed)")  # fmt: skip
     p.add_argument("--seeds", default="0,1,2,3,4", help="seeds batched in the second run")
-    p.add_argument("--device", default="cpu")
+    p.add_argument("--device", default="cpu", help="cpu or cuda (default cpu)")
+    p.add_argument("--worlds-per-goal", type=int, default=None,
+                   help="worlds per goal instead of the preset's (ours only; e.g. 64 on a GPU)")  # fmt: skip
     p.add_argument("--repeats", type=int, default=1, help="measurements per configuration")
     p.add_argument("--against", metavar="COMMIT", help="also measure this commit, side by side")
     p.add_argument("--profile", action="store_true", help="also profile (extra runs)")
@@ -255,9 +260,13 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bench_speed: error: --iterations must be > {WARMUP}, --seeds non-empty integers, "
               "--repeats >= 1", file=sys.stderr)  # fmt: skip
         return 2
+    if args.worlds_per_goal is not None and (args.worlds_per_goal < 1 or args.method != "ours"):
+        print("bench_speed: error: --worlds-per-goal must be >= 1, and times ours only",
+              file=sys.stderr)  # fmt: skip
+        return 2
     configs = [("1 seed", seeds[:1])] + ([(f"{len(seeds)} seeds", seeds)] if len(seeds) > 1 else [])
     base = {"preset": args.preset, "iterations": args.iterations, "device": args.device,
-            "method": args.method}  # fmt: skip
+            "method": args.method, "worlds_per_goal": args.worlds_per_goal}  # fmt: skip
     with contextlib.ExitStack() as stack:
         sides = [("this", sys.executable, ROOT)]
         if args.against or args.method != "ours":

@@ -26,8 +26,10 @@ Two paths:
   counted twice. Between sub-steps we therefore read the joint-space gradient, zero the tape and
   re-seed only ``joint_q``/``joint_qd``, which fully determine the next step.
 
-On CUDA, Warp launches go to torch's current stream (``wp.stream_from_torch``), so torch copies into
-the zero-copy views and Warp kernels are ordered without host synchronisation.
+On CUDA, Warp launches go to torch's current stream when that is a stream of its own
+(``wp.stream_from_torch``), else to Warp's blocking device stream, which CUDA orders with torch's
+default (NULL) stream: either way torch copies into the zero-copy views and Warp kernels are ordered
+without host synchronisation, and the step can be captured into a CUDA graph (see ``_stream``).
 
 **Graph replay** (:mod:`warp_critic.physics.replay`). Every step of both paths always touches the
 same arrays (the forward path's ping-pong pair; the differentiable path's per-sub-step buffers,
@@ -109,6 +111,7 @@ class NewtonBridge:
         self.requires_grad = bool(model.requires_grad)
         self.solver = newton.solvers.SolverFeatherstone(model, use_tile_gemm=use_tile_gemm)
         self._is_cuda = self.torch_device.type == "cuda"
+        self._wp_streams: dict[int, wp.Stream] = {}  # torch stream handle -> its Warp stream
         self._base_scratch = self._scratch_of(self.solver)
         # A replayed step skips the solver's Python, including its every-N-steps mass-matrix
         # schedule: replay only what is the same on every step.
@@ -135,12 +138,23 @@ class NewtonBridge:
         return wp.to_torch(arr).view(self.worlds, self.dof)
 
     def _stream(self):
-        """Run Warp on torch's current CUDA stream (no-op on CPU)."""
-        if self._is_cuda:
-            return wp.ScopedStream(
-                wp.stream_from_torch(torch.cuda.current_stream(self.torch_device))
-            )
-        return contextlib.nullcontext()
+        """The CUDA stream Warp runs on for one call (no-op on CPU).
+
+        Under a ``torch.cuda.stream(s)`` context: ``s`` itself, so torch's copies into the views and
+        Warp's kernels are ordered without host synchronisation. On torch's default stream -- the
+        legacy NULL stream, which CUDA cannot capture into a graph and Warp does not register
+        ("Warp error: unknown stream" at ``capture_begin``) -- Warp's own stream of the device: a
+        blocking stream, which CUDA orders with every NULL-stream operation both ways.
+        """
+        if not self._is_cuda:
+            return contextlib.nullcontext()
+        ts = torch.cuda.current_stream(self.torch_device)
+        if ts.cuda_stream == 0:
+            return wp.ScopedStream(self.device.stream)
+        ws = self._wp_streams.get(ts.cuda_stream)
+        if ws is None:  # one registered Warp stream per torch stream, kept (graphs replay on it)
+            ws = self._wp_streams[ts.cuda_stream] = wp.stream_from_torch(ts)
+        return wp.ScopedStream(ws)
 
     # -- forward only --------------------------------------------------------------------------
     @torch.no_grad()

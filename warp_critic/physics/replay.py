@@ -10,6 +10,7 @@ results as the direct calls.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import newton
@@ -22,7 +23,8 @@ class Replay:
 
     ``direct`` does the first call's one-time work (allocations, kernel loads, tape recording);
     ``captured`` issues the same Warp operations without it. Capture records without executing, so
-    the freshly captured graph is launched right away. With ``enabled=False`` every call is direct.
+    the freshly captured graph is launched right away. With ``enabled=False`` every call is direct;
+    so is every call after a capture that cannot begin on the current stream (with a warning).
     """
 
     __slots__ = ("device", "direct", "captured", "enabled", "graph", "ran")
@@ -38,7 +40,18 @@ class Replay:
                 self.direct()
                 return
             # the direct call loaded every kernel this graph launches
-            wp.capture_begin(device=self.device, force_module_load=False)
+            try:
+                wp.capture_begin(device=self.device, force_module_load=False)
+            except RuntimeError as e:  # nothing was captured: the direct path stays right
+                self.enabled = False
+                warnings.warn(
+                    f"graph capture failed on {self.device} ({e}); running Warp's launches "
+                    "directly (the same results, slower)",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+                self.direct()
+                return
             try:
                 self.captured()
             finally:
