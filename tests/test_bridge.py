@@ -335,3 +335,27 @@ def test_failed_capture_falls_back_to_direct_launches(monkeypatch):
         results.append([q.detach(), qd.detach(), tg.grad])
     for a, b in zip(*results):
         assert torch.equal(a, b)
+
+
+def test_a_capture_that_fails_midway_is_discarded_and_runs_direct():
+    """An error inside the captured work (nothing of it ran) leaves the capture ended and discarded,
+    warns, and runs the direct work from then on, each call once."""
+    from warp_critic.physics.replay import Replay
+
+    calls: list[str] = []
+
+    def captured():
+        calls.append("captured")
+        raise RuntimeError("operation not permitted when stream is capturing")
+
+    replay = Replay("cpu", lambda: calls.append("direct"), captured)
+    replay()
+    with pytest.warns(RuntimeWarning, match="not permitted"):
+        replay()
+    replay()
+    assert calls == ["direct", "captured", "direct", "direct"]
+    assert replay.graph is None and not replay.enabled
+    import warp as wp
+
+    wp.capture_begin(device="cpu")  # no capture was left open on the device
+    wp.capture_end(device="cpu")

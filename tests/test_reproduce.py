@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from warp_critic.cli.main import main as cli_main
 
@@ -185,6 +186,9 @@ def test_only_toy_and_changed_setting(tmp_path, capsys):
         (["--set", "beyond.kuka.randomised.train_variants=ee.mass=5..1"], "is empty (LO > HI)"),
         (["--set", "beyond.reacher.randomised.train_variants=arm9.mass=1..2"], "unknown link"),
         (["--set", "beyond.kuka.randomised.seeds=[1]"], "may not be set"),
+        (["--set", "beyond.reacher.pose-dynamics-full.identify.steps=3"], "unknown (known:"),
+        (["--set", "beyond.reacher.pose-dynamics-full.identify.inits=0"], "must be >= 1"),
+        (["--set", 'beyond.reacher.pose-long.identify={"iterations": 5}'], "critic told them"),
     ],
 )
 def test_bad_input(tmp_path, capsys, argv, words):
@@ -518,7 +522,9 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     assert "### Targets" in beyond and "randomised" in beyond
     results = json.loads((other / "results.json").read_text())
     targets = results["beyond"]["targets"]
-    assert len(targets) == 11 * 3 + 2 * 3  # 11 / 2 recipes x (goals + 2 maps; Table 1 + 2 tables)
+    # 11 recipes and one identified, 2 KUKA recipes x (goals + 2 maps; Table 1 + 2 tables)
+    assert len(targets) == 12 * 3 + 2 * 3
+    assert "pose-dynamics-full-identified" in results["beyond"]["maps"]  # its own row
     # each reacher target names the share the open-loop floor reaches, from the stage's own floor
     assert all("open-loop floor" in t["measured"] for t in targets if "reacher" in t["target"])
     assert "| open-loop floor |" in beyond
@@ -534,6 +540,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
         "reacher/ours",
         "reacher/history-randomised-long",
         "reacher/pose-dynamics-full",
+        "reacher/pose-dynamics-full-identified",
         "reacher/pose-dynamics-long",
         "reacher/pose-long",
         "reacher/pose-randomised-full",
@@ -552,6 +559,13 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     (bmaps,) = [json.loads(p.read_text()) for p in other.glob("beyond-maps-*/stage.json")]
     assert bmaps["result"]["reach_floor_from"] == f"maps-{maps['hash']}"
     assert bmaps["result"]["reach_floor"] == maps["result"]["reach_floor"]
+    # the told recipe's seeds each got an identifier, seeded by the seed, which the maps read
+    told = next(other.glob("beyond-metatrain-reacher-pose-dynamics-full-*/stage.json"))
+    seeds = json.loads(told.read_text())["result"]["seeds"]
+    for seed, v in seeds.items():
+        ident = told.parent / v["identified"]["run_dir"]
+        assert ident.name == f"seed{seed}-identified" and v["identified"]["iterations"] == 3
+        assert "identifier_state" in torch.load(ident / "checkpoint.pt", weights_only=False)
     stage = next(other.glob("beyond-metatrain-kuka-randomised-[0-9a-f]*/stage.json"))
     run = stage.parent / json.loads(stage.read_text())["result"]["seeds"]["0"]["run_dir"]
     first = json.loads((run / "metrics.jsonl").read_text().splitlines()[0])

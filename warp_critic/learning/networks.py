@@ -72,6 +72,9 @@ POLICY_INIT_SCHEMES = ("fresh", "fixed", "persistent")
 
 CONTINUOUS_HALF_RANGE = 1e6  # rad: a joint whose limits are this far apart has none
 
+#: the critic inputs told each world's model (privileged: ``tools/identify.py`` estimates it instead)
+TOLD_INPUTS = ("pose-dynamics", "relative-dynamics")
+
 
 class Inertia(Protocol):
     """A model's joint-space inertia as data: ``q (..., dof)`` -> ``M(q) (..., dof, dof)``, and
@@ -246,7 +249,7 @@ class Critic(nn.Module):
         self.inertia = norm.inertia if inputs == "inertial" else None
         if inputs == "inertial" and self.inertia is None:
             raise ValueError("an inertial critic needs the scene's nominal inertia (norm.inertia)")
-        told = inputs in ("pose-dynamics", "relative-dynamics")
+        told = inputs in TOLD_INPUTS
         self.dynamics_size = norm.dynamics_size if told else 0
         if told and self.dynamics_size <= 0:
             raise ValueError(

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -26,6 +27,10 @@ from warp_critic.core.errors import UserError
 #: separates the identifier's model draws from training's (``variant_draws.draw``'s seed)
 DRAW_SEED_OFFSET = 7_919
 IDENTIFY_FILE = "identify.jsonl"
+#: the summary :func:`train_identifier` returns, written last: an identified run is complete with it
+SUMMARY_FILE = "identify.json"
+#: :func:`train_identifier`'s settings, as ``reproduce`` recipes name them (``identify``)
+SETTINGS = ("iterations", "goals", "inits", "lr", "hidden")
 
 
 def train_identifier(
@@ -43,7 +48,8 @@ def train_identifier(
 ) -> dict:
     """Train on ``goals x inits`` worlds per iteration; write ``out`` (a new folder) and return
     ``{"loss": the last training loss, "held_out": the mean |d_hat - d| over the descriptor entries
-    the draws vary, on a draw never trained on, "varied": how many entries they vary}``."""
+    the draws vary, on a draw never trained on, "varied": how many entries they vary, "seconds":
+    the wall time, "iterations": iterations}``, also written to ``out/identify.json`` (last)."""
     from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
     from warp_critic.learning.identify import Identifier, trajectory_inputs
     from warp_critic.learning.rollout import settled_worlds
@@ -52,6 +58,7 @@ def train_identifier(
     from warp_critic.running.rundir import atomic_torch_save, atomic_write_text
     from warp_critic.running.task import task_variant
 
+    t0 = time.perf_counter()
     dst = Path(out)
     if dst.exists() and (not dst.is_dir() or any(dst.iterdir())):
         raise UserError(f"--out {out}: exists and is not an empty folder")
@@ -121,8 +128,22 @@ def train_identifier(
     ckpt["identifier"] = {"hidden": hidden, "size": ident.size, "iterations": iterations}
     atomic_torch_save(ckpt, dst / "checkpoint.pt")
     atomic_write_text(dst / IDENTIFY_FILE, "".join(json.dumps(r) + "\n" for r in rows))
-    return {
+    summary = {
         "loss": rows[-1]["loss"] if rows else float("nan"),
         "held_out": float(held_out[varied].mean()) if bool(varied.any()) else 0.0,
         "varied": int(varied.sum()),
+        "seconds": time.perf_counter() - t0,
+        "iterations": iterations,
     }
+    atomic_write_text(dst / SUMMARY_FILE, json.dumps(summary) + "\n")
+    return summary
+
+
+def identified(out: str | Path) -> dict | None:
+    """The summary of a complete identified run ``out`` (:func:`train_identifier`'s), or ``None``."""
+    try:
+        data = json.loads((Path(out) / SUMMARY_FILE).read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return None
+    keys = ("loss", "held_out", "varied", "seconds", "iterations")
+    return data if isinstance(data, dict) and all(k in data for k in keys) else None

@@ -10,6 +10,7 @@ results as the direct calls.
 
 from __future__ import annotations
 
+import contextlib
 import warnings
 from dataclasses import dataclass
 
@@ -24,7 +25,8 @@ class Replay:
     ``direct`` does the first call's one-time work (allocations, kernel loads, tape recording);
     ``captured`` issues the same Warp operations without it. Capture records without executing, so
     the freshly captured graph is launched right away. With ``enabled=False`` every call is direct;
-    so is every call after a capture that cannot begin on the current stream (with a warning).
+    so is every call after a capture that fails (with a warning): on CUDA, a stream that cannot be
+    captured or an operation a capture does not allow.
     """
 
     __slots__ = ("device", "direct", "captured", "enabled", "graph", "ran")
@@ -42,22 +44,30 @@ class Replay:
             # the direct call loaded every kernel this graph launches
             try:
                 wp.capture_begin(device=self.device, force_module_load=False)
-            except RuntimeError as e:  # nothing was captured: the direct path stays right
-                self.enabled = False
-                warnings.warn(
-                    f"graph capture failed on {self.device} ({e}); running Warp's launches "
-                    "directly (the same results, slower)",
-                    RuntimeWarning,
-                    stacklevel=2,
-                )
-                self.direct()
-                return
+            except RuntimeError as e:
+                return self._without_graphs(e)
             try:
                 self.captured()
-            finally:
-                graph = wp.capture_end(device=self.device)
-            self.graph = graph
+            except RuntimeError as e:  # e.g. an operation CUDA does not allow in a capture
+                with contextlib.suppress(RuntimeError):
+                    wp.capture_end(device=self.device)  # discarded
+                return self._without_graphs(e)
+            except BaseException:
+                wp.capture_end(device=self.device)
+                raise
+            self.graph = wp.capture_end(device=self.device)
         wp.capture_launch(self.graph)
+
+    def _without_graphs(self, error: Exception) -> None:
+        """A capture that failed recorded work without running it: every call is direct from now."""
+        self.enabled = False
+        warnings.warn(
+            f"graph capture failed on {self.device} ({error}); running Warp's launches directly "
+            "(the same results, slower)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
+        self.direct()
 
 
 @wp.kernel

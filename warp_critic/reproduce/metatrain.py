@@ -119,6 +119,7 @@ def run_metatrain_stage(
     run = d / "run"
     resume = _clear_unstarted(run, seeds)
     values = dict(values)
+    identify = values.pop("identify", None)  # a recipe's model identifier, after training
     record = True
     cfg = make_config(scene, method, values, seeds, run, device, resume)
     trainers: dict[str, Callable[..., TrainResult]] = {
@@ -153,6 +154,11 @@ def run_metatrain_stage(
         }
         if method == "meta-critic":  # whether h_omega still moved the actor, or it trained as DDPG
             per_seed[str(seed)]["aux_alive"] = aux_alive(rows)
+    if identify is not None:
+        for seed, r in zip(seeds, result.seeds):
+            per_seed[str(seed)]["identified"] = identify_seed(
+                d, Path(r.run_dir), seed, identify, device, progress
+            )
     first = result.seeds[0].config
     assert first is not None
     return {
@@ -169,6 +175,38 @@ def run_metatrain_stage(
     }
 
 
+def identify_seed(
+    d: Path, run_dir: Path, seed: int, settings: dict, device: str, progress: bool
+) -> dict:
+    """A model identifier for one seed's told critic, in ``<run_dir>-identified`` (a complete one is
+    kept: a resumed stage redoes at most the seed it was stopped in); returns its summary and
+    ``run_dir`` (relative to the stage directory ``d``)."""
+    from warp_critic.methods.identify import identified, train_identifier
+    from warp_critic.running.locks import holder
+
+    out = run_dir.with_name(f"{run_dir.name}-identified")
+    summary = identified(out)
+    if summary is None:
+        if out.exists():  # stopped half-way: nothing of it is used
+            owner = holder(out)
+            if owner is not None:
+                raise UserError(f"{out}: in use by process {owner.get('pid')}; not removing it")
+            shutil.rmtree(out)
+        if progress:
+            print(f"identifying the model for seed {seed}'s critic ({out.name})", flush=True)
+        summary = train_identifier(str(run_dir), str(out), seed=seed, device=device, **settings)
+    return {"run_dir": str(out.relative_to(d)), **summary}
+
+
+def identified_run_dirs(d: Path, data: dict) -> list[Path]:
+    """The per-seed identified run directories of a complete metatrain sub-stage whose recipe
+    identifies the model (``identify``), in seed order; ``[]`` for any other."""
+    seeds = sorted(data["result"]["seeds"].items(), key=lambda kv: int(kv[0]))
+    if not all(isinstance(v.get("identified"), dict) for _, v in seeds):
+        return []
+    return [d / v["identified"]["run_dir"] for _, v in seeds]
+
+
 def run_dirs(d: Path, data: dict) -> list[Path]:
     """The per-seed run directories of a complete metatrain sub-stage, in seed order."""
     return [
@@ -181,6 +219,7 @@ __all__ = [
     "METHODS",
     "run_metatrain_stage",
     "run_dirs",
+    "identified_run_dirs",
     "make_config",
     "check_fields_known",
     "scene_file",

@@ -228,7 +228,7 @@ def stages_method(name: str) -> str:
 
 def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, out: Path):
     from warp_critic.reproduce.executors import Unit
-    from warp_critic.reproduce.metatrain import run_dirs
+    from warp_critic.reproduce.metatrain import identified_run_dirs, run_dirs
 
     group, dir_name = st["group"], f"{name}-{st['hash']}"
     if group == "toy":
@@ -252,9 +252,11 @@ def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, 
             data = read_stage(out / dep_dir)
             if data is None:
                 raise UserError(f"{out / dep_dir}: the stage {dep} this one needs is not complete")
-            runs[st.get("labels", {}).get(dep) or stages_method(dep)] = [
-                str(p.relative_to(out)) for p in run_dirs(out / dep_dir, data)
-            ]
+            label = st.get("labels", {}).get(dep) or stages_method(dep)
+            runs[label] = [str(p.relative_to(out)) for p in run_dirs(out / dep_dir, data)]
+            identified = identified_run_dirs(out / dep_dir, data)
+            if identified:  # the same critics fed their identifier's estimate of the model
+                runs[f"{label}-identified"] = [str(p.relative_to(out)) for p in identified]
         kwargs = {"s": settings[group], "runs": runs, "device": device, "progress": progress}
     reads = tuple(st["depends"].values())
     if group == "maps" and name != "maps":  # beyond-maps: the paper's maps' floors, if complete

@@ -230,9 +230,37 @@ def check_beyond(b: dict, seeds: list) -> None:
         if not isinstance(b.get(scene), dict) or not b[scene]:
             raise bad(f"beyond.{scene}", b.get(scene), "must name at least one recipe")
         for recipe, values in b[scene].items():
+            where = f"beyond.{scene}.{recipe}"
             if not isinstance(values, dict):
-                raise bad(f"beyond.{scene}.{recipe}", values, "must be a meta-train config")
-            _check_train(scene, "ours", values, seeds, f"beyond.{scene}.{recipe}")
+                raise bad(where, values, "must be a meta-train config")
+            train = {k: v for k, v in values.items() if k != "identify"}
+            _check_train(scene, "ours", train, seeds, where)
+            if "identify" in values:
+                check_identify(values["identify"], train, f"{where}.identify")
+
+
+def check_identify(s, train: dict, where: str) -> None:
+    """A recipe's ``identify`` settings: a model identifier for a critic told the drawn models."""
+    from warp_critic.learning.networks import TOLD_INPUTS
+    from warp_critic.methods.identify import SETTINGS
+
+    if not isinstance(s, dict):
+        raise bad(where, s, f"must be a table of {', '.join(SETTINGS)}")
+    unknown = sorted(set(s) - set(SETTINGS))
+    if unknown:
+        raise bad(f"{where}.{unknown[0]}", s[unknown[0]], f"unknown (known: {', '.join(SETTINGS)})")
+    for k in ("iterations", "goals", "inits", "hidden"):
+        if k in s:
+            number(f"{where}.{k}", s[k], lo=1, hi=10**6, integer=True)
+    if "lr" in s:
+        number(f"{where}.lr", s["lr"], lo=0, open_lo=True, hi=10)
+    if train.get("critic_input") not in TOLD_INPUTS or not train.get("train_variants"):
+        raise bad(
+            where,
+            s,
+            f"identifies the drawn models for a critic told them: the recipe needs train_variants "
+            f"and critic_input {' or '.join(TOLD_INPUTS)}",
+        )
 
 
 __all__ = ["RESERVED", "check_all", "show"]
