@@ -129,7 +129,7 @@ WIDE = {"critic_input": "relative", "start_std": 1.5, "home_starts": 2}
 #: also test the critic fed its own estimate of the model (``<recipe>-identified``): no privileged
 #: data at meta-test. 2000 regression steps of 8 goals x 16 fresh policies (RESULTS, "Telling the
 #: critic the model, then identifying it": 600 steps gave 61% / 79.6% of the maps on 5 seeds, 2000
-#: steps 71% / 90%; about 15 min a seed on the 2-core CPU)
+#: steps 71% / 90%; 20-26 min a seed on the 2-core CPU beside other jobs)
 IDENTIFY = {"iterations": 2000, "goals": 8, "inits": 16, "lr": 1e-3, "hidden": 128}
 RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
     "reacher": {
@@ -198,7 +198,7 @@ RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
                 "train_variants": REACHER_VARIANTS_FULL,
                 "on_divergence": "drop",
                 "iterations": 3000,
-                # and the critic fed an identifier's estimate instead (seed 0: 34% / 73% / 90%)
+                # and the critic fed an identifier's estimate instead (5 seeds: 30% / 71% / 90%)
                 "identify": IDENTIFY,
             },
         ),
