@@ -180,6 +180,41 @@ def test_identified_critic_feeds_the_told_critic_its_estimate():
     assert not torch.allclose(got, truth)
 
 
+def test_identifier_version_2_reads_the_response_size_free():
+    """Version 2's moments: scaling a trajectory's velocity changes and torques by ``c`` shifts each
+    log root mean square by ``log c`` and leaves the correlations; for one joint driven by
+    ``tau = I qdd`` the difference of the two logs is ``log I`` whatever the torques' size. Version
+    1 has a linear head over the mean features; other versions are refused."""
+    from warp_critic.learning.identify import Identifier
+
+    gen = torch.Generator().manual_seed(1)
+    T, W, dof, K = 7, 3, 2, 5
+    x = torch.randn(T, W, 4 * dof, generator=gen)
+    ident = Identifier(dof, K, hidden=8)
+    ident.standardise_from(x)
+    n = 2 * dof
+    assert ident.moments == n + n * (n - 1) // 2
+    m = ident.response_moments(x)
+    scaled = x.clone()
+    scaled[..., 2 * dof :] *= 10.0
+    m10 = ident.response_moments(scaled)
+    assert torch.allclose(m10[:, :n] - m[:, :n], torch.full((W, n), math.log(10.0)), atol=1e-4)
+    assert torch.allclose(m10[:, n:], m[:, n:], atol=1e-5)
+    assert ident(x).shape == (W, K)
+
+    one = Identifier(1, 1, hidden=4)  # x: [q, qd, dqd, tau]; unit scales
+    inertia = torch.tensor([0.5, 2.0, 8.0])
+    for size in (0.01, 1.0):
+        tau = size * torch.randn(20, 3, 1, generator=gen)
+        xs = torch.cat([torch.zeros(20, 3, 2), tau / inertia[:, None], tau], dim=-1)
+        logs = one.response_moments(xs)[:, :2]
+        assert torch.allclose(logs[:, 1] - logs[:, 0], inertia.log(), atol=1e-4)
+
+    assert isinstance(Identifier(dof, K, hidden=8, version=1).head, torch.nn.Linear)
+    with pytest.raises(ValueError, match="1 or 2"):
+        Identifier(dof, K, version=3)
+
+
 def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, capsys):
     """tools/identify.py on a told run: a new run whose critic is the identified one (meta-test
     loads it and tests a new model), the regression's losses written; misuse is one line, exit 2."""
@@ -188,7 +223,7 @@ def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, 
 
     from warp_critic.cli.main import main
     from warp_critic.evaluation.metatest import build_test_critic
-    from warp_critic.learning.identify import IdentifiedCritic
+    from warp_critic.learning.identify import IdentifiedCritic, Identifier
 
     told, plain = tmp_path / "told", tmp_path / "plain"
     assert main(_train(told, "--critic-input", "pose-dynamics", iterations=1)) == 0
@@ -211,6 +246,13 @@ def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, 
     )
     critic, _ = build_test_critic(ckpt, norm)
     assert isinstance(critic, IdentifiedCritic)
+    assert ckpt["identifier"]["version"] == 2 and critic.identifier.version == 2
+    # an identifier written before versions existed (no "version") loads as version 1
+    old = Identifier(2, ckpt["identifier"]["size"], hidden=ckpt["identifier"]["hidden"], version=1)
+    legacy = {**ckpt, "identifier_state": old.state_dict()}
+    legacy["identifier"] = {k: v for k, v in ckpt["identifier"].items() if k != "version"}
+    loaded, _ = build_test_critic(legacy, norm)
+    assert loaded.identifier.version == 1 and isinstance(loaded.identifier.head, torch.nn.Linear)
     result = tmp_path / "test.json"
     test = ["meta-test", str(out), "--num-goals", "2", "--inits", "1", "--device", "cpu"]
     assert main([*test, "--variant", "arm2.mass=4", "--out", str(result)]) == 0
@@ -219,6 +261,7 @@ def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, 
         ([str(plain), "--out", str(tmp_path / "x")], "not told the model"),
         ([str(told), "--out", str(out)], "not an empty folder"),
         ([str(told), "--out", str(tmp_path / "y"), "--iterations", "0"], "--iterations"),
+        ([str(told), "--out", str(tmp_path / "y"), "--version", "3"], "--version"),
     ):
         with pytest.raises(SystemExit) as e:
             tool.main(bad)

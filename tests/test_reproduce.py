@@ -188,6 +188,7 @@ def test_only_toy_and_changed_setting(tmp_path, capsys):
         (["--set", "beyond.kuka.randomised.seeds=[1]"], "may not be set"),
         (["--set", "beyond.reacher.pose-dynamics-full.identify.steps=3"], "unknown (known:"),
         (["--set", "beyond.reacher.pose-dynamics-full.identify.inits=0"], "must be >= 1"),
+        (["--set", "beyond.reacher.pose-dynamics-full.identify.version=3"], "must be 1 or 2"),
         (["--set", 'beyond.reacher.pose-long.identify={"iterations": 5}'], "critic told them"),
     ],
 )

@@ -29,6 +29,14 @@ def main(argv=None) -> int:
     p.add_argument("--inits", type=int, default=16, help="fresh policies per goal (default 16)")
     p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
     p.add_argument("--hidden", type=int, default=128, help="per-step MLP units (default 128)")
+    p.add_argument(
+        "--version",
+        type=int,
+        default=2,
+        choices=(1, 2),
+        help="architecture: 2, with the response's moments and a nonlinear head (default); 1, "
+        "the per-step features' mean and a linear head (warp_critic.learning.identify)",
+    )
     p.add_argument("--seed", type=int, default=0, help="draws, goals and policies (default 0)")
     p.add_argument("--device", default="cpu")
     args = p.parse_args(argv)
@@ -60,6 +68,7 @@ def main(argv=None) -> int:
             inits=args.inits,
             lr=args.lr,
             hidden=args.hidden,
+            version=args.version,
             seed=args.seed,
             device=args.device,
             progress=progress,

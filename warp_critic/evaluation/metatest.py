@@ -109,7 +109,12 @@ def load_our_critic(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, dict
         from warp_critic.learning.identify import IdentifiedCritic, Identifier
 
         meta = ckpt["identifier"]
-        identifier = Identifier(ckpt["dof"], int(meta["size"]), hidden=int(meta["hidden"]))
+        identifier = Identifier(
+            ckpt["dof"],
+            int(meta["size"]),
+            hidden=int(meta["hidden"]),
+            version=int(meta.get("version", 1)),  # version 1 wrote no version
+        )
         identifier.load_state_dict(ckpt["identifier_state"])
         critic = IdentifiedCritic(critic, identifier)
     # a critic trained on policies of every age up to the policy lifetime keeps improving them that long

@@ -10,9 +10,21 @@ simulated rollouts whose ``d`` is known (:mod:`warp_critic.methods.identify`); a
 update needs no model, no model gradient and no privileged data -- the teacher/adaptation split of
 rapid motor adaptation (Kumar et al., 2021) applied to a meta-learned critic.
 
-Shapes: a trajectory's steps ``(T, W, dof)`` -> ``d_hat (W, K)``: a per-step MLP, the mean over the
-steps, a linear head. The inputs are standardised with fixed buffers (``x_mean``, ``x_std``) set
-from the first training batch and stored in the checkpoint.
+Shapes: a trajectory's steps ``(T, W, dof)`` -> ``d_hat (W, K)``. Two architectures
+(``version``):
+
+* ``1``: a per-step MLP, the mean over the steps, a linear head. A linear head over averaged
+  features cannot form a ratio, and the mass is one (``M ~ tau / qdd``): on a fresh policy's small
+  torques its estimate stays at the draws' mean (measured: the second link's log mass ratio read
+  0.20-0.58 for true values from -1.36 to 1.78).
+* ``2`` (default): the same per-step MLP, plus the trajectory's second moments of the response
+  ``z_t = [qd_t - qd_{t-1}, tau_{t-1}]`` (scaled, not centred) as ``log`` root mean squares and
+  correlations, and a two-layer head over both. For one joint ``log m = log rms(tau) - log
+  rms(qdd)`` exactly; the logs make the estimate independent of the torques' size, and the head
+  is nonlinear, so coupled joints are within reach too.
+
+The inputs are standardised with fixed buffers (``x_mean``, ``x_std``) set from the first training
+batch and stored in the checkpoint.
 """
 
 from __future__ import annotations
@@ -41,19 +53,30 @@ class Identifier(nn.Module):
     Args:
         dof: joints.
         size: ``K``, the descriptor's length.
-        hidden: units of the per-step MLP's two ELU layers.
+        hidden: units of the per-step MLP's two ELU layers (and of version 2's head).
+        version: the architecture (module docstring): ``2``; ``1`` loads identifiers written
+            before version 2 existed.
     """
 
     x_mean: torch.Tensor
     x_std: torch.Tensor
 
-    def __init__(self, dof: int, size: int, hidden: int = 128):
+    def __init__(self, dof: int, size: int, hidden: int = 128, version: int = 2):
         super().__init__()
-        self.dof, self.size, self.hidden = dof, size, hidden
+        if version not in (1, 2):
+            raise ValueError(f"identifier version {version!r}: 1 or 2")
+        self.dof, self.size, self.hidden, self.version = dof, size, hidden, version
         self.step = nn.Sequential(
             nn.Linear(4 * dof, hidden), nn.ELU(), nn.Linear(hidden, hidden), nn.ELU()
         )
-        self.head = nn.Linear(hidden, size)
+        n = 2 * dof  # the response z_t: velocity change and torque per joint
+        self.moments = n + n * (n - 1) // 2 if version == 2 else 0
+        if version == 1:
+            self.head: nn.Module = nn.Linear(hidden, size)
+        else:
+            self.head = nn.Sequential(
+                nn.Linear(hidden + self.moments, hidden), nn.ELU(), nn.Linear(hidden, size)
+            )
         self.register_buffer("x_mean", torch.zeros(4 * dof))
         self.register_buffer("x_std", torch.ones(4 * dof))
 
@@ -63,10 +86,24 @@ class Identifier(nn.Module):
         self.x_mean.copy_(flat.mean(0))
         self.x_std.copy_(flat.std(0).clamp(min=1e-6))
 
+    def response_moments(self, x: torch.Tensor) -> torch.Tensor:
+        """``(W, moments)``: ``log`` root mean square of each scaled response channel ``z`` over the
+        steps, then the correlation of each pair (``E[z_i z_j] / (rms_i rms_j)``, upper triangle)."""
+        z = x[..., 2 * self.dof :] / self.x_std[2 * self.dof :]  # scaled, not centred: zero is rest
+        second = torch.einsum("twi,twj->wij", z, z) / z.shape[0]
+        ms = torch.diagonal(second, dim1=-2, dim2=-1)
+        tiny = 1e-12
+        rms = (ms + tiny).sqrt()
+        i, j = torch.triu_indices(z.shape[-1], z.shape[-1], offset=1, device=z.device)
+        corr = second[:, i, j] / (rms[:, i] * rms[:, j])
+        return torch.cat([0.5 * torch.log(ms + tiny), corr], dim=-1)
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         """``x (T, W, 4*dof)`` (:func:`identifier_inputs`) -> ``(W, K)``."""
-        h = self.step((x - self.x_mean) / self.x_std)
-        return self.head(h.mean(0))
+        h = self.step((x - self.x_mean) / self.x_std).mean(0)
+        if self.version == 2:
+            h = torch.cat([h, self.response_moments(x)], dim=-1)
+        return self.head(h)
 
     def of_trajectory(self, traj) -> torch.Tensor:
         """``(W, K)`` from a :class:`~warp_critic.learning.rollout.Trajectory`."""

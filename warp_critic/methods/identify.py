@@ -30,7 +30,7 @@ IDENTIFY_FILE = "identify.jsonl"
 #: the summary :func:`train_identifier` returns, written last: an identified run is complete with it
 SUMMARY_FILE = "identify.json"
 #: :func:`train_identifier`'s settings, as ``reproduce`` recipes name them (``identify``)
-SETTINGS = ("iterations", "goals", "inits", "lr", "hidden")
+SETTINGS = ("iterations", "goals", "inits", "lr", "hidden", "version")
 
 
 def train_identifier(
@@ -42,6 +42,7 @@ def train_identifier(
     inits: int = 16,
     lr: float = 1e-3,
     hidden: int = 128,
+    version: int = 2,
     seed: int = 0,
     device: str = "cpu",
     progress: Callable[[int, float], None] | None = None,
@@ -49,7 +50,8 @@ def train_identifier(
     """Train on ``goals x inits`` worlds per iteration; write ``out`` (a new folder) and return
     ``{"loss": the last training loss, "held_out": the mean |d_hat - d| over the descriptor entries
     the draws vary, on a draw never trained on, "varied": how many entries they vary, "seconds":
-    the wall time, "iterations": iterations}``, also written to ``out/identify.json`` (last)."""
+    the wall time, "iterations": iterations, "version": version}``, also written to
+    ``out/identify.json`` (last)."""
     from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
     from warp_critic.learning.identify import Identifier, trajectory_inputs
     from warp_critic.learning.rollout import settled_worlds
@@ -75,7 +77,7 @@ def train_identifier(
     if not ranges:
         raise UserError(f"{run_dir}: trained on one model (no train_variants): nothing to identify")
     base, W, dev = task_variant(m.cfg), m.sim.worlds, m.sim.torch_device
-    ident = Identifier(m.scene.dof, m.sim.dynamics_size, hidden).to(dev)
+    ident = Identifier(m.scene.dof, m.sim.dynamics_size, hidden, version).to(dev)
     opt = torch.optim.Adam(ident.parameters(), lr=lr)
     gen = torch.Generator().manual_seed(seed)
 
@@ -125,7 +127,12 @@ def train_identifier(
     )
     ckpt = dict(m.ckpt)
     ckpt["identifier_state"] = {k: v.detach().cpu() for k, v in ident.state_dict().items()}
-    ckpt["identifier"] = {"hidden": hidden, "size": ident.size, "iterations": iterations}
+    ckpt["identifier"] = {
+        "hidden": hidden,
+        "size": ident.size,
+        "iterations": iterations,
+        "version": version,
+    }
     atomic_torch_save(ckpt, dst / "checkpoint.pt")
     atomic_write_text(dst / IDENTIFY_FILE, "".join(json.dumps(r) + "\n" for r in rows))
     summary = {
@@ -134,6 +141,7 @@ def train_identifier(
         "varied": int(varied.sum()),
         "seconds": time.perf_counter() - t0,
         "iterations": iterations,
+        "version": version,
     }
     atomic_write_text(dst / SUMMARY_FILE, json.dumps(summary) + "\n")
     return summary

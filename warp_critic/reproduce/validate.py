@@ -254,6 +254,10 @@ def check_identify(s, train: dict, where: str) -> None:
             number(f"{where}.{k}", s[k], lo=1, hi=10**6, integer=True)
     if "lr" in s:
         number(f"{where}.lr", s["lr"], lo=0, open_lo=True, hi=10)
+    if "version" in s and (isinstance(s["version"], bool) or s["version"] not in (1, 2)):
+        raise bad(
+            f"{where}.version", s["version"], "must be 1 or 2 (the identifier's architecture)"
+        )
     if train.get("critic_input") not in TOLD_INPUTS or not train.get("train_variants"):
         raise bad(
             where,
