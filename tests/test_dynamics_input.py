@@ -39,7 +39,8 @@ def test_descriptor_moves_what_a_variant_changes(scene):
     (the elbow moves to 2 m), nothing of the second body."""
     describe = DynamicsDescriptor(scene)
     B, J = len(describe.m0), len(describe.p0)
-    assert describe.size == PER_BODY * B + PER_JOINT * J == 20
+    assert describe.size == PER_BODY * B + PER_JOINT * J == 20 == len(describe.names)
+    assert describe.names[0] == "arm1.mass" and describe.names[PER_BODY] == "arm2.mass"
     nominal = describe.of(scene.world_builder(Variant()), 1)[0]
     assert np.array_equal(nominal, np.zeros(describe.size, np.float32))
 
@@ -269,3 +270,25 @@ def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, 
         err = capsys.readouterr().err
         assert err.startswith("identify: error: ") and err.count("\n") == 1 and words in err, err
     assert not (tmp_path / "x").exists()
+
+    # what the identifier reads, update by update, for two models that differ in the second mass
+    probe = load_tool("probe_identifier")
+    two = ["--variant", "arm2.mass=0.5:keep", "--variant", "arm2.mass=4:keep"]
+    assert probe.main([str(out), *two, "--goals", "2", "--inits", "2"]) == 0
+    text = capsys.readouterr().out
+    lines = [x.split() for x in text.splitlines() if x.strip().startswith("arm2.mass ")]
+    e_m = 0.01  # the descriptor's mass epsilon: 1% of the nominal links' mean mass (1 kg)
+    want = [f"{math.log((m + e_m) / (1 + e_m)):.3f}" for m in (0.5, 4.0)]
+    assert [x[1] for x in lines] == want, text
+    assert all(len(x) == 2 + 2 * 3 for x in lines)  # truth, then mean and ±std for 3 updates
+    for bad, words in (
+        ([str(told), *two], "no model identifier"),
+        ([str(out), "--variant", "arm9.mass=1"], "arm9"),
+        ([str(out), *two, "--inits", "0"], "--inits"),
+    ):
+        with pytest.raises(SystemExit) as e:
+            probe.main(bad)
+        assert e.value.code == 2
+        err = capsys.readouterr().err
+        assert err.startswith("probe_identifier: error: ") and err.count("\n") == 1, err
+        assert words in err, err

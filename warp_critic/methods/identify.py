@@ -155,3 +155,59 @@ def identified(out: str | Path) -> dict | None:
         return None
     keys = ("loss", "held_out", "varied", "seconds", "iterations")
     return data if isinstance(data, dict) and all(k in data for k in keys) else None
+
+
+def probe_identifier(
+    run_dir: str,
+    variants: list[str],
+    *,
+    goals: int = 4,
+    goal_std: float = 0.0,
+    inits: int = 5,
+    seed: int = 1,
+    device: str = "cpu",
+) -> dict:
+    """What an identified run's identifier reads from each rollout of a meta-test, model by model.
+
+    For each ``--variant`` text in ``variants``: a meta-test's fresh policies (``goals x inits``
+    worlds around the training goals, ``goal_std`` rad) updated by the identified critic as
+    meta-test does; per update, the identifier's estimate from the rollout that update evaluated,
+    its mean and standard deviation over the worlds that stayed finite, beside the model's true
+    descriptor. Returns ``{"names": the K descriptor entries' names, "rows": [{"variant", "truth"
+    (K,), "mean" (updates, K), "std" (updates, K), "torque" (updates,): the mean |tau| (N m) of
+    each rollout}]}``."""
+    from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
+    from warp_critic.learning.identify import IdentifiedCritic
+    from warp_critic.learning.rollout import settled_worlds
+
+    rows, names = [], None
+    for text in variants:
+        tc = MetaTestConfig(
+            run_dir=run_dir,
+            num_goals=goals,
+            goal_std=goal_std,
+            inits=inits,
+            seed=seed,
+            device=device,
+            variant=text,
+        )
+        m = setup_meta_test(tc)
+        if not isinstance(m.critic, IdentifiedCritic):
+            raise UserError(
+                f"{run_dir}: its critic has no model identifier (see tools/identify.py)"
+            )
+        names = m.sim._descriptor().names
+        _, trajs = m.update(m.params, check=False, guard=True)
+        with torch.no_grad():
+            ok = torch.stack([settled_worlds(t) for t in trajs]).all(0)
+            est = torch.stack([m.critic.identifier.of_trajectory(t) for t in trajs])[:, ok]
+        rows.append(
+            {
+                "variant": text,
+                "truth": trajs[0].dynamics[0].tolist(),
+                "mean": est.mean(1).tolist(),
+                "std": est.std(1, unbiased=est.shape[1] > 1).tolist(),
+                "torque": [float(t.tau.abs().mean()) for t in trajs],
+            }
+        )
+    return {"names": names, "rows": rows}

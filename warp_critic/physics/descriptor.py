@@ -64,6 +64,19 @@ class DynamicsDescriptor:
         longest = float(np.linalg.norm(self.p0, axis=-1).max()) if self.p0.size else 0.0
         self.length = longest if longest > 0.0 else 1.0
         self.size = PER_BODY * self.m0.shape[0] + PER_JOINT * self.p0.shape[0]
+        bodies = list(scene.body_names)
+        if len(bodies) != self.m0.shape[0]:
+            bodies = [f"body{i}" for i in range(self.m0.shape[0])]
+        joints = list(getattr(scene, "joint_names", []))
+        if len(joints) != self.p0.shape[0]:  # fixed joints have no DoF name
+            joints = [f"joint{i}" for i in range(self.p0.shape[0])]
+        #: ``K`` names, one per number: ``LINK.mass``, ``LINK.com.x``, ``LINK.inertia.x``, ...,
+        #: ``JOINT.offset.x``, ...
+        self.names = [
+            f"{b}.{what}"
+            for b in bodies
+            for what in ("mass", "com.x", "com.y", "com.z", "inertia.x", "inertia.y", "inertia.z")
+        ] + [f"{j}.offset.{x}" for j in joints for x in "xyz"]
 
     def of(self, source, worlds: int) -> np.ndarray:
         """``(worlds, K)`` float32 for a model with ``worlds`` copies (or a builder of one)."""
