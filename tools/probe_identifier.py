@@ -70,7 +70,7 @@ def main(argv=None) -> int:
             device=args.device,
         )
     except UserError as e:
-        p.exit(2, f"{PROG}: error: {user_message(e, rename={'variant': 'variant'})}\n")
+        p.exit(2, f"{PROG}: error: {user_message(e)}\n")
     truth = np.array([row["truth"] for row in r["rows"]])
     shown = np.flatnonzero((truth != truth[0]).any(0) if len(truth) > 1 else truth[0] != 0)
     updates = len(r["rows"][0]["mean"])
