@@ -15,8 +15,9 @@ Shapes: a trajectory's steps ``(T, W, dof)`` -> ``d_hat (W, K)``. Two architectu
 
 * ``1``: a per-step MLP, the mean over the steps, a linear head. A linear head over averaged
   features cannot form a ratio, and the mass is one (``M ~ tau / qdd``): on a fresh policy's small
-  torques its estimate stays at the draws' mean (measured: the second link's log mass ratio read
-  0.20-0.58 for true values from -1.36 to 1.78).
+  torques its estimate stays near the draws' mean (on the reacher, seed 0, a fresh policy's
+  rollout: the second link's log mass ratio read 0.20-0.58 for true values from -1.36 to 1.78;
+  ``tools/probe_identifier.py``).
 * ``2`` (default): the same per-step MLP, plus the trajectory's second moments of the response
   ``z_t = [qd_t - qd_{t-1}, tau_{t-1}]`` (scaled, not centred) as ``log`` root mean squares and
   correlations, and a two-layer head over both. For one joint ``log m = log rms(tau) - log
