@@ -263,13 +263,23 @@ def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, 
         ([str(told), "--out", str(out)], "not an empty folder"),
         ([str(told), "--out", str(tmp_path / "y"), "--iterations", "0"], "--iterations"),
         ([str(told), "--out", str(tmp_path / "y"), "--version", "3"], "--version"),
+        ([str(told), "--out", str(tmp_path / "y"), "--variants", "arm9.mass=1..2"], "arm9"),
+        ([str(told), "--out", str(tmp_path / "y"), "--variants", "arm2.mass=2..1"], "LO > HI"),
     ):
         with pytest.raises(SystemExit) as e:
             tool.main(bad)
         assert e.value.code == 2
         err = capsys.readouterr().err
         assert err.startswith("identify: error: ") and err.count("\n") == 1 and words in err, err
-    assert not (tmp_path / "x").exists()
+        assert "--variants" in err or "arm" not in words
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+    # other draws than training's: recorded in the summary
+    light = tmp_path / "light"
+    argv = [str(told), "--out", str(light), "--iterations", "2", "--goals", "2", "--inits", "2"]
+    assert tool.main([*argv, "--variants", "arm2.mass=0.25..1:keep"]) == 0
+    capsys.readouterr()
+    assert json.loads((light / "identify.json").read_text())["variants"] == "arm2.mass=0.25..1:keep"
+    assert "variants" not in json.loads((out / "identify.json").read_text())
 
     # what the identifier reads, update by update, for two models that differ in the second mass
     probe = load_tool("probe_identifier")

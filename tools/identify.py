@@ -37,6 +37,12 @@ def main(argv=None) -> int:
         help="architecture: 2, with the response's moments and a nonlinear head (default); 1, "
         "the per-step features' mean and a linear head (warp_critic.learning.identify)",
     )
+    p.add_argument(
+        "--variants",
+        default=None,
+        help="draw the models from these ranges (meta-train --train-variants text) instead of "
+        "the run's own train_variants, e.g. to give light masses a larger share",
+    )
     p.add_argument("--seed", type=int, default=0, help="draws, goals and policies (default 0)")
     p.add_argument("--device", default="cpu")
     args = p.parse_args(argv)
@@ -69,12 +75,13 @@ def main(argv=None) -> int:
             lr=args.lr,
             hidden=args.hidden,
             version=args.version,
+            variants=args.variants,
             seed=args.seed,
             device=args.device,
             progress=progress,
         )
     except UserError as e:
-        p.exit(2, f"{PROG}: error: {user_message(e)}\n")
+        p.exit(2, f"{PROG}: error: {user_message(e, rename={'train_variants': '--variants'})}\n")
     print(
         f"final loss {r['loss']:.5f}; on a fresh draw the estimate misses the {r['varied']} "
         f"varied entries by {r['held_out']:.4f} on average (descriptor units)"

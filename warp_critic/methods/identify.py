@@ -22,7 +22,7 @@ from pathlib import Path
 
 import torch
 
-from warp_critic.core.errors import UserError
+from warp_critic.core.errors import FieldError, UserError
 
 #: separates the identifier's model draws from training's (``variant_draws.draw``'s seed)
 DRAW_SEED_OFFSET = 7_919
@@ -43,6 +43,7 @@ def train_identifier(
     lr: float = 1e-3,
     hidden: int = 128,
     version: int = 2,
+    variants: str | None = None,
     seed: int = 0,
     device: str = "cpu",
     progress: Callable[[int, float], None] | None = None,
@@ -51,7 +52,9 @@ def train_identifier(
     ``{"loss": the last training loss, "held_out": the mean |d_hat - d| over the descriptor entries
     the draws vary, on a draw never trained on, "varied": how many entries they vary, "seconds":
     the wall time, "iterations": iterations, "version": version}``, also written to
-    ``out/identify.json`` (last)."""
+    ``out/identify.json`` (last). ``variants``: draw the models from these ranges
+    (``--train-variants`` text) instead of the run's own ``train_variants``, the held-out draw
+    too (and then ``"variants"`` is in the summary)."""
     from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
     from warp_critic.learning.identify import Identifier, trajectory_inputs
     from warp_critic.learning.rollout import settled_worlds
@@ -76,6 +79,15 @@ def train_identifier(
     ranges = parse_ranges(m.ckpt["config"].get("train_variants"))
     if not ranges:
         raise UserError(f"{run_dir}: trained on one model (no train_variants): nothing to identify")
+    if variants is not None:  # other draws than training's (same text form)
+        ranges = parse_ranges(variants)
+        if not ranges:
+            raise FieldError("train_variants", f"{variants!r}: no range to draw")
+        for v in draw(ranges, 1, DRAW_SEED_OFFSET + seed, 0):  # its links, before any work
+            try:
+                m.scene.world_builder(with_draws(task_variant(m.cfg), ranges, v))
+            except FieldError as e:
+                raise FieldError("train_variants", f"{variants!r}: {e.problem}") from None
     base, W, dev = task_variant(m.cfg), m.sim.worlds, m.sim.torch_device
     ident = Identifier(m.scene.dof, m.sim.dynamics_size, hidden, version).to(dev)
     opt = torch.optim.Adam(ident.parameters(), lr=lr)
@@ -142,6 +154,7 @@ def train_identifier(
         "seconds": time.perf_counter() - t0,
         "iterations": iterations,
         "version": version,
+        **({"variants": variants} if variants is not None else {}),
     }
     atomic_write_text(dst / SUMMARY_FILE, json.dumps(summary) + "\n")
     return summary
