@@ -59,7 +59,13 @@ def train_identifier(
     from warp_critic.learning.identify import Identifier, trajectory_inputs
     from warp_critic.learning.rollout import settled_worlds
     from warp_critic.physics.redraw import set_variants
-    from warp_critic.physics.variant_draws import draw, parse_ranges, with_draws
+    from warp_critic.physics.variant_draws import (
+        FIELD,
+        check_on_scene,
+        draw,
+        parse_ranges,
+        with_draws,
+    )
     from warp_critic.running.rundir import atomic_torch_save, atomic_write_text
     from warp_critic.running.task import task_variant
 
@@ -76,18 +82,17 @@ def train_identifier(
             f"{run_dir}: its critic is not told the model (critic input "
             f"{m.ckpt.get('critic_input')!r}); identify a pose-dynamics or relative-dynamics run"
         )
-    ranges = parse_ranges(m.ckpt["config"].get("train_variants"))
-    if not ranges:
-        raise UserError(f"{run_dir}: trained on one model (no train_variants): nothing to identify")
-    if variants is not None:  # other draws than training's (same text form)
+    if variants is None:
+        ranges = parse_ranges(m.ckpt["config"].get("train_variants"))
+        if not ranges:
+            raise UserError(
+                f"{run_dir}: trained on one model (no train_variants): nothing to identify"
+            )
+    else:  # other draws than training's (the same text form, checked on the scene before any work)
         ranges = parse_ranges(variants)
         if not ranges:
-            raise FieldError("train_variants", f"{variants!r}: no range to draw")
-        for v in draw(ranges, 1, DRAW_SEED_OFFSET + seed, 0):  # its links, before any work
-            try:
-                m.scene.world_builder(with_draws(task_variant(m.cfg), ranges, v))
-            except FieldError as e:
-                raise FieldError("train_variants", f"{variants!r}: {e.problem}") from None
+            raise FieldError(FIELD, f"{variants!r}: no range to draw")
+        check_on_scene(m.scene, task_variant(m.cfg), ranges)
     base, W, dev = task_variant(m.cfg), m.sim.worlds, m.sim.torch_device
     ident = Identifier(m.scene.dof, m.sim.dynamics_size, hidden, version).to(dev)
     opt = torch.optim.Adam(ident.parameters(), lr=lr)
@@ -209,7 +214,7 @@ def probe_identifier(
             raise UserError(
                 f"{run_dir}: its critic has no model identifier (see tools/identify.py)"
             )
-        names = m.sim._descriptor().names
+        names = m.sim.dynamics_names
         _, trajs = m.update(m.params, check=False, guard=True)
         with torch.no_grad():
             ok = torch.stack([settled_worlds(t) for t in trajs]).all(0)

@@ -67,7 +67,7 @@ class DynamicsDescriptor:
         bodies = list(scene.body_names)
         if len(bodies) != self.m0.shape[0]:
             bodies = [f"body{i}" for i in range(self.m0.shape[0])]
-        joints = list(getattr(scene, "joint_names", []))
+        joints = list(scene.joint_names)
         if len(joints) != self.p0.shape[0]:  # fixed joints have no DoF name
             joints = [f"joint{i}" for i in range(self.p0.shape[0])]
         #: ``K`` names, one per number: ``LINK.mass``, ``LINK.com.x``, ``LINK.inertia.x``, ...,

@@ -118,6 +118,11 @@ class Simulator:
         """``K``: the numbers per world of :meth:`dynamics`."""
         return self._descriptor().size
 
+    @property
+    def dynamics_names(self) -> list[str]:
+        """The ``K`` names of :meth:`dynamics`' numbers (``LINK.mass``, ``JOINT.offset.x``, ...)."""
+        return self._descriptor().names
+
     def dynamics(self) -> torch.Tensor:
         """``(W, K)``: each world's dynamics relative to the scene's nominal model
         (:class:`~warp_critic.physics.descriptor.DynamicsDescriptor`), read from the model arrays

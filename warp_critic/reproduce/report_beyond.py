@@ -73,7 +73,8 @@ def _training_rows(d: Draft) -> tuple[list[str], dict]:
                 held_out = float(np.mean([v["held_out"] for v in ident]))
                 lines.append(
                     f"| {scene} | {label}-identified | a model identifier for each seed's critic "
-                    f"(`identify`, version {ident[0].get('version', 1)}), the seeds one after another; on a fresh draw its estimate "
+                    f"(`identify`, version {ident[0].get('version', 1)}), the seeds one after "
+                    f"another; on a fresh draw its estimate "
                     f"misses by {held_out:.3f} (mean over the varied descriptor entries and the "
                     f"seeds) | {ident[0]['iterations']} | {total:.0f} | — |"
                 )
