@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import pytest
 import torch
 
@@ -57,6 +59,32 @@ def test_pose_critic_sees_the_goal_only_relative_to_the_state_and_the_state_itse
     assert torch.equal(pose.features(q, qd, tau, goal + shift)[:, 9:], f[:, 9:])
     assert not torch.allclose(
         pose(q + shift, qd, tau, goal + shift), pose(q, qd, tau, goal), atol=1e-3
+    )
+
+
+def test_pose_trig_critic_sees_the_pose_through_its_sine_and_cosine():
+    """``pose-trig``: ``[q - g, qd, a, sin q, cos q]``: the relative layout's features plus the
+    joint angles' sine and cosine, so a full turn of the state alone changes nothing, while the
+    ``pose`` critic, which sees ``q`` itself, tells the two apart."""
+    torch.manual_seed(0)
+    q, qd, tau, goal = _batch()
+    norm = _norm()
+    rel, trig, pose = (
+        Critic(3, norm, hidden=32, inputs=i) for i in ("relative", "pose-trig", "pose")
+    )
+    f = trig.features(q, qd, tau, goal)
+    assert f.shape == (16, 15)
+    assert torch.equal(f[:, :9], rel.features(q, qd, tau, goal))
+    assert torch.equal(f[:, 9:12], torch.sin(q)) and torch.equal(f[:, 12:], torch.cos(q))
+    turn = torch.tensor([2 * math.pi, 0.0, 0.0])
+    # q and g turned together: q - g unchanged, sin/cos of q unchanged (to rounding)
+    assert torch.allclose(trig(q + turn, qd, tau, goal + turn), trig(q, qd, tau, goal), atol=1e-5)
+    assert not torch.allclose(
+        pose(q + turn, qd, tau, goal + turn), pose(q, qd, tau, goal), atol=1e-3
+    )
+    shift = torch.tensor([0.3, -0.7, 0.2])
+    assert not torch.allclose(
+        trig(q + shift, qd, tau, goal + shift), trig(q, qd, tau, goal), atol=1e-3
     )
 
 

@@ -6,7 +6,7 @@ batched matmul evaluates all policies, and an inner update is ``theta - alpha * 
 tensors (no module, no in-place mutation).
 
 Critic ``L_critic(s, a, g)``: MLP with two hidden layers of 400 units and ELU, one scalar output.
-Seven input layouts (``CRITIC_INPUTS``, normalised as below):
+Eight input layouts (``CRITIC_INPUTS``, normalised as below):
 
 * ``full``: ``[q, qd, a, g, q - g]`` -- everything; the goal-relative position ``q - g`` is a fixed
   feature of ``(s, g)`` that adds no information but makes goal generalisation easier to learn;
@@ -27,6 +27,11 @@ Seven input layouts (``CRITIC_INPUTS``, normalised as below):
   arm's inertia ``M(q)`` changes with every joint but the first (the reacher's elbow), which a
   ``relative`` critic cannot see, so it applies near far goals the field it learned near the
   training goals (RESULTS.md, "Why the far goals miss").
+* ``pose-trig``: ``[q - g, qd, a, sin q, cos q]`` -- ``pose`` with the joint angles encoded by their
+  sine and cosine. A rigid arm's inertia and gravity terms are sums of products of ``sin q_i`` and
+  ``cos q_i``, so the critic sees the pose in the coordinates its dynamics are simple in (the
+  reacher's ``M(q)`` is affine in ``cos q2``). ``q - g`` stays an angle difference: the joint
+  limits let it exceed ``pi``, where its sine and cosine would alias.
 
 * ``inertial``: ``[q - g, qd, M(q_h) M(q)^-1 a]`` -- ``relative`` with the torque seen as the torque
   that gives the same joint acceleration at the home pose ``q_h`` (``M``: the nominal model's
@@ -243,6 +248,7 @@ class Critic(nn.Module):
             "inertial": 3,
             "relative-dynamics": 3,
             "pose": 4,
+            "pose-trig": 5,
             "pose-dynamics": 4,
         }
         n_in = widths.get(inputs, 5) * dof
@@ -328,6 +334,8 @@ class Critic(nn.Module):
             ]
             if self.inputs in ("pose", "pose-dynamics"):
                 parts.append(self._angles(q, wrap))
+            elif self.inputs == "pose-trig":
+                parts += [torch.sin(q), torch.cos(q)]
             if self.dynamics_size:
                 if dynamics is None or dynamics.shape[-1] != self.dynamics_size:
                     raise ValueError(

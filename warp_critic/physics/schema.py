@@ -62,6 +62,7 @@ CRITIC_INPUTS = (
     "relative",
     "history",
     "pose",
+    "pose-trig",
     "inertial",
     "pose-dynamics",
     "relative-dynamics",
