@@ -14,6 +14,7 @@ import pytest
 import torch
 
 from warp_critic.cli.main import main as cli_main
+from warp_critic.reproduce.report_beyond import elbow_bent
 
 
 def reproduce_main(argv):
@@ -478,6 +479,14 @@ def test_only_one_beyond_evaluation_plans_it_and_what_it_reads():
     assert second == ["beyond-maps", "beyond-tables"] and len(first) == len(set(first))
 
 
+def test_elbow_bent_marks_the_goals_past_a_right_angle_row_major():
+    res = {"axis_q1": [-1.0, 0.0, 1.0], "axis_q2": [-2.0, -1.5, 0.0, 1.6]}
+    bent = elbow_bent(res)
+    assert bent.shape == (12,)
+    # q1 major: every row of 4 goals repeats the q2 pattern
+    assert bent.tolist() == [True, False, False, True] * 3
+
+
 def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     """--only beyond on a copy of the quick output: the paper's stages are found complete (their
     hashes do not depend on the recipes), the recipes train and are evaluated next to the nominal
@@ -526,6 +535,14 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     # 11 recipes and one identified, 2 KUKA recipes x (goals + 2 maps; Table 1 + 2 tables)
     assert len(targets) == 12 * 3 + 2 * 3
     assert "pose-dynamics-full-identified" in results["beyond"]["maps"]  # its own row
+    # the goal grid split by the arrival's elbow: the two parts add up to the whole grid's share
+    (bmaps_stage,) = [json.loads(p.read_text()) for p in other.glob("beyond-maps-*/stage.json")]
+    bent = elbow_bent(bmaps_stage["result"])
+    for m, sh in results["beyond"]["maps"].items():
+        if m == "open-loop floor":
+            continue
+        whole = (~bent).sum() * sh["goals_elbow_within_90"] + bent.sum() * sh["goals_elbow_past_90"]
+        assert whole / bent.size == pytest.approx(sh["goals"], abs=1e-9)
     # each reacher target names the share the open-loop floor reaches, from the stage's own floor
     assert all("open-loop floor" in t["measured"] for t in targets if "reacher" in t["target"])
     assert "| open-loop floor |" in beyond

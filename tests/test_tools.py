@@ -115,9 +115,12 @@ def test_maps_tool_prints_the_three_shares_per_run_set(tmp_path, capsys):
     lines = text.split("\n\n")[0].splitlines()
     rows = {ln.split()[0]: ln for ln in lines[2:]}
     assert lines[0].startswith("2 x 2 goal grid") and set(rows) == {"one", "both"}, lines
-    for row in rows.values():  # three "share, mean" cells
-        shares = [float(x.rstrip("%,")) for x in row.split()[2::2]]
+    for row in rows.values():  # three "share, mean" cells, then the goal grid split by the elbow
+        cells, split = row.split()[2:8], row.split()[8:]
+        shares = [float(x.rstrip("%,")) for x in cells[::2]]
         assert len(shares) == 3 and all(0 <= x <= 100 for x in shares), row
+        # a 2 x 2 grid's goals lie at the limits: every elbow bent past 90 degrees
+        assert split[:2] == ["-", "/"] and split[2] == f"{shares[0]:.0f}%", row
     for argv in (
         [f"{a}"],
         [f"x={a}", f"x={b}"],

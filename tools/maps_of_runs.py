@@ -49,6 +49,7 @@ def main(argv=None) -> int:
 
     runtime.init()  # before the imports below, which would start Warp with its banner
     from warp_critic.reproduce.generalize import run_maps_stage
+    from warp_critic.reproduce.report_beyond import elbow_bent
     from warp_critic.reproduce.settings import default_settings
 
     s = dict(default_settings(quick=False, seeds=1)["maps"], reach_iterations=0)
@@ -62,13 +63,26 @@ def main(argv=None) -> int:
         f"{s['grid']} x {s['grid']} goal grid, 7 x 7 mass and length maps, {s['inits']} inits: "
         f"share below {LEVEL} MSE, mean MSE"
     )
-    print(f"{'runs':<28} {'goal grid':>16} {'mass map':>16} {'length map':>16}")
+    bent = elbow_bent(out)
+    print(
+        f"{'runs':<28} {'goal grid':>16} {'mass map':>16} {'length map':>16}   goal grid, "
+        f"elbow within / past 90 deg ({int((~bent).sum())} / {int(bent.sum())} goals)"
+    )
     for name in sets:
         m = "ours" if name == first else name
         cols = [np.asarray(out["goals"][m]["mse"]).ravel()]
         cols += [np.array([c["mse_mean"] for c in out[kind][m]]) for kind in ("mass", "length")]
         text = [f"{(x < LEVEL).mean():>6.0%}, {x.mean():7.3f}" for x in cols]
-        print(f"{name + f' ({len(sets[name])})':<28} " + " ".join(f"{t:>16}" for t in text))
+        split = " / ".join(
+            f"{(part < LEVEL).mean():.0%}" if part.size else "-"
+            for part in (cols[0][~bent], cols[0][bent])
+        )
+        print(
+            f"{name + f' ({len(sets[name])})':<28} "
+            + " ".join(f"{t:>16}" for t in text)
+            + "   "
+            + split
+        )
     if args.cells:
         for name in sets:
             m = "ours" if name == first else name

@@ -98,17 +98,32 @@ def _share(below: np.ndarray) -> str:
     return f"{below.mean():.1%}"
 
 
+def elbow_bent(res: dict) -> np.ndarray:
+    """``(n * n,)`` bool over the maps' goal grid (row-major, ``q1`` major): the goals whose second
+    joint is bent past a right angle, ``|q2| > pi/2``. There the arm arrives with ``cos q2 < 0``,
+    so the inertia's coupling ``M12 = I2 + m2 lc2 (lc2 + l1 cos q2)`` is below ``M22 = I2 + m2
+    lc2^2``, as at no arrival of the training goals (``|q2| <= 1`` rad) under any masses or
+    lengths (RESULTS.md, "The goal grid's far half")."""
+    q2 = np.asarray(res["axis_q2"], dtype=float)
+    return np.tile(np.abs(q2) > np.pi / 2, len(res["axis_q1"]))
+
+
 def _maps(res: dict, targets: list, out: dict) -> list[str]:
     methods = list(res["goals"])
+    bent = elbow_bent(res)
     lines = [
-        "| critic | goal grid below 0.05 | mass map below 0.05 | length map below 0.05 |",
-        "|---|---|---|---|",
+        "| critic | goal grid below 0.05 | of it: elbow within 90 deg "
+        f"({int((~bent).sum())} goals) | of it: elbow bent past 90 deg ({int(bent.sum())} goals) "
+        "| mass map below 0.05 | length map below 0.05 |",
+        "|---|---|---|---|---|---|",
     ]
     floor = floor_shares(res, LEVEL)
     if floor:  # what any controller within the policy's bounds and horizon reaches
         out["open-loop floor"] = floor
+        reach = np.ravel(res["reach_floor"]["goals"]) < LEVEL
         lines.append(
-            f"| open-loop floor | {floor['goals']:.0%} | {floor['mass']:.0%} | {floor['length']:.0%} |"
+            f"| open-loop floor | {floor['goals']:.0%} | {reach[~bent].mean():.0%} | "
+            f"{reach[bent].mean():.0%} | {floor['mass']:.0%} | {floor['length']:.0%} |"
         )
 
     def versus(k: str) -> str:  # what a recipe's share compares with
@@ -116,12 +131,17 @@ def _maps(res: dict, targets: list, out: dict) -> list[str]:
         return f"(nominal {out['ours'][k]:.1%}{reach})"
 
     for m in methods:
-        below = {"goals": np.asarray(res["goals"][m]["mse"]) < LEVEL} | {
+        below = {"goals": np.ravel(res["goals"][m]["mse"]) < LEVEL} | {
             k: np.asarray([c["mse_mean"] < LEVEL for c in res[k][m]]) for k in ("mass", "length")
         }
         shares = {k: float(v.mean()) for k, v in below.items()}
+        goals = below["goals"]
+        shares |= {"goals_elbow_within_90": float(goals[~bent].mean())}
+        shares |= {"goals_elbow_past_90": float(goals[bent].mean())}
         out[m] = shares
-        lines.append(f"| {m} | " + " | ".join(_share(below[k]) for k in below) + " |")
+        split = [_share(goals[~bent]), _share(goals[bent])]
+        cols = [_share(goals), *split, _share(below["mass"]), _share(below["length"])]
+        lines.append(f"| {m} | " + " | ".join(cols) + " |")
         if m == "ours":
             continue
         for k, target in (("goals", GOALS_TARGET), ("mass", MAPS_TARGET), ("length", MAPS_TARGET)):
@@ -212,6 +232,13 @@ def beyond_section(d: Draft) -> None:
     if maps is not None:
         d.md += ["### Reacher: goal grid and 2-D maps (fraction below 0.05 MSE)", ""]
         d.md += _maps(maps.data["result"], targets, result["maps"]) + [""]
+        d.md += [
+            "The goal grid is split by the elbow's angle at the goal. Past 90 degrees the arm "
+            "arrives with `cos q2 < 0`, where the inertia's coupling `M12 = I2 + m2 lc2 (lc2 + l1 "
+            "cos q2)` falls below `M22`: no arrival at the four training goals (`|q2| <= 1` rad) "
+            "shows such an inertia, under any masses or lengths.",
+            "",
+        ]
     tables = d.recs.get(f"{BEYOND}-tables")
     if tables is not None:
         d.md += ["### KUKA: Table 1 and the stress tables (MSE)", ""]
