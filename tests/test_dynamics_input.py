@@ -302,3 +302,69 @@ def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, 
         err = capsys.readouterr().err
         assert err.startswith("probe_identifier: error: ") and err.count("\n") == 1, err
         assert words in err, err
+
+
+def test_identified_critic_feeds_each_seed_its_own_identifier():
+    """Batched seeds (worlds seed-major): each block of worlds is estimated by its own identifier,
+    exactly as that identifier alone on those worlds."""
+    from warp_critic.learning.identify import IdentifiedCritic, Identifier, identifier_inputs
+    from warp_critic.learning.networks import Critic, Normalizer, history_features
+
+    T, S, Wc, dof, K = 4, 2, 3, 2, 4
+    gen = torch.Generator().manual_seed(2)
+    norm = Normalizer(torch.zeros(dof), torch.ones(dof), 5.0, torch.ones(dof), dynamics_size=K)
+    torch.manual_seed(1)
+    idents = [Identifier(dof, K, hidden=8) for _ in range(S)]
+    critic = IdentifiedCritic(Critic(dof, norm, hidden=16, inputs="pose-dynamics"), idents)
+    q, qd = (
+        torch.randn(T, S * Wc, dof, generator=gen),
+        torch.randn(T + 1, S * Wc, dof, generator=gen),
+    )
+    tau = torch.randn(T, S * Wc, dof, generator=gen)
+    history = history_features(qd, tau)
+    d_hat = critic.estimate(q, qd[:T], history)
+    for s, ident in enumerate(idents):
+        sl = slice(s * Wc, (s + 1) * Wc)
+        own = ident(identifier_inputs(q[:, sl], qd[:T, sl], history[:, sl]))
+        assert torch.allclose(d_hat[sl], own)
+    assert not torch.allclose(d_hat[:Wc], idents[1](identifier_inputs(q, qd[:T], history))[:Wc])
+    with pytest.raises(ValueError, match="do not split"):
+        critic.estimate(q[:, :5], qd[:T, :5], history[:, :5])
+
+
+def test_resuming_an_identified_run_trains_its_critic_on_the_estimates(tmp_path):
+    """``meta-train --resume`` on tools/identify.py's output: the critic keeps training, fed its
+    identifier's estimates as at meta-test (the iterations say so, and they differ from resuming
+    the told run from the same state), and the identifier stays in the checkpoint, unchanged."""
+    import shutil
+
+    from test_tools import load_tool
+    from test_train_variants import _train
+
+    from warp_critic.cli.main import main
+
+    told = tmp_path / "told"
+    assert main(_train(told, "--critic-input", "pose-dynamics", iterations=2)) == 0
+    out = tmp_path / "identified"
+    argv = [str(told), "--out", str(out), "--iterations", "2", "--goals", "2", "--inits", "2"]
+    assert load_tool("identify").main(argv) == 0
+    before = torch.load(out / "checkpoint.pt", weights_only=False)
+    again = tmp_path / "told-again"
+    shutil.copytree(told, again)
+    for run in (out, again):
+        (run / ".lock").unlink(missing_ok=True)
+        resume = ["meta-train", REACHER, "--resume", "--out", str(run), "--iterations", "4"]
+        assert main([*resume, "--device", "cpu"]) == 0
+    after = torch.load(out / "checkpoint.pt", weights_only=False)
+    assert after["iteration"] == 3
+    assert after["identifier"] == before["identifier"]
+    for k, v in before["identifier_state"].items():
+        assert torch.equal(after["identifier_state"][k], v)
+    assert any(
+        not torch.equal(after["critic_state"][k], v) for k, v in before["critic_state"].items()
+    )
+    rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]
+    assert [r.get("critic_fed") for r in rows] == [None, None, "identified", "identified"]
+    told_rows = [json.loads(x) for x in (again / "metrics.jsonl").read_text().splitlines()]
+    assert rows[:2] == told_rows[:2] and "critic_fed" not in told_rows[-1]
+    assert rows[2]["task_loss"] != told_rows[2]["task_loss"]

@@ -105,17 +105,10 @@ def load_our_critic(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, dict
         inputs=ckpt.get("critic_input", "full"),
     )
     critic.load_state_dict(ckpt["critic_state"])
-    if "identifier_state" in ckpt:  # a told critic fed the model identified from its rollouts
-        from warp_critic.learning.identify import IdentifiedCritic, Identifier
+    from warp_critic.learning.identify import IdentifiedCritic, identifier_from_checkpoint
 
-        meta = ckpt["identifier"]
-        identifier = Identifier(
-            ckpt["dof"],
-            int(meta["size"]),
-            hidden=int(meta["hidden"]),
-            version=int(meta.get("version", 1)),  # version 1 wrote no version
-        )
-        identifier.load_state_dict(ckpt["identifier_state"])
+    identifier = identifier_from_checkpoint(ckpt)
+    if identifier is not None:  # a told critic fed the model identified from its rollouts
         critic = IdentifiedCritic(critic, identifier)
     # a critic trained on policies of every age up to the policy lifetime keeps improving them that long
     steps = int(cfg.get("inner_steps", 1)) * int(cfg.get("policy_lifetime", 1))

@@ -113,24 +113,64 @@ class Identifier(nn.Module):
 
 class IdentifiedCritic(nn.Module):
     """A told critic fed the :class:`Identifier`'s estimate: ``L(q, qd, tau, g, history)`` on one
-    trajectory's steps ``(T, W, dof)``, ``history`` as for the ``history`` critic. Reads no model."""
+    trajectory's steps ``(T, W, dof)``, ``history`` as for the ``history`` critic. Reads no model.
+
+    ``identifier``: one :class:`Identifier`, or one per block of worlds for the seeds of a batched
+    run (:class:`~warp_critic.learning.networks.StackedCritic`: worlds seed-major, ``W / S`` each).
+    The estimate is data (detached): training through this critic changes the critic only."""
 
     uses_history = True  # the trajectory's observed responses: the identifier's input
     uses_dynamics = False  # never the true model
 
-    def __init__(self, critic: nn.Module, identifier: Identifier):
+    def __init__(self, critic: nn.Module, identifier: Identifier | list[Identifier]):
         super().__init__()
         if not getattr(critic, "uses_dynamics", False):
             raise ValueError("an identified critic wraps a critic that reads the dynamics")
-        self.critic, self.identifier = critic, identifier
+        self.critic = critic
+        self.identifiers = nn.ModuleList(
+            identifier if isinstance(identifier, list) else [identifier]
+        )
+
+    @property
+    def identifier(self) -> Identifier:
+        """The first (with one seed: the only) identifier."""
+        return self.identifiers[0]  # type: ignore[return-value]
+
+    def estimate(self, q, qd, history) -> torch.Tensor:
+        """``d_hat (W, K)`` from one trajectory's steps, each block of worlds by its identifier."""
+        x = identifier_inputs(q, qd, history)
+        if x.shape[1] % len(self.identifiers):
+            raise ValueError(f"{x.shape[1]} worlds do not split into {len(self.identifiers)} seeds")
+        blocks = x.chunk(len(self.identifiers), dim=1)
+        return torch.cat([f(b) for f, b in zip(self.identifiers, blocks)], dim=0).detach()
 
     def forward(self, q, qd, tau, g, history=None):
         if history is None or q.dim() != 3:
             raise ValueError(
                 "an identified critic needs one trajectory's steps (T, W, dof) and history"
             )
-        d_hat = self.identifier(identifier_inputs(q, qd, history)).detach()
-        return self.critic(q, qd, tau, g, dynamics=d_hat)
+        return self.critic(q, qd, tau, g, dynamics=self.estimate(q, qd, history))
 
 
-__all__ = ["Identifier", "IdentifiedCritic", "identifier_inputs", "trajectory_inputs"]
+def identifier_from_checkpoint(ckpt: dict) -> Identifier | None:
+    """The identifier a run's checkpoint carries (``tools/identify.py`` wrote it), or ``None``."""
+    if "identifier_state" not in ckpt:
+        return None
+    meta = ckpt["identifier"]
+    identifier = Identifier(
+        int(ckpt["dof"]),
+        int(meta["size"]),
+        hidden=int(meta["hidden"]),
+        version=int(meta.get("version", 1)),  # version 1 wrote no version
+    )
+    identifier.load_state_dict(ckpt["identifier_state"])
+    return identifier
+
+
+__all__ = [
+    "Identifier",
+    "IdentifiedCritic",
+    "identifier_from_checkpoint",
+    "identifier_inputs",
+    "trajectory_inputs",
+]

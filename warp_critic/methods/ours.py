@@ -14,7 +14,7 @@ from pathlib import Path
 
 import torch
 
-from warp_critic.core.errors import DivergenceError, FieldError
+from warp_critic.core.errors import DivergenceError, FieldError, UserError
 from warp_critic.learning.networks import (
     POLICY_INIT_SCHEMES,
     Critic,
@@ -179,6 +179,7 @@ def meta_train(
             session.seeded(i)
         critic = StackedCritic(critics)
         opt = torch.optim.Adam(critic.ordered(), lr=filled(cfg.lr, "lr"))
+        identified: list[dict] = []  # an identified run's identifier, kept in its checkpoints
         for i in range(S):
             ckpt = session.restore(i)
             if ckpt is not None:
@@ -189,6 +190,11 @@ def meta_train(
                         k: ckpt["policy_params"][k].to(dev).reshape(v.shape)
                         for k, v in seed_params[i].items()
                     }
+                    if "identifier_state" in ckpt:
+                        identified.append({k: ckpt[k] for k in ("identifier", "identifier_state")})
+        # the critic the inner loop descends: an identified run (tools/identify.py) trains on
+        # its identifier's estimates, never the told model
+        inner_critic = _fed_estimates(critic, identified, session) if identified else critic
         params = _cat(seed_params)
         q0, qd0 = task.home, torch.zeros_like(task.home)
         seeds = [r.cfg.seed for r in session.runs]  # of the task's copies, in order
@@ -211,7 +217,7 @@ def meta_train(
             if cfg.start_std:
                 q0 = torch.cat([task.start_states(g, i) for i, g in enumerate(gens)])
             res = meta_loss(
-                critic,
+                inner_critic,
                 policy,
                 detach_params(params),
                 task.sim,
@@ -257,7 +263,7 @@ def meta_train(
             ):  # lifetime > 1 implies fresh
                 params = res.params_new
             before = ((res.before.q[-1] - task.goal) ** 2).sum(-1)
-            rows = []
+            rows: list[dict] = []
             for i in range(S):
                 sl = task.copy(i)
                 after_i, before_i = res.per_world[sl], before[sl]
@@ -277,6 +283,8 @@ def meta_train(
                 )
                 if drop:
                     rows[-1]["diverged_worlds"] = int((~settled[i]).sum())
+                if identified:  # the critic learned on its identifier's estimates, not the model
+                    rows[-1]["critic_fed"] = "identified"
                 if drawn is not None:
                     # null: a range of another '|' group than the world's at this iteration
                     rows[-1]["train_variant_values"] = [
@@ -292,6 +300,7 @@ def meta_train(
                 "critic_input": critic_input,
                 "optimizer_state": optimizer_slice(opt, critic, i),
                 "policy_params": {k: v[sl].cpu() for k, v in params.items()},
+                **(identified[i] if identified else {}),
             }
 
         result = session.run(
@@ -305,6 +314,28 @@ def meta_train(
     for i, r in enumerate(result.seeds):
         r.model = critic.critic(i)
     return result
+
+
+def _fed_estimates(
+    critic: StackedCritic, identified: list[dict], session: Session
+) -> torch.nn.Module:
+    """Resuming an identified run: each seed's told critic fed its identifier's estimate from every
+    rollout it evaluates (:class:`~warp_critic.learning.identify.IdentifiedCritic`), as at
+    meta-test. The identifiers stay as they are; the critics learn on what they will be fed."""
+    from warp_critic.learning.identify import IdentifiedCritic, identifier_from_checkpoint
+
+    if len(identified) != len(session.runs):
+        raise UserError(
+            "identified and told runs cannot resume together: resume the identified ones "
+            "(tools/identify.py's outputs) apart"
+        )
+    dof, dev = session.task.scene.dof, session.task.device
+    idents = []
+    for x in identified:
+        ident = identifier_from_checkpoint({"dof": dof, **x})
+        assert ident is not None  # identified holds identifier states only
+        idents.append(ident.to(dev).requires_grad_(False))
+    return IdentifiedCritic(critic, idents)
 
 
 class VariantRedraw:
