@@ -190,6 +190,15 @@ def test_only_toy_and_changed_setting(tmp_path, capsys):
         (["--set", "beyond.reacher.pose-dynamics-full.identify.steps=3"], "unknown (known:"),
         (["--set", "beyond.reacher.pose-dynamics-full.identify.inits=0"], "must be >= 1"),
         (["--set", "beyond.reacher.pose-dynamics-full.identify.version=3"], "must be 1 or 2"),
+        (
+            ["--set", "beyond.reacher.pose-dynamics-full.identify.variants=arm9.mass=1..2"],
+            "identify.variants=",
+        ),
+        (
+            ["--set", "beyond.reacher.pose-dynamics-full.identify.variants=arm1.mass=5..1"],
+            "is empty (LO > HI)",
+        ),
+        (["--set", "beyond.reacher.pose-dynamics-full.identify.variants= | "], "an empty group"),
         (["--set", 'beyond.reacher.pose-long.identify={"iterations": 5}'], "critic told them"),
     ],
 )

@@ -30,7 +30,7 @@ IDENTIFY_FILE = "identify.jsonl"
 #: the summary :func:`train_identifier` returns, written last: an identified run is complete with it
 SUMMARY_FILE = "identify.json"
 #: :func:`train_identifier`'s settings, as ``reproduce`` recipes name them (``identify``)
-SETTINGS = ("iterations", "goals", "inits", "lr", "hidden", "version")
+SETTINGS = ("iterations", "goals", "inits", "lr", "hidden", "version", "variants")
 
 
 def train_identifier(
@@ -54,7 +54,7 @@ def train_identifier(
     the wall time, "iterations": iterations, "version": version}``, also written to
     ``out/identify.json`` (last). ``variants``: draw the models from these ranges
     (``--train-variants`` text) instead of the run's own ``train_variants``, the held-out draw
-    too (and then ``"variants"`` is in the summary)."""
+    too (and then ``"variants"`` is in the summary); ``None`` or ``""``: the run's own."""
     from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
     from warp_critic.learning.identify import Identifier, trajectory_inputs
     from warp_critic.learning.rollout import settled_worlds
@@ -82,6 +82,7 @@ def train_identifier(
             f"{run_dir}: its critic is not told the model (critic input "
             f"{m.ckpt.get('critic_input')!r}); identify a pose-dynamics or relative-dynamics run"
         )
+    variants = variants or None
     if variants is None:
         ranges = parse_ranges(m.ckpt["config"].get("train_variants"))
         if not ranges:

@@ -237,6 +237,10 @@ def check_beyond(b: dict, seeds: list) -> None:
             _check_train(scene, "ours", train, seeds, where)
             if "identify" in values:
                 check_identify(values["identify"], train, f"{where}.identify")
+                if values["identify"].get("variants"):
+                    _check_identify_draws(
+                        scene, train, seeds, values["identify"]["variants"], where
+                    )
 
 
 def check_identify(s, train: dict, where: str) -> None:
@@ -265,6 +269,27 @@ def check_identify(s, train: dict, where: str) -> None:
             f"identifies the drawn models for a critic told them: the recipe needs train_variants "
             f"and critic_input {' or '.join(TOLD_INPUTS)}",
         )
+
+
+def _check_identify_draws(scene: str, train: dict, seeds: list, variants, where: str) -> None:
+    """``identify.variants``: draw ranges (the ``train_variants`` form) that apply to the recipe's
+    robot, checked as meta-train checks its own (:func:`~warp_critic.physics.variant_draws.check_on_scene`)."""
+    from warp_critic.physics.variant_draws import check_on_scene, parse_ranges
+    from warp_critic.reproduce.metatrain import make_config
+    from warp_critic.running.task import load_task_scene, task_variant
+
+    key = f"{where}.identify.variants"
+    if not isinstance(variants, str):
+        raise bad(key, variants, "must be draw ranges in the train_variants form")
+    try:
+        ranges = parse_ranges(variants)
+        if not ranges:
+            raise FieldError("variants", "no range to draw")
+        cfg = make_config(scene, "ours", train, seeds, Path("unused"), "cpu", False)
+        cfg, robot = load_task_scene(replace(cfg, seeds=None))
+        check_on_scene(robot, task_variant(cfg), ranges)
+    except FieldError as e:
+        raise bad(key, variants, e.problem) from None
 
 
 __all__ = ["RESERVED", "check_all", "show"]
