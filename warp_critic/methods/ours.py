@@ -75,8 +75,9 @@ class TrainConfig(TaskConfig):
         None,
         "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant); "
         "history = relative + the last step's velocity change and torque (tells models apart, for "
-        "--train-variants); pose = relative + the joint angles q; pose-trig = relative + sin q and cos q; inertial = relative with the "
-        "torque in home-pose acceleration units, M(q_h) M(q)^-1 a, and inner steps in that metric; "
+        "--train-variants); pose = relative + the joint angles q; pose-trig = relative + sin q and "
+        "cos q; inertial = relative with the torque in home-pose acceleration units, "
+        "M(q_h) M(q)^-1 a, and inner steps in that metric; "
         "pose-dynamics = pose + each world's masses, inertias and link offsets relative to the "
         "nominal model (privileged: the critic is told the model, at meta-test too); "
         "relative-dynamics = relative + the same; "
