@@ -14,7 +14,7 @@ import pytest
 import torch
 
 from warp_critic.cli.main import main as cli_main
-from warp_critic.reproduce.report_beyond import elbow_bent
+from warp_critic.reproduce.report_maps import elbow_bent
 
 
 def reproduce_main(argv):

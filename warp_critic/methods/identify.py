@@ -22,7 +22,7 @@ from pathlib import Path
 
 import torch
 
-from warp_critic.core.errors import FieldError, UserError
+from warp_critic.core.errors import UserError
 
 #: separates the identifier's model draws from training's (``variant_draws.draw``'s seed)
 DRAW_SEED_OFFSET = 7_919
@@ -59,13 +59,7 @@ def train_identifier(
     from warp_critic.learning.identify import Identifier, trajectory_inputs
     from warp_critic.learning.rollout import settled_worlds
     from warp_critic.physics.redraw import set_variants
-    from warp_critic.physics.variant_draws import (
-        FIELD,
-        check_on_scene,
-        draw,
-        parse_ranges,
-        with_draws,
-    )
+    from warp_critic.physics.variant_draws import draw, parse_ranges, ranges_on_scene, with_draws
     from warp_critic.running.rundir import atomic_torch_save, atomic_write_text
     from warp_critic.running.task import task_variant
 
@@ -90,10 +84,7 @@ def train_identifier(
                 f"{run_dir}: trained on one model (no train_variants): nothing to identify"
             )
     else:  # other draws than training's (the same text form, checked on the scene before any work)
-        ranges = parse_ranges(variants)
-        if not ranges:
-            raise FieldError(FIELD, f"{variants!r}: no range to draw")
-        check_on_scene(m.scene, task_variant(m.cfg), ranges)
+        ranges = ranges_on_scene(m.scene, task_variant(m.cfg), variants)
     base, W, dev = task_variant(m.cfg), m.sim.worlds, m.sim.torch_device
     ident = Identifier(m.scene.dof, m.sim.dynamics_size, hidden, version).to(dev)
     opt = torch.optim.Adam(ident.parameters(), lr=lr)

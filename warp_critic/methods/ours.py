@@ -15,6 +15,7 @@ from pathlib import Path
 import torch
 
 from warp_critic.core.errors import DivergenceError, FieldError, UserError
+from warp_critic.learning.identify import IdentifiedCritic, identifier_from_checkpoint
 from warp_critic.learning.networks import (
     POLICY_INIT_SCHEMES,
     Critic,
@@ -180,7 +181,9 @@ def meta_train(
             session.seeded(i)
         critic = StackedCritic(critics)
         opt = torch.optim.Adam(critic.ordered(), lr=filled(cfg.lr, "lr"))
-        identified: list[dict] = []  # an identified run's identifier, kept in its checkpoints
+        # an identified run's identifiers (tools/identify.py), and their checkpoint entries, kept
+        identifiers: list = []
+        identified: list[dict] = []
         for i in range(S):
             ckpt = session.restore(i)
             if ckpt is not None:
@@ -191,11 +194,20 @@ def meta_train(
                         k: ckpt["policy_params"][k].to(dev).reshape(v.shape)
                         for k, v in seed_params[i].items()
                     }
-                    if "identifier_state" in ckpt:
+                    ident = identifier_from_checkpoint(ckpt)
+                    if ident is not None:
+                        identifiers.append(ident.to(dev).requires_grad_(False))
                         identified.append({k: ckpt[k] for k in ("identifier", "identifier_state")})
-        # the critic the inner loop descends: an identified run (tools/identify.py) trains on
-        # its identifier's estimates, never the told model
-        inner_critic = _fed_estimates(critic, identified, session) if identified else critic
+        # the critic the inner loop descends: an identified run trains on its identifiers'
+        # estimates from every rollout, as at meta-test, never on the told model
+        inner_critic: torch.nn.Module = critic
+        if identified:
+            if len(identified) != S:
+                raise UserError(
+                    "identified and told runs cannot resume together: resume the identified ones "
+                    "(tools/identify.py's outputs) apart"
+                )
+            inner_critic = IdentifiedCritic(critic, identifiers)
         params = _cat(seed_params)
         q0, qd0 = task.home, torch.zeros_like(task.home)
         seeds = [r.cfg.seed for r in session.runs]  # of the task's copies, in order
@@ -315,28 +327,6 @@ def meta_train(
     for i, r in enumerate(result.seeds):
         r.model = critic.critic(i)
     return result
-
-
-def _fed_estimates(
-    critic: StackedCritic, identified: list[dict], session: Session
-) -> torch.nn.Module:
-    """Resuming an identified run: each seed's told critic fed its identifier's estimate from every
-    rollout it evaluates (:class:`~warp_critic.learning.identify.IdentifiedCritic`), as at
-    meta-test. The identifiers stay as they are; the critics learn on what they will be fed."""
-    from warp_critic.learning.identify import IdentifiedCritic, identifier_from_checkpoint
-
-    if len(identified) != len(session.runs):
-        raise UserError(
-            "identified and told runs cannot resume together: resume the identified ones "
-            "(tools/identify.py's outputs) apart"
-        )
-    dof, dev = session.task.scene.dof, session.task.device
-    idents = []
-    for x in identified:
-        ident = identifier_from_checkpoint({"dof": dof, **x})
-        assert ident is not None  # identified holds identifier states only
-        idents.append(ident.to(dev).requires_grad_(False))
-    return IdentifiedCritic(critic, idents)
 
 
 class VariantRedraw:

@@ -169,8 +169,20 @@ def check_on_scene(scene, base: Variant, ranges: tuple[ChangeRange, ...]) -> Non
                 raise FieldError(FIELD, e.problem) from None
 
 
+def ranges_on_scene(scene, base: Variant, text: str) -> tuple[ChangeRange, ...]:
+    """``text`` (the ``train_variants`` form) parsed and checked on ``scene`` from ``base``
+    (:func:`check_on_scene`): a :class:`FieldError` on ``train_variants`` for text that names no
+    range or does not apply."""
+    ranges = parse_ranges(text)
+    if not ranges:
+        raise FieldError(FIELD, f"{text!r}: no range to draw")
+    check_on_scene(scene, base, ranges)
+    return ranges
+
+
 __all__ = [
     "ChangeRange",
+    "ranges_on_scene",
     "parse_ranges",
     "format_ranges",
     "groups",

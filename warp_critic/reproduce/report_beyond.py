@@ -18,7 +18,7 @@ import numpy as np
 from warp_critic.evaluation.paper import PAPER_TABLE1
 from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.report_draft import Draft, fmt
-from warp_critic.reproduce.report_maps import floor_shares
+from warp_critic.reproduce.report_maps import elbow_bent, floor_shares
 from warp_critic.reproduce.settings import BEYOND, RECIPES, SCENES
 
 GOALS_TARGET, MAPS_TARGET, LEVEL = 0.9, 0.8, 0.05
@@ -98,16 +98,6 @@ def _share(below: np.ndarray) -> str:
     return f"{below.mean():.1%}"
 
 
-def elbow_bent(res: dict) -> np.ndarray:
-    """``(n * n,)`` bool over the maps' goal grid (row-major, ``q1`` major): the goals whose second
-    joint is bent past a right angle, ``|q2| > pi/2``. There the arm arrives with ``cos q2 < 0``,
-    so the inertia's coupling ``M12 = I2 + m2 lc2 (lc2 + l1 cos q2)`` is below ``M22 = I2 + m2
-    lc2^2``, as at no arrival of the training goals (``|q2| <= 1`` rad) under any masses or
-    lengths (RESULTS.md, "The goal grid's far half")."""
-    q2 = np.asarray(res["axis_q2"], dtype=float)
-    return np.tile(np.abs(q2) > np.pi / 2, len(res["axis_q1"]))
-
-
 def _maps(res: dict, targets: list, out: dict) -> list[str]:
     methods = list(res["goals"])
     bent = elbow_bent(res)
@@ -134,10 +124,11 @@ def _maps(res: dict, targets: list, out: dict) -> list[str]:
         below = {"goals": np.ravel(res["goals"][m]["mse"]) < LEVEL} | {
             k: np.asarray([c["mse_mean"] < LEVEL for c in res[k][m]]) for k in ("mass", "length")
         }
-        shares = {k: float(v.mean()) for k, v in below.items()}
         goals = below["goals"]
-        shares |= {"goals_elbow_within_90": float(goals[~bent].mean())}
-        shares |= {"goals_elbow_past_90": float(goals[bent].mean())}
+        shares = {k: float(v.mean()) for k, v in below.items()} | {
+            "goals_elbow_within_90": float(goals[~bent].mean()),
+            "goals_elbow_past_90": float(goals[bent].mean()),
+        }
         out[m] = shares
         split = [_share(goals[~bent]), _share(goals[bent])]
         cols = [_share(goals), *split, _share(below["mass"]), _share(below["length"])]

@@ -148,6 +148,16 @@ def maps_section(d: Draft) -> None:
         }
 
 
+def elbow_bent(res: dict) -> np.ndarray:
+    """``(n * n,)`` bool over the maps' goal grid (row-major, ``q1`` major): the goals whose second
+    joint is bent past a right angle, ``|q2| > pi/2``. There the arm arrives with ``cos q2 < 0``,
+    so the inertia's coupling ``M12 = I2 + m2 lc2 (lc2 + l1 cos q2)`` is below ``M22 = I2 + m2
+    lc2^2``, as at no arrival of the training goals (``|q2| <= 1`` rad) under any masses or
+    lengths (RESULTS.md, "The goal grid's far half")."""
+    q2 = np.asarray(res["axis_q2"], dtype=float)
+    return np.tile(np.abs(q2) > np.pi / 2, len(res["axis_q1"]))
+
+
 def floor_shares(maps: dict, level: float = 0.05) -> dict[str, float] | None:
     """The share of the goal grid's goals and of each 2-D map's cells whose open-loop reachability
     floor is below ``level`` MSE (``None``: the maps stage computed no floor)."""

@@ -142,7 +142,7 @@ def check_metatrain(m: dict) -> dict[str, int]:
     goals = {}
     for scene in SCENES:
         for method in METHODS:
-            cfg = _check_train(
+            cfg, _ = _check_train(
                 scene, method, m[scene][method], seeds, f"metatrain.{scene}.{method}"
             )
             if method == "ours":
@@ -151,7 +151,8 @@ def check_metatrain(m: dict) -> dict[str, int]:
 
 
 def _check_train(scene: str, method: str, values: dict, seeds: list, where: str):
-    """One meta-training config (``values``) against its scene; returns the filled config."""
+    """One meta-training config (``values``) against its scene; returns the filled config and the
+    loaded robot."""
     from warp_critic.reproduce.metatrain import check_fields_known, make_config
     from warp_critic.running.task import load_task_scene
     from warp_critic.running.task_inputs import check_memory
@@ -169,7 +170,7 @@ def _check_train(scene: str, method: str, values: dict, seeds: list, where: str)
         raise _as_set(where, values, e) from None
     except TypeError as e:  # a value of a type the config cannot take
         raise FieldError("set", f"{where}: {e}") from None
-    return cfg
+    return cfg, robot
 
 
 def _common(stage: str, s: dict) -> None:
@@ -234,13 +235,11 @@ def check_beyond(b: dict, seeds: list) -> None:
             if not isinstance(values, dict):
                 raise bad(where, values, "must be a meta-train config")
             train = {k: v for k, v in values.items() if k != "identify"}
-            _check_train(scene, "ours", train, seeds, where)
+            cfg, robot = _check_train(scene, "ours", train, seeds, where)
             if "identify" in values:
                 check_identify(values["identify"], train, f"{where}.identify")
                 if values["identify"].get("variants"):
-                    _check_identify_draws(
-                        scene, train, seeds, values["identify"]["variants"], where
-                    )
+                    _check_identify_draws(robot, cfg, values["identify"]["variants"], where)
 
 
 def check_identify(s, train: dict, where: str) -> None:
@@ -271,23 +270,17 @@ def check_identify(s, train: dict, where: str) -> None:
         )
 
 
-def _check_identify_draws(scene: str, train: dict, seeds: list, variants, where: str) -> None:
+def _check_identify_draws(robot, cfg, variants, where: str) -> None:
     """``identify.variants``: draw ranges (the ``train_variants`` form) that apply to the recipe's
-    robot, checked as meta-train checks its own (:func:`~warp_critic.physics.variant_draws.check_on_scene`)."""
-    from warp_critic.physics.variant_draws import check_on_scene, parse_ranges
-    from warp_critic.reproduce.metatrain import make_config
-    from warp_critic.running.task import load_task_scene, task_variant
+    robot, checked as the identifier checks them (:func:`~warp_critic.physics.variant_draws.ranges_on_scene`)."""
+    from warp_critic.physics.variant_draws import ranges_on_scene
+    from warp_critic.running.task import task_variant
 
     key = f"{where}.identify.variants"
     if not isinstance(variants, str):
         raise bad(key, variants, "must be draw ranges in the train_variants form")
     try:
-        ranges = parse_ranges(variants)
-        if not ranges:
-            raise FieldError("variants", "no range to draw")
-        cfg = make_config(scene, "ours", train, seeds, Path("unused"), "cpu", False)
-        cfg, robot = load_task_scene(replace(cfg, seeds=None))
-        check_on_scene(robot, task_variant(cfg), ranges)
+        ranges_on_scene(robot, task_variant(cfg), variants)
     except FieldError as e:
         raise bad(key, variants, e.problem) from None
 
