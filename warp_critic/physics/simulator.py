@@ -18,14 +18,21 @@ from warp_critic.physics.bridge import DiffRollout, NewtonBridge
 from warp_critic.physics.scene import Scene, Variant
 from warp_critic.physics.schema import STANDARD_GRAVITY  # a scene's gravity when it authors none
 
+#: whether ``auto`` may pick CUDA. Off until ``tools/gpu_check.py`` has measured the CUDA path
+#: (graph replay) faster than the CPU's: the one GPU run so far measured direct CUDA launches slower
+#: than the CPU (0.93 against 0.36 s per KUKA iteration, an H200), and the graph-capture fix for CUDA
+#: has not yet run on a GPU. ``cuda`` stays available by name.
+AUTO_PICKS_CUDA = False
+
 
 def resolve_device(device: str) -> str:
-    """``auto`` -> ``cuda`` when Warp and torch both see a GPU, else ``cpu``."""
+    """``auto`` -> ``cpu`` (see :data:`AUTO_PICKS_CUDA`); ``cuda``/``cuda:N`` only where Warp and
+    torch both see a GPU."""
     if device not in ("auto", "cpu", "cuda") and not device.startswith("cuda:"):
         raise FieldError("device", f"must be one of auto, cpu, cuda (got {device!r})")
     if device == "auto":
         try:
-            has_cuda = wp.is_cuda_available() and torch.cuda.is_available()
+            has_cuda = AUTO_PICKS_CUDA and wp.is_cuda_available() and torch.cuda.is_available()
         except Exception:  # pragma: no cover - broken driver installs
             has_cuda = False
         return "cuda" if has_cuda else "cpu"

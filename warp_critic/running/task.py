@@ -129,7 +129,7 @@ class TaskConfig(SerializableConfig):
         ge=0,
         le=MAX_SEED,
     )
-    device: str = spec("auto", "cpu, cuda or auto (cuda when present)")
+    device: str = spec("auto", "cpu, cuda or auto (the CPU until CUDA is measured faster)")
     cpu_threads: int | None = spec(
         None,
         "torch CPU threads while training (0 = torch's default; default: $WARP_CRITIC_TORCH_THREADS or 1: small networks run fastest on one)",
