@@ -15,6 +15,7 @@ Before these checks (2b7c77a) every case here was accepted silently or refused w
 from __future__ import annotations
 
 import random
+import sysconfig
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -310,3 +311,32 @@ def test_effort_zero_on_a_joint_left_out_of_training_is_locked(tmp_path, capfd):
         tmp_path, capfd, "r.urdf", urdf(limit=LIMIT.replace('"5"', '"0"')), "--joints", "j2"
     )
     assert "(1 joints" in stdout
+
+
+# ------------------------------------------------------------------------------------------------
+# real files (example-robot-data, differentiable-robot-model's data; the test extra installs both)
+# ------------------------------------------------------------------------------------------------
+
+SITE = Path(sysconfig.get_paths()["purelib"])
+REAL = {
+    "iiwa7_allegro": (
+        SITE / "diff_robot_data/kuka_iiwa/urdf/iiwa7_allegro.urdf",
+        ("body 'link_9.0'", "triangle inequality", "--repair-inertia"),
+    ),
+    "panda_fingers": (
+        SITE / "cmeel.prefix/share/example-robot-data/robots/panda_description/urdf/panda.urdf",
+        ("joint 'panda_finger_joint2'", "--lock-mimic"),
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(REAL))
+def test_real_files_with_invalid_parts_are_refused_by_default(name, tmp_path, capfd):
+    path, says = REAL[name]
+    assert path.is_file(), path  # installed by the test extra: no skip
+    code, _, err = _run(["import", str(path), "--out", str(tmp_path / "s.usda")], capfd)
+    lines = [x for x in err.strip().splitlines() if "mesh file" not in x]  # the mesh warning
+    assert code == 2 and len(lines) == 1 and lines[0].startswith("warp-critic: error: "), err
+    for part in says:
+        assert part in lines[0], (part, err)
+    assert not (tmp_path / "s.usda").exists()
