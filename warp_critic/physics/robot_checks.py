@@ -6,14 +6,17 @@ or "correct" it when the model is finalised, with a warning that names no body (
 non-finite inertia, one that violates the triangle inequality, a degenerate one). A file like that
 is refused here, in one :class:`SceneError` line naming the body or joint and the value:
 
-* a joint coupled to another (URDF ``<mimic>``, MJCF ``<equality><joint>``); repair on request:
-  ``lock_mimic`` welds the coupled joint at the position the coupling gives at the home pose;
-* a body's mass that is not a finite number in 1e-6..1e6 kg, or negative; a mass of 0 with an
-  inertia; an inertia with a non-finite entry, a negative diagonal entry, a negative principal
-  moment (a large off-diagonal entry), principal moments that violate the triangle inequality,
-  or (on a body its own joint moves) a smallest principal moment below newton's floor
-  (1e-6 of the largest); repair on request: ``repair_inertia`` projects the tensor to the nearest
-  valid one (Frobenius norm, the same principal axes);
+* a joint coupled to another (URDF ``<mimic>``, MJCF ``<equality><joint>``) where either joint is
+  trained; repair on request: ``lock_mimic`` welds the coupled joint at the position the coupling
+  gives at the home pose;
+* a body's mass that is not a finite number in 1e-6..1e6 kg (a frame link welded to its parent may
+  be lighter: it is merged); a mass of 0 with an inertia; an inertia with a non-finite entry, a
+  negative diagonal entry, a negative principal moment (a large off-diagonal entry), principal
+  moments that violate the triangle inequality, or (on a body its own joint moves) a smallest
+  principal moment below newton's floor (1e-6 of the largest); repair on request:
+  ``repair_inertia`` projects the tensor to the nearest valid one (Frobenius norm, the same
+  principal axes; a massless body's inertia is dropped). Links welded to the world are not
+  checked: they are merged into it and never move (:mod:`~warp_critic.physics.inertia_checks`);
 * joint limits with lower > upper; lower == upper on a joint that is trained (a joint that cannot
   move: leave it out of the trained joints to lock it);
 * a URDF ``effort`` that is negative or not a number; ``effort="0"`` means no actuator, refused on a
