@@ -273,6 +273,15 @@ def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, 
         assert err.startswith("identify: error: ") and err.count("\n") == 1 and words in err, err
         assert "--variants" in err or "arm" not in words
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
+    # a drawn model that diverges (a massless arm1): the run stops on divergence (on_divergence
+    # stop, the default), so identify stops as its meta-train does on it: one line, exit 1, no run
+    few = ["--iterations", "2", "--goals", "2", "--inits", "2"]
+    with pytest.raises(SystemExit) as e:
+        tool.main([str(told), "--out", str(tmp_path / "z"), *few, "--variants", "arm1.mass=0..0"])
+    err = capsys.readouterr().err
+    assert e.value.code == 1 and err.startswith("identify: diverged: iteration 0 "), err
+    assert err.count("\n") == 1 and "'arm1.mass=0:keep'" in err, err
+    assert not (tmp_path / "z").exists()
     # other draws than training's: recorded in the summary
     light = tmp_path / "light"
     argv = [str(told), "--out", str(light), "--iterations", "2", "--goals", "2", "--inits", "2"]

@@ -56,7 +56,7 @@ def main(argv=None) -> int:
     from warp_critic.core import runtime
 
     runtime.init()
-    from warp_critic.core.errors import UserError
+    from warp_critic.core.errors import DivergenceError, UserError
     from warp_critic.methods.identify import train_identifier
 
     every = max(1, args.iterations // 20)
@@ -82,6 +82,8 @@ def main(argv=None) -> int:
         )
     except UserError as e:
         p.exit(2, f"{PROG}: error: {user_message(e, rename={'train_variants': '--variants'})}\n")
+    except DivergenceError as e:  # as meta-train on those models: one line, exit 1
+        p.exit(1, f"{PROG}: diverged: {e}\n")
     print(
         f"final loss {r['loss']:.5f}; on a fresh draw the estimate misses the {r['varied']} "
         f"varied entries by {r['held_out']:.4f} on average (descriptor units)"

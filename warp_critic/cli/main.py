@@ -107,23 +107,30 @@ def _not_owned(path, what: str) -> None:
 
 def cmd_import(args: argparse.Namespace) -> int:
     from warp_critic.physics.export import write_scene
-    from warp_critic.physics.robot import is_robot_file, load_any
+    from warp_critic.physics.file_format import file_format
+    from warp_critic.physics.robot import load_any
 
     robot = args.robot
-    if not is_robot_file(robot):
-        from pathlib import Path
-
-        if Path(robot).is_file():
-            raise UserError(
-                f"{robot}: already a warp-critic scene (it has warp_critic attributes); "
-                "import reads robot files (.urdf, MJCF .xml, .usd/.usda without them)"
-            )
+    if Path(robot).is_file() and file_format(robot) == "scene":
+        raise UserError(
+            f"{robot}: already a warp-critic scene (it has warp_critic attributes); "
+            "import reads robot files (.urdf, MJCF .xml, .usd/.usda without them)"
+        )
     tip = args.tip_offset
     if tip is not None and len(tip) != 3:
         raise UserError(f"--tip-offset: needs 3 values x,y,z (got {len(tip)})")
     joints = None if args.joints is None else [n for n in args.joints.split(",") if n.strip()]
-    scene = load_any(robot, ee_body=args.ee_body, tip_offset=tip, joints=joints)
+    scene = load_any(
+        robot,
+        ee_body=args.ee_body,
+        tip_offset=tip,
+        joints=joints,
+        lock_mimic=args.lock_mimic,
+        repair_inertia=args.repair_inertia,
+    )
     out = write_scene(scene, args.out)
+    for repair in getattr(scene, "import_repairs", ()):
+        print(f"repaired: {repair}")
     print(f"scene: {out} ({scene.dof} joints, end effector {scene.body_names[scene.ee_body]})")
     print(f"meta-train: warp-critic meta-train {out}")
     return 0
@@ -148,6 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
     from warp_critic.methods.baseline_config import BaselineConfig
     from warp_critic.methods.ours import TrainConfig
     from warp_critic.methods.q_networks import METHODS
+    from warp_critic.physics.robot_checks import IMPORT_RULES
 
     p = Parser(
         prog="warp-critic",
@@ -207,7 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Import a fixed-base robot (.urdf, MJCF .xml, .usd/.usda without warp_critic "
         "attributes) with newton's importer and write it as a warp-critic scene whose "
         "warp_critic:* attributes hold the defaults derived from the robot; edit them there.",
-        epilog=derived_rules_epilog(),
+        epilog=IMPORT_RULES + "\n" + derived_rules_epilog(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     im.add_argument("robot", help="robot file: .urdf, MJCF .xml, .usd/.usda")
@@ -231,6 +239,18 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         metavar="NAME,..",
         help="train only these joints; the others are locked at the home pose (default: all)",
+    )
+    im.add_argument(
+        "--lock-mimic",
+        action="store_true",
+        help="lock each coupled (mimic) joint where the coupling puts it at the home pose, "
+        "instead of refusing the file",
+    )
+    im.add_argument(
+        "--repair-inertia",
+        action="store_true",
+        help="project each invalid inertia to the nearest valid one (same principal axes), "
+        "instead of refusing the file",
     )
     im.set_defaults(func=cmd_import)
 

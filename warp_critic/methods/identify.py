@@ -6,7 +6,11 @@ Every iteration draws a new model for every world from the run's own ``train_var
 sampled around the training goals, and updates them with the told critic as meta-test does (the
 teacher: the true model told). Each of those rollouts -- the ones a meta-test's critic evaluates --
 is a regression sample: the identifier's estimate from the rollout's observed states and torques
-against the world's true descriptor (mean squared error; worlds that diverge are left out). The run
+against the world's true descriptor (mean squared error). A world that diverges is treated as the
+run's meta-train treated one (its ``on_divergence``): ``stop`` (the default) stops with a
+:class:`~warp_critic.core.errors.DivergenceError` naming the iteration, world and drawn model, before
+anything is written; ``drop`` leaves the world out, and stops only when every world of an
+iteration diverged. The run
 written to ``out`` is the input run with the identifier in its checkpoint: ``meta-test``, the maps
 and the tables then use the :class:`~warp_critic.learning.identify.IdentifiedCritic`, which never
 reads the model.
@@ -22,7 +26,7 @@ from pathlib import Path
 
 import torch
 
-from warp_critic.core.errors import UserError
+from warp_critic.core.errors import DivergenceError, UserError
 
 #: separates the identifier's model draws from training's (``variant_draws.draw``'s seed)
 DRAW_SEED_OFFSET = 7_919
@@ -86,6 +90,7 @@ def train_identifier(
     else:  # other draws than training's (the same text form, checked on the scene before any work)
         ranges = ranges_on_scene(m.scene, task_variant(m.cfg), variants)
     base, W, dev = task_variant(m.cfg), m.sim.worlds, m.sim.torch_device
+    drop = m.ckpt["config"].get("on_divergence") == "drop"  # as the run's meta-train did
     ident = Identifier(m.scene.dof, m.sim.dynamics_size, hidden, version).to(dev)
     opt = torch.optim.Adam(ident.parameters(), lr=lr)
     gen = torch.Generator().manual_seed(seed)
@@ -100,6 +105,18 @@ def train_identifier(
         }
         _, trajs = m.update(params, check=False, guard=True)
         settled = torch.stack([settled_worlds(t) for t in trajs]).all(0)
+        if not bool(settled.all()) and (not drop or not bool(settled.any())):
+            w = int((~settled).nonzero()[0, 0])
+            model = "; ".join(c.text() for c in with_draws(base, ranges, values[w]).changes)
+            raise DivergenceError(
+                f"iteration {it} of the identification: world {w} diverged under the drawn model {model!r} "
+                + (
+                    "(every world did)"
+                    if drop
+                    else "(the run stops on divergence, on_divergence stop)"
+                ),
+                world=w,
+            )
         return trajs, settled
 
     def loss_of(trajs, settled) -> torch.Tensor:
@@ -109,8 +126,6 @@ def train_identifier(
     rows: list[dict] = []
     for it in range(iterations):
         trajs, settled = samples(it)
-        if not bool(settled.any()):
-            continue
         if not rows:  # the first batch fixes the input scales
             with torch.no_grad():
                 ident.standardise_from(

@@ -138,6 +138,11 @@ def write_scene(scene, out: str | Path) -> Path:
     rp.CreateAttribute("warp_critic:tipOffset", Sdf.ValueTypeNames.Float3, custom=True).Set(
         _vec3(scene.tip_offset)
     )
+    repairs = list(getattr(scene, "import_repairs", ()))
+    if repairs:  # what the import changed in the robot file on request (robot_checks)
+        rp.CreateAttribute(
+            "warp_critic:importRepairs", Sdf.ValueTypeNames.StringArray, custom=True
+        ).Set(repairs)
     T = Sdf.ValueTypeNames
     from warp_critic.physics import schema
 

@@ -65,20 +65,20 @@ def _mesh_exists(urdf: Path, filename: str) -> bool:
     return (target if target.is_absolute() else urdf.parent / target).is_file()
 
 
-def import_builder(path: Path):
-    """Newton's importer for the file's format -> a ModelBuilder with fixed joints still in."""
+def import_builder(path: Path, fmt: str):
+    """Newton's importer for the file's format (``urdf``, ``mjcf`` or ``usd``: read from its
+    content, :mod:`warp_critic.physics.file_format`) -> a ModelBuilder with fixed joints still in."""
     import newton
 
     builder = newton.ModelBuilder()
-    suffix = path.suffix.lower()
     missing = None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            if suffix == ".urdf":
+            if fmt == "urdf":
                 text, missing = _urdf_without_meshes(path)
                 builder.add_urdf(text, joint_ordering="dfs")
-            elif suffix in (".xml", ".mjcf"):
+            elif fmt == "mjcf":
                 builder.add_mjcf(str(path))
             else:
                 builder.add_usd(str(path), load_sites=False)

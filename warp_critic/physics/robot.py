@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from warp_critic.core.errors import SceneError
+from warp_critic.physics.file_format import USD_SUFFIXES, file_format
 from warp_critic.physics.importers import (
     check_topology,
     collapse,
@@ -46,12 +47,12 @@ from warp_critic.physics.importers import (
     lock,
     short,
 )
+from warp_critic.physics.robot_checks import check_robot
 from warp_critic.physics.scene import Scene, load_scene
 
 __all__ = ["RobotOptions", "ROBOT_SUFFIXES", "is_robot_file", "load_any", "load_robot"]
 
 ROBOT_SUFFIXES = (".urdf", ".xml", ".mjcf")
-USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 CONTINUOUS_LIMIT = 1e9  # |limit| at or beyond this: a joint without limits (newton writes 1e10)
 
 
@@ -63,11 +64,14 @@ class RobotOptions:
         ee_body: end-effector body name (None: the last body of the longest chain).
         tip_offset: ``(3,)`` tip in the end-effector body frame [m] (None: ``(0, 0, 0)``).
         joints: names of the joints to train (None: every movable joint); the rest are locked.
+        lock_mimic, repair_inertia: the repairs :mod:`warp_critic.physics.robot_checks` may make.
     """
 
     ee_body: str | None = None
     tip_offset: tuple[float, float, float] | None = None
     joints: tuple[str, ...] | None = None
+    lock_mimic: bool = False
+    repair_inertia: bool = False
 
     def any(self) -> bool:
         return any(v is not None for v in (self.ee_body, self.tip_offset, self.joints))
@@ -76,25 +80,18 @@ class RobotOptions:
 def is_robot_file(path: str | Path) -> bool:
     """A URDF/MJCF file, or a USD file with no ``warp_critic:*`` attribute at all (a scene file that
     lacks one of ours is a broken scene, reported as such by :func:`load_scene`)."""
+    from warp_critic.physics.file_format import file_format
+
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix in ROBOT_SUFFIXES:
+    if suffix in ROBOT_SUFFIXES or suffix == ".xacro":
         return True
     if suffix not in USD_SUFFIXES or not path.is_file():
         return False
     try:
-        from pxr import Usd
-
-        stage = Usd.Stage.Open(str(path))
-    except Exception:  # an unreadable file: load_scene says why
+        return file_format(path) == "usd"
+    except SceneError:  # an unreadable file: load_scene says why
         return False
-    if stage is None:
-        return False
-    return not any(
-        prop.GetName().startswith("warp_critic:")
-        for prim in stage.Traverse()
-        for prop in prim.GetProperties()
-    )
 
 
 def load_any(
@@ -103,18 +100,27 @@ def load_any(
     ee_body: str | None = None,
     tip_offset: Sequence[float] | None = None,
     joints: Sequence[str] | None = None,
+    lock_mimic: bool = False,
+    repair_inertia: bool = False,
 ) -> Scene:
     """A scene file (our ``warp_critic:*`` USD) or a robot file, by what the file is.
 
     ``tip_offset``: ``(3,)`` [m], or None; ``joints``: joint names, or None (see :class:`RobotOptions`).
     """
+    from warp_critic.physics.robot_checks import check_tip_offset
+
     tip: tuple[float, float, float] | None = None
     if tip_offset is not None:
         if len(tip_offset) != 3:
             raise SceneError(f"{path}: tip_offset needs 3 values x,y,z (got {len(tip_offset)})")
         tip = (float(tip_offset[0]), float(tip_offset[1]), float(tip_offset[2]))
+        check_tip_offset(tip)
     options = RobotOptions(
-        ee_body=ee_body, tip_offset=tip, joints=None if joints is None else tuple(joints)
+        ee_body=ee_body,
+        tip_offset=tip,
+        joints=None if joints is None else tuple(joints),
+        lock_mimic=lock_mimic,
+        repair_inertia=repair_inertia,
     )
     path = Path(path).expanduser()
     if path.exists() and not path.is_dir() and is_robot_file(path):
@@ -164,10 +170,13 @@ def _load(path: Path, options: RobotOptions) -> Scene:
 
     from warp_critic.physics import derive
 
-    builder = import_builder(path)
+    fmt = file_format(path)
+    builder = import_builder(path, fmt)
     if builder.body_count == 0:
         raise fail(path, "no bodies: not a robot")
     check_topology(path, builder)
+    o = options  # refused in one line, or repaired on the options' flags (robot_checks)
+    repairs = check_robot(path, builder, fmt, o.joints, o.lock_mimic, o.repair_inertia)
 
     movable = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
     fixed = int(newton.JointType.FIXED)
@@ -179,7 +188,7 @@ def _load(path: Path, options: RobotOptions) -> Scene:
                 f"joint {short(builder.joint_label[j])!r} is a {name} joint; only revolute and "
                 "prismatic joints (and fixed ones) are supported",
             )
-    if path.suffix.lower() == ".urdf":
+    if fmt == "urdf":
         # a URDF cannot say whether its base floats: a root link welded to the world that carries
         # several movable chains (legs) is taken for a floating-base robot
         welded = [
@@ -276,21 +285,25 @@ def _load(path: Path, options: RobotOptions) -> Scene:
         path.read_bytes()
         + json.dumps(
             {
-                "options": [options.ee_body, options.tip_offset, options.joints],
+                "options": [options.ee_body, options.tip_offset, options.joints]
+                + [name for name in ("lock_mimic", "repair_inertia") if getattr(options, name)],
                 "rules": derive.MODEL_RULES,
             },
             sort_keys=True,
         ).encode()
     ).hexdigest()
     scene = RobotScene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
-    if path.suffix.lower() != ".urdf":
+    scene.import_repairs = repairs
+    if fmt != "urdf":
         return scene
     # a URDF authors no limit gains: derived from the robot (derive.limit_gains), then the scene
     # is made again on them (it copies the builder's arrays)
     ke, kd = derive.limit_gains(scene)
     builder.joint_limit_ke = [float(f"{v:.6g}") for v in ke]
     builder.joint_limit_kd = [float(f"{v:.6g}") for v in kd]
-    return RobotScene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
+    scene = RobotScene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
+    scene.import_repairs = repairs
+    return scene
 
 
 class RobotScene(Scene):
@@ -298,6 +311,7 @@ class RobotScene(Scene):
     robot (:mod:`warp_critic.physics.derive`) on first use, so loading alone stays cheap."""
 
     derived = True
+    import_repairs: tuple[str, ...] = ()  # what robot_checks repaired on request, one line each
     _derived_values: dict[str, Any] | None  # None until first use (set by the setter below)
     _derive_lock: threading.Lock
 

@@ -1,0 +1,326 @@
+"""A robot file's physical validity, checked before newton's importer result is used.
+
+Newton's importers take what a file says and, where it is physically impossible, either drop it
+(a URDF ``<mimic>`` joint, an MJCF ``<equality><joint>`` coupling: the generic solvers ignore them)
+or "correct" it when the model is finalised, with a warning that names no body (a negative or
+non-finite inertia, one that violates the triangle inequality, a degenerate one). A file like that
+is refused here, in one :class:`SceneError` line naming the body or joint and the value:
+
+* a joint coupled to another (URDF ``<mimic>``, MJCF ``<equality><joint>``) where either joint is
+  trained; repair on request: ``lock_mimic`` welds the coupled joint at the position the coupling
+  gives at the home pose;
+* a body's mass that is not a finite number in 1e-6..1e6 kg (a frame link welded to its parent may
+  be lighter: it is merged); a mass of 0 with an inertia; an inertia with a non-finite entry, a
+  negative diagonal entry, a negative principal moment (a large off-diagonal entry), principal
+  moments that violate the triangle inequality, or (on a body its own joint moves) a smallest
+  principal moment below newton's floor (1e-6 of the largest); repair on request:
+  ``repair_inertia`` projects the tensor to the nearest valid one (Frobenius norm, the same
+  principal axes; a massless body's inertia is dropped). Links welded to the world are not
+  checked: they are merged into it and never move (:mod:`~warp_critic.physics.inertia_checks`);
+* joint limits with lower > upper; lower == upper on a joint that is trained (a joint that cannot
+  move: leave it out of the trained joints to lock it);
+* a URDF ``effort`` that is negative or not a number; ``effort="0"`` means no actuator, refused on a
+  trained joint (warp-critic drives every joint it trains); a missing effort is unlimited;
+* a link (URDF) or body (MJCF) defined twice, a joint defined twice.
+
+An MJCF motor's ``ctrlrange`` (times its gear) bounds the joint's effort where no ``forcerange``
+does, as in MuJoCo; the smaller bound wins. The repairs made are returned as one line each: the
+scene records them (``warp_critic:importRepairs``).
+"""
+
+from __future__ import annotations
+
+import math
+import xml.etree.ElementTree as ET
+from collections.abc import Sequence
+from pathlib import Path
+
+from warp_critic.core.errors import FieldError, SceneError
+from warp_critic.physics.inertia_checks import check_inertias
+
+__all__ = ["IMPORT_RULES", "TIP_OFFSET_MAX", "check_robot", "check_tip_offset"]
+
+TIP_OFFSET_MAX = 10.0  # m
+LOCK_MIMIC = "import with --lock-mimic to lock it where the coupling puts it at the home pose"
+
+
+IMPORT_RULES = """\
+refused, in one line naming the body or joint and the value (nothing is written):
+  a joint coupled to another (URDF <mimic>, MJCF <equality><joint>): --lock-mimic welds it where
+    the coupling puts it at the home pose;
+  a mass that is not a finite number in 1e-6..1e6 kg; mass 0 with an inertia; an inertia that is
+    not finite, has a negative diagonal entry, is not positive definite, violates the triangle
+    inequality or (on a moving link) is degenerate: --repair-inertia projects it to the nearest
+    valid inertia;
+  joint limits lower > upper, or lower = upper on a trained joint; a URDF effort < 0 or not a
+    number; effort="0" (no actuator) on a trained joint (leave it out of --joints to lock it);
+  a link, body or joint defined twice; a --tip-offset over 10 m.
+  A missing effort is unlimited; an MJCF motor's ctrlrange x gear bounds its joint's effort where
+  no forcerange does. The format is read from the content (a URDF saved as .xml is a URDF); a
+  .xacro file is to be expanded first. A repair is printed and recorded in the scene's
+  warp_critic:importRepairs.
+"""
+
+
+def _fail(path: Path, problem: str) -> SceneError:
+    return SceneError(f"{path}: {' '.join(str(problem).split())}")
+
+
+def _short(label: str) -> str:
+    return label.rsplit("/", 1)[-1]
+
+
+def _g(x: float) -> str:
+    return f"{x:.6g}"
+
+
+def check_tip_offset(tip: Sequence[float]) -> None:
+    """A tip farther than :data:`TIP_OFFSET_MAX` from its body is a mistake (a FieldError)."""
+    norm = math.sqrt(sum(float(v) ** 2 for v in tip))
+    if not norm <= TIP_OFFSET_MAX:
+        raise FieldError(
+            "tip_offset",
+            f"{','.join(_g(float(v)) for v in tip)} is {_g(norm)} m from the end-effector body; "
+            f"a tip is at most {TIP_OFFSET_MAX:g} m from it",
+        )
+
+
+def check_robot(
+    path: Path,
+    builder,
+    fmt: str,
+    trained: Sequence[str] | None = None,
+    lock_mimic: bool = False,
+    repair_inertia: bool = False,
+) -> tuple[str, ...]:
+    """Refuse what the module docstring lists (a :class:`SceneError`), or repair it on request.
+
+    ``builder``: newton's ``ModelBuilder`` straight from the importer (fixed joints not merged);
+    ``fmt``: ``urdf``/``mjcf``/``usd``; ``trained``: the joints to train (None: every movable one).
+    Returns the repairs made, one line each (changed in ``builder``)."""
+    root = _xml_root(path) if fmt in ("urdf", "mjcf") else None
+    if root is not None:
+        _check_names(path, root, fmt)
+    repairs: list[str] = []
+    repairs += _couplings(path, builder, root, fmt, lock_mimic, trained)
+    repairs += check_inertias(path, builder, repair_inertia)
+    movable = _movable(builder)
+    trained_set = (
+        set(trained) if trained is not None else {_short(builder.joint_label[j]) for j in movable}
+    )
+    _limits(path, builder, movable, trained_set)
+    if fmt == "mjcf":
+        _mjcf_efforts(builder)
+    if fmt in ("urdf", "mjcf"):
+        _efforts(path, builder, movable, trained_set)
+    return tuple(repairs)
+
+
+# ------------------------------------------------------------------------------------------------
+# the file's names and couplings
+# ------------------------------------------------------------------------------------------------
+
+
+def _xml_root(path: Path):
+    try:
+        return ET.parse(path).getroot()
+    except (ET.ParseError, OSError):
+        return None  # the importer has said or will say why
+
+
+def _check_names(path: Path, root, fmt: str) -> None:
+    kinds = (
+        (("link", "link"), ("joint", "joint"))
+        if fmt == "urdf"
+        else (("body", "body"), ("joint", "joint"))
+    )
+    for tag, word in kinds:
+        elements = root.findall(tag) if fmt == "urdf" else list(root.iter(tag))
+        if fmt == "mjcf" and tag == "joint":  # <equality>/<tendon> also hold <joint> elements
+            world = root.find("worldbody")
+            elements = list((root if world is None else world).iter("joint"))
+        seen: set[str] = set()
+        for e in elements:
+            name = e.get("name")
+            if name is None:
+                continue
+            if name in seen:
+                raise _fail(
+                    path,
+                    f"{word} {name!r} is defined twice; the importer would keep the first "
+                    "silently (rename or remove the other)",
+                )
+            seen.add(name)
+
+
+def _couplings(
+    path: Path, builder, root, fmt: str, lock_mimic: bool, trained: Sequence[str] | None
+) -> list[str]:
+    """``(follower, leader or None, polynomial coefficients)`` per coupling: locked or refused."""
+    found: list[tuple[str, str | None, list[float]]] = []
+    if fmt == "urdf" and root is not None:
+        for joint in root.findall("joint"):
+            mimic = joint.find("mimic")
+            if mimic is not None:
+                c = [float(mimic.get("offset", 0)), float(mimic.get("multiplier", 1))]
+                found.append((joint.get("name", "?"), mimic.get("joint"), c))
+    elif fmt == "mjcf" and root is not None:
+        for eq in root.iter("equality"):
+            for joint in eq.findall("joint"):
+                if joint.get("active", "true").lower() == "false":
+                    continue
+                poly = [float(x) for x in joint.get("polycoef", "0 1 0 0 0").split()]
+                if joint.get("joint2") is None:
+                    poly = poly[:1]
+                found.append((joint.get("joint1", "?"), joint.get("joint2"), poly))
+    else:
+        labels = [_short(lb) for lb in builder.joint_label]
+        for f, lead, c0, c1 in zip(
+            builder.constraint_mimic_joint0,
+            builder.constraint_mimic_joint1,
+            builder.constraint_mimic_coef0,
+            builder.constraint_mimic_coef1,
+        ):
+            found.append((labels[f], labels[lead], [float(c0), float(c1)]))
+    if trained is not None:  # both joints locked (not trained): nothing couples them any more
+        found = [c for c in found if c[0] in trained or (c[1] is not None and c[1] in trained)]
+    if not found:
+        return []
+    if not lock_mimic:
+        follower, leader, poly = found[0]
+        rule = _poly_text(poly, leader)
+        raise _fail(
+            path,
+            f"joint {follower!r} is coupled to another ({follower} = {rule}); the coupling "
+            f"would vanish from the scene and the goals would ask for poses it forbids "
+            f"({LOCK_MIMIC})",
+        )
+    return [_lock_follower(path, builder, *c) for c in found]
+
+
+def _poly_text(poly: list[float], leader: str | None) -> str:
+    terms = [_g(poly[0])] + [
+        f"{_g(c)} x {leader}" + (f"^{i}" if i > 1 else "") for i, c in enumerate(poly[1:], 1) if c
+    ]
+    return " + ".join(terms)
+
+
+def _lock_follower(path: Path, builder, follower: str, leader: str | None, poly) -> str:
+    from warp_critic.physics import derive
+    from warp_critic.physics.importers import lock
+
+    labels = [_short(lb) for lb in builder.joint_label]
+    if follower not in labels or (leader is not None and leader not in labels):
+        raise _fail(path, f"joint {follower!r} is coupled to a joint not in the file ({leader!r})")
+    jf = labels.index(follower)
+
+    def home(j: int) -> float:
+        dof = builder.joint_qd_start[j]
+        lo, hi = float(builder.joint_limit_lower[dof]), float(builder.joint_limit_upper[dof])
+        q = float(builder.joint_q[builder.joint_q_start[j]])
+        return derive.home_value(lo, hi, q, 1e9)
+
+    x = home(labels.index(leader)) if leader is not None else 0.0
+    value = float(sum(c * x**i for i, c in enumerate(poly)))
+    dof = builder.joint_qd_start[jf]
+    lo, hi = float(builder.joint_limit_lower[dof]), float(builder.joint_limit_upper[dof])
+    at = min(max(value, lo), hi)
+    lock(builder, [jf], {jf: at})
+    _drop_mimic(builder, jf)
+    where = f" at {leader}'s home {_g(x)}" if leader is not None else ""
+    clamp = f" (the coupling's {_g(value)}, clamped to its limits)" if at != value else ""
+    return f"joint {follower} locked at {_g(at)}{clamp}: coupled as {follower} = {_poly_text(poly, leader)}{where}"
+
+
+def _drop_mimic(builder, joint: int) -> None:
+    if joint < len(builder.joint_mimic_joint):
+        builder.joint_mimic_joint[joint] = -1
+    keep = [i for i, f in enumerate(builder.constraint_mimic_joint0) if f != joint]
+    for name in ("joint0", "joint1", "coef0", "coef1", "enabled", "label", "world"):
+        values = getattr(builder, f"constraint_mimic_{name}", None)
+        if values is not None and len(values) >= len(keep):
+            setattr(builder, f"constraint_mimic_{name}", [values[i] for i in keep])
+
+
+# ------------------------------------------------------------------------------------------------
+# limits and efforts
+# ------------------------------------------------------------------------------------------------
+
+
+def _movable(builder) -> list[int]:
+    import newton
+
+    kinds = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
+    return [j for j, t in enumerate(builder.joint_type) if int(t) in kinds]
+
+
+def _limits(path: Path, builder, movable: list[int], trained: set[str]) -> None:
+    for j in movable:
+        dof = builder.joint_qd_start[j]
+        lo, hi = float(builder.joint_limit_lower[dof]), float(builder.joint_limit_upper[dof])
+        name = _short(builder.joint_label[j])
+        if not (math.isfinite(lo) or lo == -math.inf) or not (math.isfinite(hi) or hi == math.inf):
+            raise _fail(path, f"joint {name!r} has limits {_g(lo)}..{_g(hi)}: not numbers")
+        if lo > hi:
+            raise _fail(path, f"joint {name!r} has lower limit {_g(lo)} > upper limit {_g(hi)}")
+        if lo == hi and name in trained:
+            raise _fail(
+                path,
+                f"joint {name!r} cannot move: lower limit = upper limit = {_g(lo)} (make it a fixed "
+                "joint, or leave it out of the trained joints, --joints, to lock it)",
+            )
+
+
+def _efforts(path: Path, builder, movable: list[int], trained: set[str]) -> None:
+    for j in movable:
+        dof = builder.joint_qd_start[j]
+        effort = float(builder.joint_effort_limit[dof])
+        name = _short(builder.joint_label[j])
+        if math.isnan(effort) or effort < 0:
+            raise _fail(
+                path, f"joint {name!r} has effort limit {_g(effort)}: an effort is a number >= 0"
+            )
+        if effort == 0.0 and name in trained:
+            raise _fail(
+                path,
+                f"joint {name!r} has effort limit 0: no actuator, and warp-critic drives every "
+                "joint it trains (leave it out of the trained joints, --joints, to lock it)",
+            )
+
+
+def _mjcf_efforts(builder) -> None:
+    """A motor's ``ctrlrange`` x gear bounds its joint's effort where no ``forcerange`` does."""
+    attrs = getattr(builder, "custom_attributes", {}) or {}
+
+    def values(key: str) -> list:
+        a = attrs.get(f"mujoco:actuator_{key}")
+        return list(getattr(a, "values", None) or []) if a is not None else []
+
+    trntype, trnid = values("trntype"), values("trnid")
+    gaintype, biastype, gainprm, gear = (
+        values("gaintype"),
+        values("biastype"),
+        values("gainprm"),
+        values("gear"),
+    )
+    ctrl, has_ctrl, ctrl_on = values("ctrlrange"), values("has_ctrlrange"), values("ctrllimited")
+    force, has_force, force_on = (
+        values("forcerange"),
+        values("has_forcerange"),
+        values("forcelimited"),
+    )
+    for a in range(len(trntype)):
+        if int(trntype[a]) != 0:  # a joint transmission only
+            continue
+        dof = int(trnid[a][0])
+        if not 0 <= dof < len(builder.joint_effort_limit):
+            continue
+        bounds = []
+        limited = int(ctrl_on[a]) == 1 or (int(ctrl_on[a]) == 2 and int(has_ctrl[a]))
+        if limited and int(gaintype[a]) == 0 and int(biastype[a]) == 0:  # a motor: force = g u
+            g = abs(float(gear[a][0]) * float(gainprm[a][0]))
+            bounds.append(g * max(abs(float(ctrl[a][0])), abs(float(ctrl[a][1]))))
+        if int(force_on[a]) == 1 or (int(force_on[a]) == 2 and int(has_force[a])):
+            bounds.append(max(abs(float(force[a][0])), abs(float(force[a][1]))))
+        if bounds:
+            builder.joint_effort_limit[dof] = min(float(builder.joint_effort_limit[dof]), *bounds)
