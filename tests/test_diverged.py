@@ -11,7 +11,8 @@ from conftest import REACHER
 
 from warp_critic.cli.main import main
 from warp_critic.core.errors import DivergenceError
-from warp_critic.learning.networks import Critic, MLPPolicy, Normalizer, init_policy
+from warp_critic.learning.critic import Critic
+from warp_critic.learning.networks import MLPPolicy, Normalizer, init_policy
 from warp_critic.learning.outer import meta_loss
 from warp_critic.learning.rollout import DIVERGED, settled_worlds
 from warp_critic.physics.scene import Variant, load_scene

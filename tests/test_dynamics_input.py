@@ -77,9 +77,12 @@ def test_redrawn_simulator_describes_its_worlds_as_a_built_one(scene):
 
 
 def test_pose_dynamics_critic_reads_the_descriptor():
+    from warp_critic.learning.critic import Critic
+    from warp_critic.learning.critic_inputs import DYNAMICS
     from warp_critic.learning.losses import critic_loss
-    from warp_critic.learning.networks import Critic, MLPPolicy, Normalizer, StackedCritic
+    from warp_critic.learning.networks import MLPPolicy, Normalizer
     from warp_critic.learning.rollout import Trajectory
+    from warp_critic.learning.stacked import StackedCritic
 
     T, W, dof, K = 4, 3, 2, 5
     gen = torch.Generator().manual_seed(0)
@@ -91,10 +94,10 @@ def test_pose_dynamics_critic_reads_the_descriptor():
     )
     torch.manual_seed(1)
     critics = [Critic(dof, norm, hidden=16, inputs="pose-dynamics") for _ in range(2)]
-    assert critics[0].uses_dynamics and critics[0].net[0].in_features == 4 * dof + K
-    assert not Critic(dof, norm, hidden=16, inputs="pose").uses_dynamics
+    assert critics[0].rollout_data == (DYNAMICS,) and critics[0].net[0].in_features == 4 * dof + K
+    assert Critic(dof, norm, hidden=16, inputs="pose").rollout_data == ()
     relative = Critic(dof, norm, hidden=16, inputs="relative-dynamics")
-    assert relative.uses_dynamics and relative.net[0].in_features == 3 * dof + K
+    assert relative.rollout_data == (DYNAMICS,) and relative.net[0].in_features == 3 * dof + K
     q, qd, tau = (torch.randn(T, W, dof, generator=gen) for _ in range(3))
     g = torch.zeros(T, W, dof)
     d = torch.randn(W, K, generator=gen)
@@ -104,7 +107,7 @@ def test_pose_dynamics_critic_reads_the_descriptor():
     with pytest.raises(ValueError, match="dynamics"):
         critics[0](q, qd, tau, g)
     stacked = StackedCritic(critics)
-    assert stacked.uses_dynamics
+    assert stacked.rollout_data == (DYNAMICS,)
     both = [torch.cat([x, x], dim=1) for x in (q, qd, tau, g)]
     out = stacked(*both, dynamics=torch.cat([d, d]))
     assert torch.allclose(out[:, :W], a, atol=1e-6)
@@ -135,6 +138,8 @@ def test_rollout_carries_the_worlds_dynamics(scene):
 def test_identified_critic_feeds_the_told_critic_its_estimate():
     """The identifier maps a trajectory's observed steps to ``(W, K)`` with fixed input scales; the
     identified critic is the told critic at that estimate, never at the trajectory's true model."""
+    from warp_critic.learning.critic import Critic
+    from warp_critic.learning.critic_inputs import HISTORY, history_features
     from warp_critic.learning.identify import (
         IdentifiedCritic,
         Identifier,
@@ -142,7 +147,7 @@ def test_identified_critic_feeds_the_told_critic_its_estimate():
         trajectory_inputs,
     )
     from warp_critic.learning.losses import critic_loss_at
-    from warp_critic.learning.networks import Critic, Normalizer, history_features
+    from warp_critic.learning.networks import Normalizer
     from warp_critic.learning.rollout import Trajectory
 
     T, W, dof, K = 5, 3, 2, 4
@@ -171,7 +176,7 @@ def test_identified_critic_feeds_the_told_critic_its_estimate():
     d_hat = ident.of_trajectory(traj)
     assert d_hat.shape == (W, K)
     critic = IdentifiedCritic(told, ident)
-    assert critic.uses_history and not critic.uses_dynamics
+    assert critic.rollout_data == (HISTORY,)  # never the true model
     g = torch.zeros(W, dof)
     tau = torch.randn(T, W, dof, generator=gen)
     got = critic_loss_at(critic, traj, tau, g)
@@ -316,8 +321,10 @@ def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, 
 def test_identified_critic_feeds_each_seed_its_own_identifier():
     """Batched seeds (worlds seed-major): each block of worlds is estimated by its own identifier,
     exactly as that identifier alone on those worlds."""
+    from warp_critic.learning.critic import Critic
+    from warp_critic.learning.critic_inputs import history_features
     from warp_critic.learning.identify import IdentifiedCritic, Identifier, identifier_inputs
-    from warp_critic.learning.networks import Critic, Normalizer, history_features
+    from warp_critic.learning.networks import Normalizer
 
     T, S, Wc, dof, K = 4, 2, 3, 2, 4
     gen = torch.Generator().manual_seed(2)

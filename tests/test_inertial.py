@@ -8,8 +8,9 @@ import torch
 from conftest import REACHER
 
 from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
+from warp_critic.learning.critic import Critic
 from warp_critic.learning.inner import critic_gradient
-from warp_critic.learning.networks import Critic, MLPPolicy, Normalizer, init_policy
+from warp_critic.learning.networks import MLPPolicy, Normalizer, init_policy
 from warp_critic.learning.outer import meta_loss
 from warp_critic.learning.rollout import Trajectory
 from warp_critic.methods import ours as train

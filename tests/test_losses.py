@@ -7,8 +7,9 @@ import math
 import pytest
 import torch
 
+from warp_critic.learning.critic import Critic
 from warp_critic.learning.losses import task_loss
-from warp_critic.learning.networks import Critic, Normalizer
+from warp_critic.learning.networks import Normalizer
 from warp_critic.learning.rollout import Trajectory
 
 

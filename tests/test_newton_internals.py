@@ -216,7 +216,7 @@ def test_a_step_writes_the_swapped_in_scratch_and_leaves_the_solver_own(sim):
     bridge, solver, model = sim.bridge, sim.bridge.solver, sim.model
     own = {n: getattr(solver, n) for n in (*SCRATCH, *TILE_VIEWS)}
     before = {n: own[n].numpy().copy() for n in SCRATCH}
-    scratch = bridge._new_scratch()
+    scratch = bridge.scratch.new()
     s_in, s_out = model.state(requires_grad=True), model.state(requires_grad=True)
     control = model.control(clone_variables=True, requires_grad=True)
     s_in.joint_q.assign(np.linspace(-0.8, 0.9, 6).astype(np.float32))

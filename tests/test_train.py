@@ -136,7 +136,8 @@ def test_interrupted_run_resumes_exactly_on_cpu(tmp_path, extra):
 
 def test_outer_gradient_reaches_the_critic_through_model_and_inner_update(tmp_path):
     """The critic gradient is second order: it exists only through theta_new(phi) and the model."""
-    from warp_critic.learning.networks import Critic, MLPPolicy, Normalizer, init_policy
+    from warp_critic.learning.critic import Critic
+    from warp_critic.learning.networks import MLPPolicy, Normalizer, init_policy
     from warp_critic.learning.outer import meta_loss
     from warp_critic.physics.scene import Variant, load_scene
     from warp_critic.physics.simulator import Simulator

@@ -248,15 +248,12 @@ def test_bad_train_variants_flag_is_one_line_exit_2(tmp_path, value, words):
 def test_history_features_and_the_history_critic():
     """history = [qd_t - qd_{t-1}, tau_{t-1}] (zeros at t = 0); the history critic reads it (its
     output changes with it), batched seeds evaluate as single critics, and critic_loss passes it."""
+    from warp_critic.learning.critic import Critic
+    from warp_critic.learning.critic_inputs import HISTORY, history_features
     from warp_critic.learning.losses import critic_loss
-    from warp_critic.learning.networks import (
-        Critic,
-        MLPPolicy,
-        Normalizer,
-        StackedCritic,
-        history_features,
-    )
+    from warp_critic.learning.networks import MLPPolicy, Normalizer
     from warp_critic.learning.rollout import Trajectory
+    from warp_critic.learning.stacked import StackedCritic
 
     T, W, dof = 5, 3, 2
     gen = torch.Generator().manual_seed(0)
@@ -269,23 +266,23 @@ def test_history_features_and_the_history_critic():
     norm = Normalizer(torch.zeros(dof), torch.full((dof,), 2.0), 5.0, torch.full((dof,), 3.0))
     torch.manual_seed(1)
     critics = [Critic(dof, norm, hidden=16, inputs="history") for _ in range(2)]
-    assert critics[0].uses_history and critics[0].net[0].in_features == 5 * dof
+    assert critics[0].rollout_data == (HISTORY,) and critics[0].net[0].in_features == 5 * dof
     q = torch.randn(T, W, dof, generator=gen)
     g = torch.zeros(T, W, dof)
-    a = critics[0](q, qd[:T], tau, g, h)
-    assert not torch.allclose(a, critics[0](q, qd[:T], tau, g, torch.zeros_like(h)))
+    a = critics[0](q, qd[:T], tau, g, history=h)
+    assert not torch.allclose(a, critics[0](q, qd[:T], tau, g, history=torch.zeros_like(h)))
     with pytest.raises(ValueError, match="needs history"):
         critics[0](q, qd[:T], tau, g)
     stacked = StackedCritic(critics)
     both = torch.cat([q, q], dim=1), torch.cat([qd[:T]] * 2, 1), torch.cat([tau] * 2, 1)
-    out = stacked(*both, torch.cat([g, g], 1), torch.cat([h, h], 1))
+    out = stacked(*both, torch.cat([g, g], 1), history=torch.cat([h, h], 1))
     assert torch.allclose(out[:, :W], a, atol=1e-6)
-    assert torch.allclose(out[:, W:], critics[1](q, qd[:T], tau, g, h), atol=1e-6)
+    assert torch.allclose(out[:, W:], critics[1](q, qd[:T], tau, g, history=h), atol=1e-6)
     policy = MLPPolicy(norm)
     params = policy.init(W, generator=gen)
     traj = Trajectory(torch.randn(T + 1, W, dof, generator=gen), qd, tau)
     policy_tau = policy(params, traj.q[:-1], traj.qd[:-1])
-    expect = critics[0](traj.q[:-1], traj.qd[:-1], policy_tau, g, h).sum(0)
+    expect = critics[0](traj.q[:-1], traj.qd[:-1], policy_tau, g, history=h).sum(0)
     assert torch.allclose(critic_loss(critics[0], policy, params, traj, g[0]), expect)
 
 

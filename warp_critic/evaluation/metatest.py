@@ -31,9 +31,10 @@ from warp_critic.core.memory import check_fits
 from warp_critic.core.runtime import check_seed
 from warp_critic.evaluation.goals import sample_goals  # also metatest.sample_goals, as before
 from warp_critic.evaluation.paper import GOAL_NOISE
+from warp_critic.learning.critic import Critic
 from warp_critic.learning.inner import inner_update, policy_fn
 from warp_critic.learning.losses import final_error
-from warp_critic.learning.networks import Critic, MLPPolicy, Normalizer
+from warp_critic.learning.networks import MLPPolicy, Normalizer
 from warp_critic.learning.rollout import rollout
 from warp_critic.physics.scene import Scene
 from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator

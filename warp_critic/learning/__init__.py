@@ -5,7 +5,10 @@ from warp_critic.core.exports import lazy_exports
 __all__, __getattr__, __dir__ = lazy_exports(
     __name__,
     {
-        "warp_critic.learning.networks": ("Critic", "StackedCritic", "MLPPolicy", "Normalizer"),
+        "warp_critic.learning.networks": ("MLPPolicy", "Normalizer"),
+        "warp_critic.learning.critic": ("Critic",),
+        "warp_critic.learning.stacked": ("StackedCritic",),
+        "warp_critic.learning.critic_inputs": ("CRITIC_INPUTS", "CriticInput"),
         "warp_critic.learning.losses": ("final_error", "task_loss", "critic_loss", "td_loss"),
         "warp_critic.learning.protocols": ("CriticFn", "Policy"),
         "warp_critic.learning.rollout": ("Trajectory", "rollout"),

@@ -1,6 +1,6 @@
 """Identify the model from what a rollout shows, for a critic that was told it (``*-dynamics``).
 
-A ``pose-dynamics`` critic (:mod:`warp_critic.learning.networks`) reads each world's dynamics
+A ``pose-dynamics`` critic (:mod:`warp_critic.learning.critic_inputs`) reads each world's dynamics
 descriptor ``d`` (:class:`~warp_critic.physics.descriptor.DynamicsDescriptor`), privileged data. An
 :class:`Identifier` estimates ``d`` from one trajectory's observed states and applied torques alone,
 ``[q_t, qd_t, qd_t - qd_{t-1}, tau_{t-1}]`` at every step: under ``qd_t - qd_{t-1} ~ dt M(q)^-1
@@ -33,12 +33,12 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from warp_critic.learning.networks import history_features
+from warp_critic.learning.critic_inputs import DYNAMICS, HISTORY, history_features, rollout_data_of
 
 
 def identifier_inputs(q: torch.Tensor, qd: torch.Tensor, history: torch.Tensor) -> torch.Tensor:
     """``(T, W, 4*dof)``: ``[q_t, qd_t, qd_t - qd_{t-1}, tau_{t-1}]`` (``history`` from
-    :func:`~warp_critic.learning.networks.history_features`), detached: observed data."""
+    :func:`~warp_critic.learning.critic_inputs.history_features`), detached: observed data."""
     return torch.cat([q.detach(), qd.detach(), history.detach()], dim=-1)
 
 
@@ -116,15 +116,15 @@ class IdentifiedCritic(nn.Module):
     trajectory's steps ``(T, W, dof)``, ``history`` as for the ``history`` critic. Reads no model.
 
     ``identifier``: one :class:`Identifier`, or one per block of worlds for the seeds of a batched
-    run (:class:`~warp_critic.learning.networks.StackedCritic`: worlds seed-major, ``W / S`` each).
+    run (:class:`~warp_critic.learning.stacked.StackedCritic`: worlds seed-major, ``W / S`` each).
     The estimate is data (detached): training through this critic changes the critic only."""
 
-    uses_history = True  # the trajectory's observed responses: the identifier's input
-    uses_dynamics = False  # never the true model
+    # the trajectory's observed responses (the identifier's input), never the true model
+    rollout_data = (HISTORY,)
 
     def __init__(self, critic: nn.Module, identifier: Identifier | list[Identifier]):
         super().__init__()
-        if not getattr(critic, "uses_dynamics", False):
+        if DYNAMICS not in rollout_data_of(critic):
             raise ValueError("an identified critic wraps a critic that reads the dynamics")
         self.critic = critic
         self.identifiers = nn.ModuleList(

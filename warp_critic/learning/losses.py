@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import torch
 
-from warp_critic.learning.networks import PolicyParams, history_features
+from warp_critic.learning.critic_inputs import rollout_kwargs
+from warp_critic.learning.networks import PolicyParams
 from warp_critic.learning.protocols import CriticFn, Policy
 from warp_critic.learning.rollout import Trajectory
 
@@ -53,14 +54,8 @@ def critic_loss_at(
     taken at the trajectory's states (:func:`critic_loss` with the policy's actions given)."""
     q, qd = traj.q[:-1].detach(), traj.qd[:-1].detach()  # (T, W, dof)
     g = goal.unsqueeze(0).expand_as(q)
-    extra = {}
-    if getattr(critic, "uses_history", False):  # the last step's response, observed (data)
-        extra["history"] = history_features(traj.qd, traj.tau)
-    if getattr(critic, "uses_dynamics", False):  # the worlds' models, told (privileged data)
-        if traj.dynamics is None:
-            raise ValueError("this critic reads the worlds' dynamics; the trajectory carries none")
-        extra["dynamics"] = traj.dynamics  # (W, K), the same at every step
-    return critic(q, qd, tau, g, **extra).sum(0)
+    # the rollout data the critic reads beside (s, a, g): observed history, told dynamics
+    return critic(q, qd, tau, g, **rollout_kwargs(critic, traj)).sum(0)
 
 
 def td_loss(

@@ -1,7 +1,7 @@
 """What the inner and outer updates need of a critic and a policy (structural types, PEP 544).
 
-Any callable with the signature fits: our :class:`~warp_critic.learning.networks.Critic` and
-:class:`~warp_critic.learning.networks.StackedCritic`, a baseline's ``-Q``
+Any callable with the signature fits: our :class:`~warp_critic.learning.critic.Critic` and
+:class:`~warp_critic.learning.stacked.StackedCritic`, a baseline's ``-Q``
 (:class:`~warp_critic.methods.q_networks.NegQ`), :class:`~warp_critic.learning.networks.MLPPolicy`.
 """
 
@@ -16,10 +16,10 @@ from warp_critic.learning.networks import PolicyParams
 
 class CriticFn(Protocol):
     """The loss ``L(s, a, g)`` a policy descends: ``q, qd, tau, g`` all ``(..., W, dof)`` (rad, rad/s,
-    N·m, rad) -> ``(..., W)``. A critic whose ``uses_history`` is true also takes ``history``
-    ``(..., W, 2*dof)`` (:func:`~warp_critic.learning.networks.history_features`), one whose
-    ``uses_dynamics`` is true ``dynamics`` ``(W, K)`` (:attr:`~warp_critic.learning.rollout.Trajectory.dynamics`),
-    both by keyword."""
+    N·m, rad) -> ``(..., W)``. A critic that reads rollout data beside ``(s, a, g)`` names it in its
+    ``rollout_data`` (:class:`~warp_critic.learning.critic_inputs.RolloutData`: ``history`` ``(..., W,
+    2*dof)``, ``dynamics`` ``(W, K)``) and takes it by keyword
+    (:func:`~warp_critic.learning.critic_inputs.rollout_kwargs`)."""
 
     def __call__(
         self,

@@ -60,6 +60,7 @@ def train_identifier(
     (``--train-variants`` text) instead of the run's own ``train_variants``, the held-out draw
     too (and then ``"variants"`` is in the summary); ``None`` or ``""``: the run's own."""
     from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
+    from warp_critic.learning.critic_inputs import DYNAMICS, rollout_data_of
     from warp_critic.learning.identify import Identifier, trajectory_inputs
     from warp_critic.learning.rollout import settled_worlds
     from warp_critic.physics.redraw import set_variants
@@ -75,7 +76,7 @@ def train_identifier(
         run_dir=run_dir, num_goals=goals, inits=inits, goal_std=0.3, seed=seed, device=device
     )
     m = setup_meta_test(tc)
-    if not getattr(m.critic, "uses_dynamics", False):
+    if DYNAMICS not in rollout_data_of(m.critic):
         raise UserError(
             f"{run_dir}: its critic is not told the model (critic input "
             f"{m.ckpt.get('critic_input')!r}); identify a pose-dynamics or relative-dynamics run"

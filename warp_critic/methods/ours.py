@@ -15,16 +15,23 @@ from pathlib import Path
 import torch
 
 from warp_critic.core.errors import DivergenceError, FieldError, UserError
+from warp_critic.learning.critic import Critic
+from warp_critic.learning.critic_inputs import CRITIC_INPUTS, critic_input_help
 from warp_critic.learning.identify import IdentifiedCritic, identifier_from_checkpoint
 from warp_critic.learning.networks import (
     POLICY_INIT_SCHEMES,
-    Critic,
     MLPPolicy,
     PolicyParams,
-    StackedCritic,
     detach_params,
 )
 from warp_critic.learning.outer import meta_loss
+from warp_critic.learning.stacked import (
+    StackedCritic,
+    clip_slice_,
+    load_optimizer_slice,
+    optimizer_slice,
+    slice_norm,
+)
 from warp_critic.physics import schema
 from warp_critic.physics.variant_draws import check_on_scene, parse_ranges
 from warp_critic.running.config import filled, spec
@@ -74,16 +81,11 @@ class TrainConfig(TaskConfig):
     )
     critic_input: str | None = spec(
         None,
-        "critic input layout: full = [q, qd, a, g, q-g]; relative = [q-g, qd, a] (goal-equivariant); "
-        "history = relative + the last step's velocity change and torque (tells models apart, for "
-        "--train-variants); pose = relative + the joint angles q; pose-trig = relative + sin q and "
-        "cos q; inertial = relative with the torque in home-pose acceleration units, "
-        "M(q_h) M(q)^-1 a, and inner steps in that metric; "
-        "pose-dynamics = pose + each world's masses, inertias and link offsets relative to the "
-        "nominal model (privileged: the critic is told the model, at meta-test too); "
-        "relative-dynamics = relative + the same; "
-        "default: the scene's, else " + schema.fallback_text("critic_input"),
-        choices=schema.CRITIC_INPUTS,
+        "critic input layout: "
+        + critic_input_help()
+        + "; default: the scene's, else "
+        + schema.fallback_text("critic_input"),
+        choices=tuple(CRITIC_INPUTS),
     )
     critic_hidden: int = spec(400, "critic hidden units (2 ELU layers)", gt=0, cap=8192)
     running_weight: float = spec(
@@ -149,7 +151,7 @@ def meta_train(
     """Run (or resume) meta-training; returns the run directory, metrics and critic.
 
     With ``cfg.seeds`` the seeds train at once: their worlds share one simulator, their critics are
-    one :class:`~warp_critic.learning.networks.StackedCritic` under one Adam (elementwise, so exactly one Adam
+    one :class:`~warp_critic.learning.stacked.StackedCritic` under one Adam (elementwise, so exactly one Adam
     per critic), and each seed's gradient is clipped on its own; every seed writes the run directory
     a single-seed run would (``result.seeds``). ``callbacks`` get an
     :class:`~warp_critic.running.loop.IterationInfo` (of the first seed) after every iteration; ``given``
@@ -359,66 +361,9 @@ class VariantRedraw:
         return values
 
 
-# ------------------------------------------------------------------------------------------------
-# one seed's slice of the stacked critic: gradient norm, clipping, optimiser state
-# ------------------------------------------------------------------------------------------------
-
-
 def _cat(per_seed: list[PolicyParams]) -> PolicyParams:
     return (
         {k: torch.cat([p[k] for p in per_seed]) for k in per_seed[0]}
         if len(per_seed) > 1
         else per_seed[0]
     )
-
-
-def slice_norm(critic: StackedCritic, i: int) -> float:
-    """The gradient norm of critic ``i``: ``sqrt(sum of its squared gradients)``."""
-    total = 0.0
-    for p in critic.ordered():
-        if p.grad is not None:
-            total += float(p.grad[i].detach().pow(2).sum())
-    return math.sqrt(total)
-
-
-def clip_slice_(critic: StackedCritic, i: int, max_norm: float) -> None:
-    """``torch.nn.utils.clip_grad_norm_`` on critic ``i``'s gradient alone."""
-    grads = [p.grad[i] for p in critic.ordered() if p.grad is not None]
-    total = torch.linalg.vector_norm(torch.stack([torch.linalg.vector_norm(g) for g in grads]))
-    coef = torch.clamp(max_norm / (total + 1e-6), max=1.0)
-    for g in grads:
-        g.mul_(coef)
-
-
-def optimizer_slice(opt: torch.optim.Optimizer, critic: StackedCritic, i: int) -> dict:
-    """Critic ``i``'s Adam state as the state dict of an Adam over one :class:`Critic`."""
-    full = opt.state_dict()
-    state = {
-        k: {
-            name: (v[i].clone() if torch.is_tensor(v) and v.dim() > 0 else v)
-            for name, v in st.items()
-        }
-        for k, st in full["state"].items()
-    }
-    return {"state": state, "param_groups": full["param_groups"]}
-
-
-def load_optimizer_slice(
-    opt: torch.optim.Optimizer, critic: StackedCritic, i: int, single: dict
-) -> None:
-    """Inverse of :func:`optimizer_slice`: put one critic's Adam state into slice ``i``."""
-    params = critic.ordered()
-    for k, st in single["state"].items():
-        p = params[int(k)]
-        mine = opt.state[p]
-        for name, v in st.items():
-            if torch.is_tensor(v) and v.dim() > 0:
-                if name not in mine:
-                    mine[name] = torch.zeros_like(p)
-                mine[name][i].copy_(v)
-            else:
-                mine[name] = v.clone() if torch.is_tensor(v) else v
-    for group, saved in zip(opt.param_groups, single["param_groups"]):
-        for key, value in saved.items():
-            if key != "params":
-                group[key] = value

@@ -13,12 +13,10 @@ Two paths:
   allocation.
 * **differentiable** (:meth:`DiffRollout.step`, :class:`_SimStep`): every physics sub-step ``k`` of a rollout gets its own
   Newton state, its own ``wp.Tape`` and its **own copy of the solver's mass-matrix scratch**
-  (``M, J, P, H, L``). ``SolverFeatherstone`` keeps that scratch on the solver object and rewrites it
-  every step, so a single tape over many steps replays the backward pass of every step with the
-  *last* step's matrices (on a 60-step iiwa rollout that gradient was ~100% wrong). Swapping in a
-  per-step scratch set before each taped step keeps every step's matrices alive for its backward
-  pass -- the same exactness as re-running each step's forward inside its backward (checkpointing),
-  without paying for the second forward.
+  (``M, J, P, H, L``; :mod:`warp_critic.physics.scratch` says why). Swapping in a per-step scratch
+  set before each taped step keeps every step's matrices alive for its backward pass -- the same
+  exactness as re-running each step's forward inside its backward (checkpointing), without paying
+  for the second forward.
 
   One tape per sub-step (rather than one per control step) matters too: each step overwrites
   ``state_in.body_q`` with forward kinematics that the previous step had already written, and Warp's
@@ -61,15 +59,7 @@ from warp_critic.physics.replay import (
     keep_input_grads,
     seed_output_grads,
 )
-
-_SCRATCH = ("M", "J", "P", "H", "L")
-# With use_tile_gemm the solver reads batched views of J, M, H, L grouped by articulation size.
-_TILE_VIEWS = {
-    "_J_by_size": ("J", "articulation_J_start"),
-    "_M_by_size": ("M", "articulation_M_start"),
-    "_H_by_size": ("H", "articulation_H_start"),
-    "_L_by_size": ("L", "articulation_H_start"),
-}
+from warp_critic.physics.scratch import SolverScratch
 
 
 class NewtonBridge:
@@ -112,7 +102,7 @@ class NewtonBridge:
         self.solver = newton.solvers.SolverFeatherstone(model, use_tile_gemm=use_tile_gemm)
         self._is_cuda = self.torch_device.type == "cuda"
         self._wp_streams: dict[int, wp.Stream] = {}  # torch stream handle -> its Warp stream
-        self._base_scratch = self._scratch_of(self.solver)
+        self.scratch = SolverScratch(self.solver)  # the solver's own, and a copy per taped step
         # A replayed step skips the solver's Python, including its every-N-steps mass-matrix
         # schedule: replay only what is the same on every step.
         self.graphs = bool(graphs) and self.solver.update_mass_matrix_interval == 1
@@ -171,38 +161,13 @@ class NewtonBridge:
         return self._fw_q[self._fw_last].clone(), self._fw_qd[self._fw_last].clone()
 
     def _fw_substeps(self) -> None:
-        self._restore_scratch()
+        self.scratch.restore()
         a, b = 0, 1
         for _ in range(self.substeps):
             self.solver.step(
                 self._fw_states[a], self._fw_states[b], self._fw_control, None, self.dt
             )
             a, b = b, a
-
-    def _scratch_of(self, solver) -> dict:
-        names = _SCRATCH + (tuple(_TILE_VIEWS) if solver.use_tile_gemm else ())
-        return {n: getattr(solver, n) for n in names}
-
-    def _new_scratch(self) -> dict:
-        """A private copy of the solver's per-step scratch (and, for tile GEMM, its grouped views)."""
-        scratch = {n: wp.zeros_like(self._base_scratch[n], requires_grad=True) for n in _SCRATCH}
-        if self.solver.use_tile_gemm:
-            for view_name, (array_name, start_name) in _TILE_VIEWS.items():
-                starts = getattr(self.solver, start_name).numpy()
-                views = {}
-                for size, arts in self.solver._group_to_art.items():
-                    shape = self._base_scratch[view_name][size].shape
-                    first = int(arts.numpy()[0])
-                    n = int(shape[0] * shape[1] * shape[2])
-                    views[size] = scratch[array_name][
-                        int(starts[first]) : int(starts[first]) + n
-                    ].reshape(shape)
-                scratch[view_name] = views
-        return scratch
-
-    def _restore_scratch(self) -> None:
-        for n, arr in self._base_scratch.items():
-            setattr(self.solver, n, arr)
 
     # -- differentiable ------------------------------------------------------------------------
     def begin_rollout(self) -> DiffRollout:
@@ -231,7 +196,7 @@ class NewtonBridge:
             self._steps.append(
                 StepBuffers(
                     state_out=s,
-                    scratch=self._new_scratch(),
+                    scratch=self.scratch.new(),
                     tape=wp.Tape(),
                     q_out=self._view(s.joint_q),
                     qd_out=self._view(s.joint_qd),
@@ -273,15 +238,14 @@ class NewtonBridge:
         control = self._controls[c].control
         for k in range(c * self.substeps, (c + 1) * self.substeps):
             buf = self._steps[k]
-            for n, arr in buf.scratch.items():
-                setattr(self.solver, n, arr)
+            self.scratch.use(buf.scratch)
             if record:  # later rollouts reuse the same arrays, so the tape stays valid
                 buf.tape.reset()
                 with buf.tape:
                     self.solver.step(self._state_in(k), buf.state_out, control, None, self.dt)
             else:
                 self.solver.step(self._state_in(k), buf.state_out, control, None, self.dt)
-        self._restore_scratch()
+        self.scratch.restore()
 
     def _backward_substeps(self, c: int) -> None:
         """Reverse sub-steps of control step ``c``: the output gradient is seeded in the last one."""

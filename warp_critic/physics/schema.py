@@ -31,12 +31,13 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
+from warp_critic.core.critic_input_names import CRITIC_INPUT_NAMES
+
 if TYPE_CHECKING:
     import numpy as np
 
 __all__ = [
     "ATTRIBUTES",
-    "CRITIC_INPUTS",
     "EE_ATTR",
     "EFFORT_ATTR",
     "STANDARD_GRAVITY",
@@ -56,17 +57,6 @@ EFFORT_ATTR = "warp_critic:effortLimit"
 EE_ATTR = "warp_critic:endEffectorBody"
 TIP_ATTR = "warp_critic:tipOffset"
 STANDARD_GRAVITY = 9.81  # m/s^2, along -z
-# the critic's input layouts (learning.networks)
-CRITIC_INPUTS = (
-    "full",
-    "relative",
-    "history",
-    "pose",
-    "pose-trig",
-    "inertial",
-    "pose-dynamics",
-    "relative-dynamics",
-)
 
 # Sentinels for defaults that are not one value.
 REQUIRED = "required"  # the scene or the user must give it
@@ -109,7 +99,7 @@ RULES: dict[str, str] = {
     "positive": "> 0",
     "nonnegative": ">= 0",
     "finite": "finite",
-    "critic_input": ", ".join(CRITIC_INPUTS[:-1]) + " or " + CRITIC_INPUTS[-1],
+    "critic_input": ", ".join(CRITIC_INPUT_NAMES[:-1]) + " or " + CRITIC_INPUT_NAMES[-1],
 }
 
 ATTRIBUTES: tuple[Attribute, ...] = (
@@ -246,8 +236,8 @@ def parse(
             raise RuleError(f"must be > 0 (got {values})")
         return values
     if rule == "critic_input":
-        if raw not in CRITIC_INPUTS:
-            raise RuleError(f"must be one of {', '.join(CRITIC_INPUTS)} (got {raw!r})")
+        if raw not in CRITIC_INPUT_NAMES:
+            raise RuleError(f"must be one of {', '.join(CRITIC_INPUT_NAMES)} (got {raw!r})")
         return str(raw)
     value = _number(raw)
     if value is None:

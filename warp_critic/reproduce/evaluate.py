@@ -31,6 +31,7 @@ import torch
 
 from warp_critic.core import interrupts
 from warp_critic.core.errors import UserError
+from warp_critic.learning.critic_inputs import rollout_data_of
 from warp_critic.physics.inertia import NominalInertia
 from warp_critic.physics.scene import Variant
 
@@ -52,15 +53,17 @@ class Job:
 
 class MultiCritic(torch.nn.Module):
     """Several critics over consecutive world slices: ``L(q, qd, tau, g)`` on ``(..., W, dof)``
-    inputs; the trajectory's ``history`` and ``dynamics`` reach the critics that read them
-    (``uses_history``, ``uses_dynamics``)."""
+    inputs; the trajectory's rollout data (``history``, ``dynamics``) reach the critics that read
+    them (:func:`~warp_critic.learning.critic_inputs.rollout_data_of`)."""
 
     def __init__(self, segments: list[tuple[torch.nn.Module, int, int]]):
         super().__init__()
         self.critics = torch.nn.ModuleList([c for c, _, _ in segments])
         self.bounds = [(a, b) for _, a, b in segments]
-        self.uses_history = any(getattr(c, "uses_history", False) for c in self.critics)
-        self.uses_dynamics = any(getattr(c, "uses_dynamics", False) for c in self.critics)
+        # what any of them reads, once each (the losses pass it all; forward slices it per critic)
+        self.rollout_data = tuple(
+            dict.fromkeys(d for c in self.critics for d in rollout_data_of(c))
+        )
 
     def torque_metric(self, q: torch.Tensor) -> torch.Tensor | None:
         """Each critic's torque metric on its worlds (the identity where it has none), or
@@ -78,15 +81,11 @@ class MultiCritic(torch.nn.Module):
             dim=-3,
         )
 
-    def forward(self, q, qd, tau, g, history=None, dynamics=None):
+    def forward(self, q, qd, tau, g, **data):
         outs = []
         for c, (a, b) in zip(self.critics, self.bounds):
             args = [x[..., a:b, :] for x in (q, qd, tau, g)]
-            extra = {}
-            if getattr(c, "uses_history", False):
-                extra["history"] = history[..., a:b, :]
-            if getattr(c, "uses_dynamics", False):
-                extra["dynamics"] = dynamics[..., a:b, :]
+            extra = {d.key: data[d.key][..., a:b, :] for d in rollout_data_of(c)}
             outs.append(c(*args, **extra))
         return torch.cat(outs, dim=-1)
 

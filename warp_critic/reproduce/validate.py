@@ -244,7 +244,7 @@ def check_beyond(b: dict, seeds: list) -> None:
 
 def check_identify(s, train: dict, where: str) -> None:
     """A recipe's ``identify`` settings: a model identifier for a critic told the drawn models."""
-    from warp_critic.learning.networks import TOLD_INPUTS
+    from warp_critic.learning.critic_inputs import TOLD_INPUTS
     from warp_critic.methods.identify import SETTINGS
 
     if not isinstance(s, dict):

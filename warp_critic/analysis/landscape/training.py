@@ -16,9 +16,10 @@ import torch
 
 from warp_critic.analysis.landscape.problem import GoalRelative, constant_force
 from warp_critic.core.errors import DivergenceError
+from warp_critic.learning.critic import Critic
 from warp_critic.learning.inner import policy_fn
 from warp_critic.learning.losses import critic_loss, td_loss
-from warp_critic.learning.networks import Critic, Normalizer
+from warp_critic.learning.networks import Normalizer
 from warp_critic.learning.outer import meta_loss
 from warp_critic.learning.rollout import rollout
 from warp_critic.methods.replay import ReplayBuffer, rewards

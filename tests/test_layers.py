@@ -1,0 +1,210 @@
+"""The house rules of the package's layout: the layer order, small modules, the design table.
+
+* A module imports only from its own layer and the layers before it (``docs/design.md``): every
+  ``import`` and ``from`` is read with ``ast`` -- at the top, in functions, under ``TYPE_CHECKING``,
+  relative ones -- and so is every module-path string (``"warp_critic.x.y:func"``,
+  ``"warp_critic.x.y"``) that a registry imports later. The imports up a layer that exist today are
+  listed in :data:`KNOWN_UPWARD`: a new one fails, and so does a listed one that is gone.
+* Every module has at most 400 lines (the ones still over are listed, and must stay listed only
+  while they are over).
+* ``docs/design.md``'s module table is the one ``tools/design_table.py`` generates: every module,
+  described by its own docstring.
+
+Reads source files only; imports nothing of the package.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+import re
+from pathlib import Path
+
+import pytest
+from conftest import ROOT
+
+PACKAGE = ROOT / "warp_critic"
+MAX_LINES = 400
+
+#: imports up a layer that exist today (module -> module it imports); a new one fails the test
+KNOWN_UPWARD = {
+    # identify reuses meta-test's set-up (a run's critic, scene and simulator); to go when that
+    # set-up moves below methods/ (issue 46's method registry)
+    ("warp_critic.methods.identify", "warp_critic.evaluation.metatest"),
+}
+#: modules still over MAX_LINES (path under warp_critic/ -> why it is allowed for now)
+KNOWN_LONG = {
+    "reproduce/settings.py": "417 lines at 2b7c77a; split with issue 46's recipes-as-data",
+}
+#: packages that are no layer: shipped with the package, first used by this layer
+RESOURCES = {"kernels": "physics", "scenes": "physics"}
+_MODULE_PATH = re.compile(r"^warp_critic(?:\.[A-Za-z_]\w*)+(?::[A-Za-z_][\w.]*)?$")
+
+
+def _tool():
+    spec = importlib.util.spec_from_file_location(
+        "design_table", ROOT / "tools" / "design_table.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+TOOL = _tool()
+LAYERS: tuple[str, ...] = TOOL.LAYERS
+
+
+def module_name(path: Path, package: Path = PACKAGE) -> str:
+    parts = [package.name, *path.relative_to(package).with_suffix("").parts]
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def references(source: str, module: str, is_package: bool = False) -> list[tuple[str, int]]:
+    """Every module of the package that ``source`` (the module ``module``) names: imported
+    anywhere (relative imports resolved), or written as a module-path string. ``(name, line)``."""
+    package = module if is_package else module.rpartition(".")[0]
+    found: list[tuple[str, int]] = []
+    for node in ast.walk(ast.parse(source)):
+        names: list[str] = []
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                stem = ".".join(base + ([node.module] if node.module else []))
+            else:
+                stem = node.module or ""
+            # ``from . import name``: name is a module; ``from pkg import name``: pkg decides
+            names = [f"{stem}.{a.name}" for a in node.names] if node.module is None else [stem]
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+            if _MODULE_PATH.match(node.value):
+                names = [node.value.split(":")[0]]
+        found += [(n, node.lineno) for n in names if n.split(".")[0] == "warp_critic"]
+    return found
+
+
+def layer(module: str) -> int:
+    """The layer index of a module of the package. The package root (the public API of every
+    layer, and the version) counts as the last layer: the CLI may read it, nothing below."""
+    parts = module.split(".")
+    if len(parts) < 2:
+        return len(LAYERS) - 1
+    name = RESOURCES.get(parts[1], parts[1])
+    if name not in LAYERS:
+        raise AssertionError(f"{module}: {parts[1]}/ is no layer of docs/design.md: {LAYERS}")
+    return LAYERS.index(name)
+
+
+def upward_imports(package: Path = PACKAGE) -> dict[tuple[str, str], list[str]]:
+    """``(module, imported module) -> ['path:line', ...]`` for every import up a layer."""
+    found: dict[tuple[str, str], list[str]] = {}
+    for path in sorted(package.rglob("*.py")):
+        module = module_name(path, package)
+        if module == package.name:  # the package root re-exports every layer's public API
+            continue
+        own = layer(module)
+        source = path.read_text(encoding="utf-8")
+        for target, line in references(source, module, path.name == "__init__.py"):
+            if layer(target) > own:
+                where = f"{path.relative_to(package.parent)}:{line}"
+                found.setdefault((module, target), []).append(where)
+    return found
+
+
+def test_the_scanner_sees_every_form_of_import(tmp_path):
+    """Each form the rule covers, in a package laid out like ours: found, with its line."""
+    pkg = tmp_path / "warp_critic"
+    (pkg / "physics").mkdir(parents=True)
+    (pkg / "physics" / "__init__.py").write_text("")
+    (pkg / "physics" / "ok.py").write_text("from warp_critic.core import errors\n")
+    (pkg / "physics" / "bad.py").write_text(
+        "import warp_critic.running.loop\n"
+        "from typing import TYPE_CHECKING\n"
+        "if TYPE_CHECKING:\n"
+        "    from warp_critic.methods.ours import TrainConfig\n"
+        "def f():\n"
+        "    from ..learning import rollout\n"
+        "    from .. import cli\n"
+        "    return 'warp_critic.evaluation.metatest:meta_test'\n"
+        "LAZY = {'warp_critic.reproduce.report': ('x',)}\n"
+        "import warp_critic\n"
+        "from warp_critic.physics.scene import Scene  # own layer: fine\n"
+        "from warp_critic.kernels.kinematics import k  # a resource of physics: fine\n"
+    )
+    found = upward_imports(pkg)
+    assert found == {
+        ("warp_critic.physics.bad", "warp_critic.running.loop"): ["warp_critic/physics/bad.py:1"],
+        ("warp_critic.physics.bad", "warp_critic.methods.ours"): ["warp_critic/physics/bad.py:4"],
+        ("warp_critic.physics.bad", "warp_critic.learning"): ["warp_critic/physics/bad.py:6"],
+        ("warp_critic.physics.bad", "warp_critic.cli"): ["warp_critic/physics/bad.py:7"],
+        ("warp_critic.physics.bad", "warp_critic.evaluation.metatest"): [
+            "warp_critic/physics/bad.py:8"
+        ],
+        ("warp_critic.physics.bad", "warp_critic.reproduce.report"): [
+            "warp_critic/physics/bad.py:9"
+        ],
+        ("warp_critic.physics.bad", "warp_critic"): ["warp_critic/physics/bad.py:10"],
+    }
+    (pkg / "extra").mkdir()
+    (pkg / "extra" / "x.py").write_text("")
+    with pytest.raises(AssertionError, match="extra/ is no layer"):
+        upward_imports(pkg)
+
+
+def test_no_module_imports_a_later_layer():
+    found = upward_imports()
+    new = {k: v for k, v in found.items() if k not in KNOWN_UPWARD}
+    assert not new, "imports up a layer (docs/design.md, Layers): " + "; ".join(
+        f"{a} -> {b} at {', '.join(where)}" for (a, b), where in sorted(new.items())
+    )
+    gone = KNOWN_UPWARD - set(found)
+    assert not gone, f"no longer imported up a layer: remove from KNOWN_UPWARD: {sorted(gone)}"
+
+
+def test_every_module_has_at_most_400_lines():
+    lengths = {
+        str(p.relative_to(PACKAGE)): len(p.read_text(encoding="utf-8").splitlines())
+        for p in sorted(PACKAGE.rglob("*.py"))
+    }
+    lengths.update(
+        {
+            f"kernels/{p.name}": len(p.read_text().splitlines())
+            for p in (ROOT / "kernels").glob("*.py")
+        }
+    )
+    long = {p: n for p, n in lengths.items() if n > MAX_LINES and p not in KNOWN_LONG}
+    assert not long, f"modules over {MAX_LINES} lines (split along a seam): {long}"
+    short = [p for p in KNOWN_LONG if lengths.get(p, 0) <= MAX_LINES]
+    assert not short, f"now at most {MAX_LINES} lines (or gone): remove from KNOWN_LONG: {short}"
+
+
+def test_the_design_table_is_complete_and_current():
+    text = (ROOT / "docs" / "design.md").read_text(encoding="utf-8")
+    assert TOOL.rewrite(text, TOOL.table()) == text, (
+        "docs/design.md's module table is not current: python tools/design_table.py --write"
+    )
+    rows = text.split(TOOL.BEGIN)[1].split(TOOL.END)[0]
+    for path in PACKAGE.rglob("*.py"):
+        rel = path.relative_to(PACKAGE)
+        if path.name != "__init__.py":
+            assert f"| `{rel.with_suffix('')}` |" in rows, f"{rel} has no row in the design table"
+    for name in LAYERS:  # the prose names the layers in the order the tool and this test use
+        assert f"`{name}/`" in text
+    order = [text.index(f"`{name}/`,") for name in LAYERS[:-1]]
+    assert order == sorted(order), "docs/design.md lists the layers out of order"
+
+
+def test_the_design_table_reads_each_module_s_first_sentence(tmp_path):
+    pkg = tmp_path / "warp_critic"
+    (pkg / "core").mkdir(parents=True)
+    (pkg / "core" / "__init__.py").write_text('"""Core: the base."""\n')
+    (pkg / "core" / "a.py").write_text(
+        '"""Alpha, e.g. the first\nmodule (:mod:`~warp_critic.core.b`). More | text.\n\nBody."""\n'
+    )
+    (pkg / "core" / "b.py").write_text("x = 1\n")
+    assert TOOL.table(pkg).splitlines()[2:] == [
+        "| **`core/`** | Core: the base. |",
+        "| `core/a` | Alpha, e.g. the first module (`b`). |",
+        "| `core/b` | (no docstring) |",
+    ]
