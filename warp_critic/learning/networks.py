@@ -77,7 +77,7 @@ POLICY_INIT_SCHEMES = ("fresh", "fixed", "persistent")
 
 CONTINUOUS_HALF_RANGE = 1e6  # rad: a joint whose limits are this far apart has none
 
-#: the critic inputs told each world's model (privileged: ``tools/identify.py`` estimates it instead)
+#: the critic inputs told each world's model (privileged: ``warp-critic identify`` estimates it instead)
 TOLD_INPUTS = ("pose-dynamics", "relative-dynamics")
 
 
