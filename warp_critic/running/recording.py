@@ -300,7 +300,6 @@ class TrainingRecorder:
             ("task_loss", "task_loss/mean"),
             ("task_loss_before", "task_loss_before/mean"),
             ("task_loss_explore", "task_loss_explore/mean"),
-            ("seconds", "seconds"),
         ):
             if row.get(key) is not None:
                 self.rec.scalar(f"train/{entity}", row[key])

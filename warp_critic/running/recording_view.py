@@ -81,7 +81,8 @@ def training_blueprint(method: str, camera: rrb.EyeControls3D | None = None) -> 
     )
     return rrb.Blueprint(
         rrb.Horizontal(rrb.Vertical(mean, per_goal, critic, last), robot, column_shares=[1, 1]),
-        rrb.TimePanel(timeline="iteration", state="collapsed"),
+        # following: the cursor at the last iteration, also while a long file is still loading
+        rrb.TimePanel(timeline="iteration", state="collapsed", play_state="following"),
         rrb.BlueprintPanel(state="collapsed"),
         rrb.SelectionPanel(state="collapsed"),
     )
