@@ -1,10 +1,12 @@
-"""Recording: the one module that writes rerun ``.rrd`` files (and nothing else does).
+"""Recording: the one module that writes rerun ``.rrd`` files (``recording_view`` only draws the
+robot into a stream opened here).
 
 Everything is written headlessly through an explicit :class:`rerun.RecordingStream` saved to a file:
 no viewer is spawned and no port is opened. Close the recorder (or use it as a context manager) so
 that the file gets its footer; ``rerun path/to/recording.rrd`` then opens it.
 
-Timelines: ``iteration`` (outer/training iterations), ``step`` (simulation steps inside a rollout).
+A training run's recording is on one timeline, ``iteration`` (outer/training iterations), which its
+layout opens on: the time cursor selects the iteration whose rollouts the 3-D view shows.
 """
 
 from __future__ import annotations
