@@ -221,8 +221,18 @@ def test_identifier_version_2_reads_the_response_size_free():
         Identifier(dof, K, version=3)
 
 
-def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, capsys):
-    """tools/identify.py on a told run: a new run whose critic is the identified one (meta-test
+def exit_code(argv: list[str]) -> int:
+    """``warp-critic ARGV`` in process: its exit code, whether returned or raised (argparse)."""
+    from warp_critic.cli.main import main
+
+    try:
+        return main(argv)
+    except SystemExit as e:
+        return int(e.code or 0)
+
+
+def test_identify_command_writes_a_run_that_meta_tests_without_the_model(tmp_path, capsys):
+    """warp-critic identify on a told run: a new run whose critic is the identified one (meta-test
     loads it and tests a new model), the regression's losses written; misuse is one line, exit 2."""
     from test_tools import load_tool
     from test_train_variants import _train
@@ -234,10 +244,9 @@ def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, 
     told, plain = tmp_path / "told", tmp_path / "plain"
     assert main(_train(told, "--critic-input", "pose-dynamics", iterations=1)) == 0
     assert main(_train(plain, "--critic-input", "pose", iterations=1)) == 0
-    tool = load_tool("identify")
     out = tmp_path / "identified"
     argv = [str(told), "--out", str(out), "--iterations", "3", "--goals", "2", "--inits", "2"]
-    assert tool.main(argv) == 0
+    assert main(["identify", *argv]) == 0
     text = capsys.readouterr().out
     assert "varied entries" in text and f"run: {out}" in text
     rows = [json.loads(x) for x in (out / "identify.jsonl").read_text().splitlines()]
@@ -271,26 +280,23 @@ def test_identify_tool_writes_a_run_that_meta_tests_without_the_model(tmp_path, 
         ([str(told), "--out", str(tmp_path / "y"), "--variants", "arm9.mass=1..2"], "arm9"),
         ([str(told), "--out", str(tmp_path / "y"), "--variants", "arm2.mass=2..1"], "LO > HI"),
     ):
-        with pytest.raises(SystemExit) as e:
-            tool.main(bad)
-        assert e.value.code == 2
+        assert exit_code(["identify", *bad]) == 2
         err = capsys.readouterr().err
-        assert err.startswith("identify: error: ") and err.count("\n") == 1 and words in err, err
+        assert err.startswith("warp-critic: error: ") and err.count("\n") == 1 and words in err, err
         assert "--variants" in err or "arm" not in words
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
     # a drawn model that diverges (a massless arm1): the run stops on divergence (on_divergence
     # stop, the default), so identify stops as its meta-train does on it: one line, exit 1, no run
     few = ["--iterations", "2", "--goals", "2", "--inits", "2"]
-    with pytest.raises(SystemExit) as e:
-        tool.main([str(told), "--out", str(tmp_path / "z"), *few, "--variants", "arm1.mass=0..0"])
+    code = exit_code(["identify", str(told), "--out", str(tmp_path / "z"), *few, "--variants", "arm1.mass=0..0"])
     err = capsys.readouterr().err
-    assert e.value.code == 1 and err.startswith("identify: diverged: iteration 0 "), err
+    assert code == 1 and err.startswith("warp-critic: diverged: iteration 0 "), err
     assert err.count("\n") == 1 and "'arm1.mass=0:keep'" in err, err
     assert not (tmp_path / "z").exists()
     # other draws than training's: recorded in the summary
     light = tmp_path / "light"
     argv = [str(told), "--out", str(light), "--iterations", "2", "--goals", "2", "--inits", "2"]
-    assert tool.main([*argv, "--variants", "arm2.mass=0.25..1:keep"]) == 0
+    assert main(["identify", *argv, "--variants", "arm2.mass=0.25..1:keep"]) == 0
     capsys.readouterr()
     assert json.loads((light / "identify.json").read_text())["variants"] == "arm2.mass=0.25..1:keep"
     assert "variants" not in json.loads((out / "identify.json").read_text())
@@ -349,12 +355,11 @@ def test_identified_critic_feeds_each_seed_its_own_identifier():
 
 
 def test_resuming_an_identified_run_trains_its_critic_on_the_estimates(tmp_path):
-    """``meta-train --resume`` on tools/identify.py's output: the critic keeps training, fed its
+    """``meta-train --resume`` on ``warp-critic identify``'s output: the critic keeps training, fed its
     identifier's estimates as at meta-test (the iterations say so, and they differ from resuming
     the told run from the same state), and the identifier stays in the checkpoint, unchanged."""
     import shutil
 
-    from test_tools import load_tool
     from test_train_variants import _train
 
     from warp_critic.cli.main import main
@@ -363,7 +368,7 @@ def test_resuming_an_identified_run_trains_its_critic_on_the_estimates(tmp_path)
     assert main(_train(told, "--critic-input", "pose-dynamics", iterations=2)) == 0
     out = tmp_path / "identified"
     argv = [str(told), "--out", str(out), "--iterations", "2", "--goals", "2", "--inits", "2"]
-    assert load_tool("identify").main(argv) == 0
+    assert main(["identify", *argv]) == 0
     before = torch.load(out / "checkpoint.pt", weights_only=False)
     again = tmp_path / "told-again"
     shutil.copytree(told, again)

@@ -17,7 +17,7 @@ from warp_critic.methods import ours as train
 from warp_critic.methods.ours import TrainConfig
 from warp_critic.physics import bridge
 from warp_critic.physics.scene import load_scene
-from warp_critic.running.recording import read_entity_paths
+from warp_critic.running.recording import read_entity_paths, read_times
 from warp_critic.running.rundir import load_checkpoint
 
 TINY = [
@@ -59,9 +59,11 @@ def test_meta_train_cli_writes_run_directory_and_resumes(tmp_path, capsys):
     assert all(len(r["task_loss_per_goal"]) == 2 for r in rows)
     entities = read_entity_paths(out / "recording.rrd")
     assert "/train/task_loss/goal0" in entities and "/train/task_loss/goal1" in entities
-    assert any(e.startswith("/rollout/before/it0/goal0/body") for e in entities)
-    assert any(e.startswith("/rollout/after/it2/goal1/body") for e in entities)
-    assert any(e.startswith("/train/policy/") for e in entities)
+    # the arm before and after the inner update, on the iteration timeline: the first and last
+    assert read_times(out / "recording.rrd", "/robot/goal0/before/") == {0, 2}
+    assert read_times(out / "recording.rrd", "/robot/goal1/after/") == {0, 2}
+    assert "/robot/goal1/target/tip" in entities  # the goal, drawn
+    assert read_times(out / "recording.rrd", "/train/policy/update_norm") == {0, 1, 2}
 
     # an existing run is never overwritten without --resume
     assert main(["meta-train", REACHER, *TINY, "--iterations", "3", "--out", str(out)]) == 2

@@ -1,95 +1,20 @@
 #!/usr/bin/env python
-"""Train a model identifier for a run whose critic was told the model, and write the run with it.
-
-The run must be a ``meta-train --critic-input pose-dynamics`` (or ``relative-dynamics``) run with
-``--train-variants``. The written run's critic estimates each world's model from the rollouts it
-evaluates (``warp_critic.learning.identify``), so ``meta-test``, ``tools/maps_of_runs.py`` and
-``tools/tables_of_runs.py`` test it without privileged data.
+"""Kept for old command lines: ``warp-critic identify`` (``warp-critic identify --help``) does it.
 
 Usage::
 
-    python tools/identify.py runs/told-s0 --out runs/told-identified-s0 --iterations 1000
+    python tools/identify.py RUN --out RUN2 ...   # = warp-critic identify RUN --out RUN2 ...
 """
 
 from __future__ import annotations
 
 import sys
 
-from warp_critic.cli.flags import ToolParser, user_message
-
-PROG = "identify"
+from warp_critic.cli.main import main as warp_critic
 
 
-def main(argv=None) -> int:
-    p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
-    p.add_argument("run_dir", help="a run whose critic reads the dynamics (pose-dynamics)")
-    p.add_argument("--out", required=True, help="the new run folder (new or empty)")
-    p.add_argument("--iterations", type=int, default=1000, help="regression steps (default 1000)")
-    p.add_argument("--goals", type=int, default=8, help="goals per iteration (default 8)")
-    p.add_argument("--inits", type=int, default=16, help="fresh policies per goal (default 16)")
-    p.add_argument("--lr", type=float, default=1e-3, help="Adam learning rate (default 1e-3)")
-    p.add_argument("--hidden", type=int, default=128, help="per-step MLP units (default 128)")
-    p.add_argument(
-        "--version",
-        type=int,
-        default=2,
-        choices=(1, 2),
-        help="architecture: 2, with the response's moments and a nonlinear head (default); 1, "
-        "the per-step features' mean and a linear head (warp_critic.learning.identify)",
-    )
-    p.add_argument(
-        "--variants",
-        default=None,
-        help="draw the models from these ranges (meta-train --train-variants text) instead of "
-        "the run's own train_variants, e.g. to give light masses a larger share",
-    )
-    p.add_argument("--seed", type=int, default=0, help="draws, goals and policies (default 0)")
-    p.add_argument("--device", default="cpu")
-    args = p.parse_args(argv)
-    for flag in ("iterations", "goals", "inits", "hidden"):
-        if getattr(args, flag) < 1:
-            p.error(f"--{flag} must be >= 1")
-    if not args.lr > 0:
-        p.error("--lr must be > 0")
-    if args.seed < 0:
-        p.error("--seed must be >= 0")
-    from warp_critic.core import runtime
-
-    runtime.init()
-    from warp_critic.core.errors import DivergenceError, UserError
-    from warp_critic.methods.identify import train_identifier
-
-    every = max(1, args.iterations // 20)
-
-    def progress(it: int, loss: float) -> None:
-        if it % every == 0 or it == args.iterations - 1:
-            print(f"iteration {it}: loss {loss:.5f}", flush=True)
-
-    try:
-        r = train_identifier(
-            args.run_dir,
-            args.out,
-            iterations=args.iterations,
-            goals=args.goals,
-            inits=args.inits,
-            lr=args.lr,
-            hidden=args.hidden,
-            version=args.version,
-            variants=args.variants,
-            seed=args.seed,
-            device=args.device,
-            progress=progress,
-        )
-    except UserError as e:
-        p.exit(2, f"{PROG}: error: {user_message(e, rename={'train_variants': '--variants'})}\n")
-    except DivergenceError as e:  # as meta-train on those models: one line, exit 1
-        p.exit(1, f"{PROG}: diverged: {e}\n")
-    print(
-        f"final loss {r['loss']:.5f}; on a fresh draw the estimate misses the {r['varied']} "
-        f"varied entries by {r['held_out']:.4f} on average (descriptor units)"
-    )
-    print(f"run: {args.out}")
-    return 0
+def main(argv: list[str] | None = None) -> int:
+    return warp_critic(["identify", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

@@ -1,97 +1,21 @@
-"""The paper's Table 1 protocol over several meta-trained critics (seeds); prints the table.
-
-A thin script over :mod:`warp_critic.evaluation.protocol`: for every goal std and goal-noise reading, each run
-directory's critic trains ``--inits`` fresh policies (model-free) for ``--num-goals`` new goals
-sampled around training goals ``--around``; the errors of all runs are pooled, as in the paper ("the
-mean squared error between last state and goal over 10 new goals, 5 seeds and 5 new policy
-initialization"). Every run sees the same goals and policy initialisations (``--seed``).
-
-Each cell is ``mean(std)`` over the pooled errors: ``MSE`` (mean over the joints, the paper's metric)
-and ``sum sq.`` (``||q_T - g||^2``, the task loss).
+#!/usr/bin/env python
+"""Kept for old command lines: ``warp-critic score`` (``warp-critic score --help``) runs the
+paper's Table 1 protocol.
 
 Usage::
 
-    python tools/paper_table.py runs/kuka-seed0 runs/kuka-seed1 ... [--stds 0.1,0.4]
-        [--goal-noise per-joint,distance] [--around 0,1] [--out table.json]
-
-Lists are comma-separated; ``--around ''`` samples around every training goal. Works for any
-method's run directory (ours, DDPG, Meta-Critic).
+    python tools/paper_table.py RUN_DIR... [flags]   # = warp-critic score RUN_DIR... [flags]
 """
 
 from __future__ import annotations
 
-import json
 import sys
-from pathlib import Path
 
-from warp_critic.cli.flags import ToolParser, comma_list, user_message  # noqa: E402
-
-PROG = "paper_table"
-RENAME = {"run_dirs": "RUN_DIR"}
+from warp_critic.cli.main import main as warp_critic
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
-    p.add_argument(
-        "run_dirs", nargs="+", metavar="RUN_DIR", help="run directories (one per meta-train seed)"
-    )
-    p.add_argument(
-        "--stds",
-        type=comma_list(float),
-        default=[0.1, 0.4],
-        help="goal stds (rad), e.g. 0.1,0.4; the paper: 0.1 .. 1.0",
-    )
-    p.add_argument(
-        "--goal-noise",
-        type=comma_list(str),
-        default=["per-joint", "distance"],
-        dest="goal_noise",
-        help="readings of 'at a distance of N(0, std)': per-joint and/or distance (see warp_critic.evaluation.metatest.sample_goals)",
-    )
-    p.add_argument(
-        "--around",
-        type=comma_list(int),
-        default=[0, 1],
-        help="training goals to sample around, e.g. 0,1 (the paper: two of the four); '' = all",
-    )
-    p.add_argument("--num-goals", type=int, default=10)
-    p.add_argument("--inits", type=int, default=5, help="fresh policy initialisations per goal")
-    p.add_argument(
-        "--seed", type=int, default=1, help="seed of the goals and policy initialisations"
-    )
-    p.add_argument("--device", default="auto")
-    p.add_argument("--out", default=None, help="write the table as JSON here")
-    args = p.parse_args(argv)
-
-    from warp_critic.core import runtime
-    from warp_critic.core.errors import UserError
-    from warp_critic.evaluation.protocol import ProtocolConfig, format_table, run_protocol
-
-    pc = ProtocolConfig(
-        run_dirs=args.run_dirs,
-        stds=args.stds,
-        goal_noise=args.goal_noise,
-        around=args.around or None,
-        num_goals=args.num_goals,
-        inits=args.inits,
-        seed=args.seed,
-        device=args.device,
-    )
-    try:
-        runtime.init()
-        result = run_protocol(pc)
-    except UserError as e:
-        print(f"{PROG}: error: {user_message(e, rename=RENAME)}", file=sys.stderr)
-        return 2
-    print(
-        f"{len(pc.run_dirs)} run(s) x {pc.num_goals} goals x {pc.inits} inits per cell, "
-        f"around training goals {result.around or 'all'}; {result.seconds:.0f} s"
-    )
-    print("\n".join(format_table(result)))
-    if args.out:
-        Path(args.out).write_text(json.dumps(result.to_dict(), indent=2))
-        print(f"written: {args.out}")
-    return 0
+    return warp_critic(["score", *(sys.argv[1:] if argv is None else argv)])
 
 
 if __name__ == "__main__":

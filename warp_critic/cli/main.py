@@ -270,11 +270,18 @@ def build_parser() -> argparse.ArgumentParser:
     landscape.add_arguments(al)
     al.set_defaults(func=landscape.run_from_args)
 
+    from warp_critic.cli import identify as identify_cli
     from warp_critic.cli import reproduce as reproduce_cli
+    from warp_critic.cli import score as score_cli
 
-    rp = sub.add_parser("reproduce", help=reproduce_cli.HELP, description=reproduce_cli.DESCRIPTION)
-    reproduce_cli.add_arguments(rp)
-    rp.set_defaults(func=reproduce_cli.run_from_args)
+    for name, module in (
+        ("score", score_cli),
+        ("identify", identify_cli),
+        ("reproduce", reproduce_cli),
+    ):
+        sp = sub.add_parser(name, help=module.HELP, description=module.DESCRIPTION)
+        module.add_arguments(sp)
+        sp.set_defaults(func=module.run_from_args)
     return p
 
 

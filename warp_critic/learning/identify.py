@@ -153,7 +153,7 @@ class IdentifiedCritic(nn.Module):
 
 
 def identifier_from_checkpoint(ckpt: dict) -> Identifier | None:
-    """The identifier a run's checkpoint carries (``tools/identify.py`` wrote it), or ``None``."""
+    """The identifier a run's checkpoint carries (``warp-critic identify`` wrote it), or ``None``."""
     if "identifier_state" not in ckpt:
         return None
     meta = ckpt["identifier"]

@@ -23,6 +23,7 @@ class OuterResult:
     before: Trajectory  # rollout of the initial policies (inner loop data)
     after: Trajectory  # rollout of the updated policies through the model (detached)
     params_new: PolicyParams  # updated policy parameters (detached)
+    params: PolicyParams  # the policy parameters before the inner update (detached)
     # (W,) bool: the worlds that stayed finite in every rollout; with ``drop_diverged`` the others
     # are out of ``loss`` and ``losses`` (0 there) and get no gradient
     settled: torch.Tensor
@@ -94,5 +95,6 @@ def meta_loss(
         before=trajs[0],
         after=Trajectory(after.q.detach(), after.qd.detach(), after.tau.detach(), after.dynamics),
         params_new={k: v.detach() for k, v in params_new.items()},
+        params={k: v.detach() for k, v in params.items()},
         settled=settled,
     )

@@ -220,7 +220,7 @@ def probe_identifier(
         m = setup_meta_test(tc)
         if not isinstance(m.critic, IdentifiedCritic):
             raise UserError(
-                f"{run_dir}: its critic has no model identifier (see tools/identify.py)"
+                f"{run_dir}: its critic has no model identifier (see warp-critic identify --help)"
             )
         names = m.sim.dynamics_names
         _, trajs = m.update(m.params, check=False, guard=True)

@@ -183,7 +183,7 @@ def meta_train(
             session.seeded(i)
         critic = StackedCritic(critics)
         opt = torch.optim.Adam(critic.ordered(), lr=filled(cfg.lr, "lr"))
-        # an identified run's identifiers (tools/identify.py), and their checkpoint entries, kept
+        # an identified run's identifiers (warp-critic identify), and their checkpoint entries, kept
         identifiers: list = []
         identified: list[dict] = []
         for i in range(S):
@@ -207,7 +207,7 @@ def meta_train(
             if len(identified) != S:
                 raise UserError(
                     "identified and told runs cannot resume together: resume the identified ones "
-                    "(tools/identify.py's outputs) apart"
+                    "(warp-critic identify's outputs) apart"
                 )
             inner_critic = IdentifiedCritic(critic, identifiers)
         params = _cat(seed_params)

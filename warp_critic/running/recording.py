@@ -1,21 +1,39 @@
-"""Recording: the one module that writes rerun ``.rrd`` files (and nothing else does).
+"""Recording: the one module that writes rerun ``.rrd`` files (``recording_view`` only draws the
+robot into a stream opened here).
 
 Everything is written headlessly through an explicit :class:`rerun.RecordingStream` saved to a file:
 no viewer is spawned and no port is opened. Close the recorder (or use it as a context manager) so
 that the file gets its footer; ``rerun path/to/recording.rrd`` then opens it.
 
-Timelines: ``iteration`` (outer/training iterations), ``step`` (simulation steps inside a rollout).
+A training run's recording is on one timeline, ``iteration`` (outer/training iterations), which its
+layout opens on: the time cursor selects the iteration whose rollouts the 3-D view shows.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from datetime import timedelta
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
+
+from warp_critic.running.recording_view import (
+    ACTOR_SIGNALS,
+    BASE_COLOR,
+    BEFORE_COLOR,
+    CRITIC_SIGNALS,
+    MAX_GOALS_DRAWN,
+    MEAN_COLOR,
+    POLICY_COLOR,
+    RobotDrawing,
+    camera_for,
+    goal_color,
+    grid_offsets,
+    training_blueprint,
+)
 
 
 class Recorder:
@@ -25,6 +43,8 @@ class Recorder:
         path: output ``.rrd`` file; parent folders are created.
         application_id: shown in the viewer's title.
         blueprint: optional layout sent with the recording.
+        flush_seconds: how long logged data may wait to be batched into larger chunks (smaller
+            files; :meth:`flush` writes it at once); ``None``: rerun's default (a few ms).
     """
 
     def __init__(
@@ -33,12 +53,20 @@ class Recorder:
         application_id: str = "warp-critic",
         blueprint=None,
         recording_id: str | None = None,
+        flush_seconds: float | None = None,
     ):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         # segments of one run (a resumed run records each segment) share the run's recording id, so
         # merged or opened together they are one recording
-        self.stream = rr.RecordingStream(application_id, recording_id=recording_id)
+        batcher = None
+        if flush_seconds is not None:
+            batcher = rr.ChunkBatcherConfig(
+                flush_tick=timedelta(seconds=flush_seconds), flush_num_bytes=1 << 20
+            )
+        self.stream = rr.RecordingStream(
+            application_id, recording_id=recording_id, batcher_config=batcher
+        )
         self.stream.save(str(self.path), default_blueprint=blueprint)
         self._closed = False
 
@@ -160,28 +188,19 @@ def read_entity_paths(path: str | Path) -> set[str]:
     return {str(p) for p in schema.entity_paths()}
 
 
-_GOAL_COLORS = [
-    (230, 25, 75),
-    (60, 180, 75),
-    (0, 130, 200),
-    (245, 130, 48),
-    (145, 30, 180),
-    (70, 240, 240),
-    (240, 50, 230),
-    (210, 245, 60),
-    (128, 128, 0),
-    (0, 0, 128),
-]
-
-
 class TrainingRecorder:
     """Records a training run (any method) into ``recording.rrd``; used as a training callback.
 
-    Logs, on the ``iteration`` timeline: the task loss per goal and its mean, the task loss of the
-    untrained policies, and a policy-parameter trace (the first parameters and the norm of the
-    updated policy of world 0). Every ``record_every`` iterations (and the first and last ones) it
-    logs the rollout of one world per goal *before* and *after* the inner update as 3-D link
-    transforms on the ``step`` timeline under ``rollout/<before|after>/it<k>/goal<i>/body<j>``.
+    Everything is on the ``iteration`` timeline, which the recording opens on
+    (:func:`training_blueprint`): ``train/task_loss/{mean,goal<i>}`` (the updated policies; a
+    baseline's noise-free actor), ``train/task_loss_before/mean`` (ours: the untrained policies) or
+    ``train/task_loss_explore/mean`` (a baseline's exploration), ``train/critic/<signal>``,
+    ``train/actor/actor_loss`` (baselines), ``train/policy/update_norm`` (ours: the inner update's
+    ``|theta' - theta|`` of the run's first world). The 3-D view holds one copy of the robot per goal (the
+    first :data:`MAX_GOALS_DRAWN`), laid side by side under ``robot/goal<i>``: ``target`` (the goal
+    pose as a wireframe ghost, its tip labelled), ``base``, and every ``record_every`` iterations
+    (and the first and last) ``before`` and ``after`` (the final pose of one world of that goal and
+    its tip path, before and after the inner update). Moving the time cursor selects an iteration.
 
     Args:
         path: output ``.rrd``.
@@ -190,6 +209,7 @@ class TrainingRecorder:
         history: metrics rows of earlier iterations (a resumed run re-logs them so the recording is complete).
         record_every: rollout recording period (iterations).
         last_iteration: index of the final iteration (always recorded).
+        world_offset: this run's first world in ``sim`` (runs of several seeds share one).
     """
 
     def __init__(
@@ -206,105 +226,152 @@ class TrainingRecorder:
     ):
         self.sim, self.goals = sim, goals
         self.record_every, self.last_iteration = record_every, last_iteration
-        self.world_offset = (
-            world_offset  # this run's first world in ``sim`` (runs of several seeds share one)
-        )
+        self.world_offset = world_offset
         G = goals.shape[0]
-        blueprint = rrb.Blueprint(
-            rrb.Horizontal(
-                rrb.Vertical(
-                    rrb.TimeSeriesView(origin="/train/task_loss", name="task loss per goal"),
-                    rrb.TimeSeriesView(origin="/train/policy", name="policy parameters"),
-                ),
-                rrb.Spatial3DView(
-                    origin="/rollout", name="rollouts (before / after the inner update)"
-                ),
-            ),
-            collapse_panels=True,
+        self.shown = min(G, MAX_GOALS_DRAWN)
+        self.drawing = RobotDrawing.from_model(
+            sim.model,
+            sim.worlds,
+            sim.scene.ee_body,
+            sim.scene.tip_offset_of(sim.variants[world_offset]),
         )
+        q = sim.zeros()
+        for g in range(self.shown):
+            q[world_offset + g] = goals[g]
+        goal_poses = sim.body_poses(q)[world_offset : world_offset + self.shown]
+        reach = self._reach(goal_poses[0])
+        spacing = max(2.2 * reach, 0.5)
+        self.offsets = grid_offsets(self.shown, spacing)
+        # the camera frames the goal poses and room around each base to move in; a planar robot
+        # (its goal poses flat in z) is seen from above
+        robot = np.concatenate([self.drawing.points(p) for p in goal_poses])
+        flat = np.ptp(robot[:, 2]) < 0.1 * max(float(np.ptp(robot[:, :2], 0).max()), 1e-6)
+        room = np.array([[-0.6 * reach, -0.6 * reach, 0.0], [0.6 * reach, 0.6 * reach, 0.0]])
+        frame = [self.drawing.points(p) + o for p, o in zip(goal_poses, self.offsets)]
+        frame += [o + room for o in self.offsets]
         self.rec = Recorder(
             path,
             application_id=f"warp-critic {method} {sim.scene.name}",
-            blueprint=blueprint,
+            blueprint=training_blueprint(method, camera_for(np.concatenate(frame), bool(flat))),
             recording_id=recording_id,
+            flush_seconds=30.0,  # the harness flushes before every checkpoint
         )
-        for i in range(G):
-            self.rec.series_style(
-                f"train/task_loss/goal{i}", f"goal {i}", _GOAL_COLORS[i % len(_GOAL_COLORS)]
-            )
-        self.rec.series_style("train/task_loss/mean", "mean")
-        self.rec.series_style("train/task_loss_before/mean", "untrained policies")
+        self._log_static(goal_poses)
         for row in history:
             self._log_row(row)
 
+    def _reach(self, poses: np.ndarray) -> float:
+        """The robot's length: its links and the tip, end to end (m)."""
+        d = self.drawing
+        links = sum(float(np.linalg.norm(poses[c, :3] - poses[p, :3])) for p, c in d.links)
+        tip = float(np.linalg.norm(d.tip_of(poses) - poses[d.ee_body, :3]))
+        return links + tip + float(np.linalg.norm(poses[0, :3]))
+
+    def _log_static(self, goal_poses: np.ndarray) -> None:
+        s = self.rec.stream
+        for i in range(self.goals.shape[0]):
+            self.rec.series_style(f"train/task_loss/goal{i}", f"goal {i}", goal_color(i))
+        self.rec.series_style("train/task_loss/mean", "mean", MEAN_COLOR)
+        self.rec.series_style("train/task_loss_before/mean", "untrained policies", BEFORE_COLOR)
+        self.rec.series_style("train/task_loss_explore/mean", "exploration", BEFORE_COLOR)
+        for key, (name, color) in {**CRITIC_SIGNALS, **ACTOR_SIGNALS}.items():
+            group = "actor" if key in ACTOR_SIGNALS else "critic"
+            self.rec.series_style(f"train/{group}/{key}", name, color)
+        self.rec.series_style("train/policy/update_norm", "|theta' - theta|", POLICY_COLOR)
+        for g in range(self.shown):
+            root = f"robot/goal{g}"
+            s.log(root, rr.Transform3D(translation=self.offsets[g].astype(np.float32)), static=True)
+            self.drawing.log_static(s, f"{root}/base", BASE_COLOR)
+            self.drawing.log_arm(
+                s, f"{root}/target", goal_poses[g], goal_color(g), solid=False, static=True
+            )
+            s.log(
+                f"{root}/target/tip",
+                rr.Points3D(
+                    [self.drawing.tip_of(goal_poses[g])],
+                    colors=[goal_color(g)],
+                    radii=0.03,
+                    labels=[f"goal {g}"],
+                ),
+                static=True,
+            )
+
     def _log_row(self, row: dict) -> None:
         self.rec.set_time("iteration", row["iteration"])
-        self.rec.scalar("train/task_loss/mean", row["task_loss"])
-        if "task_loss_before" in row:
-            self.rec.scalar("train/task_loss_before/mean", row["task_loss_before"])
+        for key, entity in (
+            ("task_loss", "task_loss/mean"),
+            ("task_loss_before", "task_loss_before/mean"),
+            ("task_loss_explore", "task_loss_explore/mean"),
+        ):
+            if row.get(key) is not None:
+                self.rec.scalar(f"train/{entity}", row[key])
         for i, v in enumerate(row.get("task_loss_per_goal", [])):
-            self.rec.scalar(f"train/task_loss/goal{i}", v)
-        for name in ("grad_norm", "seconds"):
-            if name in row:
-                self.rec.scalar(f"train/{name}", row[name])
+            if v is not None:
+                self.rec.scalar(f"train/task_loss/goal{i}", v)
+        for group, keys in (("critic", CRITIC_SIGNALS), ("actor", ACTOR_SIGNALS)):
+            for key in keys:
+                if row.get(key) is not None:
+                    self.rec.scalar(f"train/{group}/{key}", row[key])
 
     def __call__(self, info) -> None:
         self._log_row(info.metrics)
         res = info.result
-        params = getattr(res, "params_new", None)
-        if params is not None:
+        params, params_new = getattr(res, "params", None), getattr(res, "params_new", None)
+        if params_new is not None and params is not None:
             from warp_critic.learning.networks import flat_params
 
-            flat = flat_params(params)[self.world_offset].detach().cpu().numpy()
-            self.rec.scalar("train/policy/norm", float(np.linalg.norm(flat)))
-            for j in range(min(4, flat.size)):
-                self.rec.scalar(f"train/policy/theta{j}", float(flat[j]))
+            w = self.world_offset
+            step = flat_params(params_new)[w] - flat_params(params)[w]
+            self.rec.scalar("train/policy/update_norm", float(step.norm()))
         it = info.iteration
         if it == 0 or (it + 1) % self.record_every == 0 or it == self.last_iteration:
-            worlds = [
-                int(np.nonzero(info.goal_index.cpu().numpy() == g)[0][0])
-                for g in range(self.goals.shape[0])
-            ]
+            goal_index = info.goal_index.cpu().numpy()
+            worlds = [int(np.nonzero(goal_index == g)[0][0]) for g in range(self.shown)]
             for label, traj in (
                 ("before", getattr(res, "before", None)),
                 ("after", getattr(res, "after", None)),
             ):
                 if traj is not None:
-                    self.log_rollout(f"rollout/{label}/it{it}", traj.q, worlds)
-
-    def log_rollout(self, prefix: str, q, worlds) -> None:
-        """Link transforms of ``worlds`` along a trajectory ``q (T+1, W, dof)``."""
-        T1 = q.shape[0]
-        poses = np.stack([self.sim.body_poses(q[t]) for t in range(T1)])  # (T+1, W, B, 7)
-        tips = np.stack([self.sim.tip_positions(q[t]) for t in range(T1)])  # (T+1, W, 3)
-        for gi, w in enumerate(worlds):
-            self.stream_static_strip(
-                f"{prefix}/goal{gi}/tip_path", tips[:, w], _GOAL_COLORS[gi % len(_GOAL_COLORS)]
-            )
-        for gi, w in enumerate(worlds):
-            color = _GOAL_COLORS[gi % len(_GOAL_COLORS)]
-            for b in range(poses.shape[2]):
-                self.rec.static_box(f"{prefix}/goal{gi}/body{b}", (0.03, 0.03, 0.03), color=color)
-            for t in range(T1):
-                self.rec.set_time("step", t)
-                for b in range(poses.shape[2]):
-                    self.rec.transform(
-                        f"{prefix}/goal{gi}/body{b}", poses[t, w, b, :3], poses[t, w, b, 3:]
-                    )
-                self.rec.line_strips3d(
-                    f"{prefix}/goal{gi}/skeleton", [poses[t, w, :, :3]], colors=[color]
-                )
+                    self.log_rollout(label, traj.q, worlds)
         self.rec.reset_time()
+
+    def log_rollout(self, label: str, q, worlds) -> None:
+        """The final pose and the tip path of ``worlds`` (one per goal drawn) along a trajectory
+        ``q (T+1, W, dof)`` under ``robot/goal<i>/<label>``, at the current iteration."""
+        final = self.sim.body_poses(q[-1])  # (W, B, 7)
+        tips = np.stack([self.sim.tip_positions(q[t]) for t in range(q.shape[0])])  # (T+1, W, 3)
+        s = self.rec.stream
+        for gi, w in enumerate(worlds):
+            color = goal_color(gi) if label == "after" else BEFORE_COLOR
+            entity = f"robot/goal{gi}/{label}"
+            self.drawing.log_arm(s, entity, final[w], color)
+            s.log(f"{entity}/tip_path", rr.LineStrips3D([tips[:, w]], colors=[color], radii=0.006))
 
     def flush(self) -> None:
         """Wait until everything logged so far is written to the file."""
         self.rec.stream.flush()
 
-    def stream_static_strip(self, entity: str, points: np.ndarray, color) -> None:
-        self.rec.stream.log(entity, rr.LineStrips3D([points], colors=[color]), static=True)
-
     def close(self) -> None:
         self.rec.close()
 
 
-__all__ = ["Recorder", "TrainingRecorder", "read_entity_paths", "rrb"]
+def read_times(path: str | Path, entity_prefix: str, timeline: str = "iteration") -> set[int]:
+    """The times on ``timeline`` at which anything under ``entity_prefix`` was logged in an ``.rrd``
+    file (used by tests to check recordings)."""
+    from rerun.chunk import RrdReader  # local: only needed for reading back
+
+    times: set[int] = set()
+    for chunk in RrdReader(Path(path)).store().stream():
+        if chunk.entity_path.startswith(entity_prefix) and timeline in chunk.timeline_names:
+            times.update(chunk.to_record_batch().column(timeline).to_pylist())
+    return times
+
+
+__all__ = [
+    "Recorder",
+    "TrainingRecorder",
+    "read_entity_paths",
+    "read_times",
+    "rrb",
+    "training_blueprint",
+]

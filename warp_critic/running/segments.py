@@ -1,7 +1,8 @@
 """Merging a recording segment into a run's ``recording.rrd`` without ever losing either.
 
-``rerun rrd merge`` keeps everything readable of a file without footer, so a segment cut short by a
-killed process loses at most its last, unwritten chunk. A ``recording.rrd`` that rerun cannot read
+``rerun rrd optimize`` (a merge that also compacts the chunks) keeps everything readable of a file
+without footer, so a segment cut short by a killed process loses at most its last, unwritten
+chunk. A ``recording.rrd`` that rerun cannot read
 (edited, or garbage) is kept aside under a new name, with a one-line warning, and the recording goes
 on from the segment; a segment that rerun cannot read is kept aside the same way. A segment is
 deleted only once its content is in ``recording.rrd``.
@@ -54,7 +55,7 @@ def _readable(path: Path) -> bool:
 
 
 def _merge(recording: Path, sources: list[Path]) -> bool:
-    """``rerun rrd merge`` of ``sources`` into ``recording`` (atomically); False, with ``recording``
+    """``rerun rrd optimize`` (merge and compact) of ``sources`` into ``recording`` (atomically); False, with ``recording``
     untouched, when rerun cannot read them."""
     tmp = recording.with_name(f".{recording.name}.{os.getpid()}.tmp")
     try:
@@ -69,7 +70,9 @@ def _merge(recording: Path, sources: list[Path]) -> bool:
 
 def _run_merge(sources: list[Path], out: Path) -> bool:
     proc = subprocess.run(
-        [sys.executable, "-m", "rerun_cli", "rrd", "merge", *map(str, sources), "-o", str(out)],
+        # optimize: merge and compact the many small chunks a run flushes (one per entity and
+        # checkpoint) into few: a long run's recording shrinks several-fold
+        [sys.executable, "-m", "rerun_cli", "rrd", "optimize", *map(str, sources), "-o", str(out)],
         capture_output=True,
         text=True,
         env={**os.environ, "RUST_LOG": "error"},

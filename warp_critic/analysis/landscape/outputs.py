@@ -47,7 +47,9 @@ def write_recording(
             ),
             column_shares=[3, 1],
         ),
-        collapse_panels=True,
+        rrb.TimePanel(timeline="iteration", state="collapsed"),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
     )
     rec = Recorder(path, application_id="warp-critic landscape", blueprint=blueprint)
     try:

@@ -1,0 +1,97 @@
+"""The README's table of the paper's claims quotes the committed report (docs/paper/results.json):
+every number in a row's "measured" cell is one the report holds for that row, and the verdicts
+are the report's."""
+
+from __future__ import annotations
+
+import json
+import re
+
+from conftest import ROOT
+
+NUMBER = re.compile(r"\d+(?:\.\d+)?%?")
+
+
+def claims_table() -> dict[str, tuple[str, str]]:
+    """``{claim cell: (measured cell, verdict cell)}`` of the README's claims table."""
+    text = (ROOT / "README.md").read_text()
+    block = text.split("<!-- claims:begin -->")[1].split("<!-- claims:end -->")[0]
+    rows = [r.strip().strip("|").split("|") for r in block.strip().splitlines()[2:]]
+    return {c.strip(): (m.strip(), v.strip()) for c, m, v in rows}
+
+
+def report_sources() -> tuple[dict[str, tuple[list[str], list[str]]], dict[str, dict]]:
+    """For each README row (a prefix of its claim cell): the numbers the report holds for it, and the
+    report claims whose verdicts the row's verdict cell gives, in order; and the report's claims."""
+    r = json.loads((ROOT / "docs" / "paper" / "results.json").read_text())
+    claims = {c["claim"]: c for c in r["claims"]}
+
+    def claim(prefix: str) -> dict:
+        (found,) = [c for name, c in claims.items() if name.startswith(prefix)]
+        return found
+
+    table1 = {(t["method"], t["value"]): t for t in r["tables"] if t["table"] == "table1"}
+    stds = (0.1, 0.4)
+    t1 = [f"{table1[m, s]['mse_mean']:.3f}" for m in ("ours", "ddpg", "meta-critic") for s in stds]
+    t1 += [f"{table1['ours', s]['paper'][0]:.2f}" for s in stds] + [f"{s:g}" for s in stds]
+    grid = r["maps"]["grid_means"]
+    maps = [f"{v:.3f}" for k in ("mass", "length") for v in grid[k].values()]
+    goals = [f"{v:.0%}" for v in r["maps"]["goals_fraction_below_0.05"].values()] + ["0.05"]
+
+    def numbers(*prefixes: str) -> list[str]:
+        return [n for p in prefixes for n in NUMBER.findall(claim(p)["ours"])]
+
+    return {
+        "Table 1 (KUKA": (t1, ["Table 1:"]),
+        "Tables 1-3": (
+            numbers("Table 1:", "Table 2:", "Table 3:"),
+            ["Table 1:", "Table 2:", "Table 3:"],
+        ),
+        "Figures 5 / 6": (maps, ["Figure 5", "Figure 6"]),
+        "Figure 4": (goals, ["Figure 4"]),
+        "Figure 3: ours needs": (
+            numbers("Figure 3 (reacher): ours is more", "Figure 3 (kuka): ours is more"),
+            ["Figure 3 (reacher): ours is more", "Figure 3 (kuka): ours is more"],
+        ),
+        "Figure 3: ours the least": (
+            numbers("Figure 3 (reacher): ours is the", "Figure 3 (kuka): ours is the"),
+            ["Figure 3 (reacher): ours is the", "Figure 3 (kuka): ours is the"],
+        ),
+        "Figure 1": (numbers("Figure 1"), ["Figure 1"]),
+    }, claims
+
+
+def problems(table: dict[str, tuple[str, str]]) -> list[str]:
+    """Where ``table`` (the README's claims table) says other than the report."""
+    sources, claims = report_sources()
+    found = [] if len(table) == len(sources) else [f"{len(table)} rows, {len(sources)} expected"]
+    for prefix, (numbers, verdicts) in sources.items():
+        rows = [k for k in table if k.startswith(prefix)]
+        if len(rows) != 1:
+            found.append(f"{prefix}: {len(rows)} rows")
+            continue
+        measured, verdict = table[rows[0]]
+        quoted = NUMBER.findall(measured)
+        missing = [n for n in quoted if n not in numbers]
+        if not quoted or missing:
+            found.append(f"{prefix}: {missing or 'no number'} not in the report's {numbers}")
+        said = [
+            next(c["verdict"] for name, c in claims.items() if name.startswith(p)) for p in verdicts
+        ]
+        # a row over several claims with the same verdict says it once
+        if verdict != (said[0] if len(set(said)) == 1 else " / ".join(said)):
+            found.append(f"{prefix}: verdict {verdict!r}, the report's {said}")
+    return found
+
+
+def test_readme_claims_table_quotes_results_json():
+    assert problems(claims_table()) == []
+
+
+def test_a_number_or_verdict_other_than_the_report_is_found():
+    table = claims_table()
+    row = next(k for k in table if k.startswith("Table 1 (KUKA"))
+    measured, verdict = table[row]
+    assert "0.018" in measured
+    assert problems({**table, row: (measured.replace("0.018", "0.017"), verdict)}) != []
+    assert problems({**table, row: (measured, "not met")}) != []

@@ -1,0 +1,101 @@
+"""What a run's recording draws: the robot from its own shapes (line strips without them), placed by
+the body poses, and a camera that frames it (warp_critic.running.recording_view)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import rerun as rr
+from conftest import KUKA, POINT_MASS, REACHER
+
+from warp_critic.running.recording_view import (
+    CAPSULE,
+    CYLINDER,
+    SPHERE,
+    RobotDrawing,
+    camera_for,
+    quat_mul,
+    quat_rotate,
+)
+
+
+def drawing_of(scene_path: str) -> tuple[RobotDrawing, object]:
+    from warp_critic.core import runtime
+    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.variants import Variant
+
+    runtime.init()
+    scene = load_scene(scene_path)
+    model = scene.build_model([Variant(), Variant()])
+    return RobotDrawing.from_model(model, 2, scene.ee_body, scene.tip_offset_of()), model
+
+
+def test_quaternions_rotate_and_compose():
+    qz = np.array([0.0, 0.0, np.sin(np.pi / 4), np.cos(np.pi / 4)])  # 90 degrees about z
+    assert np.allclose(quat_rotate(qz, np.array([1.0, 0, 0])), [0, 1, 0])
+    assert np.allclose(quat_rotate(quat_mul(qz, qz), np.array([1.0, 0, 0])), [-1, 0, 0])
+
+
+@pytest.mark.parametrize(
+    "scene,kinds",
+    [(KUKA, {CAPSULE}), (REACHER, {CAPSULE}), (POINT_MASS, {SPHERE})],
+)
+def test_the_robot_is_drawn_from_its_own_shapes_once(scene, kinds):
+    d, model = drawing_of(scene)
+    B = model.body_count // 2
+    assert set(d.kind.tolist()) == kinds and d.has_shapes
+    assert (d.body >= 0).all() and (d.body < B).all()  # one world's shapes, by its own bodies
+    assert len(d.kind) == int((model.shape_body.numpy() >= 0).sum()) // 2
+    if scene != POINT_MASS:
+        assert d.static_kind.tolist() == [CYLINDER]  # the base, once for both worlds
+
+
+def test_a_reacher_link_capsule_spans_its_link():
+    """At zero angles the reacher lies along x: its first capsule runs from the base to x = 1 m."""
+    d, model = drawing_of(REACHER)
+    B = model.body_count // 2
+    poses = np.tile([0.0, 0, 0, 0, 0, 0, 1], (B, 1))
+    poses[1, 0] = 1.0  # the second link's frame at the end of the first
+    rec = rr.RecordingStream("test")
+    logged = {}
+    rec.log = lambda entity, arch, static=False: logged.__setitem__(entity, arch)  # type: ignore[method-assign]
+    d.log_arm(rec, "arm", poses, (255, 0, 0))
+    caps = logged["arm/capsules"]
+    start = caps.translations.as_arrow_array().to_pylist()
+    length = caps.lengths.as_arrow_array().to_pylist()
+    quat = np.array(caps.quaternions.as_arrow_array().to_pylist())
+    ends = np.array(start) + np.array(length)[:, None] * quat_rotate(quat, np.array([0.0, 0, 1]))
+    first = int(np.argmin([s[0] for s in start]))
+    assert np.allclose(start[first], [0, 0, 0], atol=1e-6)
+    assert np.allclose(ends[first], [1, 0, 0], atol=1e-6)
+
+
+def test_a_robot_without_shapes_is_drawn_as_line_strips_along_its_links():
+    d, model = drawing_of(KUKA)
+    bare = dataclasses.replace(d, kind=d.kind[:0], body=d.body[:0])
+    B = model.body_count // 2
+    poses = np.tile([0.0, 0, 0, 0, 0, 0, 1], (B, 1))
+    poses[:, 2] = np.arange(B) * 0.2
+    rec = rr.RecordingStream("test")
+    logged = {}
+    rec.log = lambda entity, arch, static=False: logged.__setitem__(entity, arch)  # type: ignore[method-assign]
+    bare.log_arm(rec, "arm", poses, (255, 0, 0))
+    assert list(logged) == ["arm/links"]
+    strips = logged["arm/links"].strips.as_arrow_array().to_pylist()
+    assert len(strips) == len(d.links) + 1 == B  # parent -> child for each joint, and the tip
+    assert np.allclose(strips[-1][1], d.tip_of(poses))
+
+
+def test_the_camera_looks_at_the_centre_from_above_for_a_planar_robot():
+    points = np.array([[0.0, 0, 0], [2, 2, 0], [2, 0, 0]])
+    flat = camera_for(points, planar=True)
+    side = camera_for(points, planar=False)
+    for cam in (flat, side):
+        target = np.array(cam.look_target.as_arrow_array().to_pylist()[0])
+        assert np.allclose(target, [1, 1, 0])
+    up = np.array(flat.position.as_arrow_array().to_pylist()[0]) - [1, 1, 0]
+    assert up[2] > 2 * abs(up[0]) and up[2] > 2 * abs(up[1])
+    oblique = np.array(side.position.as_arrow_array().to_pylist()[0]) - [1, 1, 0]
+    assert abs(oblique[0]) > 0.3 * np.linalg.norm(oblique)
