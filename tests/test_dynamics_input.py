@@ -288,7 +288,9 @@ def test_identify_command_writes_a_run_that_meta_tests_without_the_model(tmp_pat
     # a drawn model that diverges (a massless arm1): the run stops on divergence (on_divergence
     # stop, the default), so identify stops as its meta-train does on it: one line, exit 1, no run
     few = ["--iterations", "2", "--goals", "2", "--inits", "2"]
-    code = exit_code(["identify", str(told), "--out", str(tmp_path / "z"), *few, "--variants", "arm1.mass=0..0"])
+    code = exit_code(
+        ["identify", str(told), "--out", str(tmp_path / "z"), *few, "--variants", "arm1.mass=0..0"]
+    )
     err = capsys.readouterr().err
     assert code == 1 and err.startswith("warp-critic: diverged: iteration 0 "), err
     assert err.count("\n") == 1 and "'arm1.mass=0:keep'" in err, err
