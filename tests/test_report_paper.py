@@ -71,7 +71,11 @@ def test_meta_critic_aux_alive_from_the_record_else_the_run_directory(tmp_path):
     import json
     from types import SimpleNamespace
 
-    from warp_critic.reproduce.report_training import aux_alive_of, aux_alive_sentence
+    from warp_critic.reproduce.report_training import (
+        aux_alive_bases_of,
+        aux_alive_of,
+        aux_alive_sentence,
+    )
 
     (tmp_path / "run" / "seed1").mkdir(parents=True)
     rows = [{"aux_loss": 0.69, "meta_improvement": m} for m in [1e-3, 1e-4, 0.0, 0.0]]
@@ -88,5 +92,17 @@ def test_meta_critic_aux_alive_from_the_record_else_the_run_directory(tmp_path):
     assert alive == [1.0, 0.0, None]
     line = aux_alive_sentence(alive)
     assert "100%, 0%, not recorded" in line and "In 1 of 2 recorded seeds" in line
+    # the sentence names what the share was judged by: these metrics have no aux_grad_ratio
+    bases = aux_alive_bases_of(rec)
+    assert bases == [None, "meta_improvement != 0", None]
+    assert "judged by meta_improvement != 0" in aux_alive_sentence(alive, bases)
+    assert "aux_grad_ratio >= 1e-06" not in aux_alive_sentence(alive, bases)
+    (tmp_path / "run" / "seed2").mkdir()
+    ratio = [{"aux_loss": 0.69, "meta_improvement": 0.0, "aux_grad_ratio": 0.1}] * 4
+    (tmp_path / "run" / "seed2" / "metrics.jsonl").write_text(
+        "".join(json.dumps(r) + "\n" for r in ratio)
+    )
+    assert aux_alive_bases_of(rec)[2] == "aux_grad_ratio >= 1e-06"
+    assert aux_alive_of(rec)[2] == 1.0
     assert "stayed alive in every recorded seed" in aux_alive_sentence([0.9, 1.0])
     assert "not recorded for these seeds" in aux_alive_sentence([None, None])

@@ -46,8 +46,10 @@ def metatrain_section(d: Draft) -> None:
         md.append("")
         if "meta-critic" in got:
             alive = aux_alive_of(got["meta-critic"])
+            bases = aux_alive_bases_of(got["meta-critic"])
             results["metatrain"][f"{scene}/meta-critic"]["aux_alive"] = alive
-            md += [aux_alive_sentence(alive), ""]
+            results["metatrain"][f"{scene}/meta-critic"]["aux_alive_basis"] = bases
+            md += [aux_alive_sentence(alive, bases), ""]
         lines, levels = rp.steps_table(got)
         budget = min(s["env_steps"] for s in summary.values())
         at_budget = {m: rp.error_at_budget(got[m].data["result"], budget) for m in got}
@@ -145,7 +147,27 @@ def aux_alive_of(rec) -> list[float | None]:
     return out
 
 
-def aux_alive_sentence(alive: list[float | None]) -> str:
+def aux_alive_bases_of(rec) -> list[str | None]:
+    """Per seed, what :func:`aux_alive_of`'s share was judged by
+    (:func:`~warp_critic.methods.meta_critic.aux_alive_basis`): the stage record's note, else the
+    seed's ``metrics.jsonl``, else ``None`` (a stage record without a note, or nothing to read)."""
+    import json
+
+    from warp_critic.methods.meta_critic import aux_alive_basis
+
+    out: list[str | None] = []
+    for _, v in sorted(rec.data["result"]["seeds"].items(), key=lambda kv: int(kv[0])):
+        f = rec.dir / v["run_dir"] / "metrics.jsonl"
+        if "aux_alive_basis" in v or "aux_alive" in v or not f.is_file():
+            out.append(v.get("aux_alive_basis"))
+            continue
+        out.append(
+            aux_alive_basis([json.loads(line) for line in f.read_text().splitlines() if line])
+        )
+    return out
+
+
+def aux_alive_sentence(alive: list[float | None], bases: list[str | None] | None = None) -> str:
     """One line on whether the Meta-Critic rows are Meta-Critic or, with ``h_omega`` collapsed, DDPG."""
     known = [a for a in alive if a is not None]
     if not known:
@@ -157,8 +179,12 @@ def aux_alive_sentence(alive: list[float | None]) -> str:
 
     dead = sum(a < ALIVE_SHARE for a in known)
     per = ", ".join("not recorded" if a is None else f"{a:.0%}" for a in alive)
+    named = sorted({b for b in bases or [] if b is not None})
+    how = f"judged by {' / '.join(named)} in the metrics" if named else "the stage's record"
+    if named == ["meta_improvement != 0"]:
+        how += ", which predate the aux_grad_ratio log"
     return (
-        f"Meta-Critic's auxiliary loss h_omega moved the actor (aux_grad_ratio >= 1e-6) in this share "
+        f"Meta-Critic's auxiliary loss h_omega moved the actor ({how}) in this share "
         f"of the last quarter's iterations, per seed: {per}. "
         + (
             f"In {dead} of {len(known)} recorded seeds it had collapsed to a constant, so those "
