@@ -304,50 +304,61 @@ def reproduce(rc: ReproduceConfig, executor=None) -> dict:
 
 def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict:
     from warp_critic.physics.simulator import resolve_device
+    from warp_critic.reproduce.ledger import Call
 
     device = resolve_device(rc.device)
     runner = Runner(out)
     t0 = time.perf_counter()
     stages = plan(settings, beyond=rc.plans_beyond)
+    with Call(out, rc.command, rc.selected(), device) as call:  # the folder's ledger
 
-    def done(unit, result, seconds):
-        st = stages[unit.name]
-        runner.finish(
-            st["group"],
-            unit.name,
-            st["hash"],
-            st["settings"],
-            result,
-            seconds,
-            depends=st["depends"],
+        def done(unit, result, seconds):
+            st = stages[unit.name]
+            runner.finish(
+                st["group"],
+                unit.name,
+                st["hash"],
+                st["settings"],
+                result,
+                seconds,
+                depends=st["depends"],
+            )
+            call.stage(unit.name, seconds)
+
+        waves = needed(rc, stages)
+        runner.total = sum(
+            1
+            for wave in waves
+            for n in wave
+            if read_complete(runner.stage_dir(n, stages[n]["hash"]), stages[n]["group"]) is None
         )
+        runner.log(
+            f"reproduce: {runner.total} stage(s) to run ({executor.name}); complete ones are skipped"
+        )
+        try:
+            for wave in waves:
+                units = [
+                    make_unit(n, stages[n], settings, device, rc.progress, out)
+                    for n in wave
+                    if runner.complete(stages[n]["group"], n, stages[n]["hash"]) is None
+                ]
+                executor.run(units, out, done, runner.log)
+        finally:
+            executor.close()
+        runner.log(
+            f"reproduce: writing the report, {(time.perf_counter() - t0) / 60:.1f} min elapsed"
+        )
+        from warp_critic.reproduce.report import write_report
 
-    waves = needed(rc, stages)
-    runner.total = sum(
-        1
-        for wave in waves
-        for n in wave
-        if read_complete(runner.stage_dir(n, stages[n]["hash"]), stages[n]["group"]) is None
-    )
-    runner.log(
-        f"reproduce: {runner.total} stage(s) to run ({executor.name}); complete ones are skipped"
-    )
-    try:
-        for wave in waves:
-            units = [
-                make_unit(n, stages[n], settings, device, rc.progress, out)
-                for n in wave
-                if runner.complete(stages[n]["group"], n, stages[n]["hash"]) is None
-            ]
-            executor.run(units, out, done, runner.log)
-    finally:
-        executor.close()
-    runner.log(f"reproduce: writing the report, {(time.perf_counter() - t0) / 60:.1f} min elapsed")
-    from warp_critic.reproduce.report import write_report
-
-    report = write_report(
-        out, stages, runner.records, config=rc, device=device, wall=time.perf_counter() - t0
-    )
+        report = write_report(
+            out,
+            stages,
+            runner.records,
+            config=rc,
+            device=device,
+            wall=time.perf_counter() - t0,
+            call=call.id,
+        )
     runner.log(f"reproduce: done in {(time.perf_counter() - t0):.1f} s; report {report}")
     return {"report": report, "records": runner.records, "out": out, "plan": stages}
 
