@@ -128,7 +128,7 @@ def test_second_call_skips_every_stage(quick, capsys):
     out, rc, _ = quick
     assert rc == 0
     before = _stage_mtimes(out)
-    assert len(before) == 10  # toy, landscape, 6 metatrain, maps, tables
+    assert len(before) == 11  # toy, landscape, 6 metatrain, maps, tables, tables-heldout
     t = time.perf_counter()
     capsys.readouterr()
     assert reproduce_main(["--quick", "--out", str(out), "--device", "cpu"]) == 0
@@ -367,7 +367,7 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     archive = tmp_path / "archive"
     assert carry.main(["save", str(out), str(archive)]) == 0
     names = {p.name for p in archive.iterdir()}
-    assert len(names) == 10 and not list(archive.rglob("*.rrd"))
+    assert len(names) == 11 and not list(archive.rglob("*.rrd"))
     ckpts = list(archive.rglob("checkpoint.pt"))
     assert len(ckpts) == 6 * 2  # 6 meta-trainings x 2 quick seeds
     from warp_critic.physics.scene import scenes_dir
@@ -393,7 +393,7 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     capsys.readouterr()
     assert reproduce_main(["--quick", "--out", str(other), "--device", "cpu"]) == 0
     err = capsys.readouterr().err
-    assert "2 stage(s) to run" in err
+    assert "3 stage(s) to run" in err  # maps, tables, tables-heldout
     cells = {
         (c["table"], c["value"], c["method"]): c["mse_mean"]
         for c in json.loads((out / "results.json").read_text())["tables"]
@@ -440,7 +440,7 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
     for name in read:
         assert (dest / name / "stage.json").read_bytes() == (out / name / "stage.json").read_bytes()
         assert not (dest / name / "run").exists()
-    tables = next(n for n in read if n.startswith("tables-"))
+    tables = next(n for n in read if n.startswith("tables-") and "heldout" not in n)
     assert (dest / tables / "errors.json").is_file()  # the raw cells the report cites
     assert f"{tables}/errors.json" in (dest / "REPORT.md").read_text()
     from warp_critic.reproduce.stages import MARKER

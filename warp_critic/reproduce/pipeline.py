@@ -1,7 +1,8 @@
 """``reproduce``: run the selected stages in order (skipping complete ones), then write the report.
 
-Stage order: toy, landscape, metatrain, maps, tables. ``maps`` needs the reacher ``metatrain``
-sub-stages and ``tables`` the KUKA ones: they are run (or found complete) first even when ``--only``
+Stage order: toy, landscape, metatrain, maps, tables, tables-heldout (Tables 1-3 again on a goal
+seed that chose nothing). ``maps`` needs the reacher ``metatrain`` sub-stages and ``tables`` the
+KUKA ones: they are run (or found complete) first even when ``--only``
 does not name ``metatrain``.
 """
 
@@ -150,6 +151,16 @@ def plan(settings: dict, beyond: bool = False) -> dict[str, dict]:
             "depends": dep,
             "hash": stage_hash(group, settings[group], dep),
         }
+    from warp_critic.evaluation.seed_uses import HELDOUT_TABLES
+
+    held = {**settings["tables"], **HELDOUT_TABLES}  # Tables 1-3 on a goal seed that chose nothing
+    p["tables-heldout"] = {
+        "group": "tables",
+        "scene": "kuka",
+        "settings": held,
+        "depends": p["tables"]["depends"],
+        "hash": stage_hash("tables", held, p["tables"]["depends"]),
+    }
     if beyond:
         plan_beyond(settings, p, hashes)
     return p
@@ -257,7 +268,7 @@ def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, 
             identified = identified_run_dirs(out / dep_dir, data)
             if identified:  # the same critics fed their identifier's estimate of the model
                 runs[f"{label}-identified"] = [str(p.relative_to(out)) for p in identified]
-        kwargs = {"s": settings[group], "runs": runs, "device": device, "progress": progress}
+        kwargs = {"s": st["settings"], "runs": runs, "device": device, "progress": progress}
     reads = tuple(st["depends"].values())
     if group == "maps" and name != "maps":  # beyond-maps: the paper's maps' floors, if complete
         floors = paper_maps_floors(out, st)

@@ -107,7 +107,7 @@ def write_report(
         "",
         f"- command: `{config.command}`",
         f"- device: {device}; seeds: {len(seeds)} ({', '.join(map(str, seeds))}); "
-        f"{'QUICK settings (plumbing check, not the paper setting)' if config.quick else 'paper settings'}",
+        f"{'QUICK settings (plumbing check, not the paper setting)' if config.quick else 'paper settings, except where a section states the settings that differ from the paper text'}",
         f"- versions: python {ver['python']}, warp {ver['warp']}, newton {ver['newton']}, torch {ver['torch']} "
         f"({ver['platform']})",
         f"- written {time.strftime('%Y-%m-%d %H:%M:%S')}; this call took {wall:.1f} s",

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from warp_critic.reproduce import report_paper as rp
+from warp_critic.reproduce.report_departures import departures_line
 from warp_critic.reproduce.report_draft import Draft, fmt
 from warp_critic.reproduce.report_plots import figure, plot_goal_maps
 from warp_critic.reproduce.rules import map_reason, map_verdict
@@ -40,6 +41,7 @@ def maps_section(d: Draft) -> None:
         gm = {m: M["goals"][m]["mse_mean"] for m in METHODS}
         frac = {m: float((np.asarray(M["goals"][m]["mse"]) < 0.05).mean()) for m in METHODS}
         best = min(gm, key=gm.__getitem__)
+        md += [departures_line("reacher", recs), ""]
         md += [
             f"Goal grid: {len(M['axis_q1'])} x {len(M['axis_q2'])} goals over the joint limits, "
             f"{M['policy_updates']} policy update(s), horizon {M['horizon']}; mean MSE over the grid "

@@ -5,7 +5,9 @@ reachability floor."""
 from __future__ import annotations
 
 from warp_critic.evaluation.paper import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE3
+from warp_critic.evaluation.seed_uses import seed_note
 from warp_critic.reproduce import report_paper as rp
+from warp_critic.reproduce.report_departures import departures_line
 from warp_critic.reproduce.report_draft import Draft
 from warp_critic.reproduce.report_paper import beats_baselines, method_rows
 from warp_critic.reproduce.rules import table_verdict
@@ -159,8 +161,6 @@ def tables_section(d: Draft) -> None:
     config = d.config
     solved = d.solved
     md = d.md
-    results = d.results
-    claims = d.claims
     md += [
         "## Tables 1-3: KUKA generalisation (MSE over the joints, mean(std) over seeds x goals x inits)",
         "",
@@ -170,7 +170,6 @@ def tables_section(d: Draft) -> None:
         md += ["Not run (stage `tables`).", ""]
     else:
         T = r.data["result"]
-        src = f"{r.dir.name}/{STAGE_FILE}"
         if config.quick:
             md += [
                 "QUICK settings: a handful of training iterations on short rollouts; these numbers check the "
@@ -208,27 +207,57 @@ def tables_section(d: Draft) -> None:
             "tables keep this project's earlier, harsher variants.",
             "",
         ]
-        for table in TABLES:
-            if table not in T["columns"]:
-                continue
-            lines, cells, findings, wins = table_markdown(table, T, src, sv)
-            md += [f"### {TABLES[table][2]}", ""]
-            md += lines + [""] + [f"- {s}." for s in findings] + [""]
-            results["tables"] += cells
-            if table.startswith("table"):
-                (wa, ca), (ws, cs), (hp, cp) = wins["all"], wins["solved"], wins["paper"]
-                verdict, reason = table_verdict(wins["all"], wins["solved"], wins["paper"])
-                if table == "table3":
-                    reason = f"{TABLE3_NOTE} {reason}"
-                claims.append(
-                    {
-                        "claim": f"{TABLES[table][2].split(' (')[0]}: ours below DDPG and Meta-Critic, "
-                        "at the paper's level",
-                        "paper": "ours lowest in every column",
-                        "ours": f"ours below both (all seeds) in {wa} of {ca} columns; below both "
-                        f"(solved seeds) in {ws} of {cs}; at or below the paper's own value in "
-                        f"{hp} of {cp}",
-                        "verdict": verdict,
-                        "reason": reason,
-                    }
-                )
+        md += [departures_line("kuka", recs), "", f"Goals: {seed_note(T_seed(r))}.", ""]
+        table_blocks(d, r, sv, heldout=False)
+    h = recs.get("tables-heldout")
+    md += ["## Tables 1-3 on a held-out goal seed", ""]
+    if h is None:
+        md += ["Not run (stage `tables-heldout`).", ""]
+        return
+    md += [
+        f"The same critics and protocol, on goals and initialisations of {seed_note(T_seed(h))}. "
+        "The stress tables are cut to one column each there (not shown) and no floors are "
+        f"computed. {departures_line('kuka', recs)}",
+        "",
+    ]
+    table_blocks(d, h, d.solved.get("kuka", {}), heldout=True)
+
+
+def T_seed(rec) -> int:
+    """The goal seed a tables stage scored on."""
+    return int(rec.data.get("settings", {}).get("seed", -1))
+
+
+def table_blocks(d: Draft, r, sv: dict, heldout: bool) -> None:
+    """The paper's tables of one tables stage (and, unless ``heldout``, the stress tables), each
+    with its findings, cells in results.json and its claims row."""
+    T = r.data["result"]
+    src = f"{r.dir.name}/{STAGE_FILE}"
+    suffix = f", held-out goal seed {T_seed(r)}" if heldout else ""
+    for table in TABLES:
+        if table not in T["columns"] or (heldout and not table.startswith("table")):
+            continue
+        lines, cells, findings, wins = table_markdown(table, T, src, sv)
+        title = TABLES[table][2]
+        d.md += [f"### {title.split(' (')[0]}{suffix}" if heldout else f"### {title}", ""]
+        d.md += lines + [""] + [f"- {s}." for s in findings] + [""]
+        d.results["tables_heldout" if heldout else "tables"] = (
+            d.results.get("tables_heldout" if heldout else "tables") or []
+        ) + cells
+        if table.startswith("table"):
+            (wa, ca), (ws, cs), (hp, cp) = wins["all"], wins["solved"], wins["paper"]
+            verdict, reason = table_verdict(wins["all"], wins["solved"], wins["paper"])
+            if table == "table3":
+                reason = f"{TABLE3_NOTE} {reason}"
+            d.claims.append(
+                {
+                    "claim": f"{title.split(' (')[0]}{suffix}: ours below DDPG and Meta-Critic, "
+                    "at the paper's level",
+                    "paper": "ours lowest in every column",
+                    "ours": f"ours below both (all seeds) in {wa} of {ca} columns; below both "
+                    f"(solved seeds) in {ws} of {cs}; at or below the paper's own value in "
+                    f"{hp} of {cp}",
+                    "verdict": verdict,
+                    "reason": reason,
+                }
+            )

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from warp_critic.reproduce import report_paper as rp
+from warp_critic.reproduce.report_departures import departures_line
 from warp_critic.reproduce.report_draft import Draft, fmt
 from warp_critic.reproduce.report_plots import plot_metatrain
 from warp_critic.reproduce.rules import SPREAD_RULE, STEPS_RULE, WINDOW
@@ -26,6 +27,8 @@ def metatrain_section(d: Draft) -> None:
         summary = plot_metatrain(png, scene, got)
         md += [
             f"### {scene}",
+            "",
+            departures_line(scene, recs),
             "",
             "| method | iterations | env steps | env steps counted | final ||q_T-g||^2 mean(std) over seeds | first iteration |",
             "|---|---|---|---|---|---|",
