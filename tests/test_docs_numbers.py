@@ -132,6 +132,22 @@ QUOTES = [
         "MSE {} at std 0.1 and {} at std 0.4",
         lambda r: (_g(_cell(r, "table1", 0.1, "ours")), _g(_cell(r, "table1", 0.4, "ours"))),
     ),
+    # the tables on a goal seed that chose nothing (item 6)
+    (
+        "RESULTS.md",
+        "on goal seed {}, which chose nothing (stage `tables-heldout`), ours is at or below the "
+        "paper in {}, {} and {} of 10 columns (Table 1 {}; std 0.1 / 0.4: {} / {})",
+        lambda r: (
+            str(r["tables_heldout"]["seed"]),
+            *(
+                str(r["tables_heldout"][t]["ours_at_or_below_paper"][0])
+                for t in ("table1", "table2", "table3")
+            ),
+            _claim(r, "Table 1, held-out")["verdict"],
+            _g(r["tables_heldout"]["table1"]["ours"][0]),
+            _g(r["tables_heldout"]["table1"]["ours"][3]),
+        ),
+    ),
     # steps to a level (item 4)
     (
         "RESULTS.md",
@@ -159,5 +175,7 @@ def test_verdicts_quoted_in_the_docs_match_the_claims_table():
         ("Figure 6", "| Figure 6: new link lengths (2-D) | {} |"),
         ("Table 1", "| Table 1: ours below the baselines, at the paper's level | {} |"),
         ("Figure 4", "| Figure 4: ours generalises over the reacher's full state space | {} |"),
+        ("Table 1, held-out", "| Table 1 on held-out goal seed 1000 (chose nothing) | {} |"),
+        ("Table 2, held-out", "| Table 2 on held-out goal seed 1000 | {} |"),
     ):
         assert row.format(_claim(r, start)["verdict"]) in text, start

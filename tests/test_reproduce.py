@@ -633,6 +633,7 @@ def test_ledger_records_every_call_and_a_refused_call_writes_nothing(tmp_path, c
     rows = ledger.read(out)
     assert [r["event"] for r in rows] == ["start", "stage", "end", "start", "end"]
     assert rows[1]["stage"] == "toy" and rows[2]["stages_run"] == ["toy"]
+    assert rows[1]["dir"].startswith("toy-") and (out / rows[1]["dir"] / "stage.json").is_file()
     assert rows[4]["stages_run"] == [] and {rows[2]["status"], rows[4]["status"]} == {"done"}
     assert rows[0]["machine"]["device"] == "cpu" and rows[0]["selected"] == ["toy"]
     assert rows[0]["call"] == rows[2]["call"] != rows[3]["call"]

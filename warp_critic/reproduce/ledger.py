@@ -80,9 +80,11 @@ class Call:
         append(self.out, {**self.start, "time": now()})
         return self
 
-    def stage(self, name: str, seconds: float) -> None:
+    def stage(self, name: str, seconds: float, dir_name: str | None = None) -> None:
         self.ran.append(name)
         rec = {"event": "stage", "call": self.id, "stage": name, "seconds": float(seconds)}
+        if dir_name is not None:  # the stage's directory: its settings' hash, not only its name
+            rec["dir"] = dir_name
         append(self.out, {**rec, "time": now()})
 
     def __exit__(self, kind, value, tb) -> None:
@@ -146,7 +148,7 @@ def summary(rows: list[dict], open_call: str | None = None, open_wall: float = 0
         end = c["end"] or c["last"]
         total += max(_epoch(end) - _epoch(c["start"]), 0.0)
         last = max(last or end, end)
-    ran = [r["stage"] for r in rows if r.get("event") == "stage"]
+    ran = [r.get("dir", r["stage"]) for r in rows if r.get("event") == "stage"]
     return {
         "calls": sum(c["start"] is not None for c in calls.values()),
         "unfinished": sum(
@@ -160,7 +162,8 @@ def summary(rows: list[dict], open_call: str | None = None, open_wall: float = 0
 
 
 def header_line(s: dict, stage_seconds: dict[str, float]) -> str:
-    """The report header's line: the ledger's total wall time and the sum of the stage times."""
+    """The report header's line: the ledger's total wall time and the sum of the stage times
+    (``stage_seconds``: stage directory, or name for records without one -> seconds)."""
     before = [n for n in stage_seconds if n not in s["stages_run"]]
     line = (
         f"- ledger (`{LEDGER}`): {s['calls']} call(s) on this folder"

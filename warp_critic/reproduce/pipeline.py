@@ -334,7 +334,7 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
                 seconds,
                 depends=st["depends"],
             )
-            call.stage(unit.name, seconds)
+            call.stage(unit.name, seconds, unit.dir_name)
 
         waves = needed(rc, stages)
         runner.total = sum(

@@ -85,7 +85,7 @@ def write_report(
     out = Path(out)
     recs = collect(out, plan, records)
     book = ledger.summary(ledger.read(out), open_call=call, open_wall=wall)
-    stage_seconds = {n: float(r.data["seconds"]) for n, r in recs.items() if r is not None}
+    stage_seconds = {r.dir.name: float(r.data["seconds"]) for r in recs.values() if r is not None}
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
     md: list[str] = []

@@ -241,9 +241,16 @@ def table_blocks(d: Draft, r, sv: dict, heldout: bool) -> None:
         title = TABLES[table][2]
         d.md += [f"### {title.split(' (')[0]}{suffix}" if heldout else f"### {title}", ""]
         d.md += lines + [""] + [f"- {s}." for s in findings] + [""]
-        d.results["tables_heldout" if heldout else "tables"] = (
-            d.results.get("tables_heldout" if heldout else "tables") or []
-        ) + cells
+        if heldout:  # a summary: every cell is in the stage's record (results.json stays small)
+            held = d.results.setdefault("tables_heldout", {"file": src, "seed": T_seed(r)})
+            held[table] = {
+                "values": [c["value"] for c in cells if c["method"] == "ours"],
+                **{m: [c["mse_mean"] for c in cells if c["method"] == m] for m in METHODS},
+                "ours_at_or_below_paper": list(wins["paper"]),
+                "ours_below_both": {"all": list(wins["all"]), "solved": list(wins["solved"])},
+            }
+        else:
+            d.results["tables"] += cells
         if table.startswith("table"):
             (wa, ca), (ws, cs), (hp, cp) = wins["all"], wins["solved"], wins["paper"]
             verdict, reason = table_verdict(wins["all"], wins["solved"], wins["paper"])
