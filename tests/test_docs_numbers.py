@@ -148,6 +148,16 @@ QUOTES = [
             _g(r["tables_heldout"]["table1"]["ours"][3]),
         ),
     ),
+    # the stage-time sum the report's header prints (item 11)
+    (
+        "docs/paper/README.md",
+        "the report's header sums {} stage times to {} s ({} h;",
+        lambda r: (
+            str(len(r["stages"])),
+            f"{r['ledger']['stage_seconds_sum']:,.0f}",
+            f"{r['ledger']['stage_seconds_sum'] / 3600:.1f}",
+        ),
+    ),
     # steps to a level (item 4)
     (
         "RESULTS.md",
