@@ -23,12 +23,17 @@ class _Rec:
         self.data = {"result": result}
 
 
-def test_steps_to_levels_first_crossing_and_never():
+def test_steps_to_levels_stays_below_and_never():
     res = _result({"0": [1.0, 0.2, 0.05, 0.02], "1": [1.0, 0.5, 0.4, 0.35]})
-    t = rp.steps_to_levels(res)
+    t = rp.steps_to_levels(res, window=1)
     assert t[0.3]["steps"] == [200] and t[0.3]["never"] == 1
     assert t[0.03]["steps"] == [400] and t[0.03]["seconds"] == [8.0]
     assert t[0.1]["never"] == 1 and t[0.1]["seeds"] == 2
+    # the running mean over 2 iterations: 1, 0.6, 0.125, 0.035
+    t2 = rp.steps_to_levels(res, window=2)
+    assert t2[0.3]["steps"] == [300] and t2[0.03]["never"] == 2
+    # a curve cut at a budget of 300 steps: seed 0 has not settled below 0.03 by then
+    assert rp.steps_to_levels(res, budget=300, window=1)[0.03]["never"] == 2
 
 
 def test_solved_seeds_use_the_tail_of_the_curve():
@@ -45,8 +50,8 @@ def test_solved_cell_pools_only_solved_seeds():
 
 
 def test_sample_efficiency_verdict_is_computed():
-    fast = _Rec(_result({"0": [1.0, 0.02], "1": [1.0, 0.02]}))
-    slow = _Rec(_result({"0": [1.0, 0.5, 0.2, 0.02], "1": [1.0, 0.5, 0.2, 0.02]}))
+    fast = _Rec(_result({"0": [1.0] + [0.02] * 40, "1": [1.0] + [0.02] * 40}))
+    slow = _Rec(_result({"0": [1.0, 0.5, 0.2] + [0.02] * 40, "1": [1.0, 0.5, 0.2] + [0.02] * 40}))
     _, data = rp.steps_table({"ours": fast, "ddpg": slow})
     assert rp.sample_efficiency_verdict(data)[0] == "met"
     _, data = rp.steps_table({"ours": slow, "ddpg": fast})
@@ -66,7 +71,11 @@ def test_meta_critic_aux_alive_from_the_record_else_the_run_directory(tmp_path):
     import json
     from types import SimpleNamespace
 
-    from warp_critic.reproduce.report_training import aux_alive_of, aux_alive_sentence
+    from warp_critic.reproduce.report_training import (
+        aux_alive_bases_of,
+        aux_alive_of,
+        aux_alive_sentence,
+    )
 
     (tmp_path / "run" / "seed1").mkdir(parents=True)
     rows = [{"aux_loss": 0.69, "meta_improvement": m} for m in [1e-3, 1e-4, 0.0, 0.0]]
@@ -83,5 +92,17 @@ def test_meta_critic_aux_alive_from_the_record_else_the_run_directory(tmp_path):
     assert alive == [1.0, 0.0, None]
     line = aux_alive_sentence(alive)
     assert "100%, 0%, not recorded" in line and "In 1 of 2 recorded seeds" in line
+    # the sentence names what the share was judged by: these metrics have no aux_grad_ratio
+    bases = aux_alive_bases_of(rec)
+    assert bases == [None, "meta_improvement != 0", None]
+    assert "judged by meta_improvement != 0" in aux_alive_sentence(alive, bases)
+    assert "aux_grad_ratio >= 1e-06" not in aux_alive_sentence(alive, bases)
+    (tmp_path / "run" / "seed2").mkdir()
+    ratio = [{"aux_loss": 0.69, "meta_improvement": 0.0, "aux_grad_ratio": 0.1}] * 4
+    (tmp_path / "run" / "seed2" / "metrics.jsonl").write_text(
+        "".join(json.dumps(r) + "\n" for r in ratio)
+    )
+    assert aux_alive_bases_of(rec)[2] == "aux_grad_ratio >= 1e-06"
+    assert aux_alive_of(rec)[2] == 1.0
     assert "stayed alive in every recorded seed" in aux_alive_sentence([0.9, 1.0])
     assert "not recorded for these seeds" in aux_alive_sentence([None, None])

@@ -128,7 +128,7 @@ def test_second_call_skips_every_stage(quick, capsys):
     out, rc, _ = quick
     assert rc == 0
     before = _stage_mtimes(out)
-    assert len(before) == 10  # toy, landscape, 6 metatrain, maps, tables
+    assert len(before) == 11  # toy, landscape, 6 metatrain, maps, tables, tables-heldout
     t = time.perf_counter()
     capsys.readouterr()
     assert reproduce_main(["--quick", "--out", str(out), "--device", "cpu"]) == 0
@@ -367,7 +367,7 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     archive = tmp_path / "archive"
     assert carry.main(["save", str(out), str(archive)]) == 0
     names = {p.name for p in archive.iterdir()}
-    assert len(names) == 10 and not list(archive.rglob("*.rrd"))
+    assert len(names) == 11 and not list(archive.rglob("*.rrd"))
     ckpts = list(archive.rglob("checkpoint.pt"))
     assert len(ckpts) == 6 * 2  # 6 meta-trainings x 2 quick seeds
     from warp_critic.physics.scene import scenes_dir
@@ -393,7 +393,7 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     capsys.readouterr()
     assert reproduce_main(["--quick", "--out", str(other), "--device", "cpu"]) == 0
     err = capsys.readouterr().err
-    assert "2 stage(s) to run" in err
+    assert "3 stage(s) to run" in err  # maps, tables, tables-heldout
     cells = {
         (c["table"], c["value"], c["method"]): c["mse_mean"]
         for c in json.loads((out / "results.json").read_text())["tables"]
@@ -440,7 +440,7 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
     for name in read:
         assert (dest / name / "stage.json").read_bytes() == (out / name / "stage.json").read_bytes()
         assert not (dest / name / "run").exists()
-    tables = next(n for n in read if n.startswith("tables-"))
+    tables = next(n for n in read if n.startswith("tables-") and "heldout" not in n)
     assert (dest / tables / "errors.json").is_file()  # the raw cells the report cites
     assert f"{tables}/errors.json" in (dest / "REPORT.md").read_text()
     from warp_critic.reproduce.stages import MARKER
@@ -621,3 +621,47 @@ def test_beyond_maps_takes_floors_only_from_a_maps_stage_of_the_same_inputs(tmp_
     assert paper_maps_floors(tmp_path, st) is None
     stage("maps-4", st["settings"], {**nominal, "metatrain-reacher-ddpg": "d"})
     assert paper_maps_floors(tmp_path, st) == "maps-4"
+
+
+def test_ledger_records_every_call_and_a_refused_call_writes_nothing(tmp_path, capsys):
+    from warp_critic.reproduce import ledger
+
+    out = tmp_path / "r"
+    args = ["--quick", "--only", "toy", "--out", str(out), "--device", "cpu"]
+    assert reproduce_main(args) == 0
+    assert reproduce_main(args) == 0  # every stage complete: a call that runs nothing
+    rows = ledger.read(out)
+    assert [r["event"] for r in rows] == ["start", "stage", "end", "start", "end"]
+    assert rows[1]["stage"] == "toy" and rows[2]["stages_run"] == ["toy"]
+    assert rows[1]["dir"].startswith("toy-") and (out / rows[1]["dir"] / "stage.json").is_file()
+    assert rows[4]["stages_run"] == [] and {rows[2]["status"], rows[4]["status"]} == {"done"}
+    assert rows[0]["machine"]["device"] == "cpu" and rows[0]["selected"] == ["toy"]
+    assert rows[0]["call"] == rows[2]["call"] != rows[3]["call"]
+    text = (out / "REPORT.md").read_text()
+    assert "- ledger (`ledger.jsonl`): 2 call(s) on this folder" in text
+    assert "sum of the report's 1 stage times" in text and "before the ledger" not in text
+    book = json.loads((out / "results.json").read_text())["ledger"]
+    assert book["calls"] == 2 and book["stages_before_ledger"] == []
+    before = (out / "ledger.jsonl").read_bytes()
+    capsys.readouterr()
+    assert reproduce_main([*args, "--set", "toy.nope=1"]) == 2  # refused: writes nothing
+    assert (out / "ledger.jsonl").read_bytes() == before
+
+
+def test_ledger_total_wall_time_counts_every_call():
+    from warp_critic.reproduce import ledger
+
+    rows = [
+        {"event": "start", "call": "a", "time": "2026-12-01T10:00:00Z"},
+        {"event": "stage", "call": "a", "time": "2026-12-01T10:30:00Z", "stage": "toy"},
+        {"event": "end", "call": "a", "time": "2026-12-01T11:00:00Z"},
+        {"event": "start", "call": "b", "time": "2026-12-02T09:00:00Z"},  # killed: no end
+        {"event": "stage", "call": "b", "time": "2026-12-02T09:20:00Z", "stage": "maps"},
+    ]
+    s = ledger.summary(rows)
+    assert s["calls"] == 2 and s["unfinished"] == 1
+    assert s["wall"] == 3600 + 1200  # a call without an end counts to its last record
+    assert s["first"] == "2026-12-01T10:00:00Z" and s["last"] == "2026-12-02T09:20:00Z"
+    line = ledger.header_line(s, {"toy": 5.0, "maps": 100.0, "tables": 50.0})
+    assert "total wall time 4800 s" in line and "stage times 155 s" in line
+    assert "(1 without an end)" in line and "1 of these stages completed in calls before" in line

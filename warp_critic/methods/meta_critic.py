@@ -134,6 +134,21 @@ def aux_alive(metrics: list[dict]) -> float | None:
     return sum(alive) / len(alive)
 
 
+def aux_alive_basis(metrics: list[dict]) -> str | None:
+    """What :func:`aux_alive` judged ``metrics`` by: ``"aux_grad_ratio >= 1e-6"``, or
+    ``"meta_improvement != 0"`` for runs written before the ratio was logged; ``None`` without
+    Meta-Critic rows."""
+    rows = [m for m in metrics if "aux_loss" in m]
+    if not rows:
+        return None
+    tail = rows[-max(1, len(rows) // 4) :]
+    return (
+        f"aux_grad_ratio >= {ALIVE_RATIO:g}"
+        if "aux_grad_ratio" in tail[0]
+        else "meta_improvement != 0"
+    )
+
+
 class MetaCriticAgent(DDPGAgent):
     """DDPG plus the online-learned auxiliary actor loss ``h_omega``."""
 

@@ -187,7 +187,7 @@ def _published_record(d: Path) -> bool:
 
 def publish(out: Path, dest: Path) -> tuple[list[str], list[str]]:
     """Copy the report of ``out`` into ``dest``, for committing: ``REPORT.md``, ``results.json``,
-    ``figures/*.png`` and, of each stage the report read (``results.json``'s ``stages``), its
+    ``ledger.jsonl`` (where there is one), ``figures/*.png`` and, of each stage the report read (``results.json``'s ``stages``), its
     ``*.json`` and ``*.png`` files outside its runs (``stage.json``, the raw ``errors.json`` cells,
     the landscapes), so every number in the report traces to a file in ``dest``.
 
@@ -234,6 +234,8 @@ def publish(out: Path, dest: Path) -> tuple[list[str], list[str]]:
         ]
         for name in pruned:
             shutil.rmtree(dest / name)
+        if (out / "ledger.jsonl").is_file():  # the calls that made the report, and their times
+            atomic_write_bytes(dest / "ledger.jsonl", (out / "ledger.jsonl").read_bytes())
         atomic_write_bytes(dest / "results.json", (out / "results.json").read_bytes())
         atomic_write_bytes(dest / "REPORT.md", report)  # last: a report only beside its files
     except OSError as e:

@@ -112,7 +112,7 @@ def run_metatrain_stage(
     progress: bool = True,
 ) -> dict:
     from warp_critic.methods.ddpg import train_ddpg
-    from warp_critic.methods.meta_critic import aux_alive, train_meta_critic
+    from warp_critic.methods.meta_critic import aux_alive, aux_alive_basis, train_meta_critic
     from warp_critic.methods.ours import meta_train
     from warp_critic.running.config import filled
 
@@ -154,6 +154,7 @@ def run_metatrain_stage(
         }
         if method == "meta-critic":  # whether h_omega still moved the actor, or it trained as DDPG
             per_seed[str(seed)]["aux_alive"] = aux_alive(rows)
+            per_seed[str(seed)]["aux_alive_basis"] = aux_alive_basis(rows)
     if identify is not None:
         for seed, r in zip(seeds, result.seeds):
             per_seed[str(seed)]["identified"] = identify_seed(

@@ -1,7 +1,8 @@
 """``reproduce``: run the selected stages in order (skipping complete ones), then write the report.
 
-Stage order: toy, landscape, metatrain, maps, tables. ``maps`` needs the reacher ``metatrain``
-sub-stages and ``tables`` the KUKA ones: they are run (or found complete) first even when ``--only``
+Stage order: toy, landscape, metatrain, maps, tables, tables-heldout (Tables 1-3 again on a goal
+seed that chose nothing). ``maps`` needs the reacher ``metatrain`` sub-stages and ``tables`` the
+KUKA ones: they are run (or found complete) first even when ``--only``
 does not name ``metatrain``.
 """
 
@@ -150,6 +151,16 @@ def plan(settings: dict, beyond: bool = False) -> dict[str, dict]:
             "depends": dep,
             "hash": stage_hash(group, settings[group], dep),
         }
+    from warp_critic.evaluation.seed_uses import HELDOUT_TABLES
+
+    held = {**settings["tables"], **HELDOUT_TABLES}  # Tables 1-3 on a goal seed that chose nothing
+    p["tables-heldout"] = {
+        "group": "tables",
+        "scene": "kuka",
+        "settings": held,
+        "depends": p["tables"]["depends"],
+        "hash": stage_hash("tables", held, p["tables"]["depends"]),
+    }
     if beyond:
         plan_beyond(settings, p, hashes)
     return p
@@ -257,7 +268,7 @@ def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, 
             identified = identified_run_dirs(out / dep_dir, data)
             if identified:  # the same critics fed their identifier's estimate of the model
                 runs[f"{label}-identified"] = [str(p.relative_to(out)) for p in identified]
-        kwargs = {"s": settings[group], "runs": runs, "device": device, "progress": progress}
+        kwargs = {"s": st["settings"], "runs": runs, "device": device, "progress": progress}
     reads = tuple(st["depends"].values())
     if group == "maps" and name != "maps":  # beyond-maps: the paper's maps' floors, if complete
         floors = paper_maps_floors(out, st)
@@ -304,50 +315,61 @@ def reproduce(rc: ReproduceConfig, executor=None) -> dict:
 
 def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict:
     from warp_critic.physics.simulator import resolve_device
+    from warp_critic.reproduce.ledger import Call
 
     device = resolve_device(rc.device)
     runner = Runner(out)
     t0 = time.perf_counter()
     stages = plan(settings, beyond=rc.plans_beyond)
+    with Call(out, rc.command, rc.selected(), device) as call:  # the folder's ledger
 
-    def done(unit, result, seconds):
-        st = stages[unit.name]
-        runner.finish(
-            st["group"],
-            unit.name,
-            st["hash"],
-            st["settings"],
-            result,
-            seconds,
-            depends=st["depends"],
+        def done(unit, result, seconds):
+            st = stages[unit.name]
+            runner.finish(
+                st["group"],
+                unit.name,
+                st["hash"],
+                st["settings"],
+                result,
+                seconds,
+                depends=st["depends"],
+            )
+            call.stage(unit.name, seconds, unit.dir_name)
+
+        waves = needed(rc, stages)
+        runner.total = sum(
+            1
+            for wave in waves
+            for n in wave
+            if read_complete(runner.stage_dir(n, stages[n]["hash"]), stages[n]["group"]) is None
         )
+        runner.log(
+            f"reproduce: {runner.total} stage(s) to run ({executor.name}); complete ones are skipped"
+        )
+        try:
+            for wave in waves:
+                units = [
+                    make_unit(n, stages[n], settings, device, rc.progress, out)
+                    for n in wave
+                    if runner.complete(stages[n]["group"], n, stages[n]["hash"]) is None
+                ]
+                executor.run(units, out, done, runner.log)
+        finally:
+            executor.close()
+        runner.log(
+            f"reproduce: writing the report, {(time.perf_counter() - t0) / 60:.1f} min elapsed"
+        )
+        from warp_critic.reproduce.report import write_report
 
-    waves = needed(rc, stages)
-    runner.total = sum(
-        1
-        for wave in waves
-        for n in wave
-        if read_complete(runner.stage_dir(n, stages[n]["hash"]), stages[n]["group"]) is None
-    )
-    runner.log(
-        f"reproduce: {runner.total} stage(s) to run ({executor.name}); complete ones are skipped"
-    )
-    try:
-        for wave in waves:
-            units = [
-                make_unit(n, stages[n], settings, device, rc.progress, out)
-                for n in wave
-                if runner.complete(stages[n]["group"], n, stages[n]["hash"]) is None
-            ]
-            executor.run(units, out, done, runner.log)
-    finally:
-        executor.close()
-    runner.log(f"reproduce: writing the report, {(time.perf_counter() - t0) / 60:.1f} min elapsed")
-    from warp_critic.reproduce.report import write_report
-
-    report = write_report(
-        out, stages, runner.records, config=rc, device=device, wall=time.perf_counter() - t0
-    )
+        report = write_report(
+            out,
+            stages,
+            runner.records,
+            config=rc,
+            device=device,
+            wall=time.perf_counter() - t0,
+            call=call.id,
+        )
     runner.log(f"reproduce: done in {(time.perf_counter() - t0):.1f} s; report {report}")
     return {"report": report, "records": runner.records, "out": out, "plan": stages}
 

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from warp_critic.reproduce import ledger
 from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.report_analyses import landscape_section, toy_section
 from warp_critic.reproduce.report_beyond import beyond_section
@@ -69,9 +70,22 @@ def versions() -> dict[str, str]:
     }
 
 
-def write_report(out: Path, plan: dict, records: dict, *, config, device: str, wall: float) -> Path:
+def write_report(
+    out: Path,
+    plan: dict,
+    records: dict,
+    *,
+    config,
+    device: str,
+    wall: float,
+    call: str | None = None,
+) -> Path:
+    """Write the report of ``out``'s complete stages of ``plan``; ``call`` is this call's id in
+    the folder's ledger (:mod:`.ledger`), whose total wall time the header gives."""
     out = Path(out)
     recs = collect(out, plan, records)
+    book = ledger.summary(ledger.read(out), open_call=call, open_wall=wall)
+    stage_seconds = {r.dir.name: float(r.data["seconds"]) for r in recs.values() if r is not None}
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
     md: list[str] = []
@@ -93,10 +107,11 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
         "",
         f"- command: `{config.command}`",
         f"- device: {device}; seeds: {len(seeds)} ({', '.join(map(str, seeds))}); "
-        f"{'QUICK settings (plumbing check, not the paper setting)' if config.quick else 'paper settings'}",
+        f"{'QUICK settings (plumbing check, not the paper setting)' if config.quick else 'paper settings, except where a section states the settings that differ from the paper text'}",
         f"- versions: python {ver['python']}, warp {ver['warp']}, newton {ver['newton']}, torch {ver['torch']} "
         f"({ver['platform']})",
         f"- written {time.strftime('%Y-%m-%d %H:%M:%S')}; this call took {wall:.1f} s",
+        ledger.header_line(book, stage_seconds),
         "",
     ]
     claims_at = len(md)
@@ -158,7 +173,20 @@ def write_report(out: Path, plan: dict, records: dict, *, config, device: str, w
         md += [f"### {title}", "", f"![{title}]({rel(png, out)})", "", sentence, ""]
     results["figures"] = [{"title": t, "file": rel(p, out), "sentence": s} for t, p, s in figures]
     results.update(
-        command=config.command, device=device, seeds=seeds, quick=config.quick, versions=ver
+        command=config.command,
+        device=device,
+        seeds=seeds,
+        quick=config.quick,
+        versions=ver,
+        ledger={
+            "file": ledger.LEDGER,
+            "calls": book["calls"],
+            "wall_seconds": book["wall"],
+            "first_start": book["first"],
+            "last_end": book["last"],
+            "stage_seconds_sum": sum(stage_seconds.values()),
+            "stages_before_ledger": [n for n in stage_seconds if n not in book["stages_run"]],
+        },
     )
     text = "\n".join(md) + "\n"
     atomic_write_text(out / "results.json", json.dumps(results, indent=1) + "\n")

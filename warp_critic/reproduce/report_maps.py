@@ -6,8 +6,10 @@ from __future__ import annotations
 import numpy as np
 
 from warp_critic.reproduce import report_paper as rp
+from warp_critic.reproduce.report_departures import departures_line
 from warp_critic.reproduce.report_draft import Draft, fmt
 from warp_critic.reproduce.report_plots import figure, plot_goal_maps
+from warp_critic.reproduce.rules import map_reason, map_verdict
 from warp_critic.reproduce.settings import METHOD_LABELS, METHODS
 from warp_critic.reproduce.stages import STAGE_FILE
 
@@ -39,6 +41,7 @@ def maps_section(d: Draft) -> None:
         gm = {m: M["goals"][m]["mse_mean"] for m in METHODS}
         frac = {m: float((np.asarray(M["goals"][m]["mse"]) < 0.05).mean()) for m in METHODS}
         best = min(gm, key=gm.__getitem__)
+        md += [departures_line("reacher", recs), ""]
         md += [
             f"Goal grid: {len(M['axis_q1'])} x {len(M['axis_q2'])} goals over the joint limits, "
             f"{M['policy_updates']} policy update(s), horizon {M['horizon']}; mean MSE over the grid "
@@ -72,11 +75,15 @@ def maps_section(d: Draft) -> None:
             "paper does not say how it changed a length; a stretched link is a longer link of the same mass.",
             "",
         ]
-        grid_means = {}
+        grid_means, grid_rows = {}, {}
         for kind in ("mass", "length"):
             lines, g = rp.grid_summary(M, kind, sv)
-            grid_means[kind] = g["means"]
+            grid_means[kind], grid_rows[kind] = g["means"], g["rows"]
             md += lines + [""]
+        v4 = map_verdict(
+            M["goals"]["ours"]["mse"],
+            {METHOD_LABELS[m]: M["goals"][m]["mse"] for m in METHODS if m != "ours"},
+        )
         figures.append(
             (
                 "Figure 4: reacher new goals",
@@ -94,16 +101,23 @@ def maps_section(d: Draft) -> None:
                 + ", ".join(f"{METHOD_LABELS[m]} {frac[m]:.0%}" for m in METHODS)
                 + "; grid mean: "
                 + ", ".join(f"{METHOD_LABELS[m]} {fmt(gm[m])}" for m in METHODS),
-                "verdict": "met" if frac["ours"] >= 0.9 and best == "ours" else "not met",
-                "reason": "criterion: ours below 0.05 MSE on >= 90% of the grid and the lowest grid mean",
+                "verdict": v4["verdict"],
+                "reason": map_reason(v4),
             }
         )
+        verdicts = {"goals": v4}
         for fig_no, kind, png in ((5, "mass", p5), (6, "length", p6)):
             kinds = {"mass": "masses", "length": "lengths"}[kind]
             means = grid_means[kind]
-            ours_mean = next((v for k, v in means.items() if "(ours)" in k), None)
             others = {k: v for k, v in means.items() if "(ours)" not in k}
-            ok = ours_mean is not None and others and all(ours_mean < v for v in others.values())
+            cells = {
+                lab.replace("this run: ", ""): [c[0] for c in vals]
+                for lab, m, vals in grid_rows[kind]
+                if all(c is not None for c in vals)
+            }
+            ours_label = next(k for k in cells if "(ours)" in k)
+            v = map_verdict(cells.pop(ours_label), cells)
+            verdicts[kind] = v
             figures.append(
                 (
                     f"Figure {fig_no}: reacher {kind}",
@@ -124,12 +138,8 @@ def maps_section(d: Draft) -> None:
                     + ", ".join(
                         f"{k.replace('this run: ', '')} {fmt(v)}" for k, v in means.items()
                     ),
-                    "verdict": "met" if ok else "not met",
-                    "reason": (
-                        "ours below every baseline row shown"
-                        if ok
-                        else "a baseline row is at or below ours"
-                    )
+                    "verdict": v["verdict"],
+                    "reason": map_reason(v)
                     + (
                         ""
                         if any("solved" in k for k in others)
@@ -143,6 +153,7 @@ def maps_section(d: Draft) -> None:
             "mass": M["mass"],
             "length": M["length"],
             "grid_means": grid_means,
+            "verdicts": verdicts,
             "file": f"{r.dir.name}/{STAGE_FILE}",
             "raw_file": f"{r.dir.name}/{M['raw_file']}",
         }

@@ -4,8 +4,9 @@ tables with reachability floors, and the claims table whose verdicts are compute
 
 Definitions (stated in the report):
 
-* **steps to a level**: the first iteration whose training error ``||q_T - g||^2`` (rad^2, summed over
-  the joints; the curve of Figure 3) is at or below the level, as environment steps
+* **steps to a level**: the first iteration after which the running mean of the training error
+  ``||q_T - g||^2`` (rad^2, summed over the joints; the curve of Figure 3) over
+  :data:`~.rules.WINDOW` iterations stays at or below the level (:mod:`.rules`), as environment steps
   ``(iteration + 1) x steps per iteration`` and as wall time (the sum of the iteration times up to
   it); mean and min-max over the seeds that reach it, and the count that never does.
 * **solved the training task** (the paper: "for our baselines, we selected seeds that solved the
@@ -20,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from warp_critic.reproduce.report_plots import diverged_cmap, log_limits
+from warp_critic.reproduce.rules import WINDOW, sample_efficiency, settled_index
 from warp_critic.reproduce.settings import METHOD_LABELS, METHODS
 
 LEVELS = (0.3, 0.1, 0.03)
@@ -62,20 +64,25 @@ def solved_seeds(res: dict, scene: str) -> list[bool]:
     return [final_training_error(c["loss"]) <= SOLVED[scene] for c in seed_curves(res).values()]
 
 
-def steps_to_levels(res: dict) -> dict[float, dict]:
-    """level -> {steps: [per reaching seed], seconds: [...], never: int, seeds: int}."""
+def steps_to_levels(
+    res: dict, budget: float | None = None, window: int = WINDOW
+) -> dict[float, dict]:
+    """level -> {steps: [per reaching seed], seconds: [...], never: int, seeds: int}: a seed reaches
+    a level at :func:`~.rules.settled_index` (the running mean over ``window`` iterations stays at
+    or below it to the end of the curve, the curve cut at ``budget`` env steps when given)."""
     curves = seed_curves(res)
     out = {}
     for level in LEVELS:
         steps, secs, never = [], [], 0
         for c in curves.values():
-            hit = np.nonzero(c["loss"] <= level)[0]
-            if hit.size == 0:
+            n = len(c["loss"]) if budget is None else int(np.sum(c["steps"] <= budget))
+            k = settled_index(c["loss"][:n], level, window)
+            if k is None:
                 never += 1
                 continue
-            steps.append(int(c["steps"][hit[0]]))
+            steps.append(int(c["steps"][k]))
             if c["seconds"] is not None:
-                secs.append(float(c["seconds"][hit[0]]))
+                secs.append(float(c["seconds"][k]))
         out[level] = {"steps": steps, "seconds": secs, "never": never, "seeds": len(curves)}
     return out
 
@@ -116,31 +123,11 @@ def steps_table(got: dict) -> tuple[list[str], dict]:
     return lines, data
 
 
-def sample_efficiency_verdict(data: dict) -> tuple[str, str]:
-    """(verdict, measurement) for 'ours reaches the training error levels in fewer steps'."""
-    parts, ours_first, any_level = [], 0, 0
-    for level in LEVELS:
-        mean = {
-            m: (np.mean(t[level]["steps"]) if t[level]["never"] == 0 else np.inf)
-            for m, t in data.items()
-        }
-        if all(np.isinf(v) for v in mean.values()):
-            continue
-        any_level += 1
-        best = min(mean, key=mean.__getitem__)
-        ours_first += best == "ours"
-        parts.append(
-            f"{level:g}: "
-            + ", ".join(
-                f"{METHOD_LABELS[m]} {_fmt(v) if np.isfinite(v) else 'not all seeds'}"
-                for m, v in mean.items()
-            )
-        )
-    measurement = "mean env steps to reach " + "; ".join(parts) if parts else "no level reached"
-    if "ours" not in data or len(data) < 2 or any_level == 0:
-        return "not comparable", measurement + " (a method or every level missing)"
-    verdict = "met" if ours_first == any_level else "not met"
-    return verdict, measurement + f" (ours first at {ours_first} of {any_level} levels)"
+def sample_efficiency_verdict(data: dict, within: dict | None = None) -> tuple[str, str]:
+    """(verdict, measurement) for 'ours reaches the training error levels in fewer steps', under
+    :data:`~.rules.STEPS_RULE`: ``data`` from the whole curves, ``within`` from the curves cut at
+    the common budget (the same when the budgets are equal)."""
+    return sample_efficiency(data, data if within is None else within)
 
 
 # -- two rows per baseline -------------------------------------------------------------------------

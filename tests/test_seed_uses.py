@@ -1,0 +1,37 @@
+"""Which goal seeds chose what (warp_critic/evaluation/seed_uses.py), the held-out tables stage
+planned from it, and the report's line on the settings that differ from the paper's text."""
+
+from __future__ import annotations
+
+from warp_critic.evaluation import seed_uses
+from warp_critic.reproduce.report_departures import departures
+
+
+def test_the_held_out_seed_chose_nothing_and_seed_1_is_not_held_out():
+    assert seed_uses.chose(seed_uses.HELD_OUT_SEED) == []
+    assert any("KUKA" in u.what for u in seed_uses.chose(1))
+    assert "not a held-out test" in seed_uses.seed_note(1)
+    assert "held out" in seed_uses.seed_note(seed_uses.HELD_OUT_SEED)
+    scored = {u.seed for u in seed_uses.SEED_USES if u.use == "scored"}
+    assert scored == {1}
+
+
+def test_the_held_out_stage_keeps_the_tables_stage_and_its_hash():
+    from warp_critic.reproduce.pipeline import plan
+    from warp_critic.reproduce.settings import default_settings
+
+    p = plan(default_settings(True, 2))
+    held, tables = p["tables-heldout"], p["tables"]
+    assert held["group"] == "tables" and held["depends"] == tables["depends"]
+    assert held["settings"]["seed"] == seed_uses.HELD_OUT_SEED != tables["settings"]["seed"]
+    assert held["settings"]["stds"] == tables["settings"]["stds"]
+    assert held["hash"] != tables["hash"]
+
+
+def test_departures_name_what_differs_from_the_papers_text():
+    kuka = departures("kuka", {"critic_input": "relative", "start_std": 0.4, "home_starts": 2}, 0.0)
+    text = " ".join(kuka)
+    assert "goal-relative critic" in text and "N(0, 0.4^2)" in text and "gravity 0" in text
+    reacher = departures("reacher", {"critic_input": "full"}, 9.81)
+    assert not any("gravity" in x or "goal-relative" in x for x in reacher)
+    assert any("DDPG with actor_lr 0.001" in x for x in reacher)  # the search's pick (TUNED)

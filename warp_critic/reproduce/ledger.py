@@ -1,0 +1,182 @@
+"""``ledger.jsonl``: one record per event of every ``reproduce`` call on an output folder.
+
+A call that got the folder's lock appends ``start`` (its command and machine), one ``stage`` per
+stage it completed, and ``end`` (or ``end`` with ``"status": "interrupted"`` / ``"failed"``). A call
+refused before it holds the lock (a bad flag, a folder in use) writes nothing. The report's header
+gives the ledger's total wall time (the sum over calls of end - start; a call without an end
+counts to its last record) next to the sum of the report's stage times, so a run resumed over many
+sittings states what it cost in all.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+import uuid
+from pathlib import Path
+
+LEDGER = "ledger.jsonl"
+
+
+def now() -> str:
+    """UTC time as ``YYYY-MM-DDTHH:MM:SSZ``."""
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+
+
+def _cpu_model() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "?"
+
+
+def machine(device: str) -> dict:
+    """What the call ran on: the device, the CPU model and count, the system (no host name)."""
+    return {
+        "device": device,
+        "cpu": _cpu_model(),
+        "cpus": os.cpu_count(),
+        "system": f"{platform.system()} {platform.release()}",
+        "python": platform.python_version(),
+    }
+
+
+def append(out: Path, record: dict) -> None:
+    """Append one record (a line) to ``out``'s ledger, flushed to disk."""
+    with open(Path(out) / LEDGER, "a", encoding="utf-8") as f:
+        f.write(json.dumps(record, sort_keys=True) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def new_call() -> str:
+    return uuid.uuid4().hex[:12]
+
+
+class Call:
+    """One ``reproduce`` call's records in the ledger of ``out`` (a context manager): ``start`` on
+    entry, :meth:`stage` per completed stage, ``end`` on exit (status done / interrupted /
+    failed). Enter it only once the call holds the folder's lock."""
+
+    def __init__(self, out: Path, command: str, selected: list[str], device: str):
+        self.out, self.id = Path(out), new_call()
+        self.ran: list[str] = []
+        self.start = {
+            "event": "start",
+            "call": self.id,
+            "command": command,
+            "selected": list(selected),
+            "machine": machine(device),
+        }
+        self.t0 = 0.0
+
+    def __enter__(self) -> Call:
+        self.t0 = time.perf_counter()
+        append(self.out, {**self.start, "time": now()})
+        return self
+
+    def stage(self, name: str, seconds: float, dir_name: str | None = None) -> None:
+        self.ran.append(name)
+        rec = {"event": "stage", "call": self.id, "stage": name, "seconds": float(seconds)}
+        if dir_name is not None:  # the stage's directory: its settings' hash, not only its name
+            rec["dir"] = dir_name
+        append(self.out, {**rec, "time": now()})
+
+    def __exit__(self, kind, value, tb) -> None:
+        status = (
+            "done" if kind is None else "interrupted" if kind is KeyboardInterrupt else "failed"
+        )
+        append(
+            self.out,
+            {
+                "event": "end",
+                "call": self.id,
+                "time": now(),
+                "status": status,
+                "wall_s": time.perf_counter() - self.t0,
+                "stages_run": self.ran,
+            },
+        )
+
+
+def read(out: Path) -> list[dict]:
+    """The ledger's records (a torn last line, from a crash mid-write, is skipped)."""
+    path = Path(out) / LEDGER
+    if not path.is_file():
+        return []
+    rows = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            rows.append(json.loads(line))
+        except ValueError:
+            continue
+    return rows
+
+
+def _epoch(stamp: str) -> float:
+    import calendar
+
+    return float(calendar.timegm(time.strptime(stamp, "%Y-%m-%dT%H:%M:%SZ")))
+
+
+def summary(rows: list[dict], open_call: str | None = None, open_wall: float = 0.0) -> dict:
+    """calls, total wall time (s), first start, last end, stages run by the ledger's calls.
+
+    ``open_call`` (the call writing the report, without its end yet) counts ``open_wall`` s."""
+    calls: dict[str, dict] = {}
+    for r in rows:
+        c = calls.setdefault(r.get("call", "?"), {"start": None, "end": None, "last": None})
+        if r.get("event") == "start":
+            c["start"] = r["time"]
+        elif r.get("event") == "end":
+            c["end"] = r["time"]
+        c["last"] = r.get("time", c["last"])
+    total, first, last = 0.0, None, None
+    for call, c in calls.items():
+        if c["start"] is None:
+            continue
+        first = min(first or c["start"], c["start"])
+        if call == open_call:
+            total += open_wall
+            last = max(last or "", now())
+            continue
+        end = c["end"] or c["last"]
+        total += max(_epoch(end) - _epoch(c["start"]), 0.0)
+        last = max(last or end, end)
+    ran = [r.get("dir", r["stage"]) for r in rows if r.get("event") == "stage"]
+    return {
+        "calls": sum(c["start"] is not None for c in calls.values()),
+        "unfinished": sum(
+            c["start"] is not None and c["end"] is None and k != open_call for k, c in calls.items()
+        ),
+        "wall": total,
+        "first": first,
+        "last": last,
+        "stages_run": ran,
+    }
+
+
+def header_line(s: dict, stage_seconds: dict[str, float]) -> str:
+    """The report header's line: the ledger's total wall time and the sum of the stage times
+    (``stage_seconds``: stage directory, or name for records without one -> seconds)."""
+    before = [n for n in stage_seconds if n not in s["stages_run"]]
+    line = (
+        f"- ledger (`{LEDGER}`): {s['calls']} call(s) on this folder"
+        + (f" ({s['unfinished']} without an end)" if s["unfinished"] else "")
+        + (f", {s['first']} to {s['last']}" if s["first"] else "")
+        + f"; total wall time {s['wall']:.0f} s ({s['wall'] / 3600:.1f} h); sum of the report's "
+        f"{len(stage_seconds)} stage times {sum(stage_seconds.values()):.0f} s "
+        f"({sum(stage_seconds.values()) / 3600:.1f} h; each stage's time is its completing call's)"
+    )
+    if before:
+        line += (
+            f"; {len(before)} of these stages completed in calls before the ledger was kept "
+            f"(their times {sum(stage_seconds[n] for n in before):.0f} s are in the sum, not in the "
+            "ledger's total)"
+        )
+    return line
