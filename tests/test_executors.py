@@ -13,7 +13,7 @@ import pytest
 
 from warp_critic.cli.main import main
 
-VOLATILE = ("seconds", "wall", "finished", "written", "command", "seconds_this_call")
+VOLATILE = ("seconds", "wall", "finished", "written", "command", "seconds_this_call", "ledger")
 
 
 def numbers(out: Path) -> dict:

@@ -646,6 +646,11 @@ def test_ledger_records_every_call_and_a_refused_call_writes_nothing(tmp_path, c
     capsys.readouterr()
     assert reproduce_main([*args, "--set", "toy.nope=1"]) == 2  # refused: writes nothing
     assert (out / "ledger.jsonl").read_bytes() == before
+    stage = out / rows[1]["dir"] / "stage.json"
+    stage.write_text(json.dumps({**json.loads(stage.read_text()), "result": {}}))
+    assert reproduce_main(args) == 2  # a damaged stage record: refused before any work
+    assert "edited or damaged" in capsys.readouterr().err
+    assert (out / "ledger.jsonl").read_bytes() == before
 
 
 def test_ledger_total_wall_time_counts_every_call():

@@ -321,7 +321,15 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
     runner = Runner(out)
     t0 = time.perf_counter()
     stages = plan(settings, beyond=rc.plans_beyond)
-    with Call(out, rc.command, rc.selected(), device) as call:  # the folder's ledger
+    call = Call(out, rc.command, rc.selected(), device)  # the folder's ledger
+    waves = needed(rc, stages)
+    runner.total = sum(  # reads every stage record first: a damaged one refuses the call here
+        1
+        for wave in waves
+        for n in wave
+        if read_complete(runner.stage_dir(n, stages[n]["hash"]), stages[n]["group"]) is None
+    )
+    with call:
 
         def done(unit, result, seconds):
             st = stages[unit.name]
@@ -336,13 +344,6 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
             )
             call.stage(unit.name, seconds, unit.dir_name)
 
-        waves = needed(rc, stages)
-        runner.total = sum(
-            1
-            for wave in waves
-            for n in wave
-            if read_complete(runner.stage_dir(n, stages[n]["hash"]), stages[n]["group"]) is None
-        )
         runner.log(
             f"reproduce: {runner.total} stage(s) to run ({executor.name}); complete ones are skipped"
         )
