@@ -292,8 +292,8 @@ class Session:
 
     def close(self, failed: bool = False) -> None:
         for r in self.runs:
-            if not r.claimed:
-                continue
+            if not r.claimed or (r.start_over and not r.cleared):
+                continue  # (a run to start over is not touched before its claim)
             # a new run that failed before its first iteration leaves nothing behind
             if failed and r.ckpt is None and not (r.rundir.path / "metrics.jsonl").exists():
                 r.rundir.abandon()

@@ -1,0 +1,203 @@
+"""Misuse, part three (issues 47 and 48): the cases the third held-out probe found, through the real
+command line, in the misuse table's form (``tests/test_bad_input.py``: its finished tiny runs, its
+snapshot of every file, its rule -- one line naming the file or flag, exit 2, nothing written, nothing
+lost).
+
+* a blank ``--train-variants`` (a traceback before);
+* ``--train-variants`` whose models the run's step cannot hold (``physics/stability``): refused up
+  front naming the value from which the model holds, where they used to diverge at iteration 0;
+* unbounded work: more than 100 ``--seeds`` in one process, a policy lifetime x inner steps or
+  ``--policy-steps`` over 10000 critic-gradient steps per policy at meta-test;
+* dead ends and lost results: ``--resume`` of a run stopped before its first checkpoint starts it
+  over (it was refused, and so was a new run there); ``meta-test --out`` on another run's result.
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+import test_bad_input as table
+import torch
+from test_bad_input import MT, TEST, C, base, run_written, world  # noqa: F401 (fixtures)
+
+HORIZON = ["--horizon", "20"]  # long enough for a model the step cannot hold to diverge
+
+
+def variants(text: str, *more: str) -> list[str]:
+    return [*MT, *HORIZON, "--train-variants", text, *more, "--out", "{new}"]
+
+
+def no_checkpoint(w):
+    """The run as a process killed (or stopped by a divergence) before its first checkpoint left it."""
+    (w.run / "checkpoint.pt").unlink()
+
+
+def lifetime(value: int):
+    def setup(w):
+        path = w.run / "checkpoint.pt"
+        ckpt = torch.load(path, weights_only=False)
+        ckpt["config"]["policy_lifetime"] = value
+        torch.save(ckpt, path)
+
+    return setup
+
+
+def other_kind(w):
+    (w.t / "table.json").write_text(json.dumps({"kind": "warp-critic/protocol-v1", "rows": [1]}))
+
+
+def started_over(w):
+    run_written("run", 3)(w)
+    rows = [json.loads(x) for x in (w.run / "metrics.jsonl").read_text().splitlines()]
+    assert all(r["seconds"] >= 0 for r in rows) and len(rows) == 3
+
+
+SEEDS_101 = ",".join(str(s) for s in range(101))
+
+CASES = [
+    # 1. tracebacks
+    C("t47", "train-variants-blank", variants("   "), says=("--train-variants", "blank")),
+    C("t47", "train-variants-empty", variants(""), says=("--train-variants", "blank")),
+    # 2. models the run's step cannot hold: refused before any work, naming where it holds
+    C(
+        "s47",
+        "train-variants-massless-link",
+        variants("arm1.mass=0"),
+        says=("--train-variants", "arm1.mass=0", "it holds from about arm1.mass="),
+        seconds=20,
+    ),
+    C(
+        "s47",
+        "train-variants-light-second-link",
+        variants("arm2.mass=0.01..1:keep"),
+        says=("--train-variants", "arm2.mass=0.01:keep", "holds from about arm2.mass=0."),
+        seconds=20,
+    ),
+    C(
+        "s47",
+        "train-variants-point-mass-off-the-link",
+        variants("ee.point-mass+=0..1e6@0.5,0,0"),
+        says=("--train-variants", "ee.point-mass+=1e+06@0.5,0,0", "substeps"),
+        seconds=20,
+    ),
+    C(
+        "s47",
+        "train-variants-short-second-link",
+        variants("arm1.mass=0.25..6; arm2.stretch=0.5..2"),
+        says=("--train-variants", "arm2.stretch=0.5", "holds from about arm2.stretch=0."),
+        seconds=20,
+    ),
+    C(
+        "s47",
+        "train-variants-open-range",
+        variants("arm1.mass=1e3.."),
+        says=("--train-variants", "LO..HI"),
+    ),
+    C(  # a 1000 kg to 1e9 kg first link: the step holds it, so it trains
+        "s47",
+        "train-variants-heavy-link-trains",
+        variants("arm1.mass=1e3..1e9"),
+        code=0,
+        check=run_written("new_out", 1),
+        seconds=40,
+    ),
+    C(  # dropped worlds are the user's choice: no probe
+        "s47",
+        "train-variants-light-link-with-drop-trains",
+        variants("arm2.mass=0.2..1:keep", "--on-divergence", "drop"),
+        code=0,
+        check=run_written("new_out", 1),
+        seconds=40,
+    ),
+    # 3. unbounded work
+    C(
+        "u47",
+        "seeds-101",
+        [*MT, "--seeds", SEEDS_101, "--out", "{new}"],
+        says=("--seeds", "101 seeds", "at most 100"),
+        seconds=10,
+    ),
+    C(
+        "u47",
+        "policy-lifetime-1e6",
+        [*MT, "--policy-lifetime", "1000000", "--out", "{new}"],
+        says=("--policy-lifetime", "10000"),
+        seconds=10,
+    ),
+    C(
+        "u47",
+        "policy-lifetime-times-inner-steps",
+        [*MT, "--policy-lifetime", "5000", "--inner-steps", "3", "--out", "{new}"],
+        says=("--policy-lifetime", "15000", "at most 10000"),
+        seconds=10,
+    ),
+    C(
+        "u47",
+        "meta-test-policy-steps-20000",
+        [*TEST, "--policy-steps", "20000", "--out", "{t}/mt.json"],
+        says=("--policy-steps", "10000"),
+        seconds=10,
+    ),
+    C(
+        "u47",
+        "meta-test-run-with-lifetime-1e6",
+        [*TEST, "--out", "{t}/mt.json"],
+        setup=lifetime(1_000_000),
+        says=("--policy-steps", "000000 critic-gradient steps", "at most 10000"),
+        seconds=15,
+    ),
+    C(  # the limit itself is stated, and --policy-steps takes over a run's too-long default
+        "u47",
+        "meta-test-run-with-lifetime-1e6-steps-given",
+        [*TEST, "--policy-steps", "2", "--out", "{t}/mt.json"],
+        setup=lifetime(1_000_000),
+        code=0,
+        check=table.result_written("mt.json"),
+    ),
+    # 4. dead ends and lost results
+    C(
+        "d48",
+        "resume-run-stopped-before-first-checkpoint",
+        table.RESUME,
+        setup=no_checkpoint,
+        code=0,
+        warns=1,
+        says=("no checkpoint", "starts over", "2 iteration(s)"),
+        changes=("run/",),
+        check=started_over,
+    ),
+    C(
+        "d48",
+        "new-run-in-a-run-stopped-before-first-checkpoint",
+        [*MT, "--out", "{run}"],
+        setup=no_checkpoint,
+        says=("already holds a run", "--resume"),
+    ),
+    C(
+        "d48",
+        "resume-run-stopped-before-first-checkpoint-other-settings",
+        [*table.RESUME, "--horizon", "5"],
+        setup=no_checkpoint,
+        says=("horizon", "3 -> 5"),
+    ),
+    C(
+        "d48",
+        "meta-test-out-is-another-runs-result",
+        ["meta-test", "{ddpg}", "--device", "cpu", "--num-goals", "1", "--inits", "1"]
+        + ["--out", "{run}/metatest.json"],
+        says=("--out", "metatest.json", "not replacing"),
+    ),
+    C(
+        "d48",
+        "meta-test-out-is-another-commands-result",
+        [*TEST, "--out", "{t}/table.json"],
+        setup=other_kind,
+        says=("--out", "table.json", "protocol"),
+    ),
+]
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_misuse_three(case, world, capfd, monkeypatch):  # noqa: F811 (the fixture)
+    table.test_bad_input(case, world, capfd, monkeypatch)
