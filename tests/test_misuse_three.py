@@ -15,6 +15,12 @@ lost).
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 import test_bad_input as table
@@ -51,6 +57,12 @@ def started_over(w):
     run_written("run", 3)(w)
     rows = [json.loads(x) for x in (w.run / "metrics.jsonl").read_text().splitlines()]
     assert all(r["seconds"] >= 0 for r in rows) and len(rows) == 3
+
+
+def deleted_cwd(w):
+    (w.t / "gone").mkdir()
+    os.chdir(w.t / "gone")  # the world fixture's monkeypatch restores the directory after
+    (w.t / "gone").rmdir()
 
 
 SEEDS_101 = ",".join(str(s) for s in range(101))
@@ -198,6 +210,71 @@ CASES = [
 ]
 
 
+CASES += [
+    # 5. messages that mislead
+    C(
+        "m48",
+        "working-directory-deleted",
+        [*MT, "--out", "{new}"],
+        setup=deleted_cwd,
+        says=("the working directory no longer exists",),
+    ),
+]
+
+
 @pytest.mark.parametrize("case", CASES)
 def test_misuse_three(case, world, capfd, monkeypatch):  # noqa: F811 (the fixture)
     table.test_bad_input(case, world, capfd, monkeypatch)
+
+
+def test_interrupt_after_import_wrote_the_scene_says_it_is_whole(tmp_path, capfd, monkeypatch):
+    """A signal that lands after ``import`` wrote its scene: exit 130 with one line saying the scene
+    was written whole (it said only "interrupted")."""
+    from test_robots import TWO_LINK
+
+    import warp_critic.cli.main as cli
+
+    robot = tmp_path / "twolink.urdf"
+    robot.write_text(TWO_LINK)
+    out = tmp_path / "scene.usda"
+
+    def signalled_print(*args, **kw):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)  # the handler raises here
+        print(*args, **kw)
+
+    monkeypatch.setattr(cli, "print", signalled_print, raising=False)
+    capfd.readouterr()
+    code = cli.main(["import", str(robot), "--out", str(out)])
+    lines = [x for x in capfd.readouterr().err.splitlines() if "warning" not in x]
+    assert code == 130 and lines == [
+        f"warp-critic: interrupted; the scene {out} was written whole"
+    ], lines
+    assert out.is_file()
+
+
+def _cli_ascii_locale(*args: bytes, cwd) -> subprocess.CompletedProcess:
+    env = {**os.environ, "LC_ALL": "C", "PYTHONUTF8": "0", "WARP_CRITIC_TORCH_THREADS": "1"}
+    cmd = [sys.executable.encode(), b"-m", b"warp_critic.cli.main", *args]
+    return subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, timeout=300)
+
+
+def test_utf8_paths_under_an_ascii_locale(tmp_path):
+    """``LC_ALL=C PYTHONUTF8=0``: valid UTF-8 names are taken (they were refused as "not valid
+    UTF-8"), a name with a stray byte is still refused naming its flag, nothing written."""
+    from conftest import REACHER
+
+    folder = tmp_path / "réa"
+    folder.mkdir()
+    (folder / "scène.usda").write_text(Path(REACHER).read_text())
+    tiny = [b"--iterations", b"1", b"--horizon", b"3", b"--worlds-per-goal", b"1"]
+    scene = "réa/scène.usda".encode()
+    p = _cli_ascii_locale(b"meta-train", scene, *tiny, b"--device", b"cpu", b"--out",
+                          "réa/rün".encode(), cwd=tmp_path)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    config = json.loads((folder / "rün" / "config.json").read_text())
+    assert config["scene"] == "réa/scène.usda"
+    p = _cli_ascii_locale(b"meta-train", scene, *tiny, b"--out", b"bad\xff", cwd=tmp_path)
+    err = p.stderr.decode(errors="replace").strip().splitlines()
+    assert p.returncode == 2 and len(err) == 1 and "--out" in err[0] and "UTF-8" in err[0], err
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["réa"]

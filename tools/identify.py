@@ -65,6 +65,11 @@ def main(argv=None) -> int:
         if it % every == 0 or it == args.iterations - 1:
             print(f"iteration {it}: loss {loss:.5f}", flush=True)
 
+    from warp_critic.cli import signals
+    from warp_critic.methods.identify import identified
+
+    previous = signals.install()  # Ctrl-C / SIGTERM: one true line, exit 130
+    signals.running()
     try:
         r = train_identifier(
             args.run_dir,
@@ -82,6 +87,15 @@ def main(argv=None) -> int:
         )
     except UserError as e:
         p.exit(2, f"{PROG}: error: {user_message(e, rename={'train_variants': '--variants'})}\n")
+    except KeyboardInterrupt:
+        kept = (
+            f"the identified run in {args.out} was written whole"
+            if identified(args.out) is not None
+            else f"{args.out} holds no identified run (it is written whole at the end): run it again"
+        )
+        p.exit(signals.EXIT_INTERRUPTED, f"{PROG}: interrupted; {kept}\n")
+    finally:
+        signals.restore(previous)
     print(
         f"final loss {r['loss']:.5f}; on a fresh draw the estimate misses the {r['varied']} "
         f"varied entries by {r['held_out']:.4f} on average (descriptor units)"

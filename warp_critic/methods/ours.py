@@ -313,7 +313,7 @@ def meta_train(
                 "critic_hidden": cfg.critic_hidden,
                 "critic_input": critic_input,
                 "optimizer_state": optimizer_slice(opt, critic, i),
-                "policy_params": {k: v[sl].cpu() for k, v in params.items()},
+                "policy_params": {k: v[sl].cpu().clone() for k, v in params.items()},  # own storage
                 **(identified[i] if identified else {}),
             }
 

@@ -17,6 +17,7 @@ import torch
 from warp_critic.core.errors import FieldError, UserError, warn
 from warp_critic.core.runtime import MAX_SEEDS
 from warp_critic.running.config import check_fields
+from warp_critic.running.locks import holder
 from warp_critic.running.rundir import MARKER, RECORDING, RUN_KIND, SEGMENT, RunDir
 from warp_critic.running.task import RUNTIME_FIELDS, TaskConfig
 
@@ -210,6 +211,9 @@ class SeedRun:
         """``--resume`` of a run of ours that holds no checkpoint (killed or stopped before its
         first): nothing to continue and nothing to lose, so the run starts over in its directory
         with its saved settings (``config.json``, when it got that far; the resume rule holds)."""
+        owner = holder(self.rundir.path)
+        if owner is not None:  # a live run that has not checkpointed yet: refused at once
+            self.rundir.lock()
         method = self.rundir.marker().get("method")
         if method not in (None, requested.method):
             raise UserError(
