@@ -65,6 +65,17 @@ def deleted_cwd(w):
     (w.t / "gone").rmdir()
 
 
+def truncated_recording(w):
+    data = (w.run / "recording.rrd").read_bytes()
+    (w.run / "recording.rrd").write_bytes(data[: len(data) * 2 // 3])  # a killed merge's copy
+
+
+def truncated_segment(w):
+    """The segment a process killed while recording left (its file without rerun's footer)."""
+    data = (w.run / "recording.rrd").read_bytes()
+    (w.run / "recording.segment.rrd").write_bytes(data[: len(data) // 2])
+
+
 SEEDS_101 = ",".join(str(s) for s in range(101))
 
 CASES = [
@@ -218,6 +229,28 @@ CASES += [
         [*MT, "--out", "{new}"],
         setup=deleted_cwd,
         says=("the working directory no longer exists",),
+    ),
+    C(
+        "m48",
+        "resume-repairs-a-truncated-recording-and-says-what-it-kept",
+        table.RESUME,
+        setup=truncated_recording,
+        code=0,
+        warns=1,
+        says=("recording.rrd had been cut short", "recorded iteration(s)"),
+        changes=("run/",),
+        check=run_written("run", 3),
+    ),
+    C(
+        "m48",
+        "resume-repairs-a-truncated-segment-and-says-what-it-kept",
+        table.RESUME,
+        setup=truncated_segment,
+        code=0,
+        warns=1,
+        says=("recording.segment.rrd had been cut short", "recorded iteration(s), 0 to"),
+        changes=("run/",),
+        check=run_written("run", 3),
     ),
 ]
 

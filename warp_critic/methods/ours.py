@@ -110,7 +110,7 @@ class TrainConfig(TaskConfig):
         "may be ranges LO..HI, drawn uniformly for every world at every iteration (seeded by the "
         "seed and the iteration, so a resumed run draws the same; the draws are in the metrics as "
         "train_variant_values), applied after --variant; e.g. 'ee.point-mass+=0..9' or "
-        "'arm1.mass=0.25..6; arm2.mass=0.25..6'. Groups joined by '|' are alternatives: at "
+        "'arm1.mass=0.5..6; arm2.mass=0.5..6'. Groups joined by '|' are alternatives: at "
         "iteration i world w takes group (w + i) mod (number of groups) only, one factor at a time, "
         "e.g. 'ee.stretch=0.2..2 | ee.point-mass+=0..9' (default: none, the nominal model)",
     )
