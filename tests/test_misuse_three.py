@@ -311,3 +311,54 @@ def test_utf8_paths_under_an_ascii_locale(tmp_path):
     err = p.stderr.decode(errors="replace").strip().splitlines()
     assert p.returncode == 2 and len(err) == 1 and "--out" in err[0] and "UTF-8" in err[0], err
     assert sorted(x.name for x in tmp_path.iterdir()) == ["réa"]
+
+
+def test_a_stopped_identification_continues_where_it_stopped(tmp_path):
+    """reproduce's identification step (``train_identifier`` with a ``resume_file``) saves its state
+    every ``checkpoint_every`` steps; stopped, it continues from there (it started at iteration 0)
+    to exactly the identifier an uninterrupted run trains, and removes the file."""
+    from test_train_variants import _train
+
+    from warp_critic.cli.main import main
+    from warp_critic.methods.identify import IDENTIFY_FILE, train_identifier
+
+    told = tmp_path / "told"
+    assert main(_train(told, "--critic-input", "pose-dynamics", iterations=1)) == 0
+    kw = dict(iterations=4, goals=2, inits=2, hidden=16, seed=0, device="cpu")
+    torch.manual_seed(0)  # the identifier's initial weights
+    train_identifier(str(told), str(tmp_path / "a"), **kw)
+    resume = tmp_path / "b.progress.pt"
+
+    def stop(it, loss):
+        if it == 2:
+            raise KeyboardInterrupt
+
+    torch.manual_seed(0)
+    with pytest.raises(KeyboardInterrupt):
+        train_identifier(
+            str(told),
+            str(tmp_path / "b"),
+            resume_file=resume,
+            checkpoint_every=2,
+            progress=stop,
+            **kw,
+        )
+    assert resume.is_file() and not (tmp_path / "b").exists()
+    seen: list[int] = []
+    torch.manual_seed(1)  # not needed: the saved state holds the weights
+    train_identifier(
+        str(told),
+        str(tmp_path / "b"),
+        resume_file=resume,
+        checkpoint_every=2,
+        progress=lambda it, loss: seen.append(it),
+        **kw,
+    )
+    assert seen == [2, 3] and not resume.exists()
+    a, b = (tmp_path / d / IDENTIFY_FILE for d in ("a", "b"))
+    assert a.read_text() == b.read_text() and len(a.read_text().splitlines()) == 4
+    sa, sb = (
+        torch.load(tmp_path / d / "checkpoint.pt", weights_only=False)["identifier_state"]
+        for d in ("a", "b")
+    )
+    assert sa.keys() == sb.keys() and all(torch.equal(sa[k], sb[k]) for k in sa)
