@@ -27,7 +27,12 @@ import test_bad_input as table
 import torch
 from test_bad_input import MT, TEST, C, base, run_written, world  # noqa: F401 (fixtures)
 
-HORIZON = ["--horizon", "20"]  # long enough for a model the step cannot hold to diverge
+HORIZON = ["--horizon", "20"]
+TINY_ARGS = [
+    *table.TINY,
+    "--out",
+    "{new}",
+]  # long enough for a model the step cannot hold to diverge
 
 
 def variants(text: str, *more: str) -> list[str]:
@@ -76,12 +81,37 @@ def truncated_segment(w):
     (w.run / "recording.segment.rrd").write_bytes(data[: len(data) // 2])
 
 
+def zero_axis_urdf(w):
+    import re
+
+    from test_robots import TWO_LINK
+
+    text = re.sub(r"<visual>.*?</visual>", "", TWO_LINK)  # no missing-mesh warning
+    (w.t / "zeroaxis.urdf").write_text(
+        text.replace('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>', 1)
+    )
+
+
 SEEDS_101 = ",".join(str(s) for s in range(101))
 
 CASES = [
     # 1. tracebacks
     C("t47", "train-variants-blank", variants("   "), says=("--train-variants", "blank")),
     C("t47", "train-variants-empty", variants(""), says=("--train-variants", "blank")),
+    C(
+        "t47",
+        "urdf-zero-axis-meta-train",
+        ["meta-train", "{t}/zeroaxis.urdf", *TINY_ARGS],
+        setup=zero_axis_urdf,
+        says=("zeroaxis.urdf", "joint j1", "zero joint axis"),
+    ),
+    C(
+        "t47",
+        "urdf-zero-axis-import",
+        ["import", "{t}/zeroaxis.urdf", "--out", "{t}/scene.usda"],
+        setup=zero_axis_urdf,
+        says=("zeroaxis.urdf", "joint j1", "zero joint axis"),
+    ),
     # 2. models the run's step cannot hold: refused before any work, naming where it holds
     C(
         "s47",
