@@ -77,16 +77,22 @@ def test_guard_leaves_settled_rollouts_bitwise():
     assert settled_worlds(b.after).all()
 
 
-def test_cli_drop_counts_diverged_worlds(tmp_path):
+def test_cli_drop_counts_diverged_worlds(tmp_path, capsys):
     """Training over second links as light as 10 g, where saturated torques drive the integrator
-    out of range: ``stop`` exits 1 naming the world; ``drop`` trains on the others and counts the
+    out of range: ``stop`` is refused up front (exit 2, naming the value the probe of
+    physics/stability finds stable), nothing written; ``drop`` trains on the others and counts the
     diverged worlds in the metrics."""
     args = [
         "meta-train", REACHER, "--goals", "0.5,0.3;-0.4,0.2", "--worlds-per-goal", "4",
         "--horizon", "20", "--iterations", "2", "--device", "cpu", "--critic-hidden", "16",
         "--alpha", "1e3", "--seed", "1", "--train-variants", "arm2.mass=0.01..1:keep",
     ]  # fmt: skip
-    assert main([*args, "--out", str(tmp_path / "stop")]) == 1
+    capsys.readouterr()
+    assert main([*args, "--out", str(tmp_path / "stop")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("warp-critic: error: --train-variants:"), err
+    assert "arm2.mass=0.01:keep" in err[0] and "it holds from about arm2.mass=" in err[0], err
+    assert not (tmp_path / "stop").exists()
     out = tmp_path / "drop"
     code = main([*args, "--on-divergence", "drop", "--out", str(out)])
     rows = [json.loads(x) for x in (out / "metrics.jsonl").read_text().splitlines()]

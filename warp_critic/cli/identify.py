@@ -84,6 +84,16 @@ def run_from_args(args: argparse.Namespace) -> int:
         if e.field != "train_variants":  # the run's setting that --variants replaces
             raise
         raise FieldError("variants", e.problem) from None
+    except KeyboardInterrupt:  # the interruption line says what is on disk
+        from warp_critic.cli import signals
+        from warp_critic.methods.identify import identified
+
+        signals.note(
+            f"the identified run in {args.out} was written whole"
+            if identified(args.out) is not None
+            else f"{args.out} holds no identified run (it is written whole at the end): run it again"
+        )
+        raise
     print(
         f"final loss {r['loss']:.5f}; on a fresh draw the estimate misses the {r['varied']} "
         f"varied entries by {r['held_out']:.4f} on average (descriptor units)"

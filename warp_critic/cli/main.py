@@ -131,6 +131,9 @@ def cmd_import(args: argparse.Namespace) -> int:
     out = write_scene(scene, args.out)
     for repair in getattr(scene, "import_repairs", ()):
         print(f"repaired: {repair}")
+    from warp_critic.cli import signals
+
+    signals.note(f"the scene {out} was written whole")
     print(f"scene: {out} ({scene.dof} joints, end effector {scene.body_names[scene.ee_body]})")
     print(f"meta-train: warp-critic meta-train {out}")
     return 0
@@ -289,10 +292,23 @@ def main(argv: list[str] | None = None) -> int:
     """The ``warp-critic`` command; ``argv`` given: called in-process (signal handlers restored after)."""
     from warp_critic.cli import signals
 
+    if argv is None:
+        _utf8_mode()
+    try:
+        os.getcwd()
+    except OSError:  # before torch: its libraries abort the process without a working directory
+        where = os.environ.get("PWD") or "the working directory"
+        sys.stderr.write(
+            f"warp-critic: error: {where}: the working directory no longer exists; "
+            "change to a folder that does\n"
+        )
+        return EXIT_USER_ERROR
     previous = signals.install() if _main_thread() else None
     said = False
     try:
         code, said = _run(argv, in_process=argv is not None)
+        if code == 0 and not signals.noted():  # a signal while the interpreter shuts down
+            signals.note("after the command had finished: what it wrote is whole")
         return code
     finally:
         if previous is not None:
@@ -347,7 +363,7 @@ def _run(argv: list[str] | None, in_process: bool) -> tuple[int, bool]:
         sys.stderr.write(f"warp-critic: {e}{hint}\n")
         return EXIT_INTERRUPTED, True
     except KeyboardInterrupt:
-        sys.stderr.write("warp-critic: interrupted\n")
+        sys.stderr.write(f"warp-critic: interrupted{signals.noted()}\n")
         return EXIT_INTERRUPTED, True
     except OSError as e:
         full = e.errno in (errno.ENOSPC, getattr(errno, "EDQUOT", errno.ENOSPC))
@@ -373,6 +389,28 @@ def check_utf8(args: argparse.Namespace) -> None:
                         f"{str(v).encode('utf-8', 'backslashreplace').decode()}: not valid UTF-8 "
                         f"(byte {e.object[e.start : e.end].encode('utf-8', 'surrogateescape')!r})",
                     ) from None
+
+
+def _utf8_mode() -> None:
+    """The console script under an ASCII locale (``LC_ALL=C PYTHONUTF8=0``) given a valid UTF-8 name:
+    the same command again in Python's UTF-8 mode, so that the name is text (for config.json and
+    USD) and a path (for the file system) at once. Other bytes are refused by :func:`check_utf8`."""
+    if sys.flags.utf8_mode or sys.getfilesystemencoding().lower().replace("-", "") == "utf8":
+        return
+    utf8 = False
+    for arg in sys.argv[1:]:
+        try:
+            arg.encode("utf-8")
+            continue
+        except UnicodeEncodeError:
+            pass
+        try:
+            os.fsencode(arg).decode("utf-8")
+            utf8 = True
+        except (UnicodeEncodeError, UnicodeDecodeError):
+            pass  # not UTF-8 in either mode: check_utf8 names it
+    if utf8 and getattr(sys, "orig_argv", None):
+        os.execv(sys.executable, [sys.executable, "-X", "utf8", *sys.orig_argv[1:]])
 
 
 def _floats(text: str) -> list[float]:

@@ -41,7 +41,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=_int,
         default=None,
         metavar="N",
-        help="meta-train seeds 0..N-1 for every method (>= 1; default 5, with --quick 2)",
+        help="meta-train seeds 0..N-1 for every method (1 to 100, one process; default 5, with "
+        "--quick 2)",
     )
     A(
         "--only",

@@ -26,6 +26,7 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 _phase = "off"
 _said = False  # the command already wrote its line about the interruption
+_note = ""  # what is true if a signal stops the command from now on (said in its line)
 
 
 def _handler(signum, frame) -> None:
@@ -33,6 +34,8 @@ def _handler(signum, frame) -> None:
     if _phase == "running":
         _phase = "stopping"
         interrupts.request()  # the loops raise again at their next step if this raise is swallowed
+        if interrupts.deferring():
+            return  # a section that must not be cut short raises when it ends
         raise KeyboardInterrupt
     if _phase == "stopping":
         return  # the first signal's clean-up is under way
@@ -43,10 +46,21 @@ def stop_now() -> None:
     """Write the one line (unless the command wrote it) and exit 130 without clean-up."""
     if not _said:
         try:
-            os.write(2, b"warp-critic: interrupted\n")
+            os.write(2, f"warp-critic: interrupted{noted()}\n".encode(errors="replace"))
         except OSError:
             pass
     os._exit(EXIT_INTERRUPTED)
+
+
+def note(text: str) -> None:
+    """From now on a signal's line also says ``text`` (e.g. that an output was written whole)."""
+    global _note
+    _note = text
+
+
+def noted() -> str:
+    """``"; <note>"`` for the interruption line, or ``""``."""
+    return f"; {_note}" if _note else ""
 
 
 def install() -> dict:
@@ -56,6 +70,7 @@ def install() -> dict:
     if _phase in ("starting", "running", "stopping") and signal.getsignal(SIGNALS[0]) is _handler:
         return {}
     _phase, _said = "starting", False
+    note("")
     interrupts.clear()
     return {s: signal.signal(s, _handler) for s in SIGNALS}
 
@@ -76,9 +91,19 @@ def restore(previous: dict) -> None:
     """Put the previous handlers back (an in-process call of ``main`` leaves nothing behind)."""
     global _phase
     _phase = "off"
+    note("")
     interrupts.clear()
     for s, h in previous.items():
         signal.signal(s, h)
 
 
-__all__ = ["EXIT_INTERRUPTED", "install", "running", "exiting", "restore", "stop_now"]
+__all__ = [
+    "EXIT_INTERRUPTED",
+    "install",
+    "running",
+    "exiting",
+    "restore",
+    "stop_now",
+    "note",
+    "noted",
+]

@@ -12,7 +12,29 @@ Standard library only (the CLI's signal handlers import it before torch and Warp
 
 from __future__ import annotations
 
+import contextlib
+from collections.abc import Iterator
+
 _requested = False
+_deferring = 0  # depth of deferred() sections
+
+
+@contextlib.contextmanager
+def deferred() -> Iterator[None]:
+    """A section a signal does not cut short (writing every seed's files of one iteration): the
+    handler only records its request (:func:`deferring`), and :func:`check` raises right after."""
+    global _deferring
+    _deferring += 1
+    try:
+        yield
+    finally:
+        _deferring -= 1
+    check()
+
+
+def deferring() -> bool:
+    """Whether a :func:`deferred` section runs (a signal handler then only calls :func:`request`)."""
+    return _deferring > 0
 
 
 def request() -> None:
@@ -23,8 +45,8 @@ def request() -> None:
 
 def clear() -> None:
     """Forget a request (a new in-process command starts)."""
-    global _requested
-    _requested = False
+    global _requested, _deferring
+    _requested, _deferring = False, 0
 
 
 def check() -> None:
@@ -33,4 +55,4 @@ def check() -> None:
         raise KeyboardInterrupt
 
 
-__all__ = ["request", "clear", "check"]
+__all__ = ["request", "clear", "check", "deferred", "deferring"]

@@ -19,6 +19,9 @@ from warp_critic.core.errors import FieldError, UserError
 THREADS_ENV = "WARP_CRITIC_TORCH_THREADS"
 GRAPHS_ENV = "WARP_CRITIC_GRAPHS"
 MAX_SEED = 2**32 - 1  # numpy's legacy seeding takes 32 bits; torch takes 64: the common range
+#: the most seeds one process trains at once (``--seeds``; ``reproduce --seeds``): each gets a run
+#: directory and its share of one simulator
+MAX_SEEDS = 100
 
 
 _warp_started = False

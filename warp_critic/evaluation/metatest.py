@@ -26,13 +26,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from warp_critic.core.errors import UserError
+from warp_critic.core.errors import FieldError, UserError
 from warp_critic.core.memory import check_fits
 from warp_critic.core.runtime import check_seed
 from warp_critic.evaluation.goals import sample_goals  # also metatest.sample_goals, as before
 from warp_critic.evaluation.paper import GOAL_NOISE
 from warp_critic.learning.critic import Critic
-from warp_critic.learning.inner import inner_update, policy_fn
+from warp_critic.learning.inner import MAX_POLICY_STEPS, inner_update, policy_fn
 from warp_critic.learning.losses import final_error
 from warp_critic.learning.networks import MLPPolicy, Normalizer
 from warp_critic.learning.rollout import rollout
@@ -71,9 +71,10 @@ class MetaTestConfig(SerializableConfig):
     inits: int = spec(5, "fresh policy initialisations per goal", gt=0, cap=10**6)
     policy_steps: int | None = spec(
         None,
-        "critic-gradient steps per fresh policy (default: the run's inner steps x its policy lifetime)",
+        "critic-gradient steps per fresh policy (default: the run's inner steps x its policy "
+        f"lifetime; at most {MAX_POLICY_STEPS})",
         gt=0,
-        cap=10**6,
+        cap=MAX_POLICY_STEPS,
     )
     alpha: float | None = spec(
         None, "policy learning rate (default: the run's inner learning rate)", gt=0, cap=1e6
@@ -264,6 +265,13 @@ def setup_meta_test(tc: MetaTestConfig, gen: torch.Generator | None = None) -> M
         p.requires_grad_(False)
     alpha = tc.alpha if tc.alpha is not None else defaults.get("alpha")
     steps = tc.policy_steps if tc.policy_steps is not None else defaults.get("steps", 1)
+    if tc.policy_steps is None and int(steps) > MAX_POLICY_STEPS:
+        raise FieldError(
+            "policy_steps",
+            f"{tc.run_dir}: the run's default of {steps} critic-gradient steps per policy (inner "
+            f"steps x policy lifetime) is over the limit of {MAX_POLICY_STEPS}: give at most "
+            f"{MAX_POLICY_STEPS}",
+        )
     if not (isinstance(alpha, (int, float)) and alpha > 0):
         raise UserError(
             f"{tc.run_dir}: the run stores no usable policy learning rate (alpha {alpha!r}); give one"
@@ -300,6 +308,7 @@ def meta_test(tc: MetaTestConfig, progress: Callable[[str], None] | None = None)
     """
     out = check_output_file(Path(tc.out) if tc.out else Path(tc.run_dir) / "metatest.json", "out")
     m = setup_meta_test(tc)
+    _not_anothers(out, tc, m.ckpt.get("run_id"))
     ckpt, scene, goals, goal, sim, policy = m.ckpt, m.scene, m.goals, m.goal, m.sim, m.policy
     params, q0, qd0, steps, horizon, alpha = m.params, m.q0, m.qd0, m.steps, m.horizon, m.alpha
     G, K = goals.shape[0], m.inits
@@ -313,6 +322,7 @@ def meta_test(tc: MetaTestConfig, progress: Callable[[str], None] | None = None)
     result = {
         "kind": RESULT_KIND,
         "run_dir": str(tc.run_dir),
+        "run_id": ckpt.get("run_id"),
         "method": ckpt.get("method", "ours"),
         "scene": scene.name,
         "goals": goals.tolist(),
@@ -364,3 +374,27 @@ def meta_test(tc: MetaTestConfig, progress: Callable[[str], None] | None = None)
     write_result(out, result)
     result["output"] = str(out)
     return result
+
+
+def _not_anothers(out: Path, tc: MetaTestConfig, run_id: str | None) -> None:
+    """An existing ``out`` is replaced only if it is a meta-test result of this run (the same run id,
+    or, for a result without one, the same run directory): never another run's or command's."""
+    import json
+
+    try:
+        old = json.loads(out.read_text()) if out.is_file() else None
+    except (OSError, ValueError, UnicodeDecodeError):
+        old = {}
+    if old is None:
+        return
+    old = old if isinstance(old, dict) else {}
+    if old.get("kind") == RESULT_KIND:
+        same_dir = Path(str(old.get("run_dir"))).resolve() == Path(tc.run_dir).resolve()
+        if (old.get("run_id") == run_id) if old.get("run_id") and run_id else same_dir:
+            return
+        whose = f"of the run {old.get('run_dir')}"
+    else:
+        whose = f"of kind {old.get('kind')!r}"
+    raise FieldError(
+        "out", f"{out}: holds a result {whose}; not replacing it (choose another file)"
+    )

@@ -12,11 +12,29 @@ from collections.abc import Callable
 
 import torch
 
+from warp_critic.core.errors import FieldError
 from warp_critic.learning.losses import critic_loss, critic_loss_at
 from warp_critic.learning.networks import PolicyParams
 from warp_critic.learning.protocols import CriticFn, Policy, StepSize
 from warp_critic.learning.rollout import Trajectory, hold_diverged, rollout, settled_worlds
 from warp_critic.physics.simulator import Simulator
+
+#: the most critic-gradient steps one fresh policy takes at meta-test (``--policy-steps``, or a
+#: run's inner steps x policy lifetime): on the reacher's default meta-test (50 worlds, horizon 50)
+#: a step takes about 0.1 s on a 2-core CPU, so the limit is about 20 minutes
+MAX_POLICY_STEPS = 10_000
+
+
+def check_policy_steps(lifetime: int, inner_steps: int) -> None:
+    """A meta-training config's policy lifetime x inner steps: the steps its meta-test takes per
+    policy, at most :data:`MAX_POLICY_STEPS` (a :class:`FieldError` on ``policy_lifetime``)."""
+    steps = lifetime * inner_steps
+    if steps > MAX_POLICY_STEPS:
+        raise FieldError(
+            "policy_lifetime",
+            f"{lifetime} x {inner_steps} inner step(s) = {steps} critic-gradient steps per policy "
+            f"at meta-test: at most {MAX_POLICY_STEPS}",
+        )
 
 
 def policy_fn(

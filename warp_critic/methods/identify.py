@@ -51,6 +51,8 @@ def train_identifier(
     seed: int = 0,
     device: str = "cpu",
     progress: Callable[[int, float], None] | None = None,
+    resume_file: str | Path | None = None,
+    checkpoint_every: int = 100,
 ) -> dict:
     """Train on ``goals x inits`` worlds per iteration; write ``out`` (a new folder) and return
     ``{"loss": the last training loss, "held_out": the mean |d_hat - d| over the descriptor entries
@@ -58,7 +60,12 @@ def train_identifier(
     the wall time, "iterations": iterations, "version": version}``, also written to
     ``out/identify.json`` (last). ``variants``: draw the models from these ranges
     (``--train-variants`` text) instead of the run's own ``train_variants``, the held-out draw
-    too (and then ``"variants"`` is in the summary); ``None`` or ``""``: the run's own."""
+    too (and then ``"variants"`` is in the summary); ``None`` or ``""``: the run's own.
+
+    ``resume_file`` (outside ``out``): every ``checkpoint_every`` iterations the regression's state
+    (identifier, Adam, generator, losses) is saved there, and a call that finds it for the same
+    run and settings continues from it, to exactly the identifier an uninterrupted call trains;
+    it is removed once ``out`` is complete."""
     from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
     from warp_critic.learning.critic_inputs import DYNAMICS, rollout_data_of
     from warp_critic.learning.identify import Identifier, trajectory_inputs
@@ -125,7 +132,16 @@ def train_identifier(
         return torch.stack(errs).mean(0)[settled].mean()
 
     rows: list[dict] = []
-    for it in range(iterations):
+    key = [str(Path(run_dir).resolve()), iterations, goals, inits, lr, hidden, version]
+    key += [variants, seed]
+    state = _load_progress(resume_file, key)
+    if state is not None:
+        ident.load_state_dict(state["identifier_state"])
+        opt.load_state_dict(state["optimizer_state"])
+        gen.set_state(state["generator"])
+        rows = state["rows"]
+    start = state["iteration"] + 1 if state is not None else 0
+    for it in range(start, iterations):
         trajs, settled = samples(it)
         if not rows:  # the first batch fixes the input scales
             with torch.no_grad():
@@ -137,6 +153,11 @@ def train_identifier(
         loss.backward()
         opt.step()
         rows.append({"iteration": it, "loss": float(loss.detach())})
+        if resume_file is not None and (it + 1) % checkpoint_every == 0 and it + 1 < iterations:
+            progress_state = {"key": key, "iteration": it, "rows": rows}
+            progress_state["identifier_state"] = ident.state_dict()
+            progress_state["optimizer_state"] = opt.state_dict()
+            atomic_torch_save({**progress_state, "generator": gen.get_state()}, Path(resume_file))
         if progress is not None:
             progress(it, rows[-1]["loss"])
     trajs, settled = samples(iterations)  # a draw never trained on
@@ -170,7 +191,21 @@ def train_identifier(
         **({"variants": variants} if variants is not None else {}),
     }
     atomic_write_text(dst / SUMMARY_FILE, json.dumps(summary) + "\n")
+    if resume_file is not None:
+        Path(resume_file).unlink(missing_ok=True)
     return summary
+
+
+def _load_progress(path: str | Path | None, key: list) -> dict | None:
+    """The saved regression state of the same run and settings at ``path``, or ``None`` (none, or
+    of other settings: it starts over)."""
+    if path is None or not Path(path).is_file():
+        return None
+    try:
+        state = torch.load(Path(path), weights_only=True)
+    except Exception:  # noqa: BLE001 - a cut or foreign file: start over
+        return None
+    return state if isinstance(state, dict) and state.get("key") == key else None
 
 
 def identified(out: str | Path) -> dict | None:

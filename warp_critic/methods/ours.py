@@ -18,6 +18,7 @@ from warp_critic.core.errors import DivergenceError, FieldError, UserError
 from warp_critic.learning.critic import Critic
 from warp_critic.learning.critic_inputs import CRITIC_INPUTS, critic_input_help
 from warp_critic.learning.identify import IdentifiedCritic, identifier_from_checkpoint
+from warp_critic.learning.inner import MAX_POLICY_STEPS, check_policy_steps
 from warp_critic.learning.networks import (
     POLICY_INIT_SCHEMES,
     MLPPolicy,
@@ -32,11 +33,11 @@ from warp_critic.learning.stacked import (
     optimizer_slice,
     slice_norm,
 )
+from warp_critic.methods.train_variants import VariantRedraw, check_train_variants
 from warp_critic.physics import schema
-from warp_critic.physics.variant_draws import check_on_scene, parse_ranges
 from warp_critic.running.config import filled, spec
 from warp_critic.running.loop import Callback, Session, TrainResult
-from warp_critic.running.task import TaskConfig, task_variant
+from warp_critic.running.task import TaskConfig
 
 
 @dataclass
@@ -75,9 +76,10 @@ class TrainConfig(TaskConfig):
     )
     policy_lifetime: int = spec(
         1,
-        "with policy-init fresh: outer iterations a policy lives before a fresh random one replaces it; 1 = new policies every iteration (paper). N > 1 staggers the worlds so policies of every age 0..N-1 are trained on at once: the critic learns to keep improving a policy, and meta-test takes N x inner-steps steps",
+        "with policy-init fresh: outer iterations a policy lives before a fresh random one replaces it; 1 = new policies every iteration (paper). N > 1 staggers the worlds so policies of every age 0..N-1 are trained on at once: the critic learns to keep improving a policy, and meta-test takes N x inner-steps steps "
+        f"(at most {MAX_POLICY_STEPS} in all)",
         gt=0,
-        cap=10**6,
+        cap=MAX_POLICY_STEPS,
     )
     critic_input: str | None = spec(
         None,
@@ -110,7 +112,7 @@ class TrainConfig(TaskConfig):
         "may be ranges LO..HI, drawn uniformly for every world at every iteration (seeded by the "
         "seed and the iteration, so a resumed run draws the same; the draws are in the metrics as "
         "train_variant_values), applied after --variant; e.g. 'ee.point-mass+=0..9' or "
-        "'arm1.mass=0.25..6; arm2.mass=0.25..6'. Groups joined by '|' are alternatives: at "
+        "'arm1.mass=0.5..6; arm2.mass=0.5..6'. Groups joined by '|' are alternatives: at "
         "iteration i world w takes group (w + i) mod (number of groups) only, one factor at a time, "
         "e.g. 'ee.stretch=0.2..2 | ee.point-mass+=0..9' (default: none, the nominal model)",
     )
@@ -123,9 +125,8 @@ class TrainConfig(TaskConfig):
 
     def check(self, scene=None) -> None:
         super().check(scene)
-        ranges = parse_ranges(self.train_variants)
-        if scene is not None and ranges:
-            check_on_scene(scene, task_variant(self), ranges)
+        check_policy_steps(self.policy_lifetime, self.inner_steps or 1)
+        check_train_variants(self, scene)
         if self.policy_lifetime > 1 and self.policy_init != "fresh":
             raise FieldError(
                 "policy_lifetime",
@@ -314,7 +315,7 @@ def meta_train(
                 "critic_hidden": cfg.critic_hidden,
                 "critic_input": critic_input,
                 "optimizer_state": optimizer_slice(opt, critic, i),
-                "policy_params": {k: v[sl].cpu() for k, v in params.items()},
+                "policy_params": {k: v[sl].cpu().clone() for k, v in params.items()},  # own storage
                 **(identified[i] if identified else {}),
             }
 
@@ -329,36 +330,6 @@ def meta_train(
     for i, r in enumerate(result.seeds):
         r.model = critic.critic(i)
     return result
-
-
-class VariantRedraw:
-    """``--train-variants``: every iteration, a new variant for every world of the task's simulator.
-
-    Seed ``i``'s worlds draw from ``(seed_i, iteration)`` alone
-    (:func:`~warp_critic.physics.variant_draws.draw`), so batched seeds draw what single-seed runs
-    draw, and a resumed run draws what the uninterrupted one did. Calling it with iteration ``it``
-    sets the variants in place (:func:`~warp_critic.physics.redraw.set_variants`) and returns the
-    values, ``(S, Wc, ranges)``.
-    """
-
-    def __init__(self, cfg: TrainConfig, task, seeds: list[int]):
-        self.ranges = parse_ranges(cfg.train_variants)
-        self.base = task_variant(cfg)
-        self.seeds = seeds  # of the task's copies, in order
-        self.task = task
-
-    def __call__(self, it: int):
-        import numpy as np
-
-        from warp_critic.physics.redraw import set_variants
-        from warp_critic.physics.variant_draws import draw, with_draws
-
-        values = np.stack([draw(self.ranges, self.task.Wc, s, it) for s in self.seeds])
-        worlds = [
-            with_draws(self.base, self.ranges, v) for v in values.reshape(-1, len(self.ranges))
-        ]
-        set_variants(self.task.sim, worlds)
-        return values
 
 
 def _cat(per_seed: list[PolicyParams]) -> PolicyParams:

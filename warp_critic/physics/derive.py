@@ -42,6 +42,8 @@ from typing import Any
 
 import numpy as np
 
+from warp_critic.core.errors import UserError
+
 NO_EFFORT_LIMIT = 1e6  # N*m or N: a joint whose file gives no finite positive effort limit
 CONTROL_PERIOD = 0.01  # s, the KUKA's dt x substeps (0.0025 x 4)
 GOALS = 4
@@ -177,7 +179,18 @@ def limit_gains(scene) -> tuple[np.ndarray, np.ndarray]:
     """``(ke, kd)``, ``(dof,)`` each [N m/rad, N m s/rad or N/m, N s/m]: joint-limit springs
     (rule: module docstring)."""
     sim = _simulator(scene, 1, 1e-3, 1, 0.0)
-    m = 1.0 / np.diag(np.linalg.inv(mass_matrices(sim, scene.home[None])[0]))
+    mm = mass_matrices(sim, scene.home[None])[0]
+    dead = [str(scene.joint_names[i]) for i in np.flatnonzero(~(np.abs(np.diag(mm)) > 1e-12))]
+    try:
+        if dead:
+            raise np.linalg.LinAlgError
+        m = 1.0 / np.diag(np.linalg.inv(mm))
+    except np.linalg.LinAlgError:
+        which = f"joint {', '.join(dead)} moves" if dead else "its joints move"
+        raise UserError(
+            f"{scene.path}: {which} no mass at the home pose (a zero joint axis?): the mass "
+            "matrix is singular, not a robot to train"
+        ) from None
     return m * LIMIT_OMEGA**2, 2.0 * m * LIMIT_OMEGA
 
 

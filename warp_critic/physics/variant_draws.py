@@ -4,7 +4,7 @@ Text form: link changes (:mod:`warp_critic.physics.link_changes`) whose value ma
 ``LO..HI``, joined by ``;``. Examples::
 
     ee.point-mass+=0..9                     # 0-9 kg added at the end-effector tip
-    arm1.mass=0.25..6; arm2.mass=0.25..6    # both reacher links' masses, independently
+    arm1.mass=0.5..6; arm2.mass=0.5..6      # both reacher links' masses, independently
     iiwa_link_7.stretch=0.2..2              # link 7 stretched to 0.2-2 m
     iiwa_link_7.mass=0..9:keep              # link 7's mass set, its inertia about the COM kept
 

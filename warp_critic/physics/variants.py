@@ -32,7 +32,15 @@ from warp_critic.physics.link_changes import LinkChange, format_changes, parse_c
 #: at 1 m is 1e-5 N*m, far below anything measured
 MIN_MASS = 1e-6
 
-__all__ = ["Variant", "apply_changes", "apply_variant", "is_finite", "length_map", "changed_tip"]
+__all__ = [
+    "Variant",
+    "apply_changes",
+    "apply_variant",
+    "is_finite",
+    "length_map",
+    "changed_tip",
+    "link_value",
+]
 
 
 @dataclass(frozen=True)
@@ -314,3 +322,17 @@ def apply_changes(
             if body == ee_body:
                 tip = tip * s
     return tip
+
+
+def link_value(
+    builder, change: LinkChange, body_names: list[str], ee_body: int, tip: np.ndarray
+) -> float:
+    """What ``change`` sets on its link, as the link is in ``builder`` now: its mass [kg] for a
+    mass change, its length [m] for an offset or a stretch, 0 for a point mass."""
+    body = _link_index(change, body_names, ee_body)
+    if change.what == "mass":
+        return float(builder.body_mass[body])
+    if change.what == "point-mass":
+        return 0.0
+    end = _end(builder, body, ee_body, np.asarray(tip, dtype=np.float64), change)
+    return float(np.linalg.norm(end))

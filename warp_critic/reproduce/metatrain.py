@@ -195,7 +195,14 @@ def identify_seed(
             shutil.rmtree(out)
         if progress:
             print(f"identifying the model for seed {seed}'s critic ({out.name})", flush=True)
-        summary = train_identifier(str(run_dir), str(out), seed=seed, device=device, **settings)
+        summary = train_identifier(  # a stopped regression continues from its last 100 steps
+            str(run_dir),
+            str(out),
+            seed=seed,
+            device=device,
+            resume_file=out.with_name(f"{out.name}.progress.pt"),
+            **settings,
+        )
     return {"run_dir": str(out.relative_to(d)), **summary}
 
 

@@ -22,7 +22,6 @@ from warp_critic.core.errors import FieldError
 #: meta-training keys reproduce sets itself: where the run goes, on what, resumed or not, its seeds
 RESERVED = ("out", "scene", "resume", "device", "seed", "seeds")
 MAX_GRID = 1000  # maps: grid x grid goals per run, seed and init
-MAX_SEEDS = 1000
 
 
 def show(value) -> str:
@@ -129,7 +128,7 @@ def check_landscape(s: dict) -> None:
 
 def check_metatrain(m: dict) -> dict[str, int]:
     """Every method x robot config against its scene; returns each robot's number of training goals."""
-    from warp_critic.core.runtime import MAX_SEED
+    from warp_critic.core.runtime import MAX_SEED, MAX_SEEDS  # a stage's seeds: one process
     from warp_critic.reproduce.settings import METHODS, SCENES
 
     seeds = m["seeds"]

@@ -188,7 +188,7 @@ class Session:
         if cfg.cpu_threads is not None:
             set_threads(cfg.cpu_threads)
         callbacks = list(callbacks or [])
-        bar = None
+        bar, merge = None, True
         try:
             for i, r in enumerate(self.runs):
                 r.history = r.rundir.read_metrics(upto=self.start)
@@ -230,31 +230,19 @@ class Session:
                     raise err from None
                 seconds = time.perf_counter() - t0
                 checkpoint_now = (it + 1) % cfg.checkpoint_every == 0 or it + 1 == cfg.iterations
-                for i, (r, row) in enumerate(zip(self.runs, rows)):
-                    row = {"iteration": it, **row, "seconds": seconds}
-                    r.history.append(row)
-                    assert r.metrics_file is not None  # opened above for every seed
-                    r.metrics_file.write(_json_line(row))
-                    r.metrics_file.flush()
-                    info = IterationInfo(it, row, result, task.goal_index_of(i))
-                    for cb in ([r.recorder] if r.recorder is not None else []) + (
-                        callbacks if i == 0 else []
-                    ):
-                        cb(info)
-                    if checkpoint_now:
-                        if (
-                            r.recorder is not None
-                        ):  # on disk before the checkpoint: a crash loses nothing it covers
-                            r.recorder.flush()
-                        self._checkpoint(r, it, state(i))
+                self._write(it, rows, result, state, seconds, checkpoint_now, callbacks)
                 bar.set_description_str(f"{describe(rows[0])} {seconds:.2f}s/it", refresh=False)
                 bar.update(1)
                 interrupts.check()  # a signal whose KeyboardInterrupt a callback swallowed
         except KeyboardInterrupt as e:
+            # several seeds stop at once: their recordings are merged on resume, one rerun call
+            # each, so that the signal takes effect in seconds
+            merge = len(self.runs) == 1 or not record
             if isinstance(e, Interrupted):
                 raise
+            later = "" if merge else "; each seed's last recording segment is merged on resume"
             raise Interrupted(
-                f"interrupted; {self._kept()}", self.runs[0].last_checkpoint
+                f"interrupted; {self._kept()}{later}", self.runs[0].last_checkpoint
             ) from None
         finally:
             if bar is not None:
@@ -264,11 +252,35 @@ class Session:
                     r.metrics_file.close()
                 if r.recorder is not None:
                     r.recorder.close()
-                    r.rundir.merge_recording()
+                    if merge:
+                        r.rundir.merge_recording()
             torch.set_num_threads(threads)
         results = [TrainResult(r.rundir.path, r.history, None, r.cfg) for r in self.runs]
         results[0].seeds = results
         return results[0]
+
+    def _write(self, it, rows, result, state, seconds, checkpoint_now, callbacks) -> None:
+        """Iteration ``it``'s metrics row, recording and (when due) checkpoint of every seed (the
+        checkpoints all or none: a signal waits for them)."""
+        for i, (r, row) in enumerate(zip(self.runs, rows)):
+            row = {"iteration": it, **row, "seconds": seconds}
+            r.history.append(row)
+            assert r.metrics_file is not None  # opened by run() for every seed
+            r.metrics_file.write(_json_line(row))
+            r.metrics_file.flush()
+            info = IterationInfo(it, row, result, self.task.goal_index_of(i))
+            for cb in ([r.recorder] if r.recorder is not None else []) + (
+                callbacks if i == 0 else []
+            ):
+                cb(info)
+        if checkpoint_now:
+            with interrupts.deferred():  # every seed's checkpoint of this iteration, or none
+                for i, r in enumerate(self.runs):
+                    if (
+                        r.recorder is not None
+                    ):  # on disk before the checkpoint: a crash loses nothing
+                        r.recorder.flush()
+                    self._checkpoint(r, it, state(i))
 
     def _kept(self) -> str:
         if len(self.runs) == 1:
@@ -282,7 +294,12 @@ class Session:
                 f"the checkpoints of iteration {done.pop()} in the {len(self.runs)} seed run directories "
                 f"under {where} are kept"
             )
-        return "; ".join(r.kept() for r in self.runs)
+        parts = []  # (seeds stopped between their checkpoints): one part per iteration kept
+        for last in sorted(done, key=lambda x: -1 if x is None else x):
+            names = [r.rundir.path.name for r in self.runs if r.last_checkpoint == last]
+            what = "no checkpoint was written yet" if last is None else f"iteration {last} is kept"
+            parts.append(f"{what} in {len(names)} of them ({', '.join(names)})")
+        return f"{len(self.runs)} seed run directories under {where}: " + "; ".join(parts)
 
     def __enter__(self) -> Session:
         return self
@@ -292,8 +309,8 @@ class Session:
 
     def close(self, failed: bool = False) -> None:
         for r in self.runs:
-            if not r.claimed:
-                continue
+            if not r.claimed or (r.start_over and not r.cleared):
+                continue  # (a run to start over is not touched before its claim)
             # a new run that failed before its first iteration leaves nothing behind
             if failed and r.ckpt is None and not (r.rundir.path / "metrics.jsonl").exists():
                 r.rundir.abandon()

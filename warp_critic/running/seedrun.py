@@ -14,9 +14,11 @@ from typing import TYPE_CHECKING, Any, TextIO
 
 import torch
 
-from warp_critic.core.errors import FieldError, UserError
+from warp_critic.core.errors import FieldError, UserError, warn
+from warp_critic.core.runtime import MAX_SEEDS
 from warp_critic.running.config import check_fields
-from warp_critic.running.rundir import RunDir
+from warp_critic.running.locks import holder
+from warp_critic.running.rundir import MARKER, RECORDING, RUN_KIND, SEGMENT, RunDir
 from warp_critic.running.task import RUNTIME_FIELDS, TaskConfig
 
 if TYPE_CHECKING:
@@ -79,6 +81,8 @@ class SeedRun:
             require
         )
         self.ckpt: dict | None = None
+        self.start_over = False  # --resume of a run that holds no checkpoint (it starts over)
+        self.cleared = False  # ... and its old files are gone (claim)
         self._rundir: RunDir | None = None  # opened on resume, else created by claim()
         self.cfg = self._resume_config(cfg, given) if cfg.resume else cfg
         self._gen: torch.Generator | None = None  # made by Session.seed()
@@ -131,6 +135,18 @@ class SeedRun:
                     f"{cfg.out} was trained on",
                 )
             self.rundir.lock()
+        elif self.start_over:
+            metrics = self.rundir.path / "metrics.jsonl"
+            text = metrics.read_text(errors="replace") if metrics.is_file() else ""
+            done = sum(1 for line in text.splitlines() if line.strip())
+            self.rundir.lock()  # a live run keeps its directory
+            self.cleared = True
+            for name in ("config.json", "metrics.jsonl", RECORDING, SEGMENT, MARKER):
+                (self.rundir.path / name).unlink(missing_ok=True)
+            warn(
+                f"{self.rundir.path} held no checkpoint (its run was stopped before the first, "
+                f"after {done} iteration(s) in its metrics): nothing to continue, so it starts over"
+            )
         else:
             self.rundir = RunDir.create(cfg.out or cfg.default_out(), cfg.method)
         self.run_id = self.rundir.ensure_marker(cfg.method).get("run_id")
@@ -142,6 +158,11 @@ class SeedRun:
         out = requested.out if requested.out is not None else requested.default_out()
         requested = replace(requested, out=out)
         self.rundir = RunDir.open(out)
+        if (
+            not self.rundir.checkpoint_path.exists()
+            and self.rundir.marker().get("kind") == RUN_KIND
+        ):
+            return self._start_over_config(requested, given)
         ckpt = self.rundir.load_checkpoint(require=self.require)
         _same_run(self.rundir, ckpt)
         if ckpt["method"] != requested.method:
@@ -186,6 +207,45 @@ class SeedRun:
             ),
         )
 
+    def _start_over_config(self, requested: TaskConfig, given: set[str] | None) -> TaskConfig:
+        """``--resume`` of a run of ours that holds no checkpoint (killed or stopped before its
+        first): nothing to continue and nothing to lose, so the run starts over in its directory
+        with its saved settings (``config.json``, when it got that far; the resume rule holds)."""
+        owner = holder(self.rundir.path)
+        if owner is not None:  # a live run that has not checkpointed yet: refused at once
+            self.rundir.lock()
+        method = self.rundir.marker().get("method")
+        if method not in (None, requested.method):
+            raise UserError(
+                f"run directory {requested.out}: holds a {method} run, not {requested.method}"
+            )
+        config = self.rundir.saved_config()
+        cfg = replace(requested, resume=False)
+        if config:
+            try:
+                saved = type(requested).from_dict(config)
+                check_fields(saved)
+            except (TypeError, UserError) as e:
+                raise UserError(
+                    f"run directory {requested.out}: its config.json is unusable ({e})"
+                ) from None
+            diffs = config_differences(saved, requested, given)
+            if diffs:
+                raise ResumeMismatch(requested.out, diffs)
+            asked = given is None or "iterations" in given
+            cfg = replace(
+                saved,
+                iterations=requested.iterations if asked else saved.iterations,
+                resume=False,
+                device=requested.device,
+                out=requested.out,
+                scene=requested.scene,
+                seeds=None,
+                cpu_threads=requested.cpu_threads,
+            )
+        self.start_over = True
+        return cfg
+
     def kept(self) -> str:
         if self.last_checkpoint is None:
             return f"no checkpoint was written yet in {self.rundir.path}"
@@ -212,10 +272,22 @@ def _same_run(rundir: RunDir, ckpt: dict) -> None:
         )
 
 
+def check_seed_count(seeds: list[int] | None) -> None:
+    """At most :data:`~warp_critic.core.runtime.MAX_SEEDS` seeds in one process (a run directory
+    each, all in one simulator): a :class:`FieldError` on ``seeds`` before anything is created."""
+    if seeds is not None and len(seeds) > MAX_SEEDS:
+        raise FieldError(
+            "seeds",
+            f"{len(seeds)} seeds: at most {MAX_SEEDS} in one process (each gets a run directory "
+            "and its worlds); split them over several runs",
+        )
+
+
 def seed_configs(cfg: TaskConfig) -> list[TaskConfig]:
     """One config per seed: ``cfg`` itself, or with ``seeds`` one copy per seed in ``OUT/seed<k>``."""
     if not cfg.seeds:
         return [cfg]
+    check_seed_count(cfg.seeds)
     if len(set(cfg.seeds)) != len(cfg.seeds):
         raise FieldError("seeds", f"must be distinct (got {cfg.seeds})")
     out = cfg.out if cfg.out is not None else cfg.default_out()

@@ -27,8 +27,10 @@ def merge_segment(recording: Path, segment: Path) -> None:
         segment.unlink()
         return
     old = recording if recording.exists() and recording.stat().st_size > 0 else None
+    cut = [p for p in (old, segment) if p is not None and not _whole(p)]
     if old is not None and _merge(recording, [old, segment]):
         segment.unlink()
+        _say_kept(recording, cut)
         return
     if old is not None and _readable(segment):  # the segment is fine: the old recording is not
         aside = _aside(recording)
@@ -39,10 +41,49 @@ def merge_segment(recording: Path, segment: Path) -> None:
         )
     if _merge(recording, [segment]):
         segment.unlink()
+        _say_kept(recording, [p for p in cut if p == segment])
         return
     aside = _aside(segment)
     os.replace(segment, aside)
     warn(f"{segment}: not a readable rerun recording; kept aside as {aside.name}")
+
+
+def _whole(path: Path) -> bool:
+    """Whether ``path`` ends in rerun's footer (a file closed by its writer, not cut short)."""
+    try:
+        with open(path, "rb") as f:
+            f.seek(0, os.SEEK_END)
+            size = f.tell()
+            f.seek(max(size - 12, 0))
+            return size >= 12 and f.read(8) == b"RRF2FOOT"
+    except OSError:
+        return True  # nothing to say about a file that cannot be read here
+
+
+def _say_kept(recording: Path, cut: list[Path]) -> None:
+    """After a merge that read files cut short (a killed writer): one warning line saying what the
+    recording holds now (the iterations whose rollouts it has)."""
+    if not cut:
+        return
+    import re
+
+    from warp_critic.running.recording import read_entity_paths
+
+    try:
+        paths = read_entity_paths(recording)
+    except Exception:  # noqa: BLE001 - the warning must not fail the run
+        paths = set()
+    its = sorted({int(m.group(1)) for p in paths for m in [re.search(r"/it(\d+)(?:/|$)", p)] if m})
+    held = (
+        f"the rollouts of {len(its)} recorded iteration(s), {its[0]} to {its[-1]}"
+        if its
+        else "no rollouts"
+    )
+    names = " and ".join(p.name for p in cut)
+    warn(
+        f"{recording}: {names} had been cut short (a killed write); it now holds what rerun could "
+        f"read: {held}"
+    )
 
 
 def _readable(path: Path) -> bool:

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, TypeVar
 import torch
 
 from warp_critic.core.errors import FieldError
-from warp_critic.core.runtime import MAX_SEED, check_threads
+from warp_critic.core.runtime import MAX_SEED, MAX_SEEDS, check_threads
 from warp_critic.learning.networks import Normalizer
 from warp_critic.physics import schema
 from warp_critic.physics.inertia import NominalInertia
@@ -125,7 +125,8 @@ class TaskConfig(SerializableConfig):
     seed: int = spec(0, "random seed (fixes everything on CPU)", ge=0, le=MAX_SEED)
     seeds: list[int] | None = spec(
         None,
-        "train these seeds at once in one process and one simulator (comma-separated, e.g. 0,1,2,3,4); each seed gets its own run directory OUT/seed<k> with exactly the results of a single-seed run",
+        "train these seeds at once in one process and one simulator (comma-separated, e.g. 0,1,2,3,4); each seed gets its own run directory OUT/seed<k> with exactly the results of a single-seed run; "
+        f"at most {MAX_SEEDS} seeds",
         ge=0,
         le=MAX_SEED,
     )
