@@ -188,6 +188,17 @@ def read_entity_paths(path: str | Path) -> set[str]:
     return {str(p) for p in schema.entity_paths()}
 
 
+def recorded_iterations(path: str | Path) -> list[int]:
+    """The iterations whose rollouts (``robot/goal<i>/after``) an ``.rrd`` file holds, sorted."""
+    from rerun.chunk import RrdReader  # local: only needed for reading back
+
+    its: set[int] = set()
+    for chunk in RrdReader(Path(path)).store().stream().to_chunks():
+        if "/after" in str(chunk.entity_path) and "iteration" in chunk.timeline_names:
+            its.update(int(x) for x in chunk.to_record_batch().column("iteration").to_pylist())
+    return sorted(its)
+
+
 class TrainingRecorder:
     """Records a training run (any method) into ``recording.rrd``; used as a training callback.
 
@@ -371,6 +382,7 @@ __all__ = [
     "Recorder",
     "TrainingRecorder",
     "read_entity_paths",
+    "recorded_iterations",
     "read_times",
     "rrb",
     "training_blueprint",

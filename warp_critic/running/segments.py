@@ -65,15 +65,12 @@ def _say_kept(recording: Path, cut: list[Path]) -> None:
     recording holds now (the iterations whose rollouts it has)."""
     if not cut:
         return
-    import re
-
-    from warp_critic.running.recording import read_entity_paths
+    from warp_critic.running.recording import recorded_iterations
 
     try:
-        paths = read_entity_paths(recording)
+        its = recorded_iterations(recording)
     except Exception:  # noqa: BLE001 - the warning must not fail the run
-        paths = set()
-    its = sorted({int(m.group(1)) for p in paths for m in [re.search(r"/it(\d+)(?:/|$)", p)] if m})
+        its = []
     held = (
         f"the rollouts of {len(its)} recorded iteration(s), {its[0]} to {its[-1]}"
         if its
