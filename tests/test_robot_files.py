@@ -168,3 +168,25 @@ def test_a_file_that_cannot_be_trained_never_gives_a_traceback(tmp_path, capfd):
     assert "Traceback" not in err and str(path) in err
     with pytest.raises(SceneError, match="underactuated|floating base"):
         load_robot(path)
+
+
+def test_import_writes_the_model_and_its_help_states_the_rules(tmp_path, capfd):
+    """The written scene carries the file's armature and the derived damping/limit springs; the
+    help states the armature, damping and torque rules."""
+    from warp_critic.physics.scene import load_scene
+
+    out = tmp_path / "xarm7.usda"
+    path = ERD / "xarm_description/urdf/xarm7.urdf"
+    code, stdout, err = _run(["import", str(path), "--out", str(out)], capfd)
+    assert code == 0 and out.is_file(), err
+    robot, scene = load_robot(path), load_scene(out)
+    np.testing.assert_allclose(scene.armature, robot.armature, rtol=1e-5)
+    np.testing.assert_allclose(scene.damping, robot.damping, rtol=1e-5)
+    np.testing.assert_allclose(scene.limit_ke, robot.limit_ke, rtol=1e-5)
+    assert scene.defaults["dt"] == robot.defaults["dt"] >= 1e-3
+    with pytest.raises(SystemExit):
+        main(["import", "--help"])
+    text = " ".join(capfd.readouterr().out.split())
+    for rule in ("armature:", "damping:", "max_torque:", "gear x ctrlrange", "<transmission>"):
+        assert rule in text, rule
+    assert derive.RULES["armature"] in text and derive.RULES["damping"] in text
