@@ -39,6 +39,8 @@ def _urdf_without_meshes(path: Path) -> tuple[str, str | None, ET.Element]:
     robot = tree.getroot()
     if robot.tag != "robot":
         raise fail(path, f"not a URDF (root element <{robot.tag}>, expected <robot>)")
+    if robot.find("link") is None:
+        raise fail(path, "no <link> in the URDF: not a robot")
     missing = None
     for link in robot.iter("link"):
         for kind in ("visual", "collision"):
