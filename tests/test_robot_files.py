@@ -198,3 +198,19 @@ def test_import_writes_the_model_and_its_help_states_the_rules(tmp_path, capfd):
     for rule in ("armature:", "damping:", "max_torque:", "gear x ctrlrange", "<transmission>"):
         assert rule in text, rule
     assert derive.RULES["armature"] in text and derive.RULES["damping"] in text
+
+
+def test_robot_zoo_prints_a_row_per_file_with_its_verdict(capsys):
+    """tools/robot_zoo.py --only: the table's rows (an import and a refusal), no training."""
+    import importlib.util
+
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("robot_zoo", root / "tools" / "robot_zoo.py")
+    assert spec is not None and spec.loader is not None
+    zoo = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(zoo)
+    assert zoo.main(["--only", "reacher,inverted_double_pendulum"]) == 0
+    rows = {line.split()[1]: line for line in capsys.readouterr().out.splitlines()[1:3]}
+    assert set(rows) == {"reacher.xml", "inverted_double_pendulum.xml"}, rows
+    assert "2.50 ms x 4" in rows["reacher.xml"] and "dropped 1 bodies" in rows["reacher.xml"]
+    assert "refused: underactuated: joint 'hinge'" in rows["inverted_double_pendulum.xml"]
