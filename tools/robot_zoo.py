@@ -75,10 +75,12 @@ def import_one(path: Path) -> dict:
     said = [
         short_reason(line.removeprefix("warp-critic: warning: "), path)
         for line in notes.getvalue().splitlines()
-        if "mesh file" not in line
+        if line.startswith("warp-critic: warning: ") and "mesh file" not in line
     ]
     if said and row["verdict"] == "ok":
         row["verdict"] += " (" + "; ".join(s.split(" (--joints")[0] for s in said) + ")"
+    if any(not line.startswith("warp-critic: ") for line in notes.getvalue().splitlines()):
+        row["verdict"] += " [other output on stderr]"  # a Python warning leaking: a bug
     row["seconds"] = time.perf_counter() - t0
     return row
 

@@ -205,7 +205,13 @@ class Scene:
             if variant not in cache:
                 cache[variant] = self.world_builder(variant)
             main.add_world(cache[variant])
-        return main.finalize(device=device, requires_grad=requires_grad)
+        import warnings
+
+        with warnings.catch_warnings():
+            # newton corrects a robot file's invalid inertias at every finalize, the same way each
+            # time, and says so as a Python warning: library code prints nothing
+            warnings.filterwarnings("ignore", message="Inertia validation corrected")
+            return main.finalize(device=device, requires_grad=requires_grad)
 
 
 def _array(values) -> np.ndarray:
