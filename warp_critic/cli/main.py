@@ -143,11 +143,14 @@ def derived_rules_epilog() -> str:
     """The rules of the defaults derived for a robot file, for ``--help``."""
     from warp_critic.physics.derive import RULES
 
+    model = ("armature", "damping", "limit_gains")
     lines = [
         "robot files (.urdf, MJCF .xml, .usd/.usda without warp_critic attributes):",
-        "defaults derived from the robot (each overridden by its flag):",
+        "the model where the file says nothing (written into the imported scene's joints):",
     ]
-    lines += [f"  {key}: {rule}" for key, rule in RULES.items()]
+    lines += [f"  {key}: {RULES[key]}" for key in model]
+    lines.append("defaults derived from the robot (each overridden by its flag):")
+    lines += [f"  {key}: {rule}" for key, rule in RULES.items() if key not in model]
     return "\n".join(lines)
 
 
@@ -217,7 +220,14 @@ def build_parser() -> argparse.ArgumentParser:
         help="write a robot file (URDF, MJCF, USD) as a scene with the derived defaults",
         description="Import a fixed-base robot (.urdf, MJCF .xml, .usd/.usda without warp_critic "
         "attributes) with newton's importer and write it as a warp-critic scene whose "
-        "warp_critic:* attributes hold the defaults derived from the robot; edit them there.",
+        "warp_critic:* attributes hold the defaults derived from the robot; edit them there. "
+        "Trained are the joints the file actuates: an MJCF's <actuator> joints (gear x ctrlrange, "
+        "capped by forcerange, caps the torque), a URDF's <transmission> joints and joints with a "
+        "non-zero effort limit. An MJCF's bodies outside the actuated robot (targets, objects) are "
+        "dropped with a note; an unactuated joint of the robot is refused (--joints locks it); an "
+        "arm with a hand trains the arm chain up to the hand (--joints picks others); a hand on a "
+        "fixed palm trains every finger. A URDF root without a joint to the world is fixed; a "
+        "free or floating joint is refused.",
         epilog=IMPORT_RULES + "\n" + derived_rules_epilog(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
@@ -228,7 +238,8 @@ def build_parser() -> argparse.ArgumentParser:
     im.add_argument(
         "--ee-body",
         default=None,
-        help="the end-effector body (default: the last body of the longest chain)",
+        help="the end-effector body (default: an arm with a hand: the hand; else the last body "
+        "of the longest chain)",
     )
     im.add_argument(
         "--tip-offset",
@@ -241,7 +252,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--joints",
         default=None,
         metavar="NAME,..",
-        help="train only these joints; the others are locked at the home pose (default: all)",
+        help="train only these joints; the others are locked at the home pose, applied before "
+        "any other joint check (default: the joints the file actuates; an arm with a hand: the arm "
+        "chain)",
     )
     im.add_argument(
         "--lock-mimic",

@@ -19,17 +19,26 @@ torque (``M qdd = tau - g(q)`` at rest):
   of signs accelerates a joint by more than ``A_COUPLED`` at the home pose. That matters where
   joint axes line up at home (the Panda's joints 1 and 3 at mid-range: opposite pushes spin the
   light link between them at 3,900 rad/s^2 without the cap);
-* ``dt`` and substeps: the control period is the KUKA's, ``T = 0.01`` s; ``dt = T / 2^k`` for the
-  smallest ``k >=`` :data:`MIN_HALVINGS` (the KUKA's ``dt``; at most :data:`MAX_HALVINGS`) at which :data:`PROBE_WORLDS` rollouts of the
+* armature and damping (where the file authors none; a URDF never does armature): joint ``j``'s
+  armature ``a_j =`` :data:`ARMATURE_FRACTION` ``x max_i M_ii(q_h)`` (the motor's reflected rotor
+  inertia, scaled from MuJoCo Menagerie's Panda: armature 0.1 kg m^2 on joints whose largest
+  ``M_ii`` at home is about 2 kg m^2), and damping ``b_j =`` :data:`DAMPING_RATE` ``x (M_jj(q_h) +
+  a_j)`` (N m s/rad). They keep light distal links stable at a millisecond step (MuJoCo models
+  carry both); the file's own ``armature``/``damping`` (MJCF default classes included) are kept,
+  except that a damping too strong for an explicit step (newton's; MuJoCo's is implicit) raises the
+  armature to ``b_j x T / 4 - M_jj`` (the damping's time constant at least one 2.5 ms step);
+* ``dt`` and substeps: the control period is the KUKA's, ``T = 0.01`` s; ``dt = T / n`` for the
+  first ``n`` of :data:`SUBSTEPS` (4: the KUKA's ``dt``; at most 10, ``dt >= 1`` ms) at which :data:`PROBE_WORLDS` rollouts of the
   horizon from the home pose under random saturated torques ``+-tau_j`` (random signs, seeded,
   redrawn every :data:`PROBE_HOLD` control steps, so that joints slam into their limits) stay finite with kinetic energy ``1/2 qd^T M(q) qd`` at most
   ``E_cap = 10 (sum_j tau_j min(r_j, 2 pi) + |gravity| sum_b m_b 2 R)`` (J), ``R`` the largest
   distance of a body's centre of mass from the first joint at the home pose;
-* joint-limit gains (a URDF only: it cannot author them, and newton's defaults, 1e4 N m/rad and
-  10 N m s/rad, are the same for a 0.0065 kg m^2 wrist and a 3 kg m^2 shoulder):
+* joint-limit gains (a URDF or MJCF: a URDF cannot author them, and newton's defaults, 1e4 N m/rad
+  and 10 N m s/rad, are the same for a 0.0065 kg m^2 wrist and a 3 kg m^2 shoulder):
   ``ke_j = m_j LIMIT_OMEGA^2``, ``kd_j = 2 m_j LIMIT_OMEGA``, ``m_j = 1 / (M^-1(q_h))_jj`` the
-  inertia joint ``j`` moves with the others free: each limit a critically damped spring of natural
-  frequency :data:`LIMIT_OMEGA`. MJCF and USD files keep the gains their importers read;
+  inertia joint ``j`` moves with the others free (armature included): each limit a critically
+  damped spring of natural frequency :data:`LIMIT_OMEGA`. USD files keep the gains they author;
+* continuous joints (no limits): goals and the probe see ``[q_h - pi, q_h + pi]``;
 * gravity: on (9.81 m/s^2 along -z); ``--gravity 0`` for torque-mode (gravity-compensated) arms;
 * horizon, learning rates, iterations, inner steps, critic input, start std, home starts, velocity
   scale: the KUKA's (``scenes/kuka.usda``).
@@ -51,15 +60,17 @@ GOAL_SEED = 0
 GOAL_REACH = 1.0  # rad or m
 A_MAX = 50.0  # rad/s^2 (or m/s^2)
 # what shapes an imported model beyond the file (in its content hash: a change here is a new model)
-MODEL_RULES = "urdf-limit-gains-1"
+MODEL_RULES = "armature-damping-limit-gains-2"
+ARMATURE_FRACTION = 0.05  # x the largest M_ii at home: a joint's armature where the file gives none
+DAMPING_RATE = 2.0  # 1/s x (M_jj + armature): a joint's damping where the file gives none
 LIMIT_OMEGA = 100.0  # rad/s: a limit spring's natural frequency, 0.25 rad per control step
 # rad/s^2: 10 rad/s in one control period. The KUKA scene's hand-set bounds reach 870 at home
 A_COUPLED = 1000.0
 GRAVITY = 9.81
 # at least the KUKA's 4 substeps (dt 0.0025 s): the probe's held torques do not switch as a policy's
-# can; a Panda run at the probe's dt 0.005 s went non-finite at iteration 23 (measured)
-MIN_HALVINGS = 2
-MAX_HALVINGS = 6
+# can; a Panda run at the probe's dt 0.005 s went non-finite at iteration 23 (measured). At most 10:
+# dt >= 1 ms, stability comes from the model (armature, damping, limit gains), not tiny steps
+SUBSTEPS = (4, 8, 10)
 PROBE_WORLDS = 8
 PROBE_SEED = 0
 PROBE_HOLD = 10  # control steps a probe torque is held
@@ -79,14 +90,19 @@ KUKA = dict(
 )
 
 RULES: dict[str, str] = {
-    "limit_gains": f"a URDF's joint limits: critically damped springs at {LIMIT_OMEGA:g} rad/s on the "
-    "inertia each joint moves with the others free at home (ke = m w^2, kd = 2 m w)",
+    "armature": f"where the file gives none: {ARMATURE_FRACTION:g} x the largest M_ii at home (the "
+    "motor's reflected inertia, scaled from MuJoCo Menagerie's Panda)",
+    "damping": f"where the file gives none: {DAMPING_RATE:g}/s x (M_jj at home + armature); a file's "
+    f"damping b above (M_jj + armature) / {CONTROL_PERIOD / SUBSTEPS[0]:g} s raises the armature to b x "
+    f"{CONTROL_PERIOD / SUBSTEPS[0]:g} s - M_jj (newton integrates damping explicitly)",
+    "limit_gains": f"a URDF's or MJCF's joint limits: critically damped springs at {LIMIT_OMEGA:g} rad/s on "
+    "the inertia each joint moves with the others free at home, armature included (ke = m w^2, kd = 2 m w)",
     "home": "the file's own non-zero initial pose inside the limits, else mid-range (0 for continuous joints)",
     "goals": f"{GOALS} seeded draws U[home - d, home + d], d = min(range/4, {GOAL_REACH}), inside the limits",
-    "max_torque": f"min(effort limit, c x min(effort limit, {A_MAX:g} rad/s^2 x M_jj(home)) + max |gravity torque| "
+    "max_torque": f"min(effort limit or MJCF actuator bound gear x ctrlrange capped by forcerange, c x min(effort limit, {A_MAX:g} rad/s^2 x M_jj(home)) + max |gravity torque| "
     f"over home and goals under the run's gravity), c <= 1 so that no sign combination of those pushes accelerates a joint "
     f"by more than {A_COUPLED:g} rad/s^2 at home",
-    "dt": f"control period {CONTROL_PERIOD} s halved at least {MIN_HALVINGS} times and until {PROBE_WORLDS} rollouts under random +-max_torque "
+    "dt": f"control period {CONTROL_PERIOD} s over the first of {', '.join(map(str, SUBSTEPS))} substeps at which {PROBE_WORLDS} rollouts under random +-max_torque "
     f"(signs redrawn every {PROBE_HOLD} steps) stay finite "
     f"with kinetic energy <= {ENERGY_FACTOR:g} x (sum tau x range + weight x 2 x reach)",
     "substeps": "control period / dt",
@@ -104,10 +120,11 @@ def home_value(lo: float, hi: float, file_q: float, big: float) -> float:
 
 
 def limits(scene, big: float = 1e9) -> tuple[np.ndarray, np.ndarray]:
-    """``(lo, hi)`` with continuous joints as ``[-pi, pi]``."""
+    """``(lo, hi)`` with continuous joints as ``[home - pi, home + pi]``."""
     lo, hi = scene.q_lower, scene.q_upper
     continuous = (lo <= -big) & (hi >= big)
-    return np.where(continuous, -math.pi, lo), np.where(continuous, math.pi, hi)
+    home = scene.home
+    return np.where(continuous, home - math.pi, lo), np.where(continuous, home + math.pi, hi)
 
 
 def draw_goals(scene) -> np.ndarray:
@@ -173,6 +190,25 @@ def torque_bounds(scene, goals: np.ndarray, gravity: float = GRAVITY) -> np.ndar
     poses = np.concatenate([home, goals])
     hold = np.abs(gravity_torques(scene, poses, gravity)).max(axis=0)
     return np.minimum(scene.effort_limit, push + hold)
+
+
+def armature_damping(
+    scene, armature: np.ndarray, damping: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(armature, damping)``, ``(dof,)`` each [kg m^2 or kg, N m s/rad or N s/m]: the file's
+    values, and where one is negative (the file gave none) the derived one (rule: module
+    docstring). ``scene`` is the robot with the file's armature and 0 where it gave none."""
+    sim = _simulator(scene, 1, 1e-3, 1, 0.0)
+    m = np.diag(mass_matrices(sim, scene.home[None])[0])
+    file_armature = np.maximum(armature, 0.0)
+    moved = m - file_armature  # M_ii of the links alone
+    armature = np.where(armature < 0, ARMATURE_FRACTION * float(moved.max()), armature)
+    damping = np.where(damping < 0, DAMPING_RATE * (moved + armature), damping)
+    # newton's step integrates damping explicitly (MuJoCo implicitly): a file's damping b whose time
+    # constant (M_jj + a) / b is under one step of the longest dt gets the armature that makes it one
+    step = CONTROL_PERIOD / SUBSTEPS[0]
+    armature = np.maximum(armature, damping * step - moved)
+    return armature, damping
 
 
 def limit_gains(scene) -> tuple[np.ndarray, np.ndarray]:
@@ -251,14 +287,13 @@ def time_step(scene, max_torque: np.ndarray, gravity: float = GRAVITY) -> tuple[
     """``(dt, substeps)`` from the stability probe; raises SceneError when none is stable."""
     from warp_critic.core.errors import SceneError
 
-    for k in range(MIN_HALVINGS, MAX_HALVINGS + 1):
-        substeps = 2**k
+    for substeps in SUBSTEPS:
         dt = CONTROL_PERIOD / substeps
         if stable(scene, dt, substeps, max_torque, gravity):
             return dt, substeps
     raise SceneError(
         f"{scene.path}: unstable: random-torque rollouts diverge even at dt = "
-        f"{CONTROL_PERIOD / 2**MAX_HALVINGS:g} s (check masses, inertias and joint limits)"
+        f"{CONTROL_PERIOD / SUBSTEPS[-1]:g} s (check masses, inertias, armature and joint limits)"
     )
 
 

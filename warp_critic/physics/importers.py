@@ -12,8 +12,10 @@ from __future__ import annotations
 import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import Any
 
 from warp_critic.core.errors import SceneError, warn
+from warp_critic.physics.actuation import Actuation, mjcf_resolver, read_mjcf, read_urdf
 
 
 def fail(path: Path, problem: str) -> SceneError:
@@ -27,8 +29,9 @@ def short(label: str) -> str:
 # ------------------------------------------------------------------------------------------------
 
 
-def _urdf_without_meshes(path: Path) -> tuple[str, str | None]:
-    """The URDF text with mesh visuals/colliders removed, and the first mesh file that is missing."""
+def _urdf_without_meshes(path: Path) -> tuple[str, str | None, ET.Element]:
+    """The URDF text with mesh visuals/colliders removed, the first mesh file that is missing, and
+    the parsed root element."""
     try:
         tree = ET.parse(path)
     except (ET.ParseError, OSError) as exc:
@@ -36,6 +39,8 @@ def _urdf_without_meshes(path: Path) -> tuple[str, str | None]:
     robot = tree.getroot()
     if robot.tag != "robot":
         raise fail(path, f"not a URDF (root element <{robot.tag}>, expected <robot>)")
+    if robot.find("link") is None:
+        raise fail(path, "no <link> in the URDF: not a robot")
     missing = None
     for link in robot.iter("link"):
         for kind in ("visual", "collision"):
@@ -46,7 +51,7 @@ def _urdf_without_meshes(path: Path) -> tuple[str, str | None]:
                 if missing is None and not _mesh_exists(path, mesh.get("filename", "")):
                     missing = mesh.get("filename", "")
                 link.remove(element)
-    return ET.tostring(robot, encoding="unicode"), missing
+    return ET.tostring(robot, encoding="unicode"), missing, robot
 
 
 def _mesh_exists(urdf: Path, filename: str) -> bool:
@@ -65,21 +70,36 @@ def _mesh_exists(urdf: Path, filename: str) -> bool:
     return (target if target.is_absolute() else urdf.parent / target).is_file()
 
 
-def import_builder(path: Path, fmt: str):
+# the armature and damping newton gives a joint whose file authors none: derived later
+# (derive.model_defaults), the file's own values kept
+UNSET = -1.0
+
+
+def import_builder(path: Path, fmt: str) -> tuple[Any, Actuation]:
     """Newton's importer for the file's format (``urdf``, ``mjcf`` or ``usd``: read from its
-    content, :mod:`warp_critic.physics.file_format`) -> a ModelBuilder with fixed joints still in."""
+    content, :mod:`warp_critic.physics.file_format`) -> a ModelBuilder with fixed joints still in
+    (an MJCF's props left out), and what the file actuates. Joints whose file gives no armature or
+    damping carry :data:`UNSET` there."""
     import newton
 
     builder = newton.ModelBuilder()
+    builder.default_joint_cfg.armature = UNSET
+    builder.default_joint_cfg.damping = UNSET
     missing = None
+    actuation = Actuation()
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
             if fmt == "urdf":
-                text, missing = _urdf_without_meshes(path)
+                text, missing, root = _urdf_without_meshes(path)
+                actuation = read_urdf(root)
                 builder.add_urdf(text, joint_ordering="dfs")
             elif fmt == "mjcf":
-                builder.add_mjcf(str(path))
+                actuation = read_mjcf(path)
+                if actuation.text is None:
+                    builder.add_mjcf(str(path))
+                else:
+                    builder.add_mjcf(actuation.text, path_resolver=mjcf_resolver(path))
             else:
                 builder.add_usd(str(path), load_sites=False)
         except SceneError:
@@ -93,7 +113,12 @@ def import_builder(path: Path, fmt: str):
             missing = text.split("Asset file", 1)[1].split("does not exist")[0].strip()
     if missing:
         warn(f"{path}: mesh file {missing} is missing (meshes are not needed for dynamics)")
-    return builder
+    if actuation.props:
+        warn(
+            f"{path}: dropped {len(actuation.props)} bodies outside the actuated robot "
+            f"(no actuated joint): {', '.join(actuation.props)}"
+        )
+    return builder, actuation
 
 
 def check_topology(path: Path, builder) -> None:

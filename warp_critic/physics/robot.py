@@ -4,18 +4,27 @@ Newton's own importers read the file (``ModelBuilder.add_urdf`` / ``add_mjcf`` /
 module only checks that the result is a robot warp-critic can train, and fills in what a robot
 file cannot say:
 
-* the end effector: ``ee_body`` (default: the last body of the longest chain of the file's kinematic
-  tree, counting fixed joints too; ties go to the body that comes first in the file) and
-  ``tip_offset`` ``(3,)`` m in that body's frame (default ``(0, 0, 0)``). A body that is welded to
-  its parent by a fixed joint is merged into it; naming it puts the tip at its origin;
-* ``joints``: train only these joints; the others are locked at the home pose (fixed joints);
-* the training defaults (goals, home pose, torque bounds, ``dt``/substeps, ...), derived from the
-  robot by :mod:`warp_critic.physics.derive`.
+* the end effector: ``ee_body`` (default: for an arm with a hand, the hand; else the last body of
+  the longest chain of the file's kinematic tree, counting fixed joints too; ties go to the body
+  that comes first in the file) and ``tip_offset`` ``(3,)`` m in that body's frame (default
+  ``(0, 0, 0)``). A body that is welded to its parent by a fixed joint is merged into it; naming it
+  puts the tip at its origin;
+* ``joints``: train only these joints; the others are locked at the home pose (fixed joints).
+  Without it, the joints the file actuates (:mod:`warp_critic.physics.actuation`: MJCF
+  ``<actuator>``, URDF ``<transmission>`` or non-zero effort) are trained; an unactuated joint of
+  the robot is refused ("underactuated"); an MJCF's bodies outside the actuated robot (targets,
+  objects) are dropped with one note line; an arm with a hand trains the arm chain (one note line
+  says which and how to pick others); a hand (several chains on a fixed palm) trains them all;
+* the model a robot file rarely says and the training defaults (armature, damping, limit gains,
+  goals, home pose, torque bounds, ``dt``/substeps, ...), derived from the robot by
+  :mod:`warp_critic.physics.derive`; an MJCF actuator's bound (gear x ctrlrange, capped by
+  forcerange) caps the joint's effort limit.
 
 Refused, with one line naming the reason (:class:`~warp_critic.core.errors.SceneError`): a floating
-base (a free joint to the world; for a URDF, which cannot say, a root link that carries two or more
-separate movable chains, i.e. legs), a closed kinematic loop, a joint that is not revolute or
-prismatic (after fixed joints are merged), no movable joint, a body without mass.
+base (a free joint to the world: an MJCF ``<freejoint>`` on the robot, a URDF ``floating`` joint; a
+root link without a joint to the world is fixed, as pinocchio and pybullet read it), a closed
+kinematic loop, a trained or locked joint that is not revolute or prismatic, an unactuated joint
+of the robot, no movable joint, a body without mass.
 
 Mesh files are not needed for dynamics: a URDF is imported without its ``<visual>``/``<collision>``
 meshes (masses and inertias come from ``<inertial>``), and a missing mesh file gives one warning
@@ -171,69 +180,42 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     from warp_critic.physics import derive
 
     fmt = file_format(path)
-    builder = import_builder(path, fmt)
+    builder, actuation = import_builder(path, fmt)
     if builder.body_count == 0:
         raise fail(path, "no bodies: not a robot")
     check_topology(path, builder)
     o = options  # refused in one line, or repaired on the options' flags (robot_checks)
     repairs = check_robot(path, builder, fmt, o.joints, o.lock_mimic, o.repair_inertia)
 
+    names = [short(label) for label in builder.joint_label]
     movable = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
     fixed = int(newton.JointType.FIXED)
-    for j, t in enumerate(builder.joint_type):
-        if int(t) not in movable and int(t) != fixed:
-            name = newton.JointType(int(t)).name.lower()
-            raise fail(
-                path,
-                f"joint {short(builder.joint_label[j])!r} is a {name} joint; only revolute and "
-                "prismatic joints (and fixed ones) are supported",
-            )
-    if fmt == "urdf":
-        # a URDF cannot say whether its base floats: a root link welded to the world that carries
-        # several movable chains (legs) is taken for a floating-base robot
-        welded = [
-            builder.joint_child[j]
-            for j, p in enumerate(builder.joint_parent)
-            if p < 0 and int(builder.joint_type[j]) == fixed
-        ]
-        for link in welded:
-            branches = [
-                j
-                for j, p in enumerate(builder.joint_parent)
-                if p == link and int(builder.joint_type[j]) in movable
-            ]
-            if len(branches) >= 2:
-                raise fail(
-                    path,
-                    f"floating base: the root link {short(builder.body_label[link])!r} carries "
-                    f"{len(branches)} separate movable chains (legs); warp-critic trains fixed-base "
-                    "arms",
-                )
-
-    names = [short(label) for label in builder.joint_label]
-    movable_joints = [j for j, t in enumerate(builder.joint_type) if int(t) in movable]
-    if not movable_joints:
+    jointed = [j for j, t in enumerate(builder.joint_type) if int(t) != fixed]
+    if not jointed:
         raise fail(path, "no movable joint (every joint is fixed): nothing to train")
-    dof_of = {j: builder.joint_qd_start[j] for j in movable_joints}
-    lower = {j: float(builder.joint_limit_lower[dof_of[j]]) for j in movable_joints}
-    upper = {j: float(builder.joint_limit_upper[dof_of[j]]) for j in movable_joints}
-    file_home = {j: float(builder.joint_q[builder.joint_q_start[j]]) for j in movable_joints}
-    home = {
-        j: derive.home_value(lower[j], upper[j], file_home[j], CONTINUOUS_LIMIT)
-        for j in movable_joints
-    }
-
-    if options.joints is not None:
-        by_name = {names[j]: j for j in movable_joints}
-        unknown = [n for n in options.joints if n not in by_name]
-        if unknown or not options.joints:
+    trained, branch = _trained(path, builder, names, jointed, actuation, options)
+    for j in jointed:  # after --joints: a joint that is neither trained nor lockable is refused
+        if int(builder.joint_type[j]) not in movable:
+            kind = newton.JointType(int(builder.joint_type[j])).name.lower()
             raise fail(
                 path,
-                f"joints: {unknown[0] if unknown else '(none)'!r} is not a movable joint of the "
-                f"robot (movable: {', '.join(names[j] for j in movable_joints)})",
+                f"joint {names[j]!r} is a {kind} joint; only revolute and prismatic joints (and "
+                "fixed ones) are supported"
+                + ("" if j in trained else " (--joints locks revolute and prismatic ones only)"),
             )
-        keep = {by_name[n] for n in options.joints}
-        lock(builder, [j for j in movable_joints if j not in keep], home)
+    dof_of = {j: builder.joint_qd_start[j] for j in jointed}
+    lower = {j: float(builder.joint_limit_lower[dof_of[j]]) for j in jointed}
+    upper = {j: float(builder.joint_limit_upper[dof_of[j]]) for j in jointed}
+    file_home = {j: float(builder.joint_q[builder.joint_q_start[j]]) for j in jointed}
+    home = {
+        j: derive.home_value(lower[j], upper[j], file_home[j], CONTINUOUS_LIMIT) for j in jointed
+    }
+    lock(builder, [j for j in jointed if j not in trained], home)
+    for j in trained:  # an MJCF actuator's bound caps the joint's effort limit
+        bound = (actuation.actuated or {}).get(names[j])
+        if bound is not None:
+            old = float(builder.joint_effort_limit[dof_of[j]])
+            builder.joint_effort_limit[dof_of[j]] = min(old, bound) if old > 0 else bound
 
     # the end-effector body, chosen on the file's tree (fixed links included)
     labels = list(builder.body_label)
@@ -247,6 +229,8 @@ def _load(path: Path, options: RobotOptions) -> Scene:
                 f"{[short(lb) for lb in labels]}",
             )
         ee = matches[0]
+    elif branch is not None:
+        ee = branch  # an arm with a hand: the hand
     else:
         depth, _ = depths(builder)
         ee = int(np.argmax(depth))  # first body of greatest depth
@@ -292,18 +276,67 @@ def _load(path: Path, options: RobotOptions) -> Scene:
             sort_keys=True,
         ).encode()
     ).hexdigest()
-    scene = RobotScene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
-    scene.import_repairs = repairs
-    if fmt != "urdf":
+
+    def make() -> RobotScene:  # the scene copies the builder's arrays: made again after each rule
+        scene = RobotScene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
+        scene.import_repairs = repairs
         return scene
-    # a URDF authors no limit gains: derived from the robot (derive.limit_gains), then the scene
-    # is made again on them (it copies the builder's arrays)
-    ke, kd = derive.limit_gains(scene)
-    builder.joint_limit_ke = [float(f"{v:.6g}") for v in ke]
-    builder.joint_limit_kd = [float(f"{v:.6g}") for v in kd]
-    scene = RobotScene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
-    scene.import_repairs = repairs
-    return scene
+
+    # armature and damping where the file gives none (import_builder marks them UNSET), then the
+    # limit gains on the joints' inertia with that armature (derive's rules)
+    armature = np.array(builder.joint_armature, dtype=np.float64)
+    damping = np.array(builder.joint_damping, dtype=np.float64)
+    builder.joint_armature = [float(v) for v in np.maximum(armature, 0.0)]
+    builder.joint_damping = [float(v) for v in np.maximum(damping, 0.0)]
+    armature, damping = derive.armature_damping(make(), armature, damping)
+    builder.joint_armature = [float(f"{v:.6g}") for v in armature]
+    builder.joint_damping = [float(f"{v:.6g}") for v in damping]
+    if fmt != "usd":  # a URDF/MJCF authors no limit springs
+        ke, kd = derive.limit_gains(make())
+        builder.joint_limit_ke = [float(f"{v:.6g}") for v in ke]
+        builder.joint_limit_kd = [float(f"{v:.6g}") for v in kd]
+    return make()
+
+
+def _trained(
+    path: Path, builder, names: list[str], jointed: list[int], actuation, options: RobotOptions
+) -> tuple[set[int], int | None]:
+    """The joints to train (the others are locked at home) and, for an arm with a hand, the hand
+    body (the default end effector): ``--joints``, else what the file actuates."""
+    from warp_critic.core.errors import warn
+    from warp_critic.physics.actuation import arm_chain
+
+    if options.joints is not None:
+        by_name = {names[j]: j for j in jointed}
+        unknown = [n for n in options.joints if n not in by_name]
+        if unknown or not options.joints:
+            raise fail(
+                path,
+                f"joints: {unknown[0] if unknown else '(none)'!r} is not a movable joint of the "
+                f"robot (movable: {', '.join(names[j] for j in jointed)})",
+            )
+        return {by_name[n] for n in options.joints}, None
+    if actuation.actuated is not None:
+        idle = [j for j in jointed if names[j] not in actuation.actuated]
+        if idle and len(idle) < len(jointed):  # none actuated: the file says nothing, train all
+            what = {"actuators": "<actuator>", "effort": "<transmission> or non-zero effort"}
+            raise fail(
+                path,
+                f"underactuated: joint {names[idle[0]]!r} has no actuator (no "
+                f"{what.get(actuation.source, 'actuator')} drives it); --joints "
+                "NAME,.. trains the joints named and locks the others at home",
+            )
+    chain = arm_chain(builder, set(jointed))
+    if chain is None:
+        return set(jointed), None
+    arm, body = chain
+    warn(
+        f"{path}: an arm with a hand: training the {len(arm)} joints of the arm chain "
+        f"{names[arm[0]]}..{names[arm[-1]]} (end effector {short(builder.body_label[body])}); "
+        f"the {len(jointed) - len(arm)} joints beyond it are locked at home (--joints NAME,.. "
+        "picks others)"
+    )
+    return set(arm), body
 
 
 class RobotScene(Scene):

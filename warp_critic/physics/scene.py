@@ -70,6 +70,7 @@ class Scene:
         q_lower, q_upper: ``(dof,)`` joint limits [rad or m].
         effort_limit: ``(dof,)`` actuator effort limits [N*m or N].
         damping: ``(dof,)`` passive joint damping [N*m*s/rad or N*s/m].
+        armature: ``(dof,)`` joint armature (reflected rotor inertia) [kg*m^2 or kg].
         limit_ke, limit_kd: ``(dof,)`` joint-limit penalty stiffness [N*m/rad or N/m] and damping.
         ee_body: index of the end-effector body within ONE world.
         tip_offset: ``(3,)`` end-effector tip [m] in the ee body frame, as authored.
@@ -105,6 +106,7 @@ class Scene:
             "q_upper": _array(base.joint_limit_upper),
             "effort_limit": _array(effort_limit),
             "damping": _array(base.joint_damping),
+            "armature": _array(base.joint_armature),
             "limit_ke": _array(base.joint_limit_ke),
             "limit_kd": _array(base.joint_limit_kd),
             "tip_offset": _array(tip_offset),
@@ -124,6 +126,9 @@ class Scene:
     )
     damping = property(
         lambda self: self._arrays["damping"].copy(), doc="(dof,) damping [N*m*s/rad or N*s/m]"
+    )
+    armature = property(
+        lambda self: self._arrays["armature"].copy(), doc="(dof,) armature [kg*m^2 or kg]"
     )
     limit_ke = property(lambda self: self._arrays["limit_ke"].copy(), doc="(dof,) limit stiffness")
     limit_kd = property(lambda self: self._arrays["limit_kd"].copy(), doc="(dof,) limit damping")
@@ -200,7 +205,13 @@ class Scene:
             if variant not in cache:
                 cache[variant] = self.world_builder(variant)
             main.add_world(cache[variant])
-        return main.finalize(device=device, requires_grad=requires_grad)
+        import warnings
+
+        with warnings.catch_warnings():
+            # newton corrects a robot file's invalid inertias at every finalize, the same way each
+            # time, and says so as a Python warning: library code prints nothing
+            warnings.filterwarnings("ignore", message="Inertia validation corrected")
+            return main.finalize(device=device, requires_grad=requires_grad)
 
 
 def _array(values) -> np.ndarray:
