@@ -295,7 +295,7 @@ def test_lock_mimic_welds_the_coupled_joint_where_the_coupling_puts_it(tmp_path,
 def test_urdf_saved_as_xml_imports_as_a_urdf_and_mjcf_ctrlrange_bounds_the_effort(tmp_path, capfd):
     stdout, _, repairs = _import(tmp_path, capfd, "arm.xml", urdf())
     assert "(2 joints, end effector l2)" in stdout and repairs == []
-    motor = '<actuator><motor joint="j1" gear="2" ctrlrange="-3 3"/></actuator>'
+    motor = '<actuator><motor joint="j1" gear="2" ctrlrange="-3 3"/><motor joint="j2"/></actuator>'
     _, stage, _ = _import(tmp_path, capfd, "arm.urdf", mjcf(actuator=motor))  # an MJCF named .urdf
     effort = {
         p.GetName(): p.GetAttribute("warp_critic:effortLimit").Get()
@@ -303,7 +303,7 @@ def test_urdf_saved_as_xml_imports_as_a_urdf_and_mjcf_ctrlrange_bounds_the_effor
         if p.HasAttribute("warp_critic:effortLimit")
     }
     assert effort["j1"] == pytest.approx(6.0)  # gear 2 x ctrl 3, no forcerange
-    assert effort["j2"] >= 1e5  # no actuator bound: unlimited, as before
+    assert effort["j2"] >= 1e5  # a motor without ctrlrange or forcerange: no bound, as before
 
 
 def test_effort_zero_on_a_joint_left_out_of_training_is_locked(tmp_path, capfd):
