@@ -22,6 +22,7 @@ import os  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from warp_critic import __version__
+from warp_critic.cli import import_robot
 from warp_critic.cli.flags import (
     Parser,
     add_dataclass_arguments,
@@ -29,6 +30,7 @@ from warp_critic.cli.flags import (
     flag_of,
     user_message,
 )
+from warp_critic.cli.import_robot import derived_rules_epilog
 from warp_critic.cli.messages import library_messages
 from warp_critic.core.errors import DivergenceError, FieldError, UserError
 
@@ -105,55 +107,6 @@ def _not_owned(path, what: str) -> None:
     check_not_owned(path, what)
 
 
-def cmd_import(args: argparse.Namespace) -> int:
-    from warp_critic.physics.export import write_scene
-    from warp_critic.physics.file_format import file_format
-    from warp_critic.physics.robot import load_any
-
-    robot = args.robot
-    if Path(robot).is_file() and file_format(robot) == "scene":
-        raise UserError(
-            f"{robot}: already a warp-critic scene (it has warp_critic attributes); "
-            "import reads robot files (.urdf, MJCF .xml, .usd/.usda without them)"
-        )
-    tip = args.tip_offset
-    if tip is not None and len(tip) != 3:
-        raise UserError(f"--tip-offset: needs 3 values x,y,z (got {len(tip)})")
-    joints = None if args.joints is None else [n for n in args.joints.split(",") if n.strip()]
-    scene = load_any(
-        robot,
-        ee_body=args.ee_body,
-        tip_offset=tip,
-        joints=joints,
-        lock_mimic=args.lock_mimic,
-        repair_inertia=args.repair_inertia,
-    )
-    out = write_scene(scene, args.out)
-    for repair in getattr(scene, "import_repairs", ()):
-        print(f"repaired: {repair}")
-    from warp_critic.cli import signals
-
-    signals.note(f"the scene {out} was written whole")
-    print(f"scene: {out} ({scene.dof} joints, end effector {scene.body_names[scene.ee_body]})")
-    print(f"meta-train: warp-critic meta-train {out}")
-    return 0
-
-
-def derived_rules_epilog() -> str:
-    """The rules of the defaults derived for a robot file, for ``--help``."""
-    from warp_critic.physics.derive import RULES
-
-    model = ("armature", "damping", "limit_gains")
-    lines = [
-        "robot files (.urdf, MJCF .xml, .usd/.usda without warp_critic attributes):",
-        "the model where the file says nothing (written into the imported scene's joints):",
-    ]
-    lines += [f"  {key}: {RULES[key]}" for key in model]
-    lines.append("defaults derived from the robot (each overridden by its flag):")
-    lines += [f"  {key}: {rule}" for key, rule in RULES.items() if key not in model]
-    return "\n".join(lines)
-
-
 def build_parser() -> argparse.ArgumentParser:
     from warp_critic.analysis.landscape import command as landscape
     from warp_critic.analysis.toy import command as toy
@@ -161,7 +114,6 @@ def build_parser() -> argparse.ArgumentParser:
     from warp_critic.methods.baseline_config import BaselineConfig
     from warp_critic.methods.ours import TrainConfig
     from warp_critic.methods.q_networks import METHODS
-    from warp_critic.physics.robot_checks import IMPORT_RULES
 
     p = Parser(
         prog="warp-critic",
@@ -215,60 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_dataclass_arguments(bl, BaselineConfig, skip=("scene", "method"))
     bl.set_defaults(func=cmd_baseline)
 
-    im = sub.add_parser(
-        "import",
-        help="write a robot file (URDF, MJCF, USD) as a scene with the derived defaults",
-        description="Import a fixed-base robot (.urdf, MJCF .xml, .usd/.usda without warp_critic "
-        "attributes) with newton's importer and write it as a warp-critic scene whose "
-        "warp_critic:* attributes hold the defaults derived from the robot; edit them there. "
-        "Trained are the joints the file actuates: an MJCF's <actuator> joints (gear x ctrlrange, "
-        "capped by forcerange, caps the torque), a URDF's <transmission> joints and joints with a "
-        "non-zero effort limit. An MJCF's bodies outside the actuated robot (targets, objects) are "
-        "dropped with a note; an unactuated joint of the robot is refused (--joints locks it); an "
-        "arm with a hand trains the arm chain up to the hand (--joints picks others); a hand on a "
-        "fixed palm trains every finger. A URDF root without a joint to the world is fixed; a "
-        "free or floating joint is refused.",
-        epilog=IMPORT_RULES + "\n" + derived_rules_epilog(),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    im.add_argument("robot", help="robot file: .urdf, MJCF .xml, .usd/.usda")
-    im.add_argument(
-        "--out", required=True, help="the scene file to write (.usda); never overwritten"
-    )
-    im.add_argument(
-        "--ee-body",
-        default=None,
-        help="the end-effector body (default: an arm with a hand: the hand; else the last body "
-        "of the longest chain)",
-    )
-    im.add_argument(
-        "--tip-offset",
-        default=None,
-        type=_floats,
-        metavar="X,Y,Z",
-        help="the tip (m) in the end-effector body frame (default: 0,0,0)",
-    )
-    im.add_argument(
-        "--joints",
-        default=None,
-        metavar="NAME,..",
-        help="train only these joints; the others are locked at the home pose, applied before "
-        "any other joint check (default: the joints the file actuates; an arm with a hand: the arm "
-        "chain)",
-    )
-    im.add_argument(
-        "--lock-mimic",
-        action="store_true",
-        help="lock each coupled (mimic) joint where the coupling puts it at the home pose, "
-        "instead of refusing the file",
-    )
-    im.add_argument(
-        "--repair-inertia",
-        action="store_true",
-        help="project each invalid inertia to the nearest valid one (same principal axes), "
-        "instead of refusing the file",
-    )
-    im.set_defaults(func=cmd_import)
+    import_robot.add_parser(sub)
 
     an = sub.add_parser(
         "analyze",
@@ -424,18 +323,6 @@ def _utf8_mode() -> None:
             pass  # not UTF-8 in either mode: check_utf8 names it
     if utf8 and getattr(sys, "orig_argv", None):
         os.execv(sys.executable, [sys.executable, "-X", "utf8", *sys.orig_argv[1:]])
-
-
-def _floats(text: str) -> list[float]:
-    import math
-
-    try:
-        values = [float(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected numbers x,y,z (got {text!r})") from None
-    if not all(math.isfinite(v) for v in values):
-        raise argparse.ArgumentTypeError(f"must be finite numbers (got {text!r})")
-    return values
 
 
 def _main_thread() -> bool:
