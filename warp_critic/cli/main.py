@@ -18,11 +18,11 @@ if __name__ == "__main__":  # python -m warp_critic.cli.main: the handlers befor
 
 import argparse  # noqa: E402
 import errno  # noqa: E402
-import os  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from warp_critic import __version__
 from warp_critic.cli import import_robot
+from warp_critic.cli.environment import check_utf8, cwd_gone, utf8_mode
 from warp_critic.cli.flags import (
     Parser,
     add_dataclass_arguments,
@@ -32,7 +32,7 @@ from warp_critic.cli.flags import (
 )
 from warp_critic.cli.import_robot import derived_rules_epilog
 from warp_critic.cli.messages import library_messages
-from warp_critic.core.errors import DivergenceError, FieldError, UserError
+from warp_critic.core.errors import DivergenceError, UserError
 
 EXIT_USER_ERROR = 2
 EXIT_DIVERGED = 1
@@ -205,15 +205,10 @@ def main(argv: list[str] | None = None) -> int:
     from warp_critic.cli import signals
 
     if argv is None:
-        _utf8_mode()
-    try:
-        os.getcwd()
-    except OSError:  # before torch: its libraries abort the process without a working directory
-        where = os.environ.get("PWD") or "the working directory"
-        sys.stderr.write(
-            f"warp-critic: error: {where}: the working directory no longer exists; "
-            "change to a folder that does\n"
-        )
+        utf8_mode()
+    gone = cwd_gone()  # before torch: its libraries abort the process without a working directory
+    if gone:
+        sys.stderr.write(f"warp-critic: error: {gone}\n")
         return EXIT_USER_ERROR
     previous = signals.install() if _main_thread() else None
     said = False
@@ -285,44 +280,6 @@ def _run(argv: list[str] | None, in_process: bool) -> tuple[int, bool]:
         where = f"{e.filename}: " if e.filename is not None else ""
         sys.stderr.write(f"warp-critic: error: {where}{e.strerror or e}\n")
         return (EXIT_FAILED if full else EXIT_USER_ERROR), False
-
-
-def check_utf8(args: argparse.Namespace) -> None:
-    """Every text argument must be valid UTF-8: a name with a stray byte cannot be written into
-    config.json or printed, so it is refused before anything is made."""
-    for name, value in vars(args).items():
-        for v in value if isinstance(value, list) else [value]:
-            if isinstance(v, (str, os.PathLike)):
-                try:
-                    str(v).encode("utf-8")
-                except UnicodeEncodeError as e:
-                    raise FieldError(
-                        name,
-                        f"{str(v).encode('utf-8', 'backslashreplace').decode()}: not valid UTF-8 "
-                        f"(byte {e.object[e.start : e.end].encode('utf-8', 'surrogateescape')!r})",
-                    ) from None
-
-
-def _utf8_mode() -> None:
-    """The console script under an ASCII locale (``LC_ALL=C PYTHONUTF8=0``) given a valid UTF-8 name:
-    the same command again in Python's UTF-8 mode, so that the name is text (for config.json and
-    USD) and a path (for the file system) at once. Other bytes are refused by :func:`check_utf8`."""
-    if sys.flags.utf8_mode or sys.getfilesystemencoding().lower().replace("-", "") == "utf8":
-        return
-    utf8 = False
-    for arg in sys.argv[1:]:
-        try:
-            arg.encode("utf-8")
-            continue
-        except UnicodeEncodeError:
-            pass
-        try:
-            os.fsencode(arg).decode("utf-8")
-            utf8 = True
-        except (UnicodeEncodeError, UnicodeDecodeError):
-            pass  # not UTF-8 in either mode: check_utf8 names it
-    if utf8 and getattr(sys, "orig_argv", None):
-        os.execv(sys.executable, [sys.executable, "-X", "utf8", *sys.orig_argv[1:]])
 
 
 def _main_thread() -> bool:
