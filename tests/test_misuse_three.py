@@ -295,6 +295,7 @@ def test_interrupt_after_import_wrote_the_scene_says_it_is_whole(tmp_path, capfd
     was written whole (it said only "interrupted")."""
     from test_robots import TWO_LINK
 
+    import warp_critic.cli.import_robot as command
     import warp_critic.cli.main as cli
 
     robot = tmp_path / "twolink.urdf"
@@ -306,7 +307,7 @@ def test_interrupt_after_import_wrote_the_scene_says_it_is_whole(tmp_path, capfd
         time.sleep(5)  # the handler raises here
         print(*args, **kw)
 
-    monkeypatch.setattr(cli, "print", signalled_print, raising=False)
+    monkeypatch.setattr(command, "print", signalled_print, raising=False)
     capfd.readouterr()
     code = cli.main(["import", str(robot), "--out", str(out)])
     lines = [x for x in capfd.readouterr().err.splitlines() if "warning" not in x]

@@ -109,6 +109,7 @@ def check_robot(
         set(trained) if trained is not None else {_short(builder.joint_label[j]) for j in movable}
     )
     _limits(path, builder, movable, trained_set)
+    _axes(path, builder, movable)
     if fmt == "mjcf":
         _mjcf_efforts(builder)
     if fmt in ("urdf", "mjcf"):
@@ -268,6 +269,19 @@ def _limits(path: Path, builder, movable: list[int], trained: set[str]) -> None:
                 path,
                 f"joint {name!r} cannot move: lower limit = upper limit = {_g(lo)} (make it a fixed "
                 "joint, or leave it out of the trained joints, --joints, to lock it)",
+            )
+
+
+def _axes(path: Path, builder, movable: list[int]) -> None:
+    """A revolute or prismatic joint needs an axis: a zero one moves nothing (its mass matrix row
+    is zero, so the model cannot be stepped)."""
+    for j in movable:
+        axis = [float(x) for x in builder.joint_axis[builder.joint_qd_start[j]]]
+        if not math.fsum(x * x for x in axis) > 1e-18:
+            raise _fail(
+                path,
+                f"joint {_short(builder.joint_label[j])} has a zero joint axis "
+                f"({', '.join(_g(x) for x in axis)}): it moves nothing",
             )
 
 
