@@ -126,7 +126,7 @@ REFUSED = [
         "effort-zero",
         "r.urdf",
         urdf(limit=LIMIT.replace('"5"', '"0"')),
-        ("joint 'j1'", "effort limit 0", "no actuator"),
+        ("joint 'j1'", "no actuator"),  # effort 0: not actuated, so the arm is underactuated
     ),
     Case(
         "effort-negative",
@@ -323,20 +323,34 @@ REAL = {
         SITE / "diff_robot_data/kuka_iiwa/urdf/iiwa7_allegro.urdf",
         ("body 'link_9.0'", "triangle inequality", "--repair-inertia"),
     ),
+    # the Panda's fingers are coupled (mimic): it imports by default (an arm with a hand: the
+    # fingers are locked with the hand), and is refused when the fingers are to be trained
     "panda_fingers": (
         SITE / "cmeel.prefix/share/example-robot-data/robots/panda_description/urdf/panda.urdf",
         ("joint 'panda_finger_joint2'", "--lock-mimic"),
     ),
 }
+EXTRA = {"panda_fingers": ["--joints", "panda_finger_joint1,panda_finger_joint2"]}
 
 
 @pytest.mark.parametrize("name", sorted(REAL))
 def test_real_files_with_invalid_parts_are_refused_by_default(name, tmp_path, capfd):
     path, says = REAL[name]
     assert path.is_file(), path  # installed by the test extra: no skip
-    code, _, err = _run(["import", str(path), "--out", str(tmp_path / "s.usda")], capfd)
+    extra = EXTRA.get(name, [])
+    code, _, err = _run(["import", str(path), "--out", str(tmp_path / "s.usda"), *extra], capfd)
     lines = [x for x in err.strip().splitlines() if "mesh file" not in x]  # the mesh warning
     assert code == 2 and len(lines) == 1 and lines[0].startswith("warp-critic: error: "), err
     for part in says:
         assert part in lines[0], (part, err)
     assert not (tmp_path / "s.usda").exists()
+
+
+def test_the_panda_with_coupled_fingers_imports_as_an_arm(tmp_path, capfd):
+    """A coupling between two locked joints is no concern: the Panda's mimic fingers are locked
+    with its hand, so the arm imports without a repair flag."""
+    path = REAL["panda_fingers"][0]
+    out = tmp_path / "panda.usda"
+    code, stdout, err = _run(["import", str(path), "--out", str(out)], capfd)
+    assert code == 0 and out.is_file(), err
+    assert "(7 joints" in stdout and "an arm with a hand" in err

@@ -184,8 +184,6 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     if builder.body_count == 0:
         raise fail(path, "no bodies: not a robot")
     check_topology(path, builder)
-    o = options  # refused in one line, or repaired on the options' flags (robot_checks)
-    repairs = check_robot(path, builder, fmt, o.joints, o.lock_mimic, o.repair_inertia)
 
     names = [short(label) for label in builder.joint_label]
     movable = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
@@ -193,7 +191,19 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     jointed = [j for j, t in enumerate(builder.joint_type) if int(t) != fixed]
     if not jointed:
         raise fail(path, "no movable joint (every joint is fixed): nothing to train")
-    trained, branch = _trained(path, builder, names, jointed, actuation, options)
+    trained, branch, note = _trained(path, builder, names, jointed, actuation, options)
+    # the file's validity on the joints chosen for training (a coupling between two locked joints,
+    # such as an arm's gripper fingers, is no concern): refused in one line, or repaired on the
+    # options' flags (robot_checks); --lock-mimic welds followers, which then leave the trained set
+    o = options
+    chosen = sorted(names[j] for j in trained)
+    repairs = check_robot(path, builder, fmt, chosen, o.lock_mimic, o.repair_inertia)
+    jointed = [j for j, t in enumerate(builder.joint_type) if int(t) != fixed]
+    trained = {j for j in trained if j in jointed}
+    if note:  # said once the file passed its checks: a refused file gets its one line only
+        from warp_critic.core.errors import warn
+
+        warn(note)
     for j in jointed:  # after --joints: a joint that is neither trained nor lockable is refused
         if int(builder.joint_type[j]) not in movable:
             kind = newton.JointType(int(builder.joint_type[j])).name.lower()
@@ -300,10 +310,10 @@ def _load(path: Path, options: RobotOptions) -> Scene:
 
 def _trained(
     path: Path, builder, names: list[str], jointed: list[int], actuation, options: RobotOptions
-) -> tuple[set[int], int | None]:
+) -> tuple[set[int], int | None, str | None]:
     """The joints to train (the others are locked at home) and, for an arm with a hand, the hand
-    body (the default end effector): ``--joints``, else what the file actuates."""
-    from warp_critic.core.errors import warn
+    body (the default end effector) and the note that says so: ``--joints``, else what the file
+    actuates."""
     from warp_critic.physics.actuation import arm_chain
 
     if options.joints is not None:
@@ -315,7 +325,7 @@ def _trained(
                 f"joints: {unknown[0] if unknown else '(none)'!r} is not a movable joint of the "
                 f"robot (movable: {', '.join(names[j] for j in jointed)})",
             )
-        return {by_name[n] for n in options.joints}, None
+        return {by_name[n] for n in options.joints}, None, None
     if actuation.actuated is not None:
         idle = [j for j in jointed if names[j] not in actuation.actuated]
         if idle and len(idle) < len(jointed):  # none actuated: the file says nothing, train all
@@ -328,15 +338,15 @@ def _trained(
             )
     chain = arm_chain(builder, set(jointed))
     if chain is None:
-        return set(jointed), None
+        return set(jointed), None, None
     arm, body = chain
-    warn(
+    note = (
         f"{path}: an arm with a hand: training the {len(arm)} joints of the arm chain "
         f"{names[arm[0]]}..{names[arm[-1]]} (end effector {short(builder.body_label[body])}); "
         f"the {len(jointed) - len(arm)} joints beyond it are locked at home (--joints NAME,.. "
         "picks others)"
     )
-    return set(arm), body
+    return set(arm), body, note
 
 
 class RobotScene(Scene):
