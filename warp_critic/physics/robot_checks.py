@@ -35,8 +35,8 @@ import xml.etree.ElementTree as ET
 from collections.abc import Sequence
 from pathlib import Path
 
-from warp_critic.core.errors import FieldError, SceneError
-from warp_critic.physics.inertia_checks import check_inertias
+from warp_critic.core.errors import FieldError
+from warp_critic.physics.inertia_checks import _fail, _g, _short, check_inertias
 
 __all__ = ["IMPORT_RULES", "TIP_OFFSET_MAX", "check_robot", "check_tip_offset"]
 
@@ -60,18 +60,6 @@ refused, in one line naming the body or joint and the value (nothing is written)
   .xacro file is to be expanded first. A repair is printed and recorded in the scene's
   warp_critic:importRepairs.
 """
-
-
-def _fail(path: Path, problem: str) -> SceneError:
-    return SceneError(f"{path}: {' '.join(str(problem).split())}")
-
-
-def _short(label: str) -> str:
-    return label.rsplit("/", 1)[-1]
-
-
-def _g(x: float) -> str:
-    return f"{x:.6g}"
 
 
 def check_tip_offset(tip: Sequence[float]) -> None:
