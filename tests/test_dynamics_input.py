@@ -286,14 +286,15 @@ def test_identify_command_writes_a_run_that_meta_tests_without_the_model(tmp_pat
         assert "--variants" in err or "arm" not in words
     assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()
     # a drawn model that diverges (a massless arm1): the run stops on divergence (on_divergence
-    # stop, the default), so identify stops as its meta-train does on it: one line, exit 1, no run
+    # stop, the default), so identify refuses it up front as its meta-train does (the run's step
+    # cannot hold the model: physics/stability): one line naming --variants, exit 2, no run
     few = ["--iterations", "2", "--goals", "2", "--inits", "2"]
     code = exit_code(
         ["identify", str(told), "--out", str(tmp_path / "z"), *few, "--variants", "arm1.mass=0..0"]
     )
     err = capsys.readouterr().err
-    assert code == 1 and err.startswith("warp-critic: diverged: iteration 0 "), err
-    assert err.count("\n") == 1 and "'arm1.mass=0:keep'" in err, err
+    assert code == 2 and err.startswith("warp-critic: error: --variants"), err
+    assert err.count("\n") == 1 and "holds from about arm1.mass=" in err, err
     assert not (tmp_path / "z").exists()
     # other draws than training's: recorded in the summary
     light = tmp_path / "light"
