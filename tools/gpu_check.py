@@ -37,7 +37,7 @@ TINY_WORLDS = (1, 4)
 
 
 def _tool(name: str):
-    """A sibling script of ``tools/`` as a module (loaded by path: nothing is added to sys.path)."""
+    """A sibling script of ``tools/`` as a module (loaded by path, so the import search path stays as it is)."""
     spec = importlib.util.spec_from_file_location(f"_{PROG}_{name}", ROOT / "tools" / f"{name}.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)

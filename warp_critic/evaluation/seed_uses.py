@@ -28,7 +28,8 @@ SEED_USES: tuple[SeedUse, ...] = (
         "the KUKA's setting (preset kuka-table1: goal-relative critic, random starts 0.4 rad with 2 "
         "home starts, gravity 0, 3 inner steps at alpha 3e-4, lr 3e-3, 3000 iterations): candidates "
         "scored with the Table 1 protocol",
-        "tools/paper_table.py --seed 1 (its default); RESULTS.md 'Settings compared'; "
+        "warp-critic score --seed 1 (its default); docs/journal/paper-experiments.md 'Settings "
+        "compared'; "
         "evaluation/presets.py EVALUATIONS['kuka-table1']",
     ),
     SeedUse(
