@@ -140,7 +140,9 @@ def newton_in(python: str, root: Path, worlds: int, horizon: int, dt: float, dev
     )
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("[")]
     if proc.returncode != 0 or not lines:
-        raise RuntimeError(f"measurement failed ({python}):\n{proc.stderr[-3000:]}")
+        raise RuntimeError(
+            f"measurement failed ({python}, exit {proc.returncode}):\n{proc.stderr[-3000:]}"
+        )
     return json.loads(lines[-1])
 
 

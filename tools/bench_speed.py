@@ -178,7 +178,9 @@ def run_job(python: str, job: dict) -> dict:
     )
     lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("{")]
     if proc.returncode != 0 or not lines:
-        raise RuntimeError(f"measurement failed ({python}):\n{proc.stderr[-3000:]}")
+        raise RuntimeError(
+            f"measurement failed ({python}, exit {proc.returncode}):\n{proc.stderr[-3000:]}"
+        )
     return json.loads(lines[-1])
 
 

@@ -83,6 +83,16 @@ class Budget:
         return self.end - time.perf_counter()
 
 
+def _failure(e: RuntimeError) -> str:
+    """One line for a failed measurement: the worker's last error line, or how it was ended."""
+    lines = [ln for ln in str(e).strip().splitlines() if ln.strip()]
+    if len(lines) > 1:
+        return lines[-1][:300]
+    if "exit -9)" in lines[0]:
+        return "killed (SIGKILL: out of memory on this machine)"
+    return lines[0][:300]
+
+
 def bench_rollouts(
     devices: list[str], worlds: tuple[int, ...], horizon: int, budget: Budget, reserve: float
 ) -> list[dict]:
@@ -105,7 +115,7 @@ def bench_rollouts(
                 fb, fw = dyn.newton_in(sys.executable, ROOT, n, horizon, 0.0025, dev)
                 row[dev] = {"fwd_bwd": fb, "fwd": fw}
             except RuntimeError as e:
-                row[dev] = {"error": str(e).strip().splitlines()[-1][:300]}
+                row[dev] = {"error": _failure(e)}
         last = (n, time.perf_counter() - t0)
         rows.append(row)
     return rows
@@ -140,7 +150,7 @@ def bench_iterations(
         try:
             row["per_it"] = speed.run_job(sys.executable, job)["per_it"]
         except RuntimeError as e:
-            row["error"] = str(e).strip().splitlines()[-1][:300]
+            row["error"] = _failure(e)
         rows.append(row)
     return rows
 
