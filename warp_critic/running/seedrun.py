@@ -154,7 +154,6 @@ class SeedRun:
     def _resume_config(self, requested: TaskConfig, given: set[str] | None) -> TaskConfig:
         """The run's saved config, with what may change on resume taken from ``requested`` (a new
         object; ``requested`` is left as it was). Loads the checkpoint into ``self.ckpt``."""
-        cls = type(requested)
         out = requested.out if requested.out is not None else requested.default_out()
         requested = replace(requested, out=out)
         self.rundir = RunDir.open(out)
@@ -169,16 +168,9 @@ class SeedRun:
             raise UserError(
                 f"run directory {requested.out}: holds a {ckpt['method']} run, not {requested.method}"
             )
-        try:
-            saved = cls.from_dict(ckpt["config"])
-            check_fields(saved)
-        except (TypeError, UserError) as e:
-            raise UserError(
-                f"run directory {requested.out}: its checkpoint holds an unusable config ({e})"
-            ) from None
-        diffs = config_differences(saved, requested, given)
-        if diffs:
-            raise ResumeMismatch(requested.out, diffs)
+        saved = _saved_config(
+            ckpt["config"], requested, given, "its checkpoint holds an unusable config"
+        )
         done = ckpt["iteration"] + 1
         asked = given is None or "iterations" in given
         iterations = (
@@ -194,18 +186,7 @@ class SeedRun:
             raise FieldError("scene", f"{requested.scene}: no such scene file")
         # a moved or copied run directory records where it now is; the scene is the one given now
         self.ckpt = ckpt
-        return replace(
-            saved,
-            iterations=iterations,
-            resume=True,
-            device=requested.device,
-            out=requested.out,
-            scene=requested.scene,
-            seeds=None,
-            cpu_threads=(
-                requested.cpu_threads if requested.cpu_threads is not None else saved.cpu_threads
-            ),
-        )
+        return _continued(saved, requested, iterations, resume=True)
 
     def _start_over_config(self, requested: TaskConfig, given: set[str] | None) -> TaskConfig:
         """``--resume`` of a run of ours that holds no checkpoint (killed or stopped before its
@@ -222,27 +203,10 @@ class SeedRun:
         config = self.rundir.saved_config()
         cfg = replace(requested, resume=False)
         if config:
-            try:
-                saved = type(requested).from_dict(config)
-                check_fields(saved)
-            except (TypeError, UserError) as e:
-                raise UserError(
-                    f"run directory {requested.out}: its config.json is unusable ({e})"
-                ) from None
-            diffs = config_differences(saved, requested, given)
-            if diffs:
-                raise ResumeMismatch(requested.out, diffs)
+            saved = _saved_config(config, requested, given, "its config.json is unusable")
             asked = given is None or "iterations" in given
-            cfg = replace(
-                saved,
-                iterations=requested.iterations if asked else saved.iterations,
-                resume=False,
-                device=requested.device,
-                out=requested.out,
-                scene=requested.scene,
-                seeds=None,
-                cpu_threads=requested.cpu_threads,
-            )
+            iterations = requested.iterations if asked else saved.iterations
+            cfg = _continued(saved, requested, iterations, resume=False)
         self.start_over = True
         return cfg
 
@@ -292,3 +256,34 @@ def seed_configs(cfg: TaskConfig) -> list[TaskConfig]:
         raise FieldError("seeds", f"must be distinct (got {cfg.seeds})")
     out = cfg.out if cfg.out is not None else cfg.default_out()
     return [replace(cfg, seed=s, seeds=None, out=str(Path(out) / f"seed{s}")) for s in cfg.seeds]
+
+
+def _saved_config(data: dict, requested: TaskConfig, given: set[str] | None, unusable: str):
+    """A run's saved config (``data``, from its checkpoint or ``config.json``) as ``requested``'s
+    class, checked, and refused with :class:`ResumeMismatch` where ``requested`` changes what may
+    not change on resume."""
+    try:
+        saved = type(requested).from_dict(data)
+        check_fields(saved)
+    except (TypeError, UserError) as e:
+        raise UserError(f"run directory {requested.out}: {unusable} ({e})") from None
+    diffs = config_differences(saved, requested, given)
+    if diffs:
+        raise ResumeMismatch(requested.out, diffs)
+    return saved
+
+
+def _continued(saved: TaskConfig, requested: TaskConfig, iterations, resume: bool) -> TaskConfig:
+    """``saved`` with what a resumed or restarted run takes from ``requested``: the iterations, the
+    device, where the run directory and the scene are now, the threads; one seed per run."""
+    threads = requested.cpu_threads if requested.cpu_threads is not None else saved.cpu_threads
+    return replace(
+        saved,
+        iterations=iterations,
+        resume=resume,
+        device=requested.device,
+        out=requested.out,
+        scene=requested.scene,
+        seeds=None,
+        cpu_threads=threads,
+    )
