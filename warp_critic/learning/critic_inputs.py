@@ -18,6 +18,7 @@ torques by ``max_torque``.
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -91,7 +92,7 @@ def rollout_kwargs(critic: object, traj: Trajectory) -> dict[str, torch.Tensor]:
 # ------------------------------------------------------------------------------------------------
 
 
-class CriticInput:
+class CriticInput(ABC):
     """One input layout of the critic (module docstring). Subclasses set the class attributes and
     :meth:`parts`; the features are the parts concatenated along the last dim."""
 
@@ -121,6 +122,7 @@ class CriticInput:
                 f"a {self.name} critic needs the worlds' descriptor size (norm.dynamics_size)"
             )
 
+    @abstractmethod
     def parts(
         self,
         norm: Normalizer,
@@ -130,7 +132,7 @@ class CriticInput:
         goal: torch.Tensor,
         data: Data,
     ) -> list[torch.Tensor]:
-        raise NotImplementedError
+        """The feature blocks ``(..., n_i)`` the layout concatenates (normalised)."""
 
     def features(
         self,

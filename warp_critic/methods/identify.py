@@ -99,17 +99,9 @@ def train_identifier(
         ranges = ranges_on_scene(m.scene, task_variant(m.cfg), variants)
         if m.ckpt["config"].get("on_divergence", "stop") == "stop":
             # the models the run's step cannot hold are refused up front, as meta-train refuses them
-            from types import SimpleNamespace
+            from warp_critic.methods.train_variants import check_held
 
-            from warp_critic.methods.train_variants import check_train_variants
-
-            fields = {
-                **vars(m.cfg),
-                "train_variants": variants,
-                "on_divergence": "stop",
-                "resume": False,
-            }
-            check_train_variants(SimpleNamespace(**fields), m.scene)
+            check_held(m.cfg, m.scene, ranges, variants)
     base, W, dev = task_variant(m.cfg), m.sim.worlds, m.sim.torch_device
     drop = m.ckpt["config"].get("on_divergence") == "drop"  # as the run's meta-train did
     ident = Identifier(m.scene.dof, m.sim.dynamics_size, hidden, version).to(dev)

@@ -30,13 +30,23 @@ def check_train_variants(cfg: Any, scene=None) -> None:
         return
     base = task_variant(cfg)
     check_on_scene(scene, base, ranges)
-    filled = (cfg.dt, cfg.substeps, cfg.gravity, cfg.max_torque, cfg.horizon)
-    if cfg.resume or cfg.on_divergence != "stop" or any(v is None for v in filled):
+    if cfg.resume or cfg.on_divergence != "stop":
         return  # a resumed run trained on them already; dropped worlds are the user's choice
+    check_held(cfg, scene, ranges, text)
+
+
+def check_held(cfg: Any, scene, ranges, text: str) -> None:
+    """Refuse (:class:`FieldError` on ``train_variants``) ranges whose ends the step of ``cfg`` (a
+    filled task config: ``dt``, ``substeps``, ``gravity``, ``max_torque``, ``horizon``) cannot hold
+    under saturated torques; a config not yet filled is not probed."""
+    filled = (cfg.dt, cfg.substeps, cfg.gravity, cfg.max_torque, cfg.horizon)
+    if any(v is None for v in filled):
+        return
     from warp_critic.learning.rollout import DIVERGED
     from warp_critic.physics.stability import Probe, check_ranges
     from warp_critic.running.task_inputs import max_torque_tensor
 
+    base = task_variant(cfg)
     bound = [float(x) for x in max_torque_tensor(cfg.max_torque, scene)]
     probe = Probe(
         dt=float(cfg.dt),
