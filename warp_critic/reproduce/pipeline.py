@@ -95,7 +95,7 @@ BEYOND_EVALS = (f"{BEYOND}-maps", f"{BEYOND}-tables")
 def metatrain_names() -> list[str]:
     """The names of the single meta-trainings ``--only`` also accepts (the paper's and the
     recipes beyond it)."""
-    from warp_critic.reproduce.settings import RECIPES
+    from warp_critic.reproduce.recipes import RECIPES
 
     return [f"metatrain-{scene}-{m}" for scene in SCENES for m in METHODS] + [
         f"{BEYOND}-metatrain-{scene}-{recipe}" for scene in SCENES for recipe in RECIPES[scene]
