@@ -4,6 +4,7 @@ batched evaluator against ``meta-test`` (CPU; the quick run is shared by the mod
 from __future__ import annotations
 
 import json
+import lzma
 import subprocess
 import sys
 import time
@@ -380,7 +381,17 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
         assert ckpt["scene_file"].startswith("scenes/") and ckpt["config"]["scene"].startswith(
             "scenes/"
         ), c
-        assert shipped not in (c.parent / "config.json").read_text()
+        assert shipped not in lzma.decompress((c.parent / "config.json.xz").read_bytes()).decode()
+    # JSON is stored compressed; a run's metrics only where the report reads them (Meta-Critic's
+    # auxiliary-loss columns), never ours' or DDPG's (their curves are in stage.json)
+    assert not list(archive.rglob("*.json")) and not list(archive.rglob("*.jsonl"))
+    metrics = sorted(archive.rglob("metrics.jsonl.xz"))
+    assert metrics and all("-meta-critic-" in str(m) for m in metrics)
+    from warp_critic.methods.meta_critic import AUX_KEYS
+
+    for m in metrics:
+        rows = [json.loads(r) for r in lzma.decompress(m.read_bytes()).decode().splitlines()]
+        assert rows and all(set(r) <= set(AUX_KEYS) and "aux_loss" in r for r in rows), m
     # a second save copies nothing; a differing stage in the archive is refused on one line
     assert carry.main(["save", str(out), str(archive)]) == 0
     assert "0 stage(s) copied" in capsys.readouterr().out
@@ -403,8 +414,17 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
         for c in json.loads((other / "results.json").read_text())["tables"]
     }
     assert again == cells
-    stage = next(p for p in archive.glob("toy-*/stage.json"))
-    stage.write_text(stage.read_text().replace('"seconds"', '"secs"'))
+    # restored plain: the same records and the report's auxiliary-loss shares from thinned metrics
+    for name in names - {n for n in names if n.startswith(("maps-", "tables-"))}:
+        assert (other / name / "stage.json").read_bytes() == (
+            out / name / "stage.json"
+        ).read_bytes()
+    mc = json.loads((other / "results.json").read_text())["metatrain"]
+    was = json.loads((out / "results.json").read_text())["metatrain"]
+    assert [v.get("aux_alive") for v in mc.values()] == [v.get("aux_alive") for v in was.values()]
+    stage = next(p for p in archive.glob("toy-*/stage.json.xz"))
+    text = lzma.decompress(stage.read_bytes()).decode()
+    stage.write_bytes(lzma.compress(text.replace('"seconds"', '"secs"').encode()))
     with pytest.raises(SystemExit) as e:
         carry.main(["save", str(out), str(archive)])
     assert e.value.code == 2
@@ -430,18 +450,26 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
     results = json.loads((dest / "results.json").read_text())
     read = {v["dir"] for v in results["stages"].values()}
     assert f"{len(read)} stage record(s)" in printed and "tables-0000000000" in printed
+    # the records of the stages it read are in the archive dest/stages, none beside the report
+    from warp_critic.reproduce.carry import complete_stages
+
+    archived = complete_stages(dest / "stages")
+    assert read <= set(archived) and "toy-0000000000" in {
+        p.name for p in (dest / "stages").iterdir()
+    }
     assert (dest / "REPORT.md").read_bytes() == (out / "REPORT.md").read_bytes()
     assert {p.name for p in (dest / "figures").iterdir()} == {
         p.name for p in (out / "figures").glob("*.png")
     }
-    assert {p.name for p in dest.iterdir() if p.is_dir()} == read | {"figures", "stages"}
+    assert {p.name for p in dest.iterdir() if p.is_dir()} == {"figures", "stages"}
     assert (dest / "README.md").read_text() == "kept"
-    assert (dest / "stages" / "toy-0000000000" / "stage.json").is_file()
+    assert (dest / "stages" / "toy-0000000000" / "stage.json").read_text() == "{}"
     for name in read:
-        assert (dest / name / "stage.json").read_bytes() == (out / name / "stage.json").read_bytes()
-        assert not (dest / name / "run").exists()
+        assert archived[name] == json.loads((out / name / "stage.json").read_text())
+        assert not list((dest / "stages" / name).rglob("*.rrd"))
     tables = next(n for n in read if n.startswith("tables-") and "heldout" not in n)
-    assert (dest / tables / "errors.json").is_file()  # the raw cells the report cites
+    raw = dest / "stages" / tables / "errors.json.xz"  # the raw cells the report cites
+    assert lzma.decompress(raw.read_bytes()) == (out / tables / "errors.json").read_bytes()
     assert f"{tables}/errors.json" in (dest / "REPORT.md").read_text()
     from warp_critic.reproduce.stages import MARKER
 

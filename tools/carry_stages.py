@@ -12,7 +12,7 @@ Usage::
     python tools/carry_stages.py restore docs/paper/stages runs/paper   # on the next machine
     warp-critic reproduce --out runs/paper                              # runs what is left
     python tools/carry_stages.py list docs/paper/stages
-    python tools/carry_stages.py publish runs/paper docs/paper          # the report, to commit
+    python tools/carry_stages.py publish runs/paper docs/paper          # the report + its stages, to commit
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
     ls.add_argument("archive", metavar="ARCHIVE")
     pb = sub.add_parser(
         "publish",
-        help="copy OUT's report, figures and the records of the stages it read into DEST",
+        help="copy OUT's report and figures into DEST, and the stages it read into DEST/stages",
     )
     pb.add_argument("out", metavar="OUT", help="a reproduce output folder with its report")
     pb.add_argument("dest", metavar="DEST", help="the folder to commit (created if new)")
@@ -53,8 +53,9 @@ def main(argv: list[str] | None = None) -> int:
         if args.what == "publish":
             names, pruned = carry.publish(Path(args.out), Path(args.dest))
             print(
-                f"{PROG}: the report and {len(names)} stage record(s) written to {args.dest}"
-                + "".join(f"\n  removed the earlier report's {n}" for n in pruned)
+                f"{PROG}: the report written to {args.dest}, with the {len(names)} stage record(s) "
+                f"it read in {Path(args.dest) / carry.ARCHIVE}"
+                + "".join(f"\n  removed the record written beside the report: {n}" for n in pruned)
             )
             return 0
         if args.what == "save":

@@ -117,6 +117,10 @@ ALIVE_SHARE = 0.5
 """A seed whose :func:`aux_alive` is below this trained as DDPG: it is warned about, reported as
 collapsed, and its setting cannot be adopted by the baselines' search."""
 
+#: the metrics columns :func:`aux_alive` and :func:`aux_alive_basis` read (a carried archive keeps
+#: only these of a run's metrics: :mod:`warp_critic.reproduce.carry`)
+AUX_KEYS = ("iteration", "aux_loss", "aux_grad_ratio", "meta_improvement")
+
 
 def aux_alive(metrics: list[dict]) -> float | None:
     """The fraction of the last quarter of a run's iterations in which ``h_omega`` still moved the

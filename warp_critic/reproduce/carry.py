@@ -7,16 +7,20 @@ output folder on another machine, where ``reproduce`` then skips them and runs o
 * :func:`save` copies every complete stage of ``out`` (its ``stage.json`` is present and usable)
   into ``archive/<stage dir>``, without recordings (``*.rrd``) and locks. Meta-training checkpoints
   lose the state that only a resumed training needs (:data:`TRAINING_ONLY`: optimisers, ours' last
-  policies, the baselines' target networks and replay buffers); what meta-test, the maps, the
-  tables and the report read stays (networks, config, scene identity, metrics); a shipped scene's
-  absolute path is written ``scenes/NAME`` (the scene is found by its content hash). A stage already in
-  the archive is skipped when its ``stage.json`` is the same, refused when it differs.
-* :func:`restore` copies every archived stage that ``out`` lacks into ``out`` (made a reproduce
-  output if new; its lock is held while copying). A stage ``out`` already has complete is skipped;
-  one that ``out`` holds incomplete (started there) is refused, never overwritten.
-
-* :func:`publish` copies a finished report (``REPORT.md``, ``results.json``, figures, and the
-  records of the stages it read) into a folder to commit, such as ``docs/paper``.
+  policies, the baselines' target networks and replay buffers); what meta-test, the maps and the
+  tables read stays (networks, config, scene identity). A run's ``metrics.jsonl`` is carried only
+  as far as the report reads it (:func:`thin_metrics`: Meta-Critic's auxiliary-loss columns; the
+  curves are in ``stage.json``). JSON and JSONL files are stored xz-compressed (``NAME.xz``: the
+  records compress about 5x, and an archive is meant to be committed). A shipped scene's absolute
+  path is written ``scenes/NAME`` (the scene is found by its content hash). A stage already in the
+  archive is skipped when its ``stage.json`` is the same, refused when it differs.
+* :func:`restore` copies every archived stage that ``out`` lacks into ``out``, decompressed (made a
+  reproduce output if new; its lock is held while copying). A stage ``out`` already has complete is
+  skipped; one that ``out`` holds incomplete (started there) is refused, never overwritten.
+  Archives written before compression (plain JSON, whole metrics) restore as they are.
+* :func:`publish` copies a finished report (``REPORT.md``, ``results.json``, the ledger and the
+  figures) into a folder to commit, such as ``docs/paper``, and saves the stages it read into that
+  folder's ``stages/`` archive, so every number in the report traces to a record there.
 
 Each stage is copied into a temporary sibling directory and renamed into place, so an interrupted
 call leaves no half-copied stage behind.
@@ -25,11 +29,19 @@ call leaves no half-copied stage behind.
 from __future__ import annotations
 
 import json
+import lzma
 import shutil
 from pathlib import Path
 
 from warp_critic.core.errors import UserError
-from warp_critic.reproduce.stages import MARKER, claim_out, read_complete, read_stage
+from warp_critic.reproduce.stages import (
+    MARKER,
+    PACKED,
+    STAGE_FILE,
+    claim_out,
+    read_complete,
+    read_stage,
+)
 from warp_critic.running.locks import LOCK
 
 #: checkpoint entries only a resumed training reads
@@ -37,6 +49,10 @@ TRAINING_ONLY = ("optimizer_state", "policy_params", "agent_state", "buffer")
 #: files never carried
 SKIPPED_SUFFIXES = (".rrd",)
 SKIPPED_NAMES = (LOCK,)
+#: files an archive stores xz-compressed, as ``NAME.xz``
+PACKED_SUFFIXES = (".json", ".jsonl")
+METRICS = "metrics.jsonl"
+ARCHIVE_STARTED = "exists but is not a complete stage; not replacing it"
 
 
 def complete_stages(folder: Path) -> dict[str, dict]:
@@ -81,20 +97,40 @@ def _slim_checkpoint(src: Path, dst: Path) -> None:
     atomic_torch_save(slim, dst)
 
 
-def _portable_config(src: Path, dst: Path) -> None:
-    from warp_critic.running.rundir import atomic_write_text
-
+def _portable_config(src: Path) -> bytes:
+    """A run's ``config.json`` with a shipped scene named ``scenes/NAME``; another file as it is."""
     try:
         config = json.loads(src.read_text())
-    except (OSError, ValueError, UnicodeDecodeError):
-        shutil.copy2(src, dst)  # not a run's config: carried as it is
-        return
+    except (ValueError, UnicodeDecodeError):
+        return src.read_bytes()  # not a run's config: carried as it is
     text = json.dumps(_portable(config) if isinstance(config, dict) else config, indent=2)
-    atomic_write_text(dst, text + "\n")
+    return (text + "\n").encode()
 
 
-def _copy_stage(src: Path, dst_parent: Path, slim: bool) -> None:
-    """``src`` -> ``dst_parent/src.name`` through a temporary sibling renamed into place."""
+def thin_metrics(text: str) -> str | None:
+    """A run's ``metrics.jsonl`` cut to what a reader of an archive takes from it: Meta-Critic's
+    rows, with only the columns of its per-seed auxiliary-loss share
+    (:data:`~warp_critic.methods.meta_critic.AUX_KEYS`; the report reads them for records written
+    before the share was kept in ``stage.json``). ``None`` for a run without such rows (ours,
+    DDPG): its curves are in the stage's record, and the file is not carried."""
+    from warp_critic.methods.meta_critic import AUX_KEYS
+
+    rows = [json.loads(line) for line in text.splitlines() if line.strip()]
+    kept = [{k: r[k] for k in AUX_KEYS if k in r} for r in rows if "aux_loss" in r]
+    return "".join(json.dumps(r) + "\n" for r in kept) if kept else None
+
+
+def _pack(data: bytes) -> bytes:
+    # preset 9: the stage records are written once and read rarely; the output is deterministic
+    return lzma.compress(data, preset=9)
+
+
+def _copy_stage(src: Path, dst_parent: Path, slim: bool, pack: bool) -> None:
+    """``src`` -> ``dst_parent/src.name`` through a temporary sibling renamed into place; ``slim``:
+    checkpoints and metrics cut to what is read (a meta-training stage), ``pack``: JSON stored
+    compressed (into an archive); else a packed file is unpacked (out of one)."""
+    from warp_critic.running.rundir import atomic_write_bytes
+
     final = dst_parent / src.name
     tmp = dst_parent / f".carrying-{src.name}"
     if tmp.exists():
@@ -108,22 +144,40 @@ def _copy_stage(src: Path, dst_parent: Path, slim: bool) -> None:
             target.parent.mkdir(parents=True, exist_ok=True)
             if slim and path.name == "checkpoint.pt":
                 _slim_checkpoint(path, target)
-            elif slim and path.name == "config.json":
-                _portable_config(path, target)
+                continue
+            if slim and path.name == "config.json":
+                data = _portable_config(path)
+            elif slim and path.name == METRICS:
+                thin = thin_metrics(path.read_text())
+                if thin is None:
+                    continue
+                data = thin.encode()
             else:
-                shutil.copy2(path, target)
+                data = path.read_bytes()
+            if pack and path.suffix in PACKED_SUFFIXES:
+                atomic_write_bytes(target.with_name(target.name + PACKED), _pack(data))
+            elif not pack and path.suffix == PACKED and Path(path.stem).suffix in PACKED_SUFFIXES:
+                atomic_write_bytes(target.with_name(path.stem), lzma.decompress(data))
+            else:
+                atomic_write_bytes(target, data)
         tmp.rename(final)
-    except OSError as e:
+    except (OSError, lzma.LZMAError) as e:
         shutil.rmtree(tmp, ignore_errors=True)
-        raise UserError(f"{final}: cannot write ({e.strerror or e})") from None
+        why = e.strerror if isinstance(e, OSError) and e.strerror else e
+        raise UserError(f"{final}: cannot write ({why})") from None
 
 
-def _carry(src: Path, dst: Path, *, slim: bool, started: str) -> list[str]:
-    """Copy the complete stages of ``src`` that ``dst`` lacks; an identical stage there is skipped,
-    a different or unfinished one refused (``started`` says what an unfinished one is)."""
+def _carry(
+    src: Path, dst: Path, *, slim: bool, pack: bool, started: str, only: set[str] | None = None
+) -> list[str]:
+    """Copy the complete stages of ``src`` (those named in ``only``, where given) that ``dst``
+    lacks; an identical stage there is skipped, a different or unfinished one refused (``started``
+    says what an unfinished one is)."""
     have = complete_stages(dst)
     copied = []
     for name, data in complete_stages(src).items():
+        if only is not None and name not in only:
+            continue
         if name in have:
             if have[name] != data:
                 raise UserError(
@@ -133,7 +187,7 @@ def _carry(src: Path, dst: Path, *, slim: bool, started: str) -> list[str]:
             continue
         if (dst / name).exists():
             raise UserError(f"{dst / name}: {started}")
-        _copy_stage(src / name, dst, slim=slim and data["group"] == "metatrain")
+        _copy_stage(src / name, dst, slim=slim and data["group"] == "metatrain", pack=pack)
         copied.append(name)
     return copied
 
@@ -148,9 +202,7 @@ def save(out: Path, archive: Path) -> list[str]:
         archive.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise UserError(f"{archive}: cannot create ({e.strerror or e})") from None
-    return _carry(
-        out, archive, slim=True, started="exists but is not a complete stage; not replacing it"
-    )
+    return _carry(out, archive, slim=True, pack=True, started=ARCHIVE_STARTED)
 
 
 def restore(archive: Path, out: Path) -> list[str]:
@@ -166,6 +218,7 @@ def restore(archive: Path, out: Path) -> list[str]:
             archive,
             out,
             slim=False,
+            pack=False,
             started="this stage was started here and is not complete; remove it to take the "
             "archived one",
         )
@@ -173,27 +226,30 @@ def restore(archive: Path, out: Path) -> list[str]:
         lock.release()
 
 
-#: what :func:`publish` copies of a stage the report read: its record, raw cells and figures
-PUBLISHED_SUFFIXES = (".json", ".png")
-
-
 def _published_record(d: Path) -> bool:
-    """Whether ``d`` is what :func:`publish` writes for a stage: a ``stage.json`` and nothing but
-    :data:`PUBLISHED_SUFFIXES` files (never a carried stage, which holds its runs)."""
-    if not (d / "stage.json").is_file():
+    """Whether ``d`` is a stage record that :func:`publish` wrote beside the report before the
+    records moved into ``stages/``: a ``stage.json`` and nothing but ``.json`` / ``.png`` files
+    (never a carried stage, which holds its runs)."""
+    if not (d / STAGE_FILE).is_file():
         return False
-    return all(p.is_dir() or p.suffix in PUBLISHED_SUFFIXES for p in d.rglob("*"))
+    return all(p.is_dir() or p.suffix in (".json", ".png") for p in d.rglob("*"))
+
+
+#: the folder of a published report that holds the archive of the stages it read
+ARCHIVE = "stages"
 
 
 def publish(out: Path, dest: Path) -> tuple[list[str], list[str]]:
     """Copy the report of ``out`` into ``dest``, for committing: ``REPORT.md``, ``results.json``,
-    ``ledger.jsonl`` (where there is one), ``figures/*.png`` and, of each stage the report read (``results.json``'s ``stages``), its
-    ``*.json`` and ``*.png`` files outside its runs (``stage.json``, the raw ``errors.json`` cells,
-    the landscapes), so every number in the report traces to a file in ``dest``.
+    ``ledger.jsonl`` (where there is one) and ``figures/*.png``; and save each stage the report
+    read (``results.json``'s ``stages``) into the archive ``dest/stages`` as :func:`save` does, so
+    every number in the report traces to a record there (``tables-*/errors.json`` named in the
+    report is ``dest/stages/tables-*/errors.json.xz``).
 
-    ``dest``'s figures and stage records from an earlier report that this one did not read are
-    removed (they no longer match the report beside them); anything else in ``dest`` (a README,
-    carried stages, search rows) is left alone. Returns (stage dirs written, stage dirs removed)."""
+    ``dest``'s figures that this report did not draw are removed, and so are the stage records an
+    earlier version of this function wrote beside the report; anything else in ``dest`` (a README,
+    the archive's other stages, search rows) is left alone. Returns (the stages the report read,
+    the stage directories removed)."""
     from warp_critic.running.rundir import atomic_write_bytes
 
     out, dest = Path(out), Path(dest)
@@ -208,10 +264,12 @@ def publish(out: Path, dest: Path) -> tuple[list[str], list[str]]:
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         raise UserError(f"{out / 'results.json'}: not a reproduce report's results") from None
     for name in stages:
-        if Path(name).name != name or not (out / name / "stage.json").is_file():
+        if Path(name).name != name or not (out / name / STAGE_FILE).is_file():
             raise UserError(f"{out / 'results.json'}: names stage {name!r}, which {out} lacks")
+    complete_stages(out)  # an edited stage.json is refused before anything is written
     try:
-        dest.mkdir(parents=True, exist_ok=True)
+        (dest / ARCHIVE).mkdir(parents=True, exist_ok=True)
+        _carry(out, dest / ARCHIVE, slim=True, pack=True, started=ARCHIVE_STARTED, only=set(stages))
         figures = sorted((out / "figures").glob("*.png"))
         (dest / "figures").mkdir(exist_ok=True)
         keep = {p.name for p in figures}
@@ -220,18 +278,7 @@ def publish(out: Path, dest: Path) -> tuple[list[str], list[str]]:
                 old.unlink()
         for png in figures:
             atomic_write_bytes(dest / "figures" / png.name, png.read_bytes())
-        for name in stages:
-            for path in sorted((out / name).rglob("*")):
-                rel = path.relative_to(out / name)
-                if rel.parts[0] == "run" or path.is_dir() or path.suffix not in PUBLISHED_SUFFIXES:
-                    continue
-                (dest / name / rel).parent.mkdir(parents=True, exist_ok=True)
-                atomic_write_bytes(dest / name / rel, path.read_bytes())
-        pruned = [
-            d.name
-            for d in sorted(dest.iterdir())
-            if d.is_dir() and d.name not in stages and _published_record(d)
-        ]
+        pruned = [d.name for d in sorted(dest.iterdir()) if d.is_dir() and _published_record(d)]
         for name in pruned:
             shutil.rmtree(dest / name)
         if (out / "ledger.jsonl").is_file():  # the calls that made the report, and their times

@@ -13,6 +13,7 @@ One driver at a time: the folder's OS lock (``.lock``) is held while a driver wo
 from __future__ import annotations
 
 import json
+import lzma
 import sys
 import time
 from collections.abc import Callable
@@ -27,6 +28,8 @@ from warp_critic.running.rundir import atomic_write_text, check_output_dir
 MARKER = REPRODUCE_MARKER
 STAGE_FILE = "stage.json"
 STAGE_KIND = "warp-critic/reproduce-stage-v1"
+#: the suffix of an xz-compressed text file in a carried archive (``stage.json.xz``)
+PACKED = ".xz"
 
 
 def prepare_out(out: Path) -> Path:
@@ -82,10 +85,17 @@ def _check_ours(out: Path) -> None:
 
 
 def read_stage(d: Path) -> dict | None:
-    """The ``stage.json`` of a complete stage directory, or ``None``."""
+    """The ``stage.json`` of a complete stage directory, or ``None``; in a carried archive
+    (:mod:`~warp_critic.reproduce.carry`) the record is xz-compressed, ``stage.json.xz``."""
     try:
-        data = json.loads((Path(d) / STAGE_FILE).read_text())
-    except (OSError, ValueError, UnicodeDecodeError):
+        packed = Path(d) / (STAGE_FILE + PACKED)
+        text = (
+            lzma.decompress(packed.read_bytes()).decode()
+            if packed.is_file()
+            else (Path(d) / STAGE_FILE).read_text()
+        )
+        data = json.loads(text)
+    except (OSError, ValueError, UnicodeDecodeError, lzma.LZMAError):
         return None
     return data if isinstance(data, dict) and data.get("kind") == STAGE_KIND else None
 
@@ -96,8 +106,10 @@ def read_complete(d: Path, group: str) -> dict | None:
     data = read_stage(d)
     problem = None if data is None else stage_problem(group, data)
     if problem is not None:
+        packed = Path(d) / (STAGE_FILE + PACKED)
         raise UserError(
-            f"{Path(d) / STAGE_FILE}: edited or damaged ({problem}); remove it to run the stage again"
+            f"{packed if packed.is_file() else Path(d) / STAGE_FILE}: edited or damaged "
+            f"({problem}); remove it to run the stage again"
         )
     return data
 
