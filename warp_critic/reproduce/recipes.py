@@ -40,10 +40,9 @@ WIDE = {"critic_input": "relative", "start_std": 1.5, "home_starts": 2}
 #: (:func:`warp_critic.methods.identify.train_identifier`, seeded by the run's seed), so that the maps
 #: also test the critic fed its own estimate of the model (``<recipe>-identified``): no privileged
 #: data at meta-test. 2000 regression steps of 8 goals x 16 fresh policies, ``version`` 2 of the
-#: identifier (the response's moments and a nonlinear head; RESULTS, "Telling the critic the model,
-#: then identifying it": with version 1, 600 steps gave 61% / 79.6% of the maps on 5 seeds and 2000
-#: steps 71% / 90%; version 2 with 2000 steps 75.5% / 98%, and on seed 0 it reached in 300 steps
-#: what version 1 did in 2000)
+#: identifier (the response's moments and a nonlinear head), which did better on the maps than
+#: version 1 and in fewer steps (measured: docs/journal/beyond-2026-12-04.md, "Telling the critic
+#: the model, then identifying it")
 #: ``variants``: the draws the identifier learns from (the ``train_variants`` form; ``""``: the
 #: run's own).
 IDENTIFY = {
@@ -56,25 +55,25 @@ IDENTIFY = {
     "variants": "",
 }
 #: ``pose-dynamics-full``'s identifier draws a third of its models with both masses in 0.25-1 kg:
-#: uniform draws over 0.25-6 kg put 4% of its samples below 0.5 kg, where its estimate failed
-#: (RESULTS, "The identified critic: trained on its estimates, and lighter draws": 5 seeds,
-#: 36% / 77.6% / 100% of the maps against 34% / 75.5% / 98% with the run's own draws)
+#: uniform draws over 0.25-6 kg put few of its samples below 0.5 kg, where its estimate failed
+#: (docs/journal/beyond-2026-12-05.md, "The identified critic: trained on its estimates, and
+#: lighter draws")
 REACHER_IDENTIFY_LIGHT = "arm1.mass=0.25..1:keep; arm2.mass=0.25..1:keep | " + REACHER_VARIANTS_FULL
 RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
     "reacher": {
         "randomised": ("reacher", {"train_variants": REACHER_VARIANTS}),
-        # the same, trained 7.5x longer: its final training error over the models (0.185 in 400
-        # iterations, against 0.008 for the nominal critic on one) says 400 were too few
+        # the same, trained 7.5x longer: its final training error over the models, far above the
+        # nominal critic's on one model, said 400 were too few (the report's training-cost table)
         "randomised-long": ("reacher", {"train_variants": REACHER_VARIANTS, "iterations": 3000}),
-        # and 15x: 3000 iterations took the maps from 22% / 33% to 55% / 61% of their cells
+        # and 15x: whether the maps keep improving past 3000 iterations (the report's maps table)
         "randomised-6000": ("reacher", {"train_variants": REACHER_VARIANTS, "iterations": 6000}),
         "wide": ("reacher", WIDE),
-        # the same, trained 7.5x longer: on seed 0, 2000 iterations took the share of a 9 x 9 goal
-        # grid below 0.05 from 20% to 36% and 6000 to 38% (RESULTS, "Longer wide trainings")
+        # the same, trained 7.5x longer: longer trainings raised the share of the goal grid below
+        # 0.05 on seed 0 (docs/journal/beyond-2026-12-02-03.md, "Longer wide trainings")
         "wide-long": ("reacher", {**WIDE, "iterations": 3000}),
         # the same with the critic seeing the arm's joint angles (``pose``): its elbow sets the
-        # inertia a far goal is reached with, which the relative input hides (RESULTS, "Why the far
-        # goals miss"); on seed 0, 2000 iterations: 42% of the 9 x 9 grid against 36%
+        # inertia a far goal is reached with, which the relative input hides (docs/journal, "Why the far
+        # goals miss"; measured there on seed 0)
         "pose-long": ("reacher", {**WIDE, "critic_input": "pose", "iterations": 3000}),
         # randomised-long with the history input (the last step's velocity change and torque): the
         # response to the fresh policy's small torques tells the critic the inertia it acts on
@@ -93,7 +92,7 @@ RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
             },
         ),
         # the same over the maps' whole ranges: the light and short second links the stable part
-        # of the grid left out (seed 0: mass map 65% against 59%; 5 seeds: RESULTS)
+        # of the grid left out (the report's maps table)
         "pose-randomised-full": (
             "reacher",
             {
@@ -107,7 +106,7 @@ RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
         # pose-randomised-long with each world's model told to the critic (``pose-dynamics``:
         # masses, inertias, link offsets): the oracle of identification. The critics that had to
         # tell the models apart themselves settled between the light and the heavy ends of the mass
-        # map (RESULTS, "What the critic reaches where it was trained")
+        # map (docs/journal/beyond-2026-12-04.md, "What the critic reaches where it was trained")
         "pose-dynamics-long": (
             "reacher",
             {
@@ -117,8 +116,7 @@ RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
                 "iterations": 3000,
             },
         ),
-        # the same over the maps' whole ranges (seed 0: mass map 84%, length map 100%, against
-        # 84% / 100% for pose-dynamics-long's seed 0 and 65% / 67% for pose-randomised-full's)
+        # the same over the maps' whole ranges (the report's maps table)
         "pose-dynamics-full": (
             "reacher",
             {
@@ -127,9 +125,8 @@ RECIPES: dict[str, dict[str, tuple[str, dict]]] = {
                 "train_variants": REACHER_VARIANTS_FULL,
                 "on_divergence": "drop",
                 "iterations": 3000,
-                # and the critic fed an identifier's estimate instead (5 seeds, identifier
-                # version 2 with light draws: 36% / 77.6% / 100%; with the run's own draws
-                # 33.8% / 75.5% / 98.0%; version 1: 29.8% / 71.4% / 89.8%)
+                # and the critic fed an identifier's estimate instead (``-identified`` in the
+                # report's maps table; the identifier versions compared in the journal)
                 "identify": {**IDENTIFY, "variants": REACHER_IDENTIFY_LIGHT},
             },
         ),

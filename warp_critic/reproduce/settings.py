@@ -59,9 +59,8 @@ BASELINE_CHECKPOINT_EVERY = 50
 #: The baselines' settings adopted from the committed search (``tools/tune_baselines.py``, its output in
 #: ``docs/paper/tuning/``): scene -> method -> the published values replaced, only where a complete
 #: one-at-a-time search found a setting that passes the tool's adoption rule (better than the published
-#: setting by more than half its seed spread). Reacher DDPG, 100 iterations, seeds 100-101: actor lr
-#: 1e-3 scored 0.0336 rad^2 against the published 0.0804 (per seed 0.0944, 0.0664). A test checks
-#: this table against the committed search.
+#: setting by more than half its seed spread; the scores are in docs/paper/README.md, "the baselines'
+#: search"). A test checks this table against the committed search.
 TUNED: dict[str, dict[str, dict[str, float]]] = {"reacher": {"ddpg": {"actor_lr": 1e-3}}}
 
 
