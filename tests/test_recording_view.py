@@ -99,3 +99,38 @@ def test_the_camera_looks_at_the_centre_from_above_for_a_planar_robot():
     assert up[2] > 2 * abs(up[0]) and up[2] > 2 * abs(up[1])
     oblique = np.array(side.position.as_arrow_array().to_pylist()[0]) - [1, 1, 0]
     assert abs(oblique[0]) > 0.3 * np.linalg.norm(oblique)
+
+
+def test_a_mesh_robot_logs_its_meshes_once_then_only_their_transforms(mesh_arm):
+    """Each link mesh's geometry is logged once, statically, per entity; a later pose logs only
+    its transform (a small recording); no line strips; the camera frames the meshes' extent."""
+    from warp_critic.core import runtime
+    from warp_critic.physics.robot import load_any
+    from warp_critic.physics.variants import Variant
+
+    runtime.init()
+    scene = load_any(str(mesh_arm))
+    model = scene.build_model([Variant(), Variant()])
+    d = RobotDrawing.from_model(model, 2, scene.ee_body, scene.tip_offset_of())
+    assert d.mesh_body.tolist() == [0, 1] and d.has_shapes and len(d.kind) == 0
+    assert d.mesh_vertices[0].shape == (26, 3) and d.mesh_indices[0].shape == (48, 3)
+    rec = rr.RecordingStream("test")
+    logged: list = []
+    rec.log = lambda entity, arch, static=False: logged.append((entity, arch, static))  # type: ignore[method-assign]
+    poses = np.tile([0.0, 0, 0, 0, 0, 0, 1], (2, 1))
+    poses[1, :3] = [0.5, 0.2, 0.1]
+    d.log_arm(rec, "arm", poses, (255, 0, 0))
+    first = [(e, type(a).__name__, s) for e, a, s in logged]
+    assert ("arm/meshes/1", "Mesh3D", True) in first and ("arm/meshes/0", "Mesh3D", True) in first
+    assert not any("links" in e for e, _, _ in first)
+    logged.clear()
+    poses[1, :3] = [0.4, 0.3, 0.1]
+    d.log_arm(rec, "arm", poses, (255, 0, 0))
+    assert [(e, type(a).__name__, s) for e, a, s in logged] == [
+        ("arm/meshes/0", "Transform3D", False),
+        ("arm/meshes/1", "Transform3D", False),
+    ]
+    moved = logged[1][1].translation.as_arrow_array().to_pylist()[0]
+    assert np.allclose(moved, [0.4, 0.3, 0.1])  # the second link's mesh sits at its body
+    # the camera frames the second link's far end, 0.5 m beyond its body origin
+    assert d.points(poses)[:, 0].max() == pytest.approx(0.9, abs=1e-5)
