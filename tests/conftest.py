@@ -87,6 +87,7 @@ def link_mesh(length: float = 0.5, radius: float = 0.05, sides: int = 12) -> tup
 
 
 MESH_ARM = """<mujoco model="mesh_arm">
+  <compiler angle="radian"/>
   <asset><mesh name="link" vertex="{vertex}" face="{face}"/></asset>
   <worldbody>
     <geom type="cylinder" size="0.08 0.05" pos="0 0 0.05" contype="0" conaffinity="0"/>
