@@ -134,3 +134,50 @@ def test_a_mesh_robot_logs_its_meshes_once_then_only_their_transforms(mesh_arm):
     assert np.allclose(moved, [0.4, 0.3, 0.1])  # the second link's mesh sits at its body
     # the camera frames the second link's far end, 0.5 m beyond its body origin
     assert d.points(poses)[:, 0].max() == pytest.approx(0.9, abs=1e-5)
+
+
+def test_stl_files_read_binary_and_ascii_alike(tmp_path):
+    from warp_critic.physics.robot_meshes import read_stl
+
+    tri = np.array(
+        [[[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 0, 0], [0, 1, 0], [0, 0, 1]]], np.float32
+    )
+    rows = np.zeros(2, np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]))
+    rows["v"] = tri
+    (tmp_path / "b.stl").write_bytes(bytes(80) + (2).to_bytes(4, "little") + rows.tobytes())
+    facets = "".join(
+        "facet normal 0 0 0\nouter loop\n"
+        + "".join(f"vertex {x} {y} {z}\n" for x, y, z in t)
+        + "endloop\nendfacet\n"
+        for t in tri
+    )
+    (tmp_path / "a.stl").write_text(f"solid t\n{facets}endsolid t\n")
+    for name in ("a.stl", "b.stl"):
+        v, f = read_stl(tmp_path / name)
+        assert v.shape == (4, 3) and f.shape == (2, 3)  # the shared corners merged
+        np.testing.assert_array_equal(v[f], tri)
+
+
+def test_a_urdf_robot_is_drawn_from_its_link_meshes():
+    """The UR5 of example-robot-data: a URDF imported without meshes is still drawn from them (its
+    STL collision meshes; its visual .dae files are not read), one per moving link."""
+    import sysconfig
+    from pathlib import Path
+
+    from warp_critic.core import runtime
+    from warp_critic.physics.robot import load_robot
+    from warp_critic.physics.robot_meshes import link_meshes
+    from warp_critic.physics.variants import Variant
+
+    robots = Path(sysconfig.get_paths()["purelib"]) / "cmeel.prefix/share/example-robot-data/robots"
+    urdf = robots / "ur_description/urdf/ur5_robot.urdf"
+    if not urdf.is_file():
+        pytest.skip("example-robot-data missing (pip install -e '.[test]')")
+    runtime.init()
+    scene = load_robot(urdf)
+    meshes = link_meshes(scene)
+    assert [m[0] for m in meshes] == list(range(6))  # shoulder .. wrist 3; the base is welded
+    assert all(len(v) > 100 and f.max() < len(v) for _, _, v, f in meshes)
+    model = scene.build_model([Variant(), Variant()])
+    d = RobotDrawing.from_model(model, 2, scene.ee_body, scene.tip_offset_of(), meshes)
+    assert d.mesh_body.tolist() == list(range(6)) and d.has_shapes

@@ -12,6 +12,7 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
+from warp_critic.physics.robot_meshes import link_meshes
 from warp_critic.running.robot_drawing import (  # also recording_view.<name>, as before
     BASE_COLOR,
     BEFORE_COLOR,
@@ -121,6 +122,7 @@ class GoalStage:
             sim.worlds,
             sim.scene.ee_body,
             sim.scene.tip_offset_of(sim.variants[world_offset]),
+            link_meshes(sim.scene),
         )
         q = sim.zeros()
         for g in range(shown):

@@ -98,7 +98,11 @@ class RobotDrawing:
     _meshes_logged: set[str] = field(default_factory=set, init=False, repr=False)
 
     @classmethod
-    def from_model(cls, model, worlds: int, ee_body: int, tip: np.ndarray) -> RobotDrawing:
+    def from_model(
+        cls, model, worlds: int, ee_body: int, tip: np.ndarray, meshes=()
+    ) -> RobotDrawing:
+        """One world's shapes of ``model``; ``meshes``: more, ``(body, local, vertices,
+        triangles)`` each (a URDF's links: :func:`warp_critic.physics.robot_meshes.link_meshes`)."""
         B = model.body_count // worlds
         body = model.shape_body.numpy()
         kind = model.shape_type.numpy()
@@ -116,12 +120,21 @@ class RobotDrawing:
         parent, child = model.joint_parent.numpy(), model.joint_child.numpy()
         links = [(int(p), int(c)) for p, c in zip(parent, child) if 0 <= p < B and 0 <= c < B]
         sources = getattr(model, "shape_source", None) or [None] * len(kind)
-        meshes = [
+        found = [
             s
             for s in np.nonzero((body >= 0) & (body < B) & np.isin(kind, MESHES))[0]
             if getattr(sources[s], "vertices", None) is not None
             and getattr(sources[s], "indices", None) is not None
         ]
+        all_meshes = [
+            (
+                int(body[s]),
+                local[s],
+                np.asarray(sources[s].vertices, np.float32) * scale[s].astype(np.float32),
+                np.asarray(sources[s].indices, np.uint32).reshape(-1, 3),
+            )
+            for s in found
+        ] + [m for m in meshes if 0 <= m[0] < B]
         return cls(
             kind[mine],
             body[mine],
@@ -133,13 +146,10 @@ class RobotDrawing:
             links,
             int(ee_body),
             np.asarray(tip, np.float64),
-            body[meshes],
-            local[meshes].reshape(-1, 7),
-            [
-                np.asarray(sources[s].vertices, np.float32) * scale[s].astype(np.float32)
-                for s in meshes
-            ],
-            [np.asarray(sources[s].indices, np.uint32).reshape(-1, 3) for s in meshes],
+            np.array([m[0] for m in all_meshes], int),
+            np.array([m[1] for m in all_meshes], np.float64).reshape(-1, 7),
+            [m[2] for m in all_meshes],
+            [m[3] for m in all_meshes],
         )
 
     @property
