@@ -176,8 +176,18 @@ def test_a_urdf_robot_is_drawn_from_its_link_meshes():
     runtime.init()
     scene = load_robot(urdf)
     meshes = link_meshes(scene)
-    assert [m[0] for m in meshes] == list(range(6))  # shoulder .. wrist 3; the base is welded
+    # the base (welded to the world) and shoulder .. wrist 3
+    assert [m[0] for m in meshes] == [-1, *range(6)]
     assert all(len(v) > 100 and f.max() < len(v) for _, _, v, f in meshes)
     model = scene.build_model([Variant(), Variant()])
     d = RobotDrawing.from_model(model, 2, scene.ee_body, scene.tip_offset_of(), meshes)
-    assert d.mesh_body.tolist() == list(range(6)) and d.has_shapes
+    assert d.mesh_body.tolist() == [-1, *range(6)] and d.has_shapes
+    rec = rr.RecordingStream("test")
+    logged: list = []
+    rec.log = lambda entity, arch, static=False: logged.append((entity, type(arch).__name__))  # type: ignore[method-assign]
+    d.log_static(rec, "base", (90, 90, 90))
+    assert logged == [("base/meshes/0", "Mesh3D"), ("base/meshes/0", "Transform3D")]
+    logged.clear()
+    d.log_arm(rec, "arm", np.tile([0.0, 0, 0, 0, 0, 0, 1], (6, 1)), (255, 0, 0))
+    meshes_logged = {e for e, _ in logged if "/meshes/" in e}
+    assert meshes_logged == {f"arm/meshes/{i}" for i in range(1, 7)}  # the base's is not moved

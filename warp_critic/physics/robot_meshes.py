@@ -5,7 +5,7 @@ by fixed joints are merged into the moving bodies. :func:`link_frames` keeps, at
 of the file's links ended up (the model body it is part of and its frame there); :func:`link_meshes`
 reads each link's meshes from the file (its ``<visual>`` meshes, else its ``<collision>`` ones; STL
 files, binary or ASCII, as newton needs no other package for them; other formats are skipped) and
-places them on those bodies. Links welded to the world are not drawn.
+places them on those bodies (body -1: a link welded to the world, in the world's frame).
 """
 
 from __future__ import annotations
@@ -70,7 +70,8 @@ def read_stl(path: Path) -> tuple[np.ndarray, np.ndarray]:
 
 def link_meshes(scene) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
     """``(body, local (7,), vertices (V, 3), triangles (F, 3))`` for each mesh of a URDF robot
-    scene's links (none for other scenes): ``local`` is the mesh's frame in the body."""
+    scene's links (none for other scenes): ``local`` is the mesh's frame in the body (body -1: the
+    world)."""
     import warp as wp
 
     from warp_critic.physics.file_format import file_format
@@ -85,9 +86,9 @@ def link_meshes(scene) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
         return []
     out = []
     for link in root.iter("link"):
-        body, frame = frames.get(link.get("name", ""), (-1, IDENTITY))
-        if body < 0:
+        if link.get("name") not in frames:
             continue
+        body, frame = frames[link.get("name")]
         for kind in ("visual", "collision"):
             found = []
             for element in link.findall(kind):

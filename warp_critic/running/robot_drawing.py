@@ -134,7 +134,7 @@ class RobotDrawing:
                 np.asarray(sources[s].indices, np.uint32).reshape(-1, 3),
             )
             for s in found
-        ] + [m for m in meshes if 0 <= m[0] < B]
+        ] + [m for m in meshes if m[0] < B]  # -1: a link welded to the world (drawn with the base)
         return cls(
             kind[mine],
             body[mine],
@@ -154,7 +154,7 @@ class RobotDrawing:
 
     @property
     def has_shapes(self) -> bool:
-        return len(self.kind) > 0 or len(self.mesh_body) > 0
+        return len(self.kind) > 0 or bool((self.mesh_body >= 0).any())
 
     def tip_of(self, poses: np.ndarray) -> np.ndarray:
         """The tip position for body poses ``(B, 7)``."""
@@ -165,10 +165,10 @@ class RobotDrawing:
         """Body origins, the tip and the corners of the meshes' bounding boxes: what the camera
         frames."""
         pts = [poses[:, :3], self.tip_of(poses)[None]]
-        for b, local, v in zip(self.mesh_body, self.mesh_local, self.mesh_vertices):
+        frames = self._mesh_frames(poses)
+        for frame, local, v in zip(frames, self.mesh_local, self.mesh_vertices):
             lo, hi = v.min(0), v.max(0)
             corners = np.array([[(lo, hi)[i >> k & 1][k] for k in range(3)] for i in range(8)])
-            frame = poses[b]
             at = local[:3] + quat_rotate(local[3:], corners)
             pts.append(frame[:3] + quat_rotate(frame[3:], at))
         return np.concatenate(pts)
@@ -188,6 +188,15 @@ class RobotDrawing:
                 True,
                 True,
             )
+        if (self.mesh_body < 0).any():
+            self._log_meshes(stream, entity, None, color, True, True, fixed=True)
+
+    def _mesh_frames(self, poses: np.ndarray | None) -> np.ndarray:
+        """Each mesh's body pose ``(M, 7)``; the world's (identity) for a mesh fixed to it."""
+        ident = np.array([0.0, 0, 0, 0, 0, 0, 1])
+        return np.array(
+            [poses[b] if b >= 0 and poses is not None else ident for b in self.mesh_body]
+        ).reshape(-1, 7)
 
     def log_arm(
         self,
@@ -200,7 +209,7 @@ class RobotDrawing:
         static: bool = False,
     ) -> None:
         """The robot at body poses ``(B, 7)`` under ``entity`` (solid, or as a wireframe ghost)."""
-        if len(self.mesh_body):
+        if (self.mesh_body >= 0).any():
             self._log_meshes(stream, entity, poses, color, solid, static)
         if len(self.kind):
             self._log_shapes(
@@ -225,15 +234,18 @@ class RobotDrawing:
             static=static,
         )
 
-    def _log_meshes(self, stream, entity, poses, color, solid, static) -> None:
-        """Each mesh under ``entity/meshes/<i>``: its geometry once (static, coloured per body:
-        alternate bodies a shade darker), then its transform at these poses."""
-        frames = poses[self.mesh_body]
+    def _log_meshes(self, stream, entity, poses, color, solid, static, fixed=False) -> None:
+        """Each mesh on a body (``fixed``: on the world) under ``entity/meshes/<i>``: its geometry
+        once (static, coloured per body: alternate bodies a shade darker), then its transform at
+        these poses."""
+        frames = self._mesh_frames(poses)
         pos = frames[:, :3] + quat_rotate(frames[:, 3:], self.mesh_local[:, :3])
         rot = quat_mul(frames[:, 3:], self.mesh_local[:, 3:]).astype(np.float32)
         first = entity not in self._meshes_logged
         self._meshes_logged.add(entity)
         for i, b in enumerate(self.mesh_body):
+            if (b < 0) != fixed:
+                continue
             path = f"{entity}/meshes/{i}"
             if first:
                 shade = 1.0 if int(b) % 2 == 0 else 0.8
