@@ -259,6 +259,32 @@ def test_meta_test_uses_no_model_gradient(tmp_path, monkeypatch, capsys):
     assert "mean" in text and "goal  1" in text and "MSE" in text
 
 
+def test_meta_test_records_each_goal_before_and_after_and_its_errors(
+    finished_run, tmp_path, capsys
+):
+    """meta-test writes OUT.rrd beside its results (--no-recording: none); the results are the same."""
+    import json
+
+    run = str(finished_run)
+    argv = ["meta-test", run, "--num-goals", "2", "--inits", "2", "--policy-steps", "2"]
+    assert main([*argv, "--device", "cpu", "--out", str(tmp_path / "a.json")]) == 0
+    rrd = tmp_path / "a.rrd"
+    assert f"recording: rerun {rrd}\n" in capsys.readouterr().out
+    paths = read_entity_paths(rrd)
+    for g in range(2):
+        for part in ("target", "before", "after"):
+            assert any(p.startswith(f"/robot/goal{g}/{part}/") for p in paths), (g, part)
+        assert f"/metatest/error/goal{g}" in paths
+    assert {"/metatest/final_error", "/metatest/error/mean"} <= paths
+    assert read_times(rrd, "/metatest/error", "policy_step") == {0, 1, 2}
+    assert (
+        main([*argv, "--device", "cpu", "--out", str(tmp_path / "b.json"), "--no-recording"]) == 0
+    )
+    assert "recording" not in capsys.readouterr().out and not (tmp_path / "b.rrd").exists()
+    a, b = (json.loads((tmp_path / f"{k}.json").read_text()) for k in "ab")
+    assert a == b and "recording" not in a
+
+
 def test_divergence_stops_with_iteration_and_keeps_last_good_checkpoint(
     tmp_path, monkeypatch, capsys
 ):

@@ -1,10 +1,11 @@
 """The recordings open readable in the real rerun viewer.
 
-A tiny meta-training run's recording, a DDPG run's and the landscape analysis' are rendered by the
-rerun viewer itself under Xvfb (Mesa's software Vulkan driver: ``.ci/run`` installs ``xvfb`` and
+A tiny meta-training run's recording, a DDPG run's, the landscape analysis' and a meta-test's (of an
+arm drawn from triangle meshes) are rendered by the rerun viewer itself under Xvfb (Mesa's software Vulkan driver: ``.ci/run`` installs ``xvfb`` and
 ``mesa-vulkan-drivers``) with ``rerun FILE --screenshot-to``, and the pixels are checked: every plot
 panel of the layout the recording opens with has drawn data, and the 3-D view shows the robot. A
 layout that opens on a timeline the plots are not logged on (``step``) leaves them empty and fails.
+The mesh arm's meshes are checked against the same recording drawn without them (line strips).
 Skipped, with the reason, only where the viewer cannot start (no ``xvfb-run`` or no ``rerun``).
 """
 
@@ -107,3 +108,53 @@ def test_landscape_recording_opens_with_data_in_every_panel(recordings):
             assert coloured(img, cell) > 0.05, ("value map", i, j, "is empty")
     losses = rows(2, 0.76, 0.99)[1]
     assert coloured(img, losses) > 0.002, "the training-loss plot is empty"
+
+
+@pytest.fixture(scope="module")
+def metatest_shots(tmp_path_factory, mesh_arm):
+    """Screenshots of a meta-test's recording of the mesh arm, drawn from its meshes and, for
+    comparison, with the meshes taken out of the drawing (the line-strip fallback)."""
+    import dataclasses
+
+    from warp_critic.running.robot_drawing import RobotDrawing
+
+    out = tmp_path_factory.mktemp("viewer-metatest")
+    tiny = ["--horizon", "8", "--worlds-per-goal", "2", "--device", "cpu", "--iterations", "2"]
+    assert main(["meta-train", str(mesh_arm), *tiny, "--out", str(out / "run")]) == 0
+    test = ["meta-test", str(out / "run"), "--num-goals", "4", "--inits", "2"]
+    test += ["--policy-steps", "2", "--device", "cpu"]
+    assert main([*test, "--out", str(out / "meshes.json")]) == 0
+    real = RobotDrawing.from_model.__func__  # type: ignore[attr-defined]
+
+    def without_meshes(cls, *args):
+        d = real(cls, *args)
+        return dataclasses.replace(
+            d,
+            mesh_body=d.mesh_body[:0],
+            mesh_local=d.mesh_local[:0],
+            mesh_vertices=[],
+            mesh_indices=[],
+        )
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(RobotDrawing, "from_model", classmethod(without_meshes))
+        assert main([*test, "--out", str(out / "lines.json")]) == 0
+    return {k: screenshot(out / f"{k}.rrd") for k in ("meshes", "lines")}
+
+
+ROBOT_VIEW = (0.51, TOP + 0.035, 0.99, BOTTOM - 0.01)  # the right half: the 3-D view
+
+
+def test_metatest_recording_opens_with_data_in_every_panel(metatest_shots):
+    img = metatest_shots["meshes"]
+    for i, box in enumerate(rows(2, 0.015, 0.485)):  # final error per goal, error over the steps
+        assert coloured(img, box) > 0.002, ("plot panel", i, "is empty")
+    assert coloured(img, ROBOT_VIEW) > 0.004, "the 3-D view shows no robot"
+
+
+def test_a_mesh_robot_is_drawn_from_its_meshes(metatest_shots):
+    """The arm's links are 10 cm thick meshes: far more coloured pixels than its line strips."""
+    meshes = coloured(metatest_shots["meshes"], ROBOT_VIEW)
+    lines = coloured(metatest_shots["lines"], ROBOT_VIEW)
+    print(f"coloured share of the 3-D view: meshes {meshes:.4f}, line strips {lines:.4f}")
+    assert meshes > 2 * lines > 0, (meshes, lines)

@@ -70,8 +70,10 @@ def cmd_meta_test(args: argparse.Namespace) -> int:
         _not_owned(tc.out, "--out")
     else:
         _not_owned(Path(tc.run_dir) / "metatest.json", "result (give --out)")
-    result = meta_test(tc, progress=print)
+    result = meta_test(tc, progress=print, record=not args.no_recording)
     print(f"results: {result['output']}")
+    if "recording" in result:
+        print(f"recording: rerun {result['recording']}")
     return 0
 
 
@@ -146,6 +148,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     te.add_argument("run_dir", help="run directory written by meta-train or baseline")
     add_dataclass_arguments(te, MetaTestConfig, skip=("run_dir",))
+    te.add_argument(
+        "--no-recording",
+        action="store_true",
+        help="write no rerun recording (default: OUT with the suffix .rrd, e.g. RUN_DIR/metatest.rrd)",
+    )
     te.set_defaults(func=cmd_meta_test)
 
     bl = sub.add_parser(

@@ -18,7 +18,6 @@ Two aggregations of the final error are reported, for every goal and init:
 
 from __future__ import annotations
 
-import importlib
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -29,9 +28,14 @@ import torch
 from warp_critic.core.errors import FieldError, UserError
 from warp_critic.core.memory import check_fits
 from warp_critic.core.runtime import check_seed
+from warp_critic.evaluation.critic_loaders import (  # also metatest.<name>, as before
+    CRITIC_LOADERS,
+    build_test_critic,
+    load_our_critic,
+    register_critic_loader,
+)
 from warp_critic.evaluation.goals import sample_goals  # also metatest.sample_goals, as before
 from warp_critic.evaluation.paper import GOAL_NOISE
-from warp_critic.learning.critic import Critic
 from warp_critic.learning.inner import MAX_POLICY_STEPS, inner_update, policy_fn
 from warp_critic.learning.losses import final_error
 from warp_critic.learning.networks import MLPPolicy, Normalizer
@@ -90,68 +94,6 @@ class MetaTestConfig(SerializableConfig):
     seed: int = spec(1, "random seed", ge=0, le=2**32 - 1)
     device: str = spec("auto", "cpu, cuda or auto")
     out: str | None = spec(None, "results JSON (default RUN_DIR/metatest.json)")
-
-
-# ------------------------------------------------------------------------------------------------
-# critic loaders: method -> the loss a fresh policy descends, and the run's meta-test defaults
-# ------------------------------------------------------------------------------------------------
-
-
-def load_our_critic(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, dict]:
-    """Our meta-learned critic; meta-test defaults: its inner lr, inner steps x policy lifetime."""
-    cfg = ckpt["config"]
-    critic: torch.nn.Module = Critic(
-        ckpt["dof"],
-        norm,
-        hidden=ckpt.get("critic_hidden", 400),
-        inputs=ckpt.get("critic_input", "full"),
-    )
-    critic.load_state_dict(ckpt["critic_state"])
-    from warp_critic.learning.identify import IdentifiedCritic, identifier_from_checkpoint
-
-    identifier = identifier_from_checkpoint(ckpt)
-    if identifier is not None:  # a told critic fed the model identified from its rollouts
-        critic = IdentifiedCritic(critic, identifier)
-    # a critic trained on policies of every age up to the policy lifetime keeps improving them that long
-    steps = int(cfg.get("inner_steps", 1)) * int(cfg.get("policy_lifetime", 1))
-    return critic, {"alpha": cfg.get("alpha"), "steps": steps}
-
-
-# Registry by name ("module:function"), so meta-test imports no method's code until a run of that
-# method is tested. A loader takes ``(checkpoint, normaliser)`` and returns ``(L, defaults)`` with
-# ``L(q, qd, tau, g)`` and ``defaults = {"alpha": ..., "steps": ...}``.
-CRITIC_LOADERS: dict[str, str | Callable] = {
-    "ours": load_our_critic,
-    "ddpg": "warp_critic.methods.q_networks:test_critic_from_checkpoint",
-    "meta-critic": "warp_critic.methods.q_networks:test_critic_from_checkpoint",
-}
-
-
-def register_critic_loader(method: str, loader: str | Callable) -> None:
-    """Make ``meta-test`` understand run directories of another method."""
-    CRITIC_LOADERS[method] = loader
-
-
-def build_test_critic(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, dict]:
-    """The loss ``L(q, qd, tau, g)`` a fresh policy descends and the run's defaults, for any method."""
-    method = ckpt.get("method", "ours")
-    loader = CRITIC_LOADERS.get(method)
-    if loader is None:
-        raise UserError(
-            f"checkpoint of method {method!r}: meta-test knows {', '.join(CRITIC_LOADERS)}"
-        )
-    if isinstance(loader, str):
-        module, name = loader.split(":")
-        loader = getattr(importlib.import_module(module), name)
-    try:
-        return loader(ckpt, norm)
-    except (KeyError, RuntimeError, TypeError, ValueError) as e:
-        if isinstance(e, UserError):
-            raise
-        raise UserError(
-            f"{method} checkpoint has no usable critic ({type(e).__name__}: "
-            f"{str(e).splitlines()[0] if str(e) else ''})"
-        ) from None
 
 
 @dataclass
@@ -301,19 +243,27 @@ def setup_meta_test(tc: MetaTestConfig, gen: torch.Generator | None = None) -> M
     )
 
 
-def meta_test(tc: MetaTestConfig, progress: Callable[[str], None] | None = None) -> dict:
+def meta_test(
+    tc: MetaTestConfig, progress: Callable[[str], None] | None = None, record: bool = False
+) -> dict:
     """Algorithm 3 on ``G x K`` fresh policies; writes and returns the results (see the module docstring).
 
     ``progress`` (the CLI passes ``print``) gets the summary, one line per call; nothing is printed.
+    ``record``: also write a rerun recording beside the results
+    (:mod:`warp_critic.running.recording_metatest`; its path in ``result["recording"]``).
     """
     out = check_output_file(Path(tc.out) if tc.out else Path(tc.run_dir) / "metatest.json", "out")
+    if record:
+        from warp_critic.running.recording_metatest import metatest_recording_path
+
+        rrd = metatest_recording_path(out)
     m = setup_meta_test(tc)
     _not_anothers(out, tc, m.ckpt.get("run_id"))
     ckpt, scene, goals, goal, sim, policy = m.ckpt, m.scene, m.goals, m.goal, m.sim, m.policy
     params, q0, qd0, steps, horizon, alpha = m.params, m.q0, m.qd0, m.steps, m.horizon, m.alpha
     G, K = goals.shape[0], m.inits
     before = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
-    params, _ = m.update(params, create_graph=False)
+    params, trajs = m.update(params, create_graph=False)
     after = rollout(sim, policy_fn(policy, params), q0, qd0, horizon)
     err = final_error(after.q[-1], goal).view(G, K).cpu()
     err0 = final_error(before.q[-1], goal).view(G, K).cpu()
@@ -373,6 +323,13 @@ def meta_test(tc: MetaTestConfig, progress: Callable[[str], None] | None = None)
         )
     write_result(out, result)
     result["output"] = str(out)
+    if record:
+        from warp_critic.running.recording_metatest import record_meta_test
+
+        rollouts = [before, *trajs[1:], after]  # the policies at every step
+        result["recording"] = str(
+            record_meta_test(rrd, sim, goals, goal, K, rollouts, result["method"])
+        )
     return result
 
 
@@ -398,3 +355,16 @@ def _not_anothers(out: Path, tc: MetaTestConfig, run_id: str | None) -> None:
     raise FieldError(
         "out", f"{out}: holds a result {whose}; not replacing it (choose another file)"
     )
+
+
+__all__ = [
+    "CRITIC_LOADERS",
+    "MetaTestConfig",
+    "MetaTestSetup",
+    "build_test_critic",
+    "load_our_critic",
+    "meta_test",
+    "register_critic_loader",
+    "sample_goals",
+    "setup_meta_test",
+]

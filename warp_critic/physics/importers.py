@@ -56,18 +56,9 @@ def _urdf_without_meshes(path: Path) -> tuple[str, str | None, ET.Element]:
 
 def _mesh_exists(urdf: Path, filename: str) -> bool:
     """Whether a URDF mesh reference resolves to a file (package:// searched up from the URDF)."""
-    if filename.startswith("package://"):
-        package, _, rest = filename[len("package://") :].partition("/")
-        for parent in urdf.parents:
-            if parent.name == package and (parent / rest).is_file():
-                return True
-            if (parent / package / rest).is_file():
-                return True
-        return False
-    if filename.startswith("file://"):
-        filename = filename[len("file://") :]
-    target = Path(filename)
-    return (target if target.is_absolute() else urdf.parent / target).is_file()
+    from warp_critic.physics.robot_meshes import mesh_path
+
+    return mesh_path(urdf, filename) is not None
 
 
 # the armature and damping newton gives a joint whose file authors none: derived later

@@ -57,6 +57,7 @@ from warp_critic.physics.importers import (
     short,
 )
 from warp_critic.physics.robot_checks import check_robot
+from warp_critic.physics.robot_meshes import link_frames
 from warp_critic.physics.scene import Scene, load_scene
 
 __all__ = ["RobotOptions", "ROBOT_SUFFIXES", "is_robot_file", "load_any", "load_robot"]
@@ -247,6 +248,7 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     ee_label = labels[ee]
 
     info = collapse(builder)
+    frames = link_frames(labels, info)  # where each file link ended up: to draw its meshes
     tip = np.array(options.tip_offset or (0.0, 0.0, 0.0), dtype=np.float64)
     if ee in info["body_merged_parent"]:
         parent = info["body_merged_parent"][ee]
@@ -290,6 +292,7 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     def make() -> RobotScene:  # the scene copies the builder's arrays: made again after each rule
         scene = RobotScene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
         scene.import_repairs = repairs
+        scene.link_frames = frames
         return scene
 
     # armature and damping where the file gives none (import_builder marks them UNSET), then the
@@ -355,6 +358,7 @@ class RobotScene(Scene):
 
     derived = True
     import_repairs: tuple[str, ...] = ()  # what robot_checks repaired on request, one line each
+    link_frames: dict[str, tuple[int, tuple[float, ...]]]  # robot_meshes.link_frames
     _derived_values: dict[str, Any] | None  # None until first use (set by the setter below)
     _derive_lock: threading.Lock
 

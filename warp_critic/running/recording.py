@@ -22,16 +22,13 @@ import rerun.blueprint as rrb
 
 from warp_critic.running.recording_view import (
     ACTOR_SIGNALS,
-    BASE_COLOR,
     BEFORE_COLOR,
     CRITIC_SIGNALS,
     MAX_GOALS_DRAWN,
     MEAN_COLOR,
     POLICY_COLOR,
-    RobotDrawing,
-    camera_for,
+    GoalStage,
     goal_color,
-    grid_offsets,
     training_blueprint,
 )
 
@@ -238,48 +235,21 @@ class TrainingRecorder:
         self.sim, self.goals = sim, goals
         self.record_every, self.last_iteration = record_every, last_iteration
         self.world_offset = world_offset
-        G = goals.shape[0]
-        self.shown = min(G, MAX_GOALS_DRAWN)
-        self.drawing = RobotDrawing.from_model(
-            sim.model,
-            sim.worlds,
-            sim.scene.ee_body,
-            sim.scene.tip_offset_of(sim.variants[world_offset]),
-        )
-        q = sim.zeros()
-        for g in range(self.shown):
-            q[world_offset + g] = goals[g]
-        goal_poses = sim.body_poses(q)[world_offset : world_offset + self.shown]
-        reach = self._reach(goal_poses[0])
-        spacing = max(2.2 * reach, 0.5)
-        self.offsets = grid_offsets(self.shown, spacing)
-        # the camera frames the goal poses and room around each base to move in; a planar robot
-        # (its goal poses flat in z) is seen from above
-        robot = np.concatenate([self.drawing.points(p) for p in goal_poses])
-        flat = np.ptp(robot[:, 2]) < 0.1 * max(float(np.ptp(robot[:, :2], 0).max()), 1e-6)
-        room = np.array([[-0.6 * reach, -0.6 * reach, 0.0], [0.6 * reach, 0.6 * reach, 0.0]])
-        frame = [self.drawing.points(p) + o for p, o in zip(goal_poses, self.offsets)]
-        frame += [o + room for o in self.offsets]
+        self.shown = min(goals.shape[0], MAX_GOALS_DRAWN)
+        self.stage = GoalStage(sim, goals, self.shown, world_offset)
+        self.drawing = self.stage.drawing
         self.rec = Recorder(
             path,
             application_id=f"warp-critic {method} {sim.scene.name}",
-            blueprint=training_blueprint(method, camera_for(np.concatenate(frame), bool(flat))),
+            blueprint=training_blueprint(method, self.stage.camera),
             recording_id=recording_id,
             flush_seconds=30.0,  # the harness flushes before every checkpoint
         )
-        self._log_static(goal_poses)
+        self._log_static()
         for row in history:
             self._log_row(row)
 
-    def _reach(self, poses: np.ndarray) -> float:
-        """The robot's length: its links and the tip, end to end (m)."""
-        d = self.drawing
-        links = sum(float(np.linalg.norm(poses[c, :3] - poses[p, :3])) for p, c in d.links)
-        tip = float(np.linalg.norm(d.tip_of(poses) - poses[d.ee_body, :3]))
-        return links + tip + float(np.linalg.norm(poses[0, :3]))
-
-    def _log_static(self, goal_poses: np.ndarray) -> None:
-        s = self.rec.stream
+    def _log_static(self) -> None:
         for i in range(self.goals.shape[0]):
             self.rec.series_style(f"train/task_loss/goal{i}", f"goal {i}", goal_color(i))
         self.rec.series_style("train/task_loss/mean", "mean", MEAN_COLOR)
@@ -289,23 +259,7 @@ class TrainingRecorder:
             group = "actor" if key in ACTOR_SIGNALS else "critic"
             self.rec.series_style(f"train/{group}/{key}", name, color)
         self.rec.series_style("train/policy/update_norm", "|theta' - theta|", POLICY_COLOR)
-        for g in range(self.shown):
-            root = f"robot/goal{g}"
-            s.log(root, rr.Transform3D(translation=self.offsets[g].astype(np.float32)), static=True)
-            self.drawing.log_static(s, f"{root}/base", BASE_COLOR)
-            self.drawing.log_arm(
-                s, f"{root}/target", goal_poses[g], goal_color(g), solid=False, static=True
-            )
-            s.log(
-                f"{root}/target/tip",
-                rr.Points3D(
-                    [self.drawing.tip_of(goal_poses[g])],
-                    colors=[goal_color(g)],
-                    radii=0.03,
-                    labels=[f"goal {g}"],
-                ),
-                static=True,
-            )
+        self.stage.log_static(self.rec.stream)
 
     def _log_row(self, row: dict) -> None:
         self.rec.set_time("iteration", row["iteration"])
@@ -349,14 +303,7 @@ class TrainingRecorder:
     def log_rollout(self, label: str, q, worlds) -> None:
         """The final pose and the tip path of ``worlds`` (one per goal drawn) along a trajectory
         ``q (T+1, W, dof)`` under ``robot/goal<i>/<label>``, at the current iteration."""
-        final = self.sim.body_poses(q[-1])  # (W, B, 7)
-        tips = np.stack([self.sim.tip_positions(q[t]) for t in range(q.shape[0])])  # (T+1, W, 3)
-        s = self.rec.stream
-        for gi, w in enumerate(worlds):
-            color = goal_color(gi) if label == "after" else BEFORE_COLOR
-            entity = f"robot/goal{gi}/{label}"
-            self.drawing.log_arm(s, entity, final[w], color)
-            s.log(f"{entity}/tip_path", rr.LineStrips3D([tips[:, w]], colors=[color], radii=0.006))
+        self.stage.log_rollout(self.rec.stream, label, q, worlds)
 
     def flush(self) -> None:
         """Wait until everything logged so far is written to the file."""

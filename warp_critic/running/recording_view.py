@@ -1,35 +1,32 @@
-"""What a run's recording shows in the viewer: its layout and the robot.
+"""What a recording shows in the viewer: its layout and the robot per goal.
 
-:func:`training_blueprint` is the layout a run's recording opens with.
-:class:`RobotDrawing` reads one world's shapes from the Newton model (capsules, spheres, boxes,
-cylinders attached to the bodies, and the static base shapes); a robot whose bodies carry no such
-shape (meshes only, or none) is drawn as line strips along its links (parent body to child body, and
-the end-effector body to the tip). :func:`camera_for` frames a set of points.
+:func:`training_blueprint` is the layout a run's recording opens with, :func:`metatest_blueprint`
+a meta-test's. :class:`GoalStage` lays out the 3-D view: one copy of the robot per goal, drawn by
+:class:`~warp_critic.running.robot_drawing.RobotDrawing` (the model's own shapes and meshes, line
+strips without them).
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-_GOAL_COLORS = [
-    (230, 25, 75),
-    (60, 180, 75),
-    (0, 130, 200),
-    (245, 130, 48),
-    (145, 30, 180),
-    (70, 240, 240),
-    (240, 50, 230),
-    (210, 245, 60),
-    (128, 128, 0),
-    (0, 0, 128),
-]
-BEFORE_COLOR = (150, 150, 150)  # the arm before the inner update (a baseline's exploration)
-BASE_COLOR = (90, 90, 90)
-MAX_GOALS_DRAWN = 6  # goals drawn in the 3-D view (every goal is plotted)
+from warp_critic.physics.robot_meshes import link_meshes
+from warp_critic.running.robot_drawing import (  # also recording_view.<name>, as before
+    BASE_COLOR,
+    BEFORE_COLOR,
+    CAPSULE,
+    CYLINDER,
+    MAX_GOALS_DRAWN,
+    SPHERE,
+    RobotDrawing,
+    camera_for,
+    goal_color,
+    grid_offsets,
+    quat_mul,
+    quat_rotate,
+)
 
 MEAN_COLOR = (255, 190, 0)
 # metrics-row keys -> (series name, colour); a row logs the keys it has
@@ -42,10 +39,6 @@ CRITIC_SIGNALS = {
 }
 ACTOR_SIGNALS = {"actor_loss": ("actor loss", (60, 200, 170))}
 POLICY_COLOR = (60, 200, 170)
-
-
-def goal_color(i: int) -> tuple[int, int, int]:
-    return _GOAL_COLORS[i % len(_GOAL_COLORS)]
 
 
 def training_blueprint(method: str, camera: rrb.EyeControls3D | None = None) -> rrb.Blueprint:
@@ -88,232 +81,124 @@ def training_blueprint(method: str, camera: rrb.EyeControls3D | None = None) -> 
     )
 
 
-# newton.GeoType values (newton/_src/geometry/types.py); kept here so that reading a model's shapes
-# needs no import of newton
-SPHERE, CAPSULE, CYLINDER, BOX = 3, 4, 6, 7
-DRAWN = (SPHERE, CAPSULE, CYLINDER, BOX)
-
-
-def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Hamilton product of quaternions in ``(x, y, z, w)`` order, broadcast over leading axes."""
-    ax, ay, az, aw = np.moveaxis(a, -1, 0)
-    bx, by, bz, bw = np.moveaxis(b, -1, 0)
-    return np.stack(
-        [
-            aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx,
-            aw * bz + ax * by - ay * bx + az * bw,
-            aw * bw - ax * bx - ay * by - az * bz,
-        ],
-        -1,
+def metatest_blueprint(camera: rrb.EyeControls3D | None = None) -> rrb.Blueprint:
+    """The layout a meta-test's recording opens with: the ``policy_step`` timeline; on the left the
+    final error per goal (bars) and the error over the policy steps (mean, per goal); on the right
+    the robot per goal before and after its critic-gradient steps, framed by ``camera``."""
+    bars = rrb.BarChartView(
+        origin="/metatest/final_error", name="final error ||q_T - g||^2 per goal (mean over inits)"
+    )
+    curve = rrb.TimeSeriesView(
+        origin="/metatest/error", name="error ||q_T - g||^2 over the policy steps"
+    )
+    robot = rrb.Spatial3DView(
+        origin="/robot",
+        name="fresh policy per goal: goal (wireframe), before training (grey), after (colour)",
+        eye_controls=camera,
+    )
+    return rrb.Blueprint(
+        rrb.Horizontal(rrb.Vertical(bars, curve), robot, column_shares=[1, 1]),
+        rrb.TimePanel(timeline="policy_step", state="collapsed", play_state="following"),
+        rrb.BlueprintPanel(state="collapsed"),
+        rrb.SelectionPanel(state="collapsed"),
     )
 
 
-def quat_rotate(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """``v`` rotated by the unit quaternion ``q`` ``(x, y, z, w)``, broadcast over leading axes."""
-    u, w = q[..., :3], q[..., 3:4]
-    t = 2.0 * np.cross(u, v)
-    return v + w * t + np.cross(u, t)
+class GoalStage:
+    """The 3-D view of a recording: one copy of the robot per goal drawn (the first ``shown``), laid
+    side by side under ``robot/goal<i>``: ``target`` (the goal pose as a wireframe ghost, its tip
+    labelled), ``base``, and rollouts' final poses and tip paths (:meth:`log_rollout`).
 
-
-@dataclass
-class RobotDrawing:
-    """One world's drawable shapes, in the frames of its bodies.
-
-    ``kind[s]``, ``body[s]`` (index within the world), ``local[s]`` (7: position, quaternion xyzw of
-    the shape in its body), ``scale[s]`` (newton's shape scale: radius, half height, ...);
-    ``static``: the same for shapes fixed to the world (the base); ``links``: ``(parent, child)``
-    body pairs for the line-strip fallback; ``ee_body``/``tip``: the end effector and its tip offset.
+    Args:
+        sim: the :class:`~warp_critic.physics.simulator.Simulator` (for forward kinematics).
+        goals: ``(G, dof)`` goals; ``shown`` of them are drawn.
+        world_offset: the first world of ``sim`` to use for the goals' poses.
     """
 
-    kind: np.ndarray
-    body: np.ndarray
-    local: np.ndarray
-    scale: np.ndarray
-    static_kind: np.ndarray
-    static_local: np.ndarray
-    static_scale: np.ndarray
-    links: list[tuple[int, int]]
-    ee_body: int
-    tip: np.ndarray
-
-    @classmethod
-    def from_model(cls, model, worlds: int, ee_body: int, tip: np.ndarray) -> RobotDrawing:
-        B = model.body_count // worlds
-        body = model.shape_body.numpy()
-        kind = model.shape_type.numpy()
-        local = model.shape_transform.numpy().astype(np.float64)
-        scale = model.shape_scale.numpy().astype(np.float64)
-        mine = (body >= 0) & (body < B) & np.isin(kind, DRAWN)
-        # static shapes repeat once per world at the same place: keep one of each
-        static = np.nonzero((body < 0) & np.isin(kind, DRAWN))[0]
-        seen, keep = set(), []
-        for s in static:
-            key = (int(kind[s]), *np.round(local[s], 5), *np.round(scale[s], 5))
-            if key not in seen:
-                seen.add(key)
-                keep.append(s)
-        parent, child = model.joint_parent.numpy(), model.joint_child.numpy()
-        links = [(int(p), int(c)) for p, c in zip(parent, child) if 0 <= p < B and 0 <= c < B]
-        return cls(
-            kind[mine],
-            body[mine],
-            local[mine],
-            scale[mine],
-            kind[keep],
-            local[keep],
-            scale[keep],
-            links,
-            int(ee_body),
-            np.asarray(tip, np.float64),
+    def __init__(self, sim, goals, shown: int, world_offset: int = 0):
+        self.sim, self.shown = sim, shown
+        self.drawing = RobotDrawing.from_model(
+            sim.model,
+            sim.worlds,
+            sim.scene.ee_body,
+            sim.scene.tip_offset_of(sim.variants[world_offset]),
+            link_meshes(sim.scene),
         )
+        q = sim.zeros()
+        for g in range(shown):
+            q[world_offset + g] = goals[g]
+        self.goal_poses = sim.body_poses(q)[world_offset : world_offset + shown]
+        reach = self._reach(self.goal_poses[0])
+        self.offsets = grid_offsets(shown, max(2.2 * reach, 0.5))
+        # the camera frames the goal poses and room around each base to move in; a planar robot
+        # (its goal poses flat in z) is seen from above
+        d = self.drawing
+        robot = np.concatenate([d.points(p) for p in self.goal_poses])
+        flat = np.ptp(robot[:, 2]) < 0.1 * max(float(np.ptp(robot[:, :2], 0).max()), 1e-6)
+        room = np.array([[-0.6 * reach, -0.6 * reach, 0.0], [0.6 * reach, 0.6 * reach, 0.0]])
+        frame = [d.points(p) + o for p, o in zip(self.goal_poses, self.offsets)]
+        frame += [o + room for o in self.offsets]
+        self.camera = camera_for(np.concatenate(frame), bool(flat))
 
-    @property
-    def has_shapes(self) -> bool:
-        return len(self.kind) > 0
+    def _reach(self, poses: np.ndarray) -> float:
+        """The robot's length: its links and the tip, end to end (m)."""
+        d = self.drawing
+        links = sum(float(np.linalg.norm(poses[c, :3] - poses[p, :3])) for p, c in d.links)
+        tip = float(np.linalg.norm(d.tip_of(poses) - poses[d.ee_body, :3]))
+        return links + tip + float(np.linalg.norm(poses[0, :3]))
 
-    def tip_of(self, poses: np.ndarray) -> np.ndarray:
-        """The tip position for body poses ``(B, 7)``."""
-        p = poses[self.ee_body]
-        return p[:3] + quat_rotate(p[3:], self.tip)
-
-    def points(self, poses: np.ndarray) -> np.ndarray:
-        """Body origins and the tip: what the camera frames."""
-        return np.concatenate([poses[:, :3], self.tip_of(poses)[None]])
-
-    def log_static(self, stream: rr.RecordingStream, entity: str, color) -> None:
-        """The shapes fixed to the world (the base), once."""
-        if len(self.static_kind):
-            ident = np.tile([0.0, 0, 0, 0, 0, 0, 1], (len(self.static_kind), 1))
-            self._log_shapes(
-                stream,
-                entity,
-                self.static_kind,
-                ident,
-                self.static_local,
-                self.static_scale,
-                color,
-                True,
-                True,
+    def log_static(self, s: rr.RecordingStream) -> None:
+        """Each goal's place, base and goal pose, once."""
+        for g in range(self.shown):
+            root = f"robot/goal{g}"
+            s.log(root, rr.Transform3D(translation=self.offsets[g].astype(np.float32)), static=True)
+            self.drawing.log_static(s, f"{root}/base", BASE_COLOR)
+            self.drawing.log_arm(
+                s, f"{root}/target", self.goal_poses[g], goal_color(g), solid=False, static=True
+            )
+            s.log(
+                f"{root}/target/tip",
+                rr.Points3D(
+                    [self.drawing.tip_of(self.goal_poses[g])],
+                    colors=[goal_color(g)],
+                    radii=0.03,
+                    labels=[f"goal {g}"],
+                ),
+                static=True,
             )
 
-    def log_arm(
-        self,
-        stream: rr.RecordingStream,
-        entity: str,
-        poses: np.ndarray,
-        color,
-        *,
-        solid: bool = True,
-        static: bool = False,
+    def log_rollout(
+        self, s: rr.RecordingStream, label: str, q, worlds, static: bool = False
     ) -> None:
-        """The robot at body poses ``(B, 7)`` under ``entity`` (solid, or as a wireframe ghost)."""
-        if self.has_shapes:
-            self._log_shapes(
-                stream,
-                entity,
-                self.kind,
-                poses[self.body],
-                self.local,
-                self.scale,
-                color,
-                solid,
-                static,
-            )
-            return
-        tip = self.tip_of(poses)
-        strips = [np.stack([poses[p, :3], poses[c, :3]]) for p, c in self.links]
-        strips.append(np.stack([poses[self.ee_body, :3], tip]))
-        stream.log(
-            f"{entity}/links",
-            rr.LineStrips3D(strips, colors=[color], radii=0.02 if solid else 0.006),
-            static=static,
-        )
-
-    @staticmethod
-    def _log_shapes(stream, entity, kind, frames, local, scale, color, solid, static) -> None:
-        pos = frames[:, :3] + quat_rotate(frames[:, 3:], local[:, :3])
-        rot = quat_mul(frames[:, 3:], local[:, 3:])
-        FillMode = rr.components.FillMode
-        fill = FillMode.Solid if solid else FillMode.TransparentFillMajorWireframe
-        quats = lambda m: rot[m].astype(np.float32)  # noqa: E731 (x, y, z, w)
-        m = kind == CAPSULE
-        if m.any():
-            half = scale[m, 1:2]
-            axis = quat_rotate(rot[m], np.tile([0.0, 0.0, 1.0], (int(m.sum()), 1)))
-            stream.log(
-                f"{entity}/capsules",
-                rr.Capsules3D(
-                    lengths=2 * half[:, 0],
-                    radii=scale[m, 0],
-                    translations=pos[m] - axis * half,
-                    quaternions=quats(m),
-                    colors=[color],
-                    fill_mode=fill,
-                ),
+        """The final pose and the tip path of ``worlds`` (one per goal drawn) along a trajectory
+        ``q (T+1, W, dof)`` under ``robot/goal<i>/<label>`` (``after``: the goal's colour, else
+        grey), at the current time."""
+        final = self.sim.body_poses(q[-1])  # (W, B, 7)
+        tips = np.stack([self.sim.tip_positions(q[t]) for t in range(q.shape[0])])  # (T+1, W, 3)
+        for gi, w in enumerate(worlds):
+            color = goal_color(gi) if label == "after" else BEFORE_COLOR
+            entity = f"robot/goal{gi}/{label}"
+            self.drawing.log_arm(s, entity, final[w], color, static=static)
+            s.log(
+                f"{entity}/tip_path",
+                rr.LineStrips3D([tips[:, w]], colors=[color], radii=0.006),
                 static=static,
             )
-        m = kind == CYLINDER
-        if m.any():
-            stream.log(
-                f"{entity}/cylinders",
-                rr.Cylinders3D(
-                    lengths=2 * scale[m, 1],
-                    radii=scale[m, 0],
-                    centers=pos[m],
-                    quaternions=quats(m),
-                    colors=[color],
-                    fill_mode=fill,
-                ),
-                static=static,
-            )
-        for k, name, half in (
-            (SPHERE, "spheres", lambda s: np.repeat(s[:, :1], 3, 1)),
-            (BOX, "boxes", lambda s: s),
-        ):
-            m = kind == k
-            if m.any():
-                cls = rr.Ellipsoids3D if k == SPHERE else rr.Boxes3D
-                stream.log(
-                    f"{entity}/{name}",
-                    cls(
-                        centers=pos[m],
-                        half_sizes=half(scale[m]),
-                        quaternions=quats(m),
-                        colors=[color],
-                        fill_mode=fill,
-                    ),
-                    static=static,
-                )
-
-
-def grid_offsets(n: int, spacing: float) -> np.ndarray:
-    """``(n, 3)`` offsets that lay ``n`` copies of the robot out side by side in a near-square grid
-    (rows along -y, columns along x)."""
-    cols = int(np.ceil(np.sqrt(n)))
-    return np.array([[(i % cols) * spacing, -(i // cols) * spacing, 0.0] for i in range(n)])
-
-
-def camera_for(points: np.ndarray, planar: bool) -> rrb.EyeControls3D:
-    """An orbit camera looking at the centre of ``points (N, 3)``, from above for a ``planar`` robot
-    and from the front, above and to the side otherwise, just far enough back to see them all."""
-    lo, hi = points.min(0), points.max(0)
-    centre = (lo + hi) / 2
-    radius = max(float(np.linalg.norm(hi - lo)) / 2, 0.25)
-    direction = np.array([0.0, -0.45, 1.0]) if planar else np.array([0.6, -1.0, 0.55])
-    direction /= np.linalg.norm(direction)
-    return rrb.EyeControls3D(
-        position=(centre + direction * radius * 2.2).tolist(),
-        look_target=centre.tolist(),
-        eye_up=[0.0, 0.0, 1.0],
-    )
 
 
 __all__ = [
+    "BASE_COLOR",
+    "BEFORE_COLOR",
+    "CAPSULE",
+    "CYLINDER",
+    "SPHERE",
+    "GoalStage",
+    "MAX_GOALS_DRAWN",
     "RobotDrawing",
     "camera_for",
     "goal_color",
     "grid_offsets",
+    "metatest_blueprint",
     "quat_mul",
     "quat_rotate",
     "training_blueprint",
