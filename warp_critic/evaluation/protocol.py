@@ -35,6 +35,7 @@ from typing import Any
 
 from warp_critic.core.errors import FieldError, UserError
 from warp_critic.evaluation.paper import GOAL_NOISE, PAPER_TABLE1, TABLE1_STDS
+from warp_critic.methods import method
 
 # ------------------------------------------------------------------------------------------------
 # settings and results
@@ -270,12 +271,6 @@ def run_protocol(pc: ProtocolConfig, log: Callable[[str], None] | None = None) -
 # formatting
 # ------------------------------------------------------------------------------------------------
 
-_PAPER_LABEL = {
-    "ours": "paper (Table 1)",
-    "ddpg": "paper (Table 1, DDPG)",
-    "meta-critic": "paper (Table 1, Meta-Critic)",
-}
-
 
 def format_table(
     result: ProtocolResult, paper: str | None = "ours", per_run: bool = True
@@ -297,7 +292,7 @@ def format_table(
     row = PAPER_TABLE1.get(paper or "", {})
     if paper is not None and all(s in row for s in stds):
         lines.append(
-            f"| {_PAPER_LABEL[paper]} | MSE | "
+            f"| {method(paper).paper_label} | MSE | "
             + " | ".join(f"{row[s][0]:g}({row[s][1]:g})" for s in stds)
             + " |"
         )

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from warp_critic.methods import method
 from warp_critic.reproduce.report_plots import diverged_cmap, log_limits
 from warp_critic.reproduce.rules import WINDOW, sample_efficiency, settled_index
 from warp_critic.reproduce.settings import METHOD_LABELS, METHODS
@@ -29,7 +30,7 @@ LEVELS = (0.3, 0.1, 0.03)
 #: training error -- about the error band our method trains to on each robot (reacher ~0.01,
 #: KUKA ~0.2), so that the comparison is between methods that learned the training task.
 SOLVED = {"reacher": 0.1, "kuka": 0.3}
-BASELINES = ("ddpg", "meta-critic")
+BASELINES = tuple(m for m in METHODS if method(m).baseline)
 
 
 def _fmt(x: float) -> str:

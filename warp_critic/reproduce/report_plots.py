@@ -6,11 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
+from warp_critic.methods import methods
 from warp_critic.reproduce.settings import METHOD_LABELS, METHODS
 from warp_critic.reproduce.stages import StageRecord
 from warp_critic.running.rundir import save_figure
 
-COLORS = {"ours": "tab:blue", "ddpg": "tab:orange", "meta-critic": "tab:green"}
+COLORS = {m.name: m.colour for m in methods()}
 
 
 def figure(w: float, h: float):

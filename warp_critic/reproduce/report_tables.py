@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from warp_critic.evaluation.paper import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE3
 from warp_critic.evaluation.seed_uses import seed_note
+from warp_critic.methods import methods
 from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.report_departures import departures_line
 from warp_critic.reproduce.report_draft import Draft
@@ -40,11 +41,7 @@ TABLE3_NOTE = (
     f"is near-constant too, {min(v[0] for v in PAPER_TABLE3['ours'].values()):g}-"
     f"{max(v[0] for v in PAPER_TABLE3['ours'].values()):g})."
 )
-PAPER_ROW = {
-    "ours": "paper: L_critic (ours)",
-    "ddpg": "paper: DDPG",
-    "meta-critic": "paper: Meta Critic",
-}
+PAPER_ROW = {m.name: m.table_label for m in methods() if m.table_label is not None}
 
 
 def _fmt(x: float) -> str:
@@ -73,7 +70,7 @@ def table_markdown(
     lines = ["| Method | " + " | ".join(head(v) for v in values) + " |"]
     lines.append("|---" * (len(values) + 1) + "|")
     if paper is not None:
-        for m in METHODS:
+        for m in (m for m in METHODS if m in paper):  # the methods the paper reports
             row = [
                 f"{paper[m][v][0]:g}({paper[m][v][1]:g})" if v in paper[m] else "—" for v in values
             ]

@@ -37,14 +37,16 @@ from typing import Any
 
 from warp_critic.core.errors import FieldError
 from warp_critic.evaluation.presets import preset
+from warp_critic.methods import method, methods
 from warp_critic.reproduce.recipes import RECIPES
 
 STAGES = ("toy", "landscape", "metatrain", "maps", "tables", "tables-heldout")
 #: the recipes beyond the paper (``--beyond``): kept apart, never part of the paper's stages
 BEYOND = "beyond"
 SCENES = ("reacher", "kuka")
-METHODS = ("ours", "ddpg", "meta-critic")
-METHOD_LABELS = {"ours": "L_critic (ours)", "ddpg": "DDPG", "meta-critic": "Meta-Critic"}
+#: the methods reproduced by default (the method registry's, ours first)
+METHODS = tuple(m.name for m in methods() if m.reproduced_by_default)
+METHOD_LABELS = {m.name: m.label for m in methods()}
 #: TaskConfig fields of ours' presets that describe the TASK (training distribution), shared with the baselines.
 TASK_FIELDS = ("start_std", "home_starts")
 
@@ -71,7 +73,7 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
         ours = preset(name)
         task = {k: ours[k] for k in TASK_FIELDS if k in ours}
         per = {"ours": ours}
-        for m in ("ddpg", "meta-critic"):
+        for m in (m for m in METHODS if method(m).baseline):
             per[m] = {
                 **preset(m),
                 **task,
@@ -81,7 +83,7 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
         for m in METHODS:
             per[m].pop("method", None)
             per[m]["record_every"] = 50
-            if m != "ours":
+            if method(m).baseline:
                 per[m].update(
                     iterations=BASELINE_ITERATIONS[scene],
                     checkpoint_every=BASELINE_CHECKPOINT_EVERY,
@@ -93,7 +95,7 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
     return out
 
 
-def _quick_metatrain(values: dict, method: str) -> None:
+def _quick_metatrain(values: dict, method_name: str) -> None:
     """Plumbing only: a handful of iterations on short rollouts with small networks."""
     values.update(
         iterations=6,
@@ -103,7 +105,7 @@ def _quick_metatrain(values: dict, method: str) -> None:
         checkpoint_every=3,
         record_every=3,
     )
-    if method != "ours":  # and one alpha search (at the last checkpoint) instead of two
+    if method(method_name).baseline:  # and one alpha search (at the last checkpoint) instead of two
         values.update(
             updates_per_iteration=4,
             warmup_iterations=1,
