@@ -47,6 +47,17 @@ SCENES = ("reacher", "kuka")
 #: the methods reproduced by default (the method registry's, ours first)
 METHODS = tuple(m.name for m in methods() if m.reproduced_by_default)
 METHOD_LABELS = {m.name: m.label for m in methods()}
+#: every registered method, in report order: the report shows those whose stages exist
+ALL_METHODS = tuple(m.name for m in methods())
+#: the baselines ``--baselines`` may add to the default ones (each adds its own stages)
+EXTRA_BASELINES = tuple(m.name for m in methods(baseline=True) if not m.reproduced_by_default)
+
+
+def present(keys) -> tuple[str, ...]:
+    """The methods among ``keys`` (e.g. a stage result's per-method dict), in report order."""
+    return tuple(m for m in ALL_METHODS if m in keys)
+
+
 #: TaskConfig fields of ours' presets that describe the TASK (training distribution), shared with the baselines.
 TASK_FIELDS = ("start_std", "home_starts")
 
@@ -67,20 +78,20 @@ BASELINE_CHECKPOINT_EVERY = 50
 TUNED: dict[str, dict[str, dict[str, float]]] = {"reacher": {"ddpg": {"actor_lr": 1e-3}}}
 
 
-def _metatrain(quick: bool, seeds: list[int]) -> dict:
+def _metatrain(quick: bool, seeds: list[int], extra: tuple[str, ...] = ()) -> dict:
     out: dict[str, Any] = {}
     for scene, name in (("reacher", "reacher"), ("kuka", "kuka-table1")):
         ours = preset(name)
         task = {k: ours[k] for k in TASK_FIELDS if k in ours}
         per = {"ours": ours}
-        for m in (m for m in METHODS if method(m).baseline):
+        for m in (m for m in (*METHODS, *extra) if method(m).baseline):
             per[m] = {
                 **preset(m),
                 **task,
                 "inner_steps": ours.get("inner_steps", 1),
                 **TUNED.get(scene, {}).get(m, {}),
             }
-        for m in METHODS:
+        for m in per:
             per[m].pop("method", None)
             per[m]["record_every"] = 50
             if method(m).baseline:
@@ -141,8 +152,9 @@ def default_seeds(quick: bool) -> int:
     return 2 if quick else 5
 
 
-def default_settings(quick: bool, seeds: int) -> dict[str, dict]:
-    """The settings of every stage for ``--quick`` or the paper, with seeds ``0 .. seeds-1``."""
+def default_settings(quick: bool, seeds: int, extra: tuple[str, ...] = ()) -> dict[str, dict]:
+    """The settings of every stage for ``--quick`` or the paper, with seeds ``0 .. seeds-1``;
+    ``extra``: baselines beyond the default ones (:data:`EXTRA_BASELINES`) trained too."""
     seed_list = list(range(seeds))
     s: dict[str, dict] = {
         "toy": {
@@ -185,7 +197,7 @@ def default_settings(quick: bool, seeds: int) -> dict[str, dict]:
                 "start_std": 1.0,
             },
         },
-        "metatrain": _metatrain(quick, seed_list),
+        "metatrain": _metatrain(quick, seed_list, tuple(extra)),
         BEYOND: _beyond(quick),
         "tables": {
             "stds": [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0],
