@@ -180,3 +180,33 @@ def test_bad_td3_input_is_one_line_and_exit_2(tmp_path, capsys, argv, fragment):
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and fragment in err[0], err
     assert not (tmp_path / "run").exists()
+
+
+def test_the_reported_actor_loss_is_the_mean_over_the_delayed_updates(tmp_path, monkeypatch):
+    seen: list[float] = []
+    update = TD3Agent.update
+
+    def spy(self, buffer, gen, train_actor=True):
+        stats = update(self, buffer, gen, train_actor)
+        if "actor_loss" in stats:
+            seen.append(stats["actor_loss"])
+        return stats
+
+    monkeypatch.setattr(TD3Agent, "update", spy)
+    cfg = TD3Config(
+        scene=REACHER,
+        goals=[[0.5, 0.3]],
+        worlds_per_goal=2,
+        horizon=5,
+        iterations=2,
+        device="cpu",
+        out=str(tmp_path / "run"),
+        critic_hidden=16,
+        actor_hidden=8,
+        updates_per_iteration=4,
+        batch_size=8,
+        warmup_iterations=1,
+    )
+    rows = train_td3(cfg, progress=False, record=False).metrics
+    assert len(seen) == 2  # iteration 1: 4 critic updates, the actor on the 2nd and the 4th
+    assert rows[1]["actor_loss"] == pytest.approx(sum(seen) / 2, rel=1e-6)
