@@ -6,7 +6,7 @@ two of the four training goals, std = 0.1 .. 1.0. :func:`run_protocol` runs exac
 run directory per meta-train seed: for every goal-noise reading and std, each run's critic trains
 ``inits`` fresh policies (model-free, :func:`warp_critic.evaluation.metatest.meta_test`) for the same
 ``num_goals`` goals and the same initialisations (``seed``), and the final errors of all runs are
-pooled into one cell. It works for any method's run directory (ours, DDPG, Meta-Critic).
+pooled into one cell. It works for any method's run directory (ours or any registered baseline).
 
 Each cell holds two aggregations over the joints of the final error:
 
