@@ -43,21 +43,24 @@ def check_baselines(names: list[str] | None) -> tuple[str, ...]:
     return tuple(m for m in EXTRA_BASELINES if m in names)
 
 
+def metatrain_stage(settings: dict, scene: str, m: str, hashes: dict[str, str]) -> dict:
+    """The plan entry of the meta-training ``metatrain-<scene>-<m>`` (the paper's or an extra)."""
+    values, seeds = settings["metatrain"][scene][m], settings["metatrain"]["seeds"]
+    return {
+        "group": "metatrain",
+        "scene": scene,
+        "method": m,
+        "depends": {},
+        "settings": {"values": values, "seeds": seeds, "scene_hash": hashes[scene]},
+        "hash": stage_hash(f"metatrain-{scene}-{m}", values, seeds, hashes[scene]),
+    }
+
+
 def plan_extra(settings: dict, p: dict, hashes: dict[str, str], extra: tuple[str, ...]) -> None:
     """Add each extra baseline's meta-trainings and evaluations to the plan ``p``."""
-    seeds = settings["metatrain"]["seeds"]
     for m in extra:
         for scene in SCENES:
-            values = settings["metatrain"][scene][m]
-            name = f"metatrain-{scene}-{m}"
-            p[name] = {
-                "group": "metatrain",
-                "scene": scene,
-                "method": m,
-                "depends": {},
-                "settings": {"values": values, "seeds": seeds, "scene_hash": hashes[scene]},
-                "hash": stage_hash(name, values, seeds, hashes[scene]),
-            }
+            p[f"metatrain-{scene}-{m}"] = metatrain_stage(settings, scene, m, hashes)
         for group, scene in EVALUATIONS:
             dep = {
                 n: f"{n}-{p[n]['hash']}"

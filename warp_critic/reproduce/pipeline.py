@@ -13,7 +13,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
-from warp_critic.reproduce.extra_baselines import check_baselines, plan_extra, selected_extra
+from warp_critic.reproduce.extra_baselines import (
+    check_baselines,
+    metatrain_stage,
+    plan_extra,
+    selected_extra,
+)
 from warp_critic.reproduce.settings import (
     ALL_METHODS,
     BEYOND,
@@ -124,7 +129,6 @@ def plan(settings: dict, beyond: bool = False, extra: tuple[str, ...] = ()) -> d
     with ``beyond``, also the recipes beyond the paper (:func:`plan_beyond`); with ``extra``, the
     stages of those baselines (:func:`~.extra_baselines.plan_extra`)."""
     hashes = scene_hashes()
-    seeds = settings["metatrain"]["seeds"]
     p: dict[str, dict] = {}
     p["toy"] = {
         "group": "toy",
@@ -140,16 +144,7 @@ def plan(settings: dict, beyond: bool = False, extra: tuple[str, ...] = ()) -> d
     }
     for scene in SCENES:
         for m in METHODS:
-            values = settings["metatrain"][scene][m]
-            name = f"metatrain-{scene}-{m}"
-            p[name] = {
-                "group": "metatrain",
-                "scene": scene,
-                "method": m,
-                "depends": {},
-                "settings": {"values": values, "seeds": seeds, "scene_hash": hashes[scene]},
-                "hash": stage_hash(name, values, seeds, hashes[scene]),
-            }
+            p[f"metatrain-{scene}-{m}"] = metatrain_stage(settings, scene, m, hashes)
     for group, scene in (("maps", "reacher"), ("tables", "kuka")):
         dep = {
             f"metatrain-{scene}-{m}": f"metatrain-{scene}-{m}-{p[f'metatrain-{scene}-{m}']['hash']}"
