@@ -27,11 +27,7 @@ PACKAGE = ROOT / "warp_critic"
 MAX_LINES = 400
 
 #: imports up a layer that exist today (module -> module it imports); a new one fails the test
-KNOWN_UPWARD = {
-    # identify reuses meta-test's set-up (a run's critic, scene and simulator); to go when that
-    # set-up moves below methods/ (issue 46's method registry)
-    ("warp_critic.methods.identify", "warp_critic.evaluation.metatest"),
-}
+KNOWN_UPWARD: set[tuple[str, str]] = set()
 #: modules still over MAX_LINES (path under warp_critic/ -> why it is allowed for now)
 KNOWN_LONG: dict[str, str] = {}  # module -> why it may stay over the limit for now
 #: packages that are no layer: shipped with the package, first used by this layer

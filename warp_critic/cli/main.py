@@ -78,13 +78,12 @@ def cmd_meta_test(args: argparse.Namespace) -> int:
 
 
 def cmd_baseline(args: argparse.Namespace) -> int:
-    from warp_critic.methods.baseline_config import BaselineConfig
-    from warp_critic.methods.ddpg import train_ddpg
-    from warp_critic.methods.meta_critic import train_meta_critic
+    from warp_critic.methods import method
 
-    cfg, given = dataclass_from_args(BaselineConfig, args)
+    entry = method(args.method)
+    cfg, given = dataclass_from_args(entry.config, args)
     _not_owned(cfg.out or cfg.default_out(), "--out")
-    train = train_ddpg if cfg.method == "ddpg" else train_meta_critic
+    train = entry.train
     result = train(cfg, given=given)
     last = result.metrics[-1] if result.metrics else {}
     print(f"run directory: {result.run_dir}")
@@ -113,9 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     from warp_critic.analysis.landscape import command as landscape
     from warp_critic.analysis.toy import command as toy
     from warp_critic.evaluation.metatest import MetaTestConfig
-    from warp_critic.methods.baseline_config import BaselineConfig
+    from warp_critic.methods import methods
     from warp_critic.methods.ours import TrainConfig
-    from warp_critic.methods.q_networks import METHODS
 
     p = Parser(
         prog="warp-critic",
@@ -155,24 +153,31 @@ def build_parser() -> argparse.ArgumentParser:
     )
     te.set_defaults(func=cmd_meta_test)
 
+    baselines = methods(baseline=True)
     bl = sub.add_parser(
         "baseline",
-        help="train a baseline: ddpg or meta-critic",
-        description="Train a baseline critic (DDPG or Meta-Critic) on the same scenes, goals and "
-        "training distribution as meta-train; its run directory works with meta-test.",
+        help="train a baseline: " + ", ".join(m.name for m in baselines),
+        description="Train a baseline critic ("
+        + ", ".join(m.label for m in baselines)
+        + ") on the same scenes, goals and training distribution as meta-train; its run directory "
+        "works with meta-test.",
     )
-    bl.add_argument(
-        "method",
-        choices=METHODS,
-        help="ddpg (Lillicrap et al. 2015) or meta-critic (Zhou et al. 2020)",
-    )
-    bl.epilog = derived_rules_epilog()
-    bl.formatter_class = argparse.RawDescriptionHelpFormatter
-    bl.add_argument(
-        "scene", help="USD scene, e.g. scenes/reacher.usda, or a robot file (.urdf, .xml, .usd)"
-    )
-    add_dataclass_arguments(bl, BaselineConfig, skip=("scene", "method"))
-    bl.set_defaults(func=cmd_baseline)
+    bl_sub = bl.add_subparsers(dest="method", metavar="METHOD", parser_class=Parser, required=True)
+    for entry in baselines:  # one parser per baseline: its own config's flags and defaults
+        one = bl_sub.add_parser(
+            entry.name,
+            help=f"{entry.label} ({entry.cite})",
+            description=f"Train {entry.label} ({entry.cite}) on the same scenes, goals and training "
+            "distribution as meta-train; its run directory works with meta-test.",
+        )
+        one.epilog = derived_rules_epilog()
+        one.formatter_class = argparse.RawDescriptionHelpFormatter
+        one.add_argument(
+            "scene",
+            help="USD scene, e.g. scenes/reacher.usda, or a robot file (.urdf, .xml, .usd)",
+        )
+        add_dataclass_arguments(one, entry.config, skip=("scene", "method"))
+        one.set_defaults(func=cmd_baseline)
 
     import_robot.add_parser(sub)
 

@@ -14,7 +14,7 @@ import argparse
 import shlex
 from pathlib import Path
 
-from warp_critic.reproduce.settings import STAGES
+from warp_critic.reproduce.settings import EXTRA_BASELINES, METHODS, STAGES
 
 __all__ = ["add_arguments", "run_from_args", "config_from_args"]
 
@@ -65,6 +65,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "meta-training, evaluated on the paper's maps and tables next to the nominal critic; "
         "reported apart from the reproduction); --only beyond runs just them",
     )
+    A(
+        "--baselines",
+        type=str,
+        default=None,
+        metavar="NAME,...",
+        help="the baselines trained and reported (comma-separated; default "
+        f"{','.join(_paper_baselines())}, the paper's two, always included): each added one, e.g. "
+        f"{','.join((*_paper_baselines(), *EXTRA_BASELINES))}, gets its own stages "
+        "(metatrain-<robot>-NAME, NAME-maps, NAME-tables) and rows in the report's curves, maps and "
+        "tables; the paper's stages are unchanged",
+    )
     A("--device", type=str, default="auto", metavar="DEV", help="cpu, cuda or auto (default auto)")
     A(
         "--jobs",
@@ -99,6 +110,10 @@ def _int(text: str) -> int:
         raise argparse.ArgumentTypeError(f"invalid int value: {text!r}") from None
 
 
+def _paper_baselines() -> tuple[str, ...]:
+    return tuple(m for m in METHODS if m != "ours")
+
+
 def _only(text: str | None) -> list[str] | None:
     if text is None:
         return None
@@ -115,6 +130,8 @@ def command_line(args: argparse.Namespace) -> str:
         parts.append("--quick")
     if getattr(args, "beyond", False):
         parts.append("--beyond")
+    if getattr(args, "baselines", None):
+        parts += ["--baselines", args.baselines]
     parts += ["--device", args.device]
     if getattr(args, "jobs", None) is not None:
         parts += ["--jobs", str(args.jobs)]
@@ -140,6 +157,7 @@ def config_from_args(args: argparse.Namespace):
         command=command_line(args),
         seeds_given=args.seeds is not None,
         beyond=bool(getattr(args, "beyond", False)),
+        baselines=_only(getattr(args, "baselines", None)),
     )
 
 

@@ -22,7 +22,7 @@ __all__ = ["HELP", "DESCRIPTION", "add_arguments", "run_from_args"]
 
 HELP = "score critics with the paper's Table 1 protocol (seeds pooled); prints the table"
 DESCRIPTION = (
-    "The paper's Table 1 protocol: each run's critic (any method: ours, DDPG, Meta-Critic) trains "
+    "The paper's Table 1 protocol: each run's critic (any method: ours or any baseline) trains "
     "fresh policies, model-free, for new goals sampled around training goals; the final errors of "
     "all runs (one per seed) are pooled. Each cell is mean(std): MSE (mean over the joints, the "
     "paper's metric) and sum sq. (||q_T - g||^2, the task loss). Lists are comma-separated."

@@ -9,7 +9,6 @@ __all__, __getattr__, __dir__ = lazy_exports(
             "MetaTestConfig",
             "meta_test",
             "setup_meta_test",
-            "register_critic_loader",
         ),
         "warp_critic.evaluation.protocol": ("ProtocolConfig", "ProtocolResult", "run_protocol"),
         "warp_critic.evaluation.paper": ("PAPER_TABLES", "PaperTable", "GOAL_NOISE"),

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from warp_critic.core.errors import FieldError
+from warp_critic.methods import methods
 
 
 @dataclass(frozen=True)
@@ -40,9 +41,8 @@ PRESETS: dict[str, FromScene | dict[str, Any]] = {
     "kuka-table1": FromScene(
         ("critic_input", "start_std", "home_starts", "iterations", "inner_steps", "alpha", "lr")
     ),
-    # baselines (BaselineConfig fields): the published DDPG / Meta-Critic settings, 300 iterations
-    "ddpg": {"method": "ddpg", "iterations": 300},
-    "meta-critic": {"method": "meta-critic", "iterations": 300},
+    # baselines (their config's fields): each registered method's preset (the published settings)
+    **{m.name: m.preset for m in methods() if m.preset is not None},
 }
 
 DESCRIPTIONS: dict[str, str] = {
@@ -51,19 +51,17 @@ DESCRIPTIONS: dict[str, str] = {
     "kuka-table1": "KUKA against the paper's Table 1: goal-relative critic, random starts 0.4 rad with 2 of 4 "
     "worlds per goal at home, 3 inner steps at alpha 3e-4, lr 3e-3, 3000 iterations "
     "(MSE 0.019 / 0.056 at std 0.1 / 0.4 per-joint)",
-    "ddpg": "DDPG baseline: the published settings (BaselineConfig defaults), 300 iterations",
-    "meta-critic": "Meta-Critic baseline: Zhou et al.'s settings (BaselineConfig defaults), 300 iterations",
+    **{m.name: m.preset_description for m in methods() if m.preset is not None},
 }
 
 #: The scene (file stem under ``scenes/``) each preset was measured on; ``None``: reported on several.
 SCENES: dict[str, str | None] = {
     "reacher": "reacher",
     "kuka-table1": "kuka",
-    "ddpg": None,
-    "meta-critic": None,
+    **{m.name: None for m in methods() if m.preset is not None},
 }
 
-# both baselines were reported with the same protocol
+# every baseline is reported with the same protocol
 _BASELINE_EVALUATION: dict[str, Any] = {
     "stds": [0.1, 0.3, 0.4],
     "goal_noise": ["per-joint"],
@@ -91,8 +89,7 @@ EVALUATIONS: dict[str, dict[str, Any]] = {
         "inits": 5,
         "seed": 1,
     },
-    "ddpg": _BASELINE_EVALUATION,
-    "meta-critic": _BASELINE_EVALUATION,
+    **{m.name: _BASELINE_EVALUATION for m in methods() if m.preset is not None},
 }
 
 

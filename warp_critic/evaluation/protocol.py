@@ -6,7 +6,7 @@ two of the four training goals, std = 0.1 .. 1.0. :func:`run_protocol` runs exac
 run directory per meta-train seed: for every goal-noise reading and std, each run's critic trains
 ``inits`` fresh policies (model-free, :func:`warp_critic.evaluation.metatest.meta_test`) for the same
 ``num_goals`` goals and the same initialisations (``seed``), and the final errors of all runs are
-pooled into one cell. It works for any method's run directory (ours, DDPG, Meta-Critic).
+pooled into one cell. It works for any method's run directory (ours or any registered baseline).
 
 Each cell holds two aggregations over the joints of the final error:
 
@@ -35,6 +35,7 @@ from typing import Any
 
 from warp_critic.core.errors import FieldError, UserError
 from warp_critic.evaluation.paper import GOAL_NOISE, PAPER_TABLE1, TABLE1_STDS
+from warp_critic.methods import method
 
 # ------------------------------------------------------------------------------------------------
 # settings and results
@@ -270,12 +271,6 @@ def run_protocol(pc: ProtocolConfig, log: Callable[[str], None] | None = None) -
 # formatting
 # ------------------------------------------------------------------------------------------------
 
-_PAPER_LABEL = {
-    "ours": "paper (Table 1)",
-    "ddpg": "paper (Table 1, DDPG)",
-    "meta-critic": "paper (Table 1, Meta-Critic)",
-}
-
 
 def format_table(
     result: ProtocolResult, paper: str | None = "ours", per_run: bool = True
@@ -297,7 +292,7 @@ def format_table(
     row = PAPER_TABLE1.get(paper or "", {})
     if paper is not None and all(s in row for s in stds):
         lines.append(
-            f"| {_PAPER_LABEL[paper]} | MSE | "
+            f"| {method(paper).paper_label} | MSE | "
             + " | ".join(f"{row[s][0]:g}({row[s][1]:g})" for s in stds)
             + " |"
         )

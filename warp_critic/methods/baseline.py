@@ -207,12 +207,17 @@ def train_baseline(
                 buffers[i].add_trajectory(part, goal[sl], r[:, sl], done[:, sl])
                 # 2. gradient updates from the replay buffer
                 stats: dict[str, float] = {}
+                counts: dict[str, int] = {}
                 if buffers[i].size >= cfg.batch_size:
                     for _ in range(n_updates):
                         for k, v in (
                             agents[i].update(buffers[i], gens[i], train_actor=not warmup).items()
                         ):
                             stats[k] = stats.get(k, 0.0) + v / n_updates
+                            counts[k] = counts.get(k, 0) + 1
+                for k, c in counts.items():  # a value some updates report (TD3's delayed actor)
+                    if c < n_updates:  # is the mean over those updates
+                        stats[k] *= n_updates / c
                 if not all(math.isfinite(v) for v in stats.values()):
                     raise DivergenceError(
                         "non-finite loss: " + ", ".join(f"{k} {v}" for k, v in stats.items())

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from warp_critic.methods.q_networks import AUX_INPUTS, METHODS
+from warp_critic.methods.q_networks import AUX_INPUTS
 from warp_critic.methods.replay import NOISE_KINDS, REWARD_KINDS
 from warp_critic.physics import schema
 from warp_critic.running.config import filled, spec
@@ -27,7 +27,9 @@ class BaselineConfig(TaskConfig):
     2 x 100 hidden units, virtual step size = the actor lr.
     """
 
-    method: str = spec("ddpg", "ddpg or meta-critic", choices=METHODS)
+    method: str = spec(
+        "ddpg", "the baseline's name in the method registry (warp_critic.running.methods)"
+    )
     iterations: int = spec(
         300,
         "training iterations (one episode in every world, then the gradient updates)",

@@ -24,9 +24,15 @@ from warp_critic.learning.losses import td_loss
 from warp_critic.learning.networks import Normalizer
 from warp_critic.methods.baseline import train_baseline
 from warp_critic.methods.baseline_config import BaselineConfig
-from warp_critic.methods.q_networks import Actor, QNetwork, soft_update
+from warp_critic.methods.q_networks import (
+    Actor,
+    QNetwork,
+    soft_update,
+    test_critic_from_checkpoint,
+)
 from warp_critic.methods.replay import ReplayBuffer
 from warp_critic.running.loop import TrainResult
+from warp_critic.running.methods import Method, register
 
 
 class DDPGAgent:
@@ -107,3 +113,21 @@ class DDPGAgent:
 def train_ddpg(cfg: BaselineConfig, **kwargs) -> TrainResult:
     """Train (or resume) DDPG; ``kwargs`` go to :func:`~warp_critic.methods.baseline.train_baseline`."""
     return train_baseline(replace(cfg, method="ddpg"), DDPGAgent, **kwargs)
+
+
+register(
+    Method(
+        name="ddpg",
+        order=1,
+        label="DDPG",
+        colour="tab:orange",
+        config=BaselineConfig,
+        train=train_ddpg,
+        critic_loader=test_critic_from_checkpoint,
+        cite="Lillicrap et al. 2015",
+        preset={"method": "ddpg", "iterations": 300},
+        preset_description="DDPG baseline: the published settings (BaselineConfig defaults), 300 iterations",
+        paper_label="paper (Table 1, DDPG)",
+        table_label="paper: DDPG",
+    )
+)

@@ -66,12 +66,12 @@ def train_identifier(
     (identifier, Adam, generator, losses) is saved there, and a call that finds it for the same
     run and settings continues from it, to exactly the identifier an uninterrupted call trains;
     it is removed once ``out`` is complete."""
-    from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
     from warp_critic.learning.critic_inputs import DYNAMICS, rollout_data_of
     from warp_critic.learning.identify import Identifier, trajectory_inputs
     from warp_critic.learning.rollout import settled_worlds
     from warp_critic.physics.redraw import set_variants
     from warp_critic.physics.variant_draws import draw, parse_ranges, ranges_on_scene, with_draws
+    from warp_critic.running.metatest_setup import MetaTestConfig, setup_meta_test
     from warp_critic.running.rundir import atomic_torch_save, atomic_write_text
     from warp_critic.running.task import task_variant
 
@@ -242,9 +242,9 @@ def probe_identifier(
     descriptor. Returns ``{"names": the K descriptor entries' names, "rows": [{"variant", "truth"
     (K,), "mean" (updates, K), "std" (updates, K), "torque" (updates,): the mean |tau| (N m) of
     each rollout}]}``."""
-    from warp_critic.evaluation.metatest import MetaTestConfig, setup_meta_test
     from warp_critic.learning.identify import IdentifiedCritic
     from warp_critic.learning.rollout import settled_worlds
+    from warp_critic.running.metatest_setup import MetaTestConfig, setup_meta_test
 
     rows, names = [], None
     for text in variants:

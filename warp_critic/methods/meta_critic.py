@@ -51,9 +51,10 @@ from warp_critic.learning.networks import Normalizer
 from warp_critic.methods.baseline import train_baseline
 from warp_critic.methods.baseline_config import BaselineConfig
 from warp_critic.methods.ddpg import DDPGAgent
-from warp_critic.methods.q_networks import _GoalInput
+from warp_critic.methods.q_networks import _GoalInput, test_critic_from_checkpoint
 from warp_critic.methods.replay import ReplayBuffer
 from warp_critic.running.loop import TrainResult
+from warp_critic.running.methods import Method, register
 
 
 class AuxiliaryLoss(_GoalInput):
@@ -245,3 +246,25 @@ def train_meta_critic(cfg: BaselineConfig, **kwargs) -> TrainResult:
                 "iterations (aux_grad_ratio < 1e-6): this Meta-Critic run trained as DDPG"
             )
     return result
+
+
+register(
+    Method(
+        name="meta-critic",
+        order=2,
+        label="Meta-Critic",
+        colour="tab:green",
+        config=BaselineConfig,
+        train=train_meta_critic,
+        critic_loader=test_critic_from_checkpoint,
+        cite="Zhou et al. 2020",
+        preset={"method": "meta-critic", "iterations": 300},
+        preset_description="Meta-Critic baseline: Zhou et al.'s settings (BaselineConfig defaults), 300 iterations",
+        paper_label="paper (Table 1, Meta-Critic)",
+        table_label="paper: Meta Critic",
+        run_summary=lambda rows: {
+            "aux_alive": aux_alive(rows),
+            "aux_alive_basis": aux_alive_basis(rows),
+        },
+    )
+)

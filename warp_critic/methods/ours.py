@@ -37,6 +37,7 @@ from warp_critic.methods.train_variants import VariantRedraw, check_train_varian
 from warp_critic.physics import schema
 from warp_critic.running.config import filled, spec
 from warp_critic.running.loop import Callback, Session, TrainResult
+from warp_critic.running.methods import Method, register
 from warp_critic.running.task import TaskConfig
 
 
@@ -338,3 +339,40 @@ def _cat(per_seed: list[PolicyParams]) -> PolicyParams:
         if len(per_seed) > 1
         else per_seed[0]
     )
+
+
+def load_our_critic(ckpt: dict, norm) -> tuple[torch.nn.Module, dict]:
+    """Our meta-learned critic; meta-test defaults: its inner lr, inner steps x policy lifetime."""
+    cfg = ckpt["config"]
+    critic: torch.nn.Module = Critic(
+        ckpt["dof"],
+        norm,
+        hidden=ckpt.get("critic_hidden", 400),
+        inputs=ckpt.get("critic_input", "full"),
+    )
+    critic.load_state_dict(ckpt["critic_state"])
+    identifier = identifier_from_checkpoint(ckpt)
+    if identifier is not None:  # a told critic fed the model identified from its rollouts
+        critic = IdentifiedCritic(critic, identifier)
+    # a critic trained on policies of every age up to the policy lifetime keeps improving them that long
+    steps = int(cfg.get("inner_steps", 1)) * int(cfg.get("policy_lifetime", 1))
+    return critic, {"alpha": cfg.get("alpha"), "steps": steps}
+
+
+register(
+    Method(
+        name="ours",
+        order=0,
+        label="L_critic (ours)",
+        colour="tab:blue",
+        config=TrainConfig,
+        train=meta_train,
+        critic_loader=load_our_critic,
+        samples_per_iteration=lambda cfg: filled(cfg.inner_steps, "inner_steps") + 1,
+        samples_text="(inner_steps + 1) x worlds x horizon per iteration: the inner-loop rollouts "
+        "and the rollout of the updated policies",
+        baseline=False,
+        paper_label="paper (Table 1)",
+        table_label="paper: L_critic (ours)",
+    )
+)

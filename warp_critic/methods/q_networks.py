@@ -12,8 +12,8 @@ from torch import nn
 
 from warp_critic.core.errors import UserError
 from warp_critic.learning.networks import Normalizer, wrap_angles
+from warp_critic.running.methods import names
 
-METHODS = ("ddpg", "meta-critic")
 AUX_INPUTS = ("action", "features")  # what Meta-Critic's h_omega sees (BaselineConfig.aux_input)
 
 
@@ -127,8 +127,9 @@ def test_critic_from_checkpoint(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.
     trained on.
     """
     method = ckpt.get("method")
-    if method not in METHODS:
-        raise UserError(f"checkpoint method {method!r} is not a baseline ({', '.join(METHODS)})")
+    if method not in names(baseline=True):
+        baselines = ", ".join(names(baseline=True))
+        raise UserError(f"checkpoint method {method!r} is not a baseline ({baselines})")
     try:
         qnet = QNetwork(int(ckpt["dof"]), norm, hidden=int(ckpt.get("critic_hidden", 400)))
         qnet.load_state_dict(ckpt["q_state"])

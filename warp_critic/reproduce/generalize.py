@@ -106,13 +106,20 @@ def _with(values, extra: float) -> list[float]:
 
 
 def run_tables_stage(
-    d: Path, s: dict, runs: dict[str, list[Path]], device: str, progress: bool = True
+    d: Path,
+    s: dict,
+    runs: dict[str, list[Path]],
+    device: str,
+    progress: bool = True,
+    only: list[str] | None = None,
 ) -> dict:
     """``runs``: method (a row of the tables: ours, the baselines, or a recipe beyond the paper) ->
-    per-seed run directories (KUKA); ``runs["ours"]`` sets the scene, goals and policy updates."""
+    per-seed run directories (KUKA); ``runs["ours"]`` sets the scene, goals and policy updates.
+    ``only``: the rows evaluated (default: every one of ``runs``)."""
     import json
 
     first = str(runs["ours"][0])
+    runs = {m: runs[m] for m in (only if only is not None else runs)}
     scene, train_goals, lo, hi = _train_goals_and_limits(first)
     steps = default_steps(first)
     train_mass = round(float(scene.world_builder().body_mass[scene.ee_body]), 6)
@@ -251,8 +258,10 @@ def run_maps_stage(
     device: str,
     progress: bool = True,
     floors_from: str | None = None,
+    only: list[str] | None = None,
 ) -> dict:
-    """``runs``: method (ours, the baselines, or a recipe) -> per-seed run directories (reacher).
+    """``runs``: method (ours, the baselines, or a recipe) -> per-seed run directories (reacher);
+    ``only``: the rows evaluated (default: every one of ``runs``; ours' runs set the grids).
 
     ``floors_from``: a complete maps stage directory next to ``d`` that computed the reachability
     floors of the same grids from the same nominal runs (:func:`~.pipeline.paper_maps_floors`); its
@@ -260,6 +269,7 @@ def run_maps_stage(
     import json
 
     first = str(runs["ours"][0])
+    runs = {m: runs[m] for m in (only if only is not None else runs)}
     scene, train_goals, lo, hi = _train_goals_and_limits(first)
     steps = default_steps(first)
     n = int(s["grid"])

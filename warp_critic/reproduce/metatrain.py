@@ -27,26 +27,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from warp_critic.core.errors import UserError
+from warp_critic.methods import method as method_of
+from warp_critic.methods import methods
 from warp_critic.reproduce.settings import METHODS
 
 if TYPE_CHECKING:
     from warp_critic.running.loop import TrainResult
 
-STEPS_COUNTED = {
-    "ours": "(inner_steps + 1) x worlds x horizon per iteration: the inner-loop rollouts and the rollout of the updated policies",
-    "ddpg": "worlds x horizon per iteration: the exploration episodes (evaluation rollouts not counted)",
-    "meta-critic": "worlds x horizon per iteration: the exploration episodes (evaluation rollouts not counted)",
-}
+#: how each method's environment steps are counted (the method registry's words)
+STEPS_COUNTED = {m.name: m.samples_text for m in methods()}
 
 
-def config_class(method: str):
-    if method == "ours":
-        from warp_critic.methods.ours import TrainConfig
-
-        return TrainConfig
-    from warp_critic.methods.baseline import BaselineConfig
-
-    return BaselineConfig
+def config_class(method_name: str):
+    return method_of(method_name).config
 
 
 def check_fields_known(method: str, values: dict, where: str) -> None:
@@ -67,7 +60,7 @@ def make_config(
 ):
     cls = config_class(method)
     kw = dict(values)
-    if method != "ours":
+    if method_of(method).baseline:
         kw["method"] = method
     return cls(
         scene=str(scene_file(scene)),
@@ -111,9 +104,6 @@ def run_metatrain_stage(
     device: str,
     progress: bool = True,
 ) -> dict:
-    from warp_critic.methods.ddpg import train_ddpg
-    from warp_critic.methods.meta_critic import aux_alive, aux_alive_basis, train_meta_critic
-    from warp_critic.methods.ours import meta_train
     from warp_critic.running.config import filled
 
     run = d / "run"
@@ -122,12 +112,7 @@ def run_metatrain_stage(
     identify = values.pop("identify", None)  # a recipe's model identifier, after training
     record = True
     cfg = make_config(scene, method, values, seeds, run, device, resume)
-    trainers: dict[str, Callable[..., TrainResult]] = {
-        "ours": meta_train,
-        "ddpg": train_ddpg,
-        "meta-critic": train_meta_critic,
-    }
-    train = trainers[method]
+    train: Callable[..., TrainResult] = method_of(method).train
     result = train(cfg, progress=progress, record=record)
     per_seed = {}
     steps_per_it = None
@@ -135,7 +120,7 @@ def run_metatrain_stage(
         c = r.config
         assert c is not None  # a run returns its config
         worlds = len(filled(c.goals, "goals")) * c.worlds_per_goal
-        mult = (getattr(c, "inner_steps", 1) + 1) if method == "ours" else 1
+        mult = method_of(method).samples_per_iteration(c)
         steps_per_it = mult * worlds * filled(c.horizon, "horizon")
         rows = r.metrics
         per_seed[str(seed)] = {
@@ -152,9 +137,9 @@ def run_metatrain_stage(
             # each is the whole batch's time for that iteration)
             "seconds_each": [float(x.get("seconds", 0.0)) for x in rows],
         }
-        if method == "meta-critic":  # whether h_omega still moved the actor, or it trained as DDPG
-            per_seed[str(seed)]["aux_alive"] = aux_alive(rows)
-            per_seed[str(seed)]["aux_alive_basis"] = aux_alive_basis(rows)
+        summary = method_of(method).run_summary
+        if summary is not None:  # e.g. Meta-Critic: whether h_omega still moved the actor
+            per_seed[str(seed)].update(summary(rows))
     if identify is not None:
         for seed, r in zip(seeds, result.seeds):
             per_seed[str(seed)]["identified"] = identify_seed(

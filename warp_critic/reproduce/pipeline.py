@@ -13,7 +13,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
+from warp_critic.reproduce.extra_baselines import (
+    check_baselines,
+    metatrain_stage,
+    plan_extra,
+    selected_extra,
+)
 from warp_critic.reproduce.settings import (
+    ALL_METHODS,
     BEYOND,
     METHODS,
     SCENES,
@@ -37,6 +44,12 @@ class ReproduceConfig:
     command: str = ""  # the command line, for the report
     seeds_given: bool = False  # --seeds was given (then metatrain.seeds may not contradict it)
     beyond: bool = False  # also the recipes beyond the paper (stage group "beyond")
+    baselines: list[str] | None = None  # --baselines; None: the paper's two
+
+    @property
+    def extra(self) -> tuple[str, ...]:
+        """The baselines beyond the paper's two that this call adds (:mod:`.extra_baselines`)."""
+        return check_baselines(self.baselines)
 
     def validate(self) -> dict:
         """Check everything before any work; returns the settings. Raises a one-line :class:`UserError`."""
@@ -44,19 +57,20 @@ class ReproduceConfig:
             raise FieldError("seeds", f"must be an integer >= 1 (got {self.seeds!r})")
         if self.seeds > 1000:
             raise FieldError("seeds", f"must be <= 1000 (got {self.seeds})")
-        subs = metatrain_names() + list(BEYOND_EVALS)
+        extra = self.extra
+        subs = metatrain_names(extra) + list(BEYOND_EVALS)
         for s in self.only or []:
             if s not in STAGES and s not in subs and s != BEYOND:
                 raise FieldError(
                     "only",
                     f"unknown stage {s!r} (stages: {', '.join(STAGES)}, {BEYOND}, "
-                    f"{', '.join(BEYOND_EVALS)}; one meta-training: {', '.join(metatrain_names())})",
+                    f"{', '.join(BEYOND_EVALS)}; one meta-training: {', '.join(metatrain_names(extra))})",
                 )
         if self.only is not None and not self.only:
             raise UserError(f"--only: give one or more of {', '.join(STAGES)}")
         if self.device not in ("auto", "cpu", "cuda") and not str(self.device).startswith("cuda:"):
             raise UserError(f"--device: must be cpu, cuda or auto (got {self.device!r})")
-        defaults = default_settings(self.quick, self.seeds)
+        defaults = default_settings(self.quick, self.seeds, extra)
         settings = apply_overrides(defaults, self.overrides)
         seeds = settings["metatrain"]["seeds"]
         if self.seeds_given and seeds != defaults["metatrain"]["seeds"]:
@@ -74,13 +88,14 @@ class ReproduceConfig:
         ``beyond-metatrain-<robot>-<recipe>``)."""
         extra = [BEYOND] if self.beyond or BEYOND in (self.only or []) else []
         if self.only is None:
-            return list(STAGES) + extra
-        singles = [s for s in metatrain_names() if s in self.only]
+            return list(STAGES) + selected_extra(list(STAGES), self.extra) + extra
+        singles = [s for s in metatrain_names(self.extra) if s in self.only]
         if "metatrain" in self.only:
             singles = [s for s in singles if not s.startswith("metatrain-")]
         if BEYOND not in self.only:  # one of the beyond evaluations alone (with what it reads)
             singles += [s for s in BEYOND_EVALS if s in self.only]
-        return [s for s in STAGES if s in self.only] + singles + extra
+        groups = [s for s in STAGES if s in self.only]
+        return groups + selected_extra(groups, self.extra) + singles + extra
 
     @property
     def plans_beyond(self) -> bool:
@@ -92,12 +107,12 @@ class ReproduceConfig:
 BEYOND_EVALS = (f"{BEYOND}-maps", f"{BEYOND}-tables")
 
 
-def metatrain_names() -> list[str]:
-    """The names of the single meta-trainings ``--only`` also accepts (the paper's and the
-    recipes beyond it)."""
+def metatrain_names(extra: tuple[str, ...] = ()) -> list[str]:
+    """The names of the single meta-trainings ``--only`` also accepts (the paper's, the ``extra``
+    baselines' and the recipes beyond the paper)."""
     from warp_critic.reproduce.recipes import RECIPES
 
-    return [f"metatrain-{scene}-{m}" for scene in SCENES for m in METHODS] + [
+    return [f"metatrain-{scene}-{m}" for scene in SCENES for m in (*METHODS, *extra)] + [
         f"{BEYOND}-metatrain-{scene}-{recipe}" for scene in SCENES for recipe in RECIPES[scene]
     ]
 
@@ -109,11 +124,11 @@ def scene_hashes() -> dict[str, str]:
     return {s: load_scene(scene_file(s)).content_hash for s in SCENES}
 
 
-def plan(settings: dict, beyond: bool = False) -> dict[str, dict]:
+def plan(settings: dict, beyond: bool = False, extra: tuple[str, ...] = ()) -> dict[str, dict]:
     """Every stage (sub-stage) of ``settings``: name -> group, hash, settings, depends (dir names);
-    with ``beyond``, also the recipes beyond the paper (:func:`plan_beyond`)."""
+    with ``beyond``, also the recipes beyond the paper (:func:`plan_beyond`); with ``extra``, the
+    stages of those baselines (:func:`~.extra_baselines.plan_extra`)."""
     hashes = scene_hashes()
-    seeds = settings["metatrain"]["seeds"]
     p: dict[str, dict] = {}
     p["toy"] = {
         "group": "toy",
@@ -129,16 +144,7 @@ def plan(settings: dict, beyond: bool = False) -> dict[str, dict]:
     }
     for scene in SCENES:
         for m in METHODS:
-            values = settings["metatrain"][scene][m]
-            name = f"metatrain-{scene}-{m}"
-            p[name] = {
-                "group": "metatrain",
-                "scene": scene,
-                "method": m,
-                "depends": {},
-                "settings": {"values": values, "seeds": seeds, "scene_hash": hashes[scene]},
-                "hash": stage_hash(name, values, seeds, hashes[scene]),
-            }
+            p[f"metatrain-{scene}-{m}"] = metatrain_stage(settings, scene, m, hashes)
     for group, scene in (("maps", "reacher"), ("tables", "kuka")):
         dep = {
             f"metatrain-{scene}-{m}": f"metatrain-{scene}-{m}-{p[f'metatrain-{scene}-{m}']['hash']}"
@@ -161,6 +167,7 @@ def plan(settings: dict, beyond: bool = False) -> dict[str, dict]:
         "depends": p["tables"]["depends"],
         "hash": stage_hash("tables", held, p["tables"]["depends"]),
     }
+    plan_extra(settings, p, hashes, extra)
     if beyond:
         plan_beyond(settings, p, hashes)
     return p
@@ -234,7 +241,7 @@ def needed(rc: ReproduceConfig, stages: dict) -> list[list[str]]:
 
 def stages_method(name: str) -> str:
     """The method of a ``metatrain-<robot>-<method>`` stage name."""
-    return next(m for m in METHODS if name.endswith(f"-{m}"))
+    return next(m for m in ALL_METHODS if name.endswith(f"-{m}"))
 
 
 def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, out: Path):
@@ -269,6 +276,8 @@ def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, 
             if identified:  # the same critics fed their identifier's estimate of the model
                 runs[f"{label}-identified"] = [str(p.relative_to(out)) for p in identified]
         kwargs = {"s": st["settings"], "runs": runs, "device": device, "progress": progress}
+        if "rows" in st:  # an extra baseline's evaluation: only its rows, ours' runs the reference
+            kwargs["only"] = st["rows"]
     reads = tuple(st["depends"].values())
     if group == "maps" and name != "maps":  # beyond-maps: the paper's maps' floors, if complete
         floors = paper_maps_floors(out, st)
@@ -320,7 +329,7 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
     device = resolve_device(rc.device)
     runner = Runner(out)
     t0 = time.perf_counter()
-    stages = plan(settings, beyond=rc.plans_beyond)
+    stages = plan(settings, beyond=rc.plans_beyond, extra=rc.extra)
     call = Call(out, rc.command, rc.selected(), device)  # the folder's ledger
     waves = needed(rc, stages)
     runner.total = sum(  # reads every stage record first: a damaged one refuses the call here

@@ -18,6 +18,7 @@ import numpy as np
 
 from warp_critic.reproduce import ledger
 from warp_critic.reproduce import report_paper as rp
+from warp_critic.reproduce.extra_baselines import merge_rows
 from warp_critic.reproduce.report_analyses import landscape_section, toy_section
 from warp_critic.reproduce.report_beyond import beyond_section
 from warp_critic.reproduce.report_draft import Draft, rel
@@ -83,7 +84,9 @@ def write_report(
     """Write the report of ``out``'s complete stages of ``plan``; ``call`` is this call's id in
     the folder's ledger (:mod:`.ledger`), whose total wall time the header gives."""
     out = Path(out)
-    recs = collect(out, plan, records)
+    recs = merge_rows(
+        collect(out, plan, records), plan
+    )  # an extra baseline's rows join the paper's
     book = ledger.summary(ledger.read(out), open_call=call, open_wall=wall)
     stage_seconds = {r.dir.name: float(r.data["seconds"]) for r in recs.values() if r is not None}
     figs = out / "figures"
@@ -119,7 +122,7 @@ def write_report(
     solved: dict[str, dict[str, list[bool]]] = {}  # robot -> baseline -> per seed
     for scene in SCENES:
         solved[scene] = {}
-        for m in rp.BASELINES:
+        for m in rp.ALL_BASELINES:
             rec = recs.get(f"metatrain-{scene}-{m}")
             if rec is not None:
                 solved[scene][m] = rp.solved_seeds(rec.data["result"], scene)

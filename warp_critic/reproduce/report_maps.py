@@ -10,7 +10,7 @@ from warp_critic.reproduce.report_departures import departures_line
 from warp_critic.reproduce.report_draft import Draft, fmt
 from warp_critic.reproduce.report_plots import figure, plot_goal_maps
 from warp_critic.reproduce.rules import map_reason, map_verdict
-from warp_critic.reproduce.settings import METHOD_LABELS, METHODS
+from warp_critic.reproduce.settings import METHOD_LABELS, METHODS, present
 from warp_critic.reproduce.stages import STAGE_FILE
 
 
@@ -38,8 +38,8 @@ def maps_section(d: Draft) -> None:
         sv = solved.get("reacher", {})
         rp.plot_grid_2d(p5, M, "mass", figure)
         rp.plot_grid_2d(p6, M, "length", figure)
-        gm = {m: M["goals"][m]["mse_mean"] for m in METHODS}
-        frac = {m: float((np.asarray(M["goals"][m]["mse"]) < 0.05).mean()) for m in METHODS}
+        gm = {m: M["goals"][m]["mse_mean"] for m in present(M["goals"])}
+        frac = {m: float((np.asarray(M["goals"][m]["mse"]) < 0.05).mean()) for m in gm}
         best = min(gm, key=gm.__getitem__)
         md += [departures_line("reacher", recs), ""]
         md += [
@@ -108,12 +108,14 @@ def maps_section(d: Draft) -> None:
         verdicts = {"goals": v4}
         for fig_no, kind, png in ((5, "mass", p5), (6, "length", p6)):
             kinds = {"mass": "masses", "length": "lengths"}[kind]
-            means = grid_means[kind]
+            # the claims compare ours with the paper's baselines (an extra one is shown only)
+            claimed = {lab for lab, m, _ in grid_rows[kind] if m in METHODS}
+            means = {k: v for k, v in grid_means[kind].items() if k in claimed}
             others = {k: v for k, v in means.items() if "(ours)" not in k}
             cells = {
                 lab.replace("this run: ", ""): [c[0] for c in vals]
                 for lab, m, vals in grid_rows[kind]
-                if all(c is not None for c in vals)
+                if lab in claimed and all(c is not None for c in vals)
             }
             ours_label = next(k for k in cells if "(ours)" in k)
             v = map_verdict(cells.pop(ours_label), cells)
@@ -124,7 +126,10 @@ def maps_section(d: Draft) -> None:
                     png,
                     f"Figure {fig_no}: MSE at the training goals over the {kinds} of both links (red cross: "
                     f"as trained; one colour scale); grid mean: "
-                    + ", ".join(f"{k.replace('this run: ', '')} {fmt(v)}" for k, v in means.items())
+                    + ", ".join(
+                        f"{k.replace('this run: ', '')} {fmt(v)}"
+                        for k, v in grid_means[kind].items()
+                    )
                     + ".",
                 )
             )

@@ -20,16 +20,20 @@ from pathlib import Path
 
 import numpy as np
 
+from warp_critic.methods import method
 from warp_critic.reproduce.report_plots import diverged_cmap, log_limits
 from warp_critic.reproduce.rules import WINDOW, sample_efficiency, settled_index
-from warp_critic.reproduce.settings import METHOD_LABELS, METHODS
+from warp_critic.reproduce.settings import ALL_METHODS, METHOD_LABELS, METHODS, present
 
 LEVELS = (0.3, 0.1, 0.03)
 #: rad^2 (summed over the joints): a baseline seed "solved the training task" at or below this final
 #: training error -- about the error band our method trains to on each robot (reacher ~0.01,
 #: KUKA ~0.2), so that the comparison is between methods that learned the training task.
 SOLVED = {"reacher": 0.1, "kuka": 0.3}
-BASELINES = ("ddpg", "meta-critic")
+#: the paper's baselines: the claims ("ours below both") compare ours with these
+BASELINES = tuple(m for m in METHODS if method(m).baseline)
+#: every registered baseline: each gets its rows wherever its stages exist
+ALL_BASELINES = tuple(m for m in ALL_METHODS if method(m).baseline)
 
 
 def _fmt(x: float) -> str:
@@ -147,11 +151,13 @@ def solved_cell(cell: dict, solved: list[bool]) -> tuple[float, float] | None:
     return mean, float(np.sqrt(max(var, 0.0)))
 
 
-def method_rows(cells_of, n_cols: int, solved: dict[str, list[bool]], fmt_cell) -> list[tuple]:
+def method_rows(
+    cells_of, n_cols: int, solved: dict[str, list[bool]], fmt_cell, shown=METHODS
+) -> list[tuple]:
     """(label, method, [(mean, std) or None per column]) rows: ours, then each baseline with all
-    seeds and with its solved seeds."""
+    seeds and with its solved seeds; ``shown``: the methods with numbers (default the paper's)."""
     rows: list[tuple] = []
-    for m in METHODS:
+    for m in shown:
         rows.append(
             (
                 f"this run: {METHOD_LABELS[m]}" + (", all seeds" if m != "ours" else ""),
@@ -159,7 +165,7 @@ def method_rows(cells_of, n_cols: int, solved: dict[str, list[bool]], fmt_cell) 
                 [(c["mse_mean"], c["mse_std"]) for c in (cells_of(ci, m) for ci in range(n_cols))],
             )
         )
-        if m in BASELINES:
+        if m in ALL_BASELINES:
             ok = solved.get(m, [])
             label = (
                 f"this run: {METHOD_LABELS[m]}, seeds that solved training ({sum(ok)} of {len(ok)})"
@@ -200,16 +206,17 @@ def plot_grid_2d(path: Path, M: dict, kind: str, figure) -> None:
 
     values = M["masses"] if kind == "mass" else M["lengths"]
     n = len(values)
+    shown = present(M[kind])
     grids = {
         m: np.ma.masked_invalid(np.array([c["mse_mean"] for c in M[kind][m]]).reshape(n, n))
-        for m in METHODS
+        for m in shown
     }
     lo, hi = log_limits(grids.values())
     trained = M["trained_mass"] if kind == "mass" else M["trained_length"]
-    fig = figure(13, 4.2)
-    axes = fig.subplots(1, 3)
+    fig = figure(13 * len(shown) / 3, 4.2)
+    axes = fig.subplots(1, len(shown))
     im = None
-    for ax, m in zip(axes, METHODS):
+    for ax, m in zip(axes, shown):
         im = ax.imshow(
             grids[m].T, origin="lower", cmap=diverged_cmap(), norm=LogNorm(vmin=lo, vmax=hi)
         )
@@ -242,7 +249,7 @@ def grid_summary(M: dict, kind: str, solved: dict[str, list[bool]]) -> tuple[lis
     ti = [int(np.argmin(np.abs(np.asarray(values) - t))) for t in trained]
     k = ti[0] * n + ti[1]
     cells = M[kind]
-    rows = method_rows(lambda ci, m: cells[m][ci], n * n, solved, None)
+    rows = method_rows(lambda ci, m: cells[m][ci], n * n, solved, None, present(cells))
     lines = [
         f"| {kind} grid ({n} x {n}) | mean MSE over the grid | MSE at the trained pair | worst cell |",
         "|---|---|---|---|",

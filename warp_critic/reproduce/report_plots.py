@@ -6,11 +6,12 @@ from pathlib import Path
 
 import numpy as np
 
-from warp_critic.reproduce.settings import METHOD_LABELS, METHODS
+from warp_critic.methods import methods
+from warp_critic.reproduce.settings import METHOD_LABELS, present
 from warp_critic.reproduce.stages import StageRecord
 from warp_critic.running.rundir import save_figure
 
-COLORS = {"ours": "tab:blue", "ddpg": "tab:orange", "meta-critic": "tab:green"}
+COLORS = {m.name: m.colour for m in methods()}
 
 
 def figure(w: float, h: float):
@@ -49,7 +50,7 @@ def plot_metatrain(path: Path, scene: str, recs: dict[str, StageRecord]) -> dict
     fig = figure(11, 4)
     ax_it, ax_env = fig.subplots(1, 2)
     summary = {}
-    for m in METHODS:
+    for m in present(recs):
         rec = recs.get(m)
         if rec is None:
             continue
@@ -91,16 +92,17 @@ def plot_goal_maps(path: Path, res: dict) -> None:
     from matplotlib.colors import LogNorm
 
     ax0, ax1 = np.asarray(res["axis_q1"]), np.asarray(res["axis_q2"])
-    vals = [np.ma.masked_invalid(np.asarray(res["goals"][m]["mse"])) for m in METHODS]
+    shown = present(res["goals"])
+    vals = [np.ma.masked_invalid(np.asarray(res["goals"][m]["mse"])) for m in shown]
     lo, hi = log_limits(vals)
-    fig = figure(13, 4.2)
-    axes = fig.subplots(1, 3)
+    fig = figure(13 * len(shown) / 3, 4.2)
+    axes = fig.subplots(1, len(shown))
     tg = np.asarray(res["train_goals"])
     dq0 = (ax0[1] - ax0[0]) / 2 if len(ax0) > 1 else 0.5
     dq1 = (ax1[1] - ax1[0]) / 2 if len(ax1) > 1 else 0.5
     ext = [ax0[0] - dq0, ax0[-1] + dq0, ax1[0] - dq1, ax1[-1] + dq1]
     im = None
-    for ax, m, v in zip(axes, METHODS, vals):
+    for ax, m, v in zip(axes, shown, vals):
         im = ax.imshow(
             v.T,
             origin="lower",

@@ -6,12 +6,13 @@ from __future__ import annotations
 
 from warp_critic.evaluation.paper import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE3
 from warp_critic.evaluation.seed_uses import seed_note
+from warp_critic.methods import methods
 from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.report_departures import departures_line
 from warp_critic.reproduce.report_draft import Draft
 from warp_critic.reproduce.report_paper import beats_baselines, method_rows
 from warp_critic.reproduce.rules import table_verdict
-from warp_critic.reproduce.settings import METHOD_LABELS, METHODS
+from warp_critic.reproduce.settings import METHOD_LABELS, METHODS, present
 from warp_critic.reproduce.stages import STAGE_FILE
 
 MARK = "✓"
@@ -40,11 +41,7 @@ TABLE3_NOTE = (
     f"is near-constant too, {min(v[0] for v in PAPER_TABLE3['ours'].values()):g}-"
     f"{max(v[0] for v in PAPER_TABLE3['ours'].values()):g})."
 )
-PAPER_ROW = {
-    "ours": "paper: L_critic (ours)",
-    "ddpg": "paper: DDPG",
-    "meta-critic": "paper: Meta Critic",
-}
+PAPER_ROW = {m.name: m.table_label for m in methods() if m.table_label is not None}
 
 
 def _fmt(x: float) -> str:
@@ -73,7 +70,7 @@ def table_markdown(
     lines = ["| Method | " + " | ".join(head(v) for v in values) + " |"]
     lines.append("|---" * (len(values) + 1) + "|")
     if paper is not None:
-        for m in METHODS:
+        for m in (m for m in METHODS if m in paper):  # the methods the paper reports
             row = [
                 f"{paper[m][v][0]:g}({paper[m][v][1]:g})" if v in paper[m] else "—" for v in values
             ]
@@ -92,13 +89,14 @@ def table_markdown(
             + " | ".join(_fmt(x) for x in floor)
             + " |"
         )
-    rows = method_rows(lambda ci, m: cells[(ci, m)], len(values), solved, None)
+    measured = present({m for _, m in cells})  # the paper's methods, and any extra baseline's
+    rows = method_rows(lambda ci, m: cells[(ci, m)], len(values), solved, None, measured)
     out_cells, summary = [], []
     paper_hits = (0, 0)
     for row_label, m, vals in rows:
         shown = []
         for ci, (v, val) in enumerate(zip(values, vals)):
-            ref = paper[m].get(v) if paper is not None else None
+            ref = paper.get(m, {}).get(v) if paper is not None else None
             ok = ref is not None and val is not None and val[0] <= ref[0]
             mark = MARK if m == "ours" else BASELINE_MARK
             shown.append(_cell(val) + (f" {mark}" if ok else ""))
@@ -124,7 +122,7 @@ def table_markdown(
                 }
             )
         lines.append(f"| {row_label} | " + " | ".join(shown) + " |")
-        if paper is not None and "solved" not in row_label:
+        if paper is not None and m in paper and "solved" not in row_label:
             comparable = [ci for ci, v in enumerate(values) if v in paper[m]]
             hits = sum(vals[ci][0] <= paper[m][values[ci]][0] for ci in comparable)
             if m == "ours":

@@ -37,14 +37,27 @@ from typing import Any
 
 from warp_critic.core.errors import FieldError
 from warp_critic.evaluation.presets import preset
+from warp_critic.methods import method, methods
 from warp_critic.reproduce.recipes import RECIPES
 
 STAGES = ("toy", "landscape", "metatrain", "maps", "tables", "tables-heldout")
 #: the recipes beyond the paper (``--beyond``): kept apart, never part of the paper's stages
 BEYOND = "beyond"
 SCENES = ("reacher", "kuka")
-METHODS = ("ours", "ddpg", "meta-critic")
-METHOD_LABELS = {"ours": "L_critic (ours)", "ddpg": "DDPG", "meta-critic": "Meta-Critic"}
+#: the methods reproduced by default (the method registry's, ours first)
+METHODS = tuple(m.name for m in methods() if m.reproduced_by_default)
+METHOD_LABELS = {m.name: m.label for m in methods()}
+#: every registered method, in report order: the report shows those whose stages exist
+ALL_METHODS = tuple(m.name for m in methods())
+#: the baselines ``--baselines`` may add to the default ones (each adds its own stages)
+EXTRA_BASELINES = tuple(m.name for m in methods(baseline=True) if not m.reproduced_by_default)
+
+
+def present(keys) -> tuple[str, ...]:
+    """The methods among ``keys`` (e.g. a stage result's per-method dict), in report order."""
+    return tuple(m for m in ALL_METHODS if m in keys)
+
+
 #: TaskConfig fields of ours' presets that describe the TASK (training distribution), shared with the baselines.
 TASK_FIELDS = ("start_std", "home_starts")
 
@@ -64,23 +77,23 @@ BASELINE_CHECKPOINT_EVERY = 50
 TUNED: dict[str, dict[str, dict[str, float]]] = {"reacher": {"ddpg": {"actor_lr": 1e-3}}}
 
 
-def _metatrain(quick: bool, seeds: list[int]) -> dict:
+def _metatrain(quick: bool, seeds: list[int], extra: tuple[str, ...] = ()) -> dict:
     out: dict[str, Any] = {}
     for scene, name in (("reacher", "reacher"), ("kuka", "kuka-table1")):
         ours = preset(name)
         task = {k: ours[k] for k in TASK_FIELDS if k in ours}
         per = {"ours": ours}
-        for m in ("ddpg", "meta-critic"):
+        for m in (m for m in (*METHODS, *extra) if method(m).baseline):
             per[m] = {
                 **preset(m),
                 **task,
                 "inner_steps": ours.get("inner_steps", 1),
                 **TUNED.get(scene, {}).get(m, {}),
             }
-        for m in METHODS:
+        for m in per:
             per[m].pop("method", None)
             per[m]["record_every"] = 50
-            if m != "ours":
+            if method(m).baseline:
                 per[m].update(
                     iterations=BASELINE_ITERATIONS[scene],
                     checkpoint_every=BASELINE_CHECKPOINT_EVERY,
@@ -92,7 +105,7 @@ def _metatrain(quick: bool, seeds: list[int]) -> dict:
     return out
 
 
-def _quick_metatrain(values: dict, method: str) -> None:
+def _quick_metatrain(values: dict, method_name: str) -> None:
     """Plumbing only: a handful of iterations on short rollouts with small networks."""
     values.update(
         iterations=6,
@@ -102,7 +115,7 @@ def _quick_metatrain(values: dict, method: str) -> None:
         checkpoint_every=3,
         record_every=3,
     )
-    if method != "ours":  # and one alpha search (at the last checkpoint) instead of two
+    if method(method_name).baseline:  # and one alpha search (at the last checkpoint) instead of two
         values.update(
             updates_per_iteration=4,
             warmup_iterations=1,
@@ -138,8 +151,9 @@ def default_seeds(quick: bool) -> int:
     return 2 if quick else 5
 
 
-def default_settings(quick: bool, seeds: int) -> dict[str, dict]:
-    """The settings of every stage for ``--quick`` or the paper, with seeds ``0 .. seeds-1``."""
+def default_settings(quick: bool, seeds: int, extra: tuple[str, ...] = ()) -> dict[str, dict]:
+    """The settings of every stage for ``--quick`` or the paper, with seeds ``0 .. seeds-1``;
+    ``extra``: baselines beyond the default ones (:data:`EXTRA_BASELINES`) trained too."""
     seed_list = list(range(seeds))
     s: dict[str, dict] = {
         "toy": {
@@ -182,7 +196,7 @@ def default_settings(quick: bool, seeds: int) -> dict[str, dict]:
                 "start_std": 1.0,
             },
         },
-        "metatrain": _metatrain(quick, seed_list),
+        "metatrain": _metatrain(quick, seed_list, tuple(extra)),
         BEYOND: _beyond(quick),
         "tables": {
             "stds": [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0],

@@ -129,7 +129,7 @@ def check_landscape(s: dict) -> None:
 def check_metatrain(m: dict) -> dict[str, int]:
     """Every method x robot config against its scene; returns each robot's number of training goals."""
     from warp_critic.core.runtime import MAX_SEED, MAX_SEEDS  # a stage's seeds: one process
-    from warp_critic.reproduce.settings import METHODS, SCENES
+    from warp_critic.reproduce.settings import SCENES
 
     seeds = m["seeds"]
     if not isinstance(seeds, list) or not seeds or len(seeds) > MAX_SEEDS:
@@ -140,7 +140,7 @@ def check_metatrain(m: dict) -> dict[str, int]:
         raise bad("metatrain.seeds", seeds, "must be distinct")
     goals = {}
     for scene in SCENES:
-        for method in METHODS:
+        for method in m[scene]:  # the default methods, and any --baselines added
             cfg, _ = _check_train(
                 scene, method, m[scene][method], seeds, f"metatrain.{scene}.{method}"
             )

@@ -1,13 +1,15 @@
 """New goals around the training goals (the paper's Table 1 sampling), clipped inside the joint
-limits; :mod:`warp_critic.evaluation.metatest` samples its goals with it."""
+limits; meta-test (:mod:`warp_critic.running.metatest_setup`) samples its goals with it."""
 
 from __future__ import annotations
 
 import torch
 
 from warp_critic.core.errors import FieldError
-from warp_critic.evaluation.paper import GOAL_NOISE
 from warp_critic.running.task_inputs import inside_limits
+
+#: the two readings of the paper's "at a distance of N(0, std)" (see :func:`sample_goals`)
+GOAL_NOISE: tuple[str, ...] = ("per-joint", "distance")
 
 
 def sample_goals(
