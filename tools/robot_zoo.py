@@ -217,7 +217,7 @@ def main(argv: list[str] | None = None) -> int:
     for package, path in robot_files():
         if args.only is not None and path.stem not in args.only:
             continue
-        row = import_one(path)
+        row = import_one(path) | {"package": package}
         rows.append(row)
         step = f"{row['dt'] * 1e3:.2f} ms x {row['substeps']}" if row["dof"] else "-"
         print(
@@ -231,6 +231,11 @@ def main(argv: list[str] | None = None) -> int:
     if not args.train:
         return 0
     chosen = [r for r in ok if args.only is None or r["path"].stem in args.only]
+    stems = [r["path"].stem for r in chosen]
+    for r in chosen:  # two packages' reacher.xml: their runs and rows named by package
+        twin = stems.count(r["path"].stem) > 1
+        r["run"] = f"{r['package']}.{r['path'].stem}" if twin else r["path"].stem
+        r["name"] = f"{r['package']}/{r['file']}" if twin else r["file"]
     try:
         args.runs_dir.mkdir(parents=True, exist_ok=True)
         stamp = time.strftime("%Y%m%d-%H%M%S")
@@ -242,10 +247,10 @@ def main(argv: list[str] | None = None) -> int:
         print_header(args)
         print_row("kuka.usda (scenes/)", out, kuka, kuka, args)
         for r in chosen:
-            out = args.runs_dir / f"{r['path'].stem}-{stamp}"
+            out = args.runs_dir / f"{r['run']}-{stamp}"
             with contextlib.redirect_stderr(io.StringIO()):
                 t = train_one(str(r["path"]), out, args.train, args.goals, args.inits)
-            print_row(r["file"], out, t, kuka, args)
+            print_row(r["name"], out, t, kuka, args)
     except UserError as e:
         print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
         return 2
