@@ -162,7 +162,7 @@ def print_row(name: str, out: Path, t: dict, kuka: dict, args) -> None:
     """One robot's row; with ``--floor`` its open-loop floor on the meta-test's goals."""
     floor = f" {floor_mse(out, t['goals'], args.floor_iterations):15.4g}" if args.floor else ""
     print(f"{name:40s} {t['dof']:3d} {t['s_per_it']:6.2f} {t['s_per_it'] / kuka['s_per_it']:6.2f} "
-          f"{t['mse_before']:13.4f} {t['mse_after']:19.4f}{floor}", flush=True)  # fmt: skip
+          f"{t['mse_before']:13.4g} {t['mse_after']:19.4g}{floor}", flush=True)  # fmt: skip
 
 
 def floors_of_runs(args) -> int:
