@@ -20,6 +20,7 @@ import pytest
 from warp_critic.cli.main import main
 from warp_critic.core.errors import SceneError
 from warp_critic.physics import derive
+from warp_critic.physics.balance import upright_joints
 from warp_critic.physics.robot import RobotOptions, load_robot
 
 PURELIB = Path(sysconfig.get_paths()["purelib"])
@@ -144,6 +145,10 @@ def test_jaco_trains_its_arm_with_goals_near_home_and_real_bounds():
     goals = np.array(d["goals"])
     assert np.all(np.abs(goals - scene.home) <= derive.GOAL_REACH + 1e-9)
     assert min(d["max_torque"]) > 1.0  # N m: every joint can move its links (was 0.04 at the base)
+    # its mid-range home is the arm pointing straight up (joints 2 and 3 at pi): balanced, said
+    joints, growth = upright_joints(scene, derive.GRAVITY)
+    assert [scene.joint_names[j] for j in joints] == ["j2n6s300_joint_2", "j2n6s300_joint_3"]
+    assert np.allclose(scene.home[joints], math.pi) and growth > 10.0
 
 
 @pytest.mark.parametrize(
@@ -160,6 +165,7 @@ def test_arms_refused_or_finely_stepped_before_import_at_a_normal_step(path):
     assert scene.dof >= 6
     d = _stable_at_a_normal_step(scene)
     assert d["substeps"] == 4, d["substeps"]  # the KUKA's dt, 2.5 ms
+    assert upright_joints(scene, derive.GRAVITY)[0] == []  # gravity pulls their home pose one way
 
 
 @pytest.mark.parametrize(

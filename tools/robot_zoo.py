@@ -2,7 +2,9 @@
 """Robot zoo: import every robot file of the installed robot-description packages and print a table.
 
 The files: example-robot-data's URDFs (``robots/*/urdf/*.urdf``), differentiable-robot-model's data
-(``diff_robot_data/**/*.urdf``) and gymnasium's MuJoCo assets (``envs/mujoco/assets/*.xml``). Each is
+(``diff_robot_data/**/*.urdf``), gymnasium's MuJoCo assets (``envs/mujoco/assets/*.xml``) and, where
+dm_control is installed (not by the test extra), its control suite's and Kinova arm's MJCF files
+(``suite/*.xml``, ``third_party/kinova/*.xml``). Each is
 imported as ``warp-critic import`` would (``load_robot`` and its derived defaults); the table gives the
 file, the trained DoF, ``dt x substeps`` and the verdict: ``ok`` (with the import's notes: props
 dropped, an arm chain chosen) or the one-line reason it was refused.
@@ -10,10 +12,16 @@ dropped, an arm chain chosen) or the one-line reason it was refused.
 ``--only STEM,..`` keeps those files. ``--train ITERATIONS`` then meta-trains each imported robot for that many
 iterations on the CPU, and the KUKA scene in the same run, and prints per robot: s/iteration and its
 ratio to the KUKA's, the untrained MSE and the MSE after the 3 meta-test updates (goal std 0.1,
-``--goals`` goals x ``--inits`` fresh policies).
+``--goals`` goals x ``--inits`` fresh policies). ``--floor`` adds the open-loop floor on the same
+meta-test goals: the MSE of open-loop torques optimised through the model within the run's torque
+bounds and horizon (``--floor-iterations`` Adam steps at each of two step sizes, the better per goal:
+``warp_critic/reproduce/reach.py``), an upper bound of the best any controller reaches. Without
+``--train``, ``--floor`` reads the newest run of each robot (and of the KUKA) in ``--runs-dir``, as a
+``--train`` pass left it, and prints the table with its floor.
 
     python tools/robot_zoo.py                                   # the import table
     python tools/robot_zoo.py --train 50 --only xarm7,z1,reacher --runs-dir runs/zoo
+    python tools/robot_zoo.py --floor --only xarm7,z1,reacher --runs-dir runs/zoo   # floors afterwards
 
 The import pass takes a few minutes on a 2-core CPU.
 """
@@ -22,6 +30,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import sys
 import sysconfig
 import time
@@ -39,15 +48,17 @@ PACKAGES = {
     ),
     "differentiable-robot-model": (PURELIB / "diff_robot_data", "**/*.urdf"),
     "gymnasium": (PURELIB / "gymnasium/envs/mujoco/assets", "*.xml"),
+    "dm_control": (PURELIB / "dm_control", "suite/*.xml", "third_party/kinova/*.xml"),
 }
+FLOOR_LRS = (0.1, 0.03)  # Adam step sizes of the open-loop search (reach.best_open_loop_floor)
 
 
 def robot_files() -> list[tuple[str, Path]]:
     """(package, file) for every robot file found, sorted within each package."""
     found = []
-    for package, (base, pattern) in PACKAGES.items():
+    for package, (base, *patterns) in PACKAGES.items():
         if base.is_dir():
-            found += [(package, p) for p in sorted(base.glob(pattern))]
+            found += [(package, p) for pattern in patterns for p in sorted(base.glob(pattern))]
     return found
 
 
@@ -92,19 +103,85 @@ def train_one(scene: str, out: Path, iterations: int, goals: int, inits: int) ->
 
     cfg = TrainConfig(scene=scene, iterations=iterations, device="cpu", out=str(out))
     with contextlib.redirect_stderr(io.StringIO()):
-        res = meta_train(cfg, progress=False, record=False)
-    rows = res.metrics
-    per_it = sum(r["seconds"] for r in rows[1:]) / max(len(rows) - 1, 1)  # the first compiles
+        meta_train(cfg, progress=False, record=False)
     tc = MetaTestConfig(
         run_dir=str(out), num_goals=goals, inits=inits, goal_std=0.1, device="cpu",
         out=str(out / "metatest-zoo.json"),
     )  # fmt: skip
-    result = meta_test(tc)
+    meta_test(tc)
+    return read_run(out)
+
+
+def read_run(out: Path) -> dict:
+    """What a trained and meta-tested run directory holds: s/iteration (the first compiles and is
+    left out), the meta-test's MSE before and after the updates, its goals and the trained DoF."""
+    rows = [json.loads(line) for line in (out / "metrics.jsonl").read_text().splitlines() if line]
+    result = json.loads((out / "metatest-zoo.json").read_text())
     return {
-        "s_per_it": per_it,
+        "s_per_it": sum(r["seconds"] for r in rows[1:]) / max(len(rows) - 1, 1),
         "mse_before": result["mse_mean_before"],
         "mse_after": result["mse_mean"],
+        "goals": result["goals"],
+        "dof": len(result["goals"][0]),
     }
+
+
+def newest_run(runs_dir: Path, stem: str) -> Path:
+    """The newest ``STEM-STAMP`` run directory in ``runs_dir`` that was meta-tested."""
+    from warp_critic.core.errors import UserError
+
+    runs = sorted(p.parent for p in runs_dir.glob(f"{stem}-*/metatest-zoo.json"))
+    if not runs:
+        raise UserError(f"--runs-dir: {runs_dir}: no meta-tested run of {stem} (--train first)")
+    return runs[-1]
+
+
+def floor_mse(out: Path, goals: list, iterations: int) -> float:
+    """The open-loop floor's MSE (mean over the goals and joints of the squared final error) on
+    ``goals`` with the run's model, torque bounds and horizon."""
+    import torch
+
+    from warp_critic.physics.scene import Variant
+    from warp_critic.reproduce.reach import best_open_loop_floor
+
+    g = torch.as_tensor(goals, dtype=torch.float32)
+    with contextlib.redirect_stderr(io.StringIO()):
+        best = best_open_loop_floor(
+            str(out), [Variant()], g, iterations=iterations, lrs=list(FLOOR_LRS)
+        )
+    return float(best.mean()) / g.shape[1]
+
+
+def print_header(args) -> None:
+    floor = f" {'open-loop floor':>15s}" if args.floor else ""
+    print(f"{'robot':40s} {'DoF':>3s} {'s/it':>6s} {'x KUKA':>6s} {'MSE untrained':>13s} "
+          f"{'MSE after 3 updates':>19s}{floor}", flush=True)  # fmt: skip
+
+
+def print_row(name: str, out: Path, t: dict, kuka: dict, args) -> None:
+    """One robot's row; with ``--floor`` its open-loop floor on the meta-test's goals."""
+    floor = f" {floor_mse(out, t['goals'], args.floor_iterations):15.4g}" if args.floor else ""
+    print(f"{name:40s} {t['dof']:3d} {t['s_per_it']:6.2f} {t['s_per_it'] / kuka['s_per_it']:6.2f} "
+          f"{t['mse_before']:13.4g} {t['mse_after']:19.4g}{floor}", flush=True)  # fmt: skip
+
+
+def floors_of_runs(args) -> int:
+    """``--floor`` without ``--train``: the table of the newest runs in ``--runs-dir``."""
+    stems = args.only or sorted(
+        {p.parent.name.rsplit("-", 2)[0] for p in args.runs_dir.glob("*-*-*/metatest-zoo.json")}
+        - {"kuka"}
+    )
+    kuka_dir = newest_run(args.runs_dir, "kuka")
+    kuka = read_run(kuka_dir)
+    print(
+        f"the newest runs in {args.runs_dir}, meta-test at goal std 0.1, with the open-loop floor:"
+    )
+    print_header(args)
+    print_row("kuka.usda (scenes/)", kuka_dir, kuka, kuka, args)
+    for stem in stems:
+        out = newest_run(args.runs_dir, stem)
+        print_row(stem, out, read_run(out), kuka, args)
+    return 0
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -116,20 +193,31 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--goals", type=int, default=4, help="meta-test goals (std 0.1)")
     p.add_argument("--inits", type=int, default=2, help="fresh policies per meta-test goal")
     p.add_argument("--runs-dir", type=Path, default=ROOT / "runs" / "zoo")
+    p.add_argument("--floor", action="store_true", help="add the open-loop floor (without --train: "
+                   "of the newest runs in --runs-dir)")  # fmt: skip
+    p.add_argument("--floor-iterations", type=int, default=100, help="Adam steps per step size")
     args = p.parse_args(argv)
     if args.train < 0:
         p.error(f"--train: must be >= 0 (got {args.train})")
+    if args.floor_iterations < 1:
+        p.error(f"--floor-iterations: must be >= 1 (got {args.floor_iterations})")
 
     from warp_critic.core import runtime
     from warp_critic.core.errors import UserError
 
     runtime.init()
+    if args.floor and not args.train:
+        try:
+            return floors_of_runs(args)
+        except UserError as e:
+            print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
+            return 2
     rows = []
     print(f"{'package':27s} {'file':45s} {'DoF':>3s} {'dt x sub-steps':>15s} {'s':>5s}  verdict")
     for package, path in robot_files():
         if args.only is not None and path.stem not in args.only:
             continue
-        row = import_one(path)
+        row = import_one(path) | {"package": package}
         rows.append(row)
         step = f"{row['dt'] * 1e3:.2f} ms x {row['substeps']}" if row["dof"] else "-"
         print(
@@ -143,25 +231,26 @@ def main(argv: list[str] | None = None) -> int:
     if not args.train:
         return 0
     chosen = [r for r in ok if args.only is None or r["path"].stem in args.only]
+    stems = [r["path"].stem for r in chosen]
+    for r in chosen:  # two packages' reacher.xml: their runs and rows named by package
+        twin = stems.count(r["path"].stem) > 1
+        r["run"] = f"{r['package']}.{r['path'].stem}" if twin else r["path"].stem
+        r["name"] = f"{r['package']}/{r['file']}" if twin else r["file"]
     try:
         args.runs_dir.mkdir(parents=True, exist_ok=True)
         stamp = time.strftime("%Y%m%d-%H%M%S")
+        out = args.runs_dir / f"kuka-{stamp}"
         kuka = train_one(
-            str(ROOT / "scenes" / "kuka.usda"), args.runs_dir / f"kuka-{stamp}", args.train,
-            args.goals, args.inits,
-        )  # fmt: skip
+            str(ROOT / "scenes" / "kuka.usda"), out, args.train, args.goals, args.inits
+        )
         print(f"\nmeta-train {args.train} iterations (CPU), meta-test at goal std 0.1:")
-        print(f"{'robot':40s} {'DoF':>3s} {'s/it':>6s} {'x KUKA':>6s} {'MSE untrained':>13s} "
-              f"{'MSE after 3 updates':>19s}")  # fmt: skip
-        print(f"{'kuka.usda (scenes/)':40s} {7:3d} {kuka['s_per_it']:6.2f} {1.0:6.2f} "
-              f"{kuka['mse_before']:13.4f} {kuka['mse_after']:19.4f}", flush=True)  # fmt: skip
+        print_header(args)
+        print_row("kuka.usda (scenes/)", out, kuka, kuka, args)
         for r in chosen:
-            out = args.runs_dir / f"{r['path'].stem}-{stamp}"
+            out = args.runs_dir / f"{r['run']}-{stamp}"
             with contextlib.redirect_stderr(io.StringIO()):
                 t = train_one(str(r["path"]), out, args.train, args.goals, args.inits)
-            print(f"{r['file']:40s} {r['dof']:3d} {t['s_per_it']:6.2f} "
-                  f"{t['s_per_it'] / kuka['s_per_it']:6.2f} {t['mse_before']:13.4f} "
-                  f"{t['mse_after']:19.4f}", flush=True)  # fmt: skip
+            print_row(r["name"], out, t, kuka, args)
     except UserError as e:
         print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
         return 2

@@ -44,12 +44,15 @@ class Actuation:
         props: names of the top-level MJCF bodies dropped (no actuated joint in their subtree).
         text: the MJCF text without the props (None: read the file as it is).
         source: what decided ``actuated`` (``"actuators"``, ``"transmissions"``, ``"effort"``).
+        tendons: joint name -> the MJCF tendon through which an actuator drives it (not modelled:
+            the joint counts as unactuated, and its refusal names the tendon).
     """
 
     actuated: dict[str, float | None] | None = None
     props: list[str] = field(default_factory=list)
     text: str | None = None
     source: str = ""
+    tendons: dict[str, str] = field(default_factory=dict)
 
 
 def _number(text: str | None, default: float = math.nan) -> float:
@@ -118,6 +121,7 @@ def read_mjcf(path: Path) -> Actuation:
         return Actuation()
     classes = _default_classes(root)
     actuated: dict[str, float | None] = {}
+    driven_tendons: set[str] = set()
     for section in root.findall("actuator"):
         for element in section:
             if element.tag not in _ACTUATORS:
@@ -125,8 +129,9 @@ def read_mjcf(path: Path) -> Actuation:
             cls = classes.get(element.get("class", "main"), {})
             attrs = {**cls.get("general", {}), **cls.get(element.tag, {}), **element.attrib}
             joint = attrs.get("joint")
-            if joint is None:
-                continue  # a tendon, site or body transmission drives no one joint
+            if joint is None:  # a tendon, site or body transmission drives no one joint
+                driven_tendons |= {attrs["tendon"]} if "tendon" in attrs else set()
+                continue
             bound = _actuator_bound(element.tag, attrs)
             old = actuated.get(joint)
             actuated[joint] = bound if old is None else (old if bound is None else old + bound)
@@ -141,7 +146,13 @@ def read_mjcf(path: Path) -> Actuation:
                 worldbody.remove(body)
                 props.append(body.get("name") or "(unnamed body)")
     text = ET.tostring(root, encoding="unicode") if props else None
-    return Actuation(actuated=actuated, props=props, text=text, source="actuators")
+    tendons = {
+        j.get("joint", ""): tendon.get("name", "")
+        for tendon in root.iter("fixed")
+        if tendon.get("name") in driven_tendons
+        for j in tendon.findall("joint")
+    }
+    return Actuation(actuated=actuated, props=props, text=text, source="actuators", tendons=tendons)
 
 
 def mjcf_resolver(path: Path):

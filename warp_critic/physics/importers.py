@@ -14,7 +14,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
-from warp_critic.core.errors import SceneError, warn
+from warp_critic.core.errors import SceneError
 from warp_critic.physics.actuation import Actuation, mjcf_resolver, read_mjcf, read_urdf
 
 
@@ -66,11 +66,12 @@ def _mesh_exists(urdf: Path, filename: str) -> bool:
 UNSET = -1.0
 
 
-def import_builder(path: Path, fmt: str) -> tuple[Any, Actuation]:
+def import_builder(path: Path, fmt: str) -> tuple[Any, Actuation, list[str]]:
     """Newton's importer for the file's format (``urdf``, ``mjcf`` or ``usd``: read from its
     content, :mod:`warp_critic.physics.file_format`) -> a ModelBuilder with fixed joints still in
-    (an MJCF's props left out), and what the file actuates. Joints whose file gives no armature or
-    damping carry :data:`UNSET` there."""
+    (an MJCF's props left out), what the file actuates, and the notes for the user (a missing mesh,
+    the props dropped), to be said once the file has passed its checks. Joints whose file gives no
+    armature or damping carry :data:`UNSET` there."""
     import newton
 
     builder = newton.ModelBuilder()
@@ -102,14 +103,15 @@ def import_builder(path: Path, fmt: str) -> tuple[Any, Actuation]:
         text = str(w.message)
         if missing is None and "does not exist" in text and "Asset file" in text:
             missing = text.split("Asset file", 1)[1].split("does not exist")[0].strip()
+    notes = []
     if missing:
-        warn(f"{path}: mesh file {missing} is missing (meshes are not needed for dynamics)")
+        notes.append(f"{path}: mesh file {missing} is missing (meshes are not needed for dynamics)")
     if actuation.props:
-        warn(
+        notes.append(
             f"{path}: dropped {len(actuation.props)} bodies outside the actuated robot "
             f"(no actuated joint): {', '.join(actuation.props)}"
         )
-    return builder, actuation
+    return builder, actuation, notes
 
 
 def check_topology(path: Path, builder) -> None:

@@ -181,7 +181,7 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     from warp_critic.physics import derive
 
     fmt = file_format(path)
-    builder, actuation = import_builder(path, fmt)
+    builder, actuation, notes = import_builder(path, fmt)
     if builder.body_count == 0:
         raise fail(path, "no bodies: not a robot")
     check_topology(path, builder)
@@ -201,10 +201,10 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     repairs = check_robot(path, builder, fmt, chosen, o.lock_mimic, o.repair_inertia)
     jointed = [j for j, t in enumerate(builder.joint_type) if int(t) != fixed]
     trained = {j for j in trained if j in jointed}
-    if note:  # said once the file passed its checks: a refused file gets its one line only
-        from warp_critic.core.errors import warn
+    from warp_critic.core.errors import warn
 
-        warn(note)
+    for line in [*notes, note] if note else notes:  # said once the file passed its checks: a
+        warn(line)  # refused file gets its one line only
     for j in jointed:  # after --joints: a joint that is neither trained nor lockable is refused
         if int(builder.joint_type[j]) not in movable:
             kind = newton.JointType(int(builder.joint_type[j])).name.lower()
@@ -333,11 +333,16 @@ def _trained(
         idle = [j for j in jointed if names[j] not in actuation.actuated]
         if idle and len(idle) < len(jointed):  # none actuated: the file says nothing, train all
             what = {"actuators": "<actuator>", "effort": "<transmission> or non-zero effort"}
+            tendon = actuation.tendons.get(names[idle[0]])
             raise fail(
                 path,
-                f"underactuated: joint {names[idle[0]]!r} has no actuator (no "
-                f"{what.get(actuation.source, 'actuator')} drives it); --joints "
-                "NAME,.. trains the joints named and locks the others at home",
+                f"underactuated: joint {names[idle[0]]!r} has no actuator ("
+                + (
+                    f"an <actuator> drives it only through tendon {tendon!r}, not modelled"
+                    if tendon
+                    else f"no {what.get(actuation.source, 'actuator')} drives it"
+                )
+                + "); --joints NAME,.. trains the joints named and locks the others at home",
             )
     chain = arm_chain(builder, set(jointed))
     if chain is None:
