@@ -66,3 +66,39 @@ def test_a_bent_home_or_no_gravity_is_not_balanced(arms):
     assert upright_note(bent, derive.GRAVITY) is None
     upright = load_robot(arms["upright"])
     assert upright_joints(upright, 0.0) == ([], 1.0)
+
+
+def test_import_home_bends_the_arm_out_of_balance_and_bad_homes_are_one_line(
+    arms, tmp_path, capsys
+):
+    """``warp-critic import --home``: the given joints start there (the goals around them), the
+    warning goes; an unknown joint, a value outside the limits or a malformed list is one line."""
+    from warp_critic.cli.main import main
+    from warp_critic.physics.robot import RobotOptions
+    from warp_critic.physics.scene import load_scene
+
+    bent = load_robot(arms["upright"], RobotOptions(home=(("shoulder", 0.8), ("elbow", -0.6))))
+    assert bent.home.tolist() == pytest.approx([0.8, -0.6])
+    goals = np.asarray(bent.defaults["goals"])
+    assert np.all(np.abs(goals - bent.home) <= 1.0 + 1e-9)  # drawn around the given home
+    assert upright_note(bent, derive.GRAVITY) is None
+    out = tmp_path / "bent.usda"
+    assert main(["import", str(arms["upright"]), "--out", str(out), "--home", "elbow=-0.6"]) == 0
+    assert "upright in balance" not in capsys.readouterr().err
+    assert load_scene(out).home.tolist() == pytest.approx([0.0, -0.6])
+    for flag, words in (
+        ("knee=0.1", "--home: "),
+        ("elbow=2.0", "outside its limits [-1.5, 1.5]"),
+        ("elbow", "expected NAME=number"),
+        ("elbow=0.1,elbow=0.2", "given twice"),
+        ("elbow=nan", "expected NAME=number"),
+    ):
+        argv = ["import", str(arms["upright"]), "--out", str(tmp_path / "x.usda"), "--home", flag]
+        try:  # a flag's syntax is argparse's exit, a value the file refuses main's return code
+            rc = main(argv)
+        except SystemExit as e:
+            rc = e.code
+        assert rc == 2, flag
+        err = capsys.readouterr().err.strip()
+        assert words in err and len(err.splitlines()) == 1, err
+        assert not (tmp_path / "x.usda").exists()

@@ -39,6 +39,7 @@ def cmd_import(args: argparse.Namespace) -> int:
         joints=joints,
         lock_mimic=args.lock_mimic,
         repair_inertia=args.repair_inertia,
+        home=args.home,
     )
     out = write_scene(scene, args.out)
     for repair in getattr(scene, "import_repairs", ()):
@@ -112,6 +113,15 @@ def add_parser(sub) -> None:
         "chain)",
     )
     im.add_argument(
+        "--home",
+        default=None,
+        type=_named_floats,
+        metavar="NAME=V,..",
+        help="the home pose of these joints (rad, or m for a slider), inside their limits; the "
+        "goals, torque bounds and model defaults are derived around it (default: the file's own "
+        "pose inside the limits, else mid-range)",
+    )
+    im.add_argument(
         "--lock-mimic",
         action="store_true",
         help="lock each coupled (mimic) joint where the coupling puts it at the home pose, "
@@ -124,6 +134,22 @@ def add_parser(sub) -> None:
         "instead of refusing the file",
     )
     im.set_defaults(func=cmd_import)
+
+
+def _named_floats(text: str) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for part in (p.strip() for p in text.split(",")):
+        name, eq, value = part.partition("=")
+        try:
+            number = float(value)
+        except ValueError:
+            number = math.nan
+        if not part or not eq or not name.strip() or not math.isfinite(number):
+            raise argparse.ArgumentTypeError(f"expected NAME=number,.. (got {part!r})")
+        if name.strip() in out:
+            raise argparse.ArgumentTypeError(f"joint {name.strip()!r} given twice")
+        out[name.strip()] = number
+    return out
 
 
 def _floats(text: str) -> list[float]:

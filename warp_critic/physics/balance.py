@@ -61,6 +61,6 @@ def upright_note(scene, gravity: float) -> str | None:
         f"{scene.path}: the home pose ({names}) stands the arm upright in balance: gravity pulls "
         f"it neither way there and a lean grows {growth:.0f}x over the horizon, so each start falls "
         "the way its first torques tip it and a critic may learn to drop the arm onto a limit; "
-        "give the imported scene (warp-critic import) a bent warp_critic:homePose and goals, or "
-        "train at --gravity 0"
+        "import it with a bent home (warp-critic import --home NAME=V,..), or train at "
+        "--gravity 0"
     )

@@ -97,7 +97,7 @@ RULES: dict[str, str] = {
     f"{CONTROL_PERIOD / SUBSTEPS[0]:g} s - M_jj (newton integrates damping explicitly)",
     "limit_gains": f"a URDF's or MJCF's joint limits: critically damped springs at {LIMIT_OMEGA:g} rad/s on "
     "the inertia each joint moves with the others free at home, armature included (ke = m w^2, kd = 2 m w)",
-    "home": "the file's own non-zero initial pose inside the limits, else mid-range (0 for continuous joints)",
+    "home": "--home NAME=V,.. where given, else the file's own non-zero initial pose inside the limits, else mid-range (0 for continuous joints)",
     "goals": f"{GOALS} seeded draws U[home - d, home + d], d = min(range/4, {GOAL_REACH}), inside the limits",
     "max_torque": f"min(effort limit or MJCF actuator bound gear x ctrlrange capped by forcerange, c x min(effort limit, {A_MAX:g} rad/s^2 x M_jj(home)) + max |gravity torque| "
     f"over home and goals under the run's gravity), c <= 1 so that no sign combination of those pushes accelerates a joint "

@@ -38,7 +38,7 @@ import copy
 import hashlib
 import json
 import threading
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -56,7 +56,7 @@ from warp_critic.physics.importers import (
     lock,
     short,
 )
-from warp_critic.physics.robot_checks import check_robot
+from warp_critic.physics.robot_checks import check_robot, given_home
 from warp_critic.physics.robot_meshes import link_frames
 from warp_critic.physics.scene import Scene, load_scene
 
@@ -75,6 +75,9 @@ class RobotOptions:
         tip_offset: ``(3,)`` tip in the end-effector body frame [m] (None: ``(0, 0, 0)``).
         joints: names of the joints to train (None: every movable joint); the rest are locked.
         lock_mimic, repair_inertia: the repairs :mod:`warp_critic.physics.robot_checks` may make.
+        home: ``(joint name, value)`` pairs [rad or m] that replace the derived home pose of those
+            joints (None: the file's own pose inside the limits, else mid-range); the goals, the
+            bounds and the model's derived values are then derived around it.
     """
 
     ee_body: str | None = None
@@ -82,9 +85,10 @@ class RobotOptions:
     joints: tuple[str, ...] | None = None
     lock_mimic: bool = False
     repair_inertia: bool = False
+    home: tuple[tuple[str, float], ...] | None = None
 
     def any(self) -> bool:
-        return any(v is not None for v in (self.ee_body, self.tip_offset, self.joints))
+        return any(v is not None for v in (self.ee_body, self.tip_offset, self.joints, self.home))
 
 
 def is_robot_file(path: str | Path) -> bool:
@@ -112,10 +116,12 @@ def load_any(
     joints: Sequence[str] | None = None,
     lock_mimic: bool = False,
     repair_inertia: bool = False,
+    home: Mapping[str, float] | None = None,
 ) -> Scene:
     """A scene file (our ``warp_critic:*`` USD) or a robot file, by what the file is.
 
-    ``tip_offset``: ``(3,)`` [m], or None; ``joints``: joint names, or None (see :class:`RobotOptions`).
+    ``tip_offset``: ``(3,)`` [m], or None; ``joints``: joint names, or None; ``home``: joint name ->
+    home value [rad or m], or None (see :class:`RobotOptions`).
     """
     from warp_critic.physics.robot_checks import check_tip_offset
 
@@ -131,20 +137,14 @@ def load_any(
         joints=None if joints is None else tuple(joints),
         lock_mimic=lock_mimic,
         repair_inertia=repair_inertia,
+        home=None if home is None else tuple((str(k), float(v)) for k, v in home.items()),
     )
     path = Path(path).expanduser()
     if path.exists() and not path.is_dir() and is_robot_file(path):
         return load_robot(path, options)
     if options.any():
-        given = [
-            flag
-            for flag, v in (
-                ("ee_body", ee_body),
-                ("tip_offset", tip_offset),
-                ("joints", joints),
-            )
-            if v is not None
-        ]
+        asked = {"ee_body": ee_body, "tip_offset": tip_offset, "joints": joints, "home": home}
+        given = [flag for flag, v in asked.items() if v is not None]
         raise SceneError(
             f"{path}: {', '.join(given)} apply to robot files (URDF, MJCF, USD without "
             "warp_critic attributes); this scene names its own end effector and joints"
@@ -221,6 +221,7 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     home = {
         j: derive.home_value(lower[j], upper[j], file_home[j], CONTINUOUS_LIMIT) for j in jointed
     }
+    home.update(given_home(path, o.home or (), names, jointed, lower, upper, CONTINUOUS_LIMIT))
     lock(builder, [j for j in jointed if j not in trained], home)
     for j in trained:  # an MJCF actuator's bound caps the joint's effort limit
         bound = (actuation.actuated or {}).get(names[j])

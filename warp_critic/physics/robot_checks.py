@@ -38,7 +38,7 @@ from pathlib import Path
 from warp_critic.core.errors import FieldError
 from warp_critic.physics.inertia_checks import _fail, _g, _short, check_inertias
 
-__all__ = ["IMPORT_RULES", "TIP_OFFSET_MAX", "check_robot", "check_tip_offset"]
+__all__ = ["IMPORT_RULES", "TIP_OFFSET_MAX", "check_robot", "check_tip_offset", "given_home"]
 
 TIP_OFFSET_MAX = 10.0  # m
 LOCK_MIMIC = "import with --lock-mimic to lock it where the coupling puts it at the home pose"
@@ -326,3 +326,33 @@ def _mjcf_efforts(builder) -> None:
             bounds.append(max(abs(float(force[a][0])), abs(float(force[a][1]))))
         if bounds:
             builder.joint_effort_limit[dof] = min(float(builder.joint_effort_limit[dof]), *bounds)
+
+
+def given_home(
+    path: Path,
+    given: Sequence[tuple[str, float]],
+    names: list[str],
+    jointed: list[int],
+    lower: dict[int, float],
+    upper: dict[int, float],
+    unlimited: float,
+) -> dict[int, float]:
+    """Joint index -> the home value the user gave (``--home``), each checked against the file: a
+    movable joint of it, inside its limits (a joint whose limits are at ``unlimited`` has none)."""
+    index = {names[j]: j for j in jointed}
+    out = {}
+    for name, value in given:
+        j = index.get(name)
+        if j is None:
+            raise FieldError(
+                "home", f"{path}: no movable joint {name!r} (its joints: {', '.join(index)})"
+            )
+        limited = max(abs(lower[j]), abs(upper[j])) < unlimited  # newton writes 1e10 for none
+        if not math.isfinite(value) or (limited and not lower[j] <= value <= upper[j]):
+            raise FieldError(
+                "home",
+                f"{path}: joint {name!r} at {value:g} is outside its limits "
+                f"[{lower[j]:g}, {upper[j]:g}]",
+            )
+        out[j] = value
+    return out
