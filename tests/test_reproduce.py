@@ -681,6 +681,24 @@ def test_ledger_records_every_call_and_a_refused_call_writes_nothing(tmp_path, c
     assert (out / "ledger.jsonl").read_bytes() == before
 
 
+def test_ledger_calls_a_run_stopped_inside_a_stage_interrupted(tmp_path):
+    """A stage's run stops with its own ``Interrupted`` (a KeyboardInterrupt subclass that says
+    what it kept): the ledger says interrupted, not failed; any other error says failed."""
+    from warp_critic.reproduce import ledger
+    from warp_critic.running.loop import Interrupted
+
+    for error, status in (
+        (Interrupted("interrupted; checkpoints kept", 799), "interrupted"),
+        (KeyboardInterrupt(), "interrupted"),
+        (RuntimeError("boom"), "failed"),
+    ):
+        out = tmp_path / status / type(error).__name__
+        out.mkdir(parents=True)
+        with pytest.raises(type(error)), ledger.Call(out, "warp-critic reproduce", ["toy"], "cpu"):
+            raise error
+        assert ledger.read(out)[-1]["status"] == status, error
+
+
 def test_ledger_total_wall_time_counts_every_call():
     from warp_critic.reproduce import ledger
 

@@ -167,6 +167,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     from warp_critic.physics.simulator import resolve_device
     from warp_critic.reproduce.executors import make_executor
     from warp_critic.reproduce.pipeline import reproduce
+    from warp_critic.running.loop import Interrupted
 
     rc = config_from_args(args)
     rc.validate()  # one-line UserError before any work
@@ -174,7 +175,16 @@ def run_from_args(args: argparse.Namespace) -> int:
     executor = make_executor(
         getattr(args, "jobs", None), getattr(args, "ray", None), resolve_device(rc.device)
     )
-    result = reproduce(rc, executor)
+    try:
+        result = reproduce(rc, executor)
+    except KeyboardInterrupt as e:
+        # a stage's run says what it kept; the way on is this same command (complete stages are
+        # skipped, a stage's runs resume from their checkpoints), not a run's --resume flag
+        from warp_critic.cli import signals
+
+        kept = str(e).removeprefix("interrupted").lstrip("; ")
+        kept = f"; {kept}" if kept else signals.noted()
+        raise Interrupted(f"interrupted{kept}; the same reproduce command goes on from here") from e
     print(f"report: {result['report']}")
     print(f"recording: rerun {Path(result['out']) / 'report.rrd'}")
     return 0

@@ -88,9 +88,13 @@ class Call:
         append(self.out, {**rec, "time": now()})
 
     def __exit__(self, kind, value, tb) -> None:
-        status = (
-            "done" if kind is None else "interrupted" if kind is KeyboardInterrupt else "failed"
-        )
+        # a run's own stop (``running.loop.Interrupted``) is a KeyboardInterrupt too: interrupted
+        if kind is None:
+            status = "done"
+        elif issubclass(kind, KeyboardInterrupt):
+            status = "interrupted"
+        else:
+            status = "failed"
         append(
             self.out,
             {
