@@ -28,7 +28,8 @@ def test_docs_paper_within_budget():
 def test_every_stage_the_report_read_is_carried_complete():
     """Each stage named in ``results.json`` is complete in the archive ``stages/`` (its record
     compressed, ``stage.json.xz``), nothing else of a stage lies beside the report, and a
-    meta-training stage that an evaluation stage still reads keeps its checkpoints."""
+    meta-training stage of the paper's methods keeps its checkpoints (the critics anyone can
+    meta-test), a recipe's only its record (its critics' scores are in the beyond stages)."""
     import json
 
     results = json.loads((PAPER / "results.json").read_text())
@@ -40,11 +41,14 @@ def test_every_stage_the_report_read_is_carried_complete():
     assert not list((PAPER / "stages").rglob("stage.json")), "an uncompressed stage record"
     text = json.dumps(results)
     for d in stages:
-        if d.name.startswith(("metatrain-kuka-", "beyond-metatrain-kuka-")) or (
+        if d.name.startswith("metatrain-kuka-") or (
             d.name.startswith("metatrain-reacher-") and d.name in text
         ):
             seeds = sorted((d / "run").glob("seed*/checkpoint.pt"))
             assert seeds, f"{d.name}: its critics are gone (the tables/maps stages read them)"
+        if d.name.startswith("beyond-metatrain-"):
+            kept = sorted(p.name for p in d.iterdir())
+            assert kept == ["stage.json.xz"], f"{d.name}: a recipe keeps its record alone: {kept}"
 
 
 @pytest.mark.parametrize("name", ["REPORT.md", "results.json", "README.md"])

@@ -471,7 +471,32 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
     raw = dest / "stages" / tables / "errors.json.xz"  # the raw cells the report cites
     assert lzma.decompress(raw.read_bytes()) == (out / tables / "errors.json").read_bytes()
     assert f"{tables}/errors.json" in (dest / "REPORT.md").read_text()
+    import shutil
+
     from warp_critic.reproduce.stages import MARKER
+
+    # a recipe's meta-training is archived as its record alone, also one archived whole before
+    mine = tmp_path / "with-recipes"
+    shutil.copytree(out, mine, ignore=shutil.ignore_patterns("*.rrd", ".lock"))
+    nominal = next(n for n in read if n.startswith("metatrain-reacher-ours-"))
+    recipes = []
+    for i in range(2):
+        name = f"beyond-metatrain-reacher-r{i}-000000000{i}"
+        shutil.copytree(mine / nominal, mine / name)
+        record = json.loads((mine / name / "stage.json").read_text())
+        (mine / name / "stage.json").write_text(
+            json.dumps({**record, "stage": name.rsplit("-", 1)[0]})
+        )
+        recipes.append(name)
+    shutil.copytree(mine / recipes[1], dest / "stages" / recipes[1])  # an earlier publish's, whole
+    book = json.loads((mine / "results.json").read_text())
+    book["stages"].update({n: {"dir": n} for n in recipes})
+    (mine / "results.json").write_text(json.dumps(book))
+    assert carry.main(["publish", str(mine), str(dest)]) == 0
+    for name in recipes:
+        kept = [p.name for p in (dest / "stages" / name).iterdir()]
+        assert kept in (["stage.json.xz"], ["stage.json"]), (name, kept)
+    assert list((dest / "stages" / nominal / "run").glob("seed*/checkpoint.pt"))
 
     empty = tmp_path / "empty"
     empty.mkdir()

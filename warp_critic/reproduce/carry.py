@@ -20,7 +20,10 @@ output folder on another machine, where ``reproduce`` then skips them and runs o
   Archives written before compression (plain JSON, whole metrics) restore as they are.
 * :func:`publish` copies a finished report (``REPORT.md``, ``results.json``, the ledger and the
   figures) into a folder to commit, such as ``docs/paper``, and saves the stages it read into that
-  folder's ``stages/`` archive, so every number in the report traces to a record there.
+  folder's ``stages/`` archive, so every number in the report traces to a record there. A recipe's
+  meta-training (``beyond-metatrain-*``) is published as its record alone: the beyond stages that
+  scored its critics are published whole, and the critics kept for anyone to meta-test are the
+  paper's methods'.
 
 Each stage is copied into a temporary sibling directory and renamed into place, so an interrupted
 call leaves no half-copied stage behind.
@@ -125,10 +128,17 @@ def _pack(data: bytes) -> bytes:
     return lzma.compress(data, preset=9)
 
 
-def _copy_stage(src: Path, dst_parent: Path, slim: bool, pack: bool) -> None:
+def record_only(data: dict) -> bool:
+    """Whether :func:`publish` keeps only the record of the stage whose ``stage.json`` is ``data``:
+    a recipe's meta-training (its critics were scored by ``beyond-maps`` / ``beyond-tables``)."""
+    return data.get("group") == "metatrain" and str(data.get("stage", "")).startswith("beyond-")
+
+
+def _copy_stage(src: Path, dst_parent: Path, slim: bool, pack: bool, record: bool = False) -> None:
     """``src`` -> ``dst_parent/src.name`` through a temporary sibling renamed into place; ``slim``:
     checkpoints and metrics cut to what is read (a meta-training stage), ``pack``: JSON stored
-    compressed (into an archive); else a packed file is unpacked (out of one)."""
+    compressed (into an archive); else a packed file is unpacked (out of one); ``record``: the
+    stage's record alone."""
     from warp_critic.running.rundir import atomic_write_bytes
 
     final = dst_parent / src.name
@@ -139,6 +149,8 @@ def _copy_stage(src: Path, dst_parent: Path, slim: bool, pack: bool) -> None:
         for path in sorted(src.rglob("*")):
             rel = path.relative_to(src)
             if path.is_dir() or path.name in SKIPPED_NAMES or path.suffix in SKIPPED_SUFFIXES:
+                continue
+            if record and rel != Path(STAGE_FILE):
                 continue
             target = tmp / rel
             target.parent.mkdir(parents=True, exist_ok=True)
@@ -168,11 +180,19 @@ def _copy_stage(src: Path, dst_parent: Path, slim: bool, pack: bool) -> None:
 
 
 def _carry(
-    src: Path, dst: Path, *, slim: bool, pack: bool, started: str, only: set[str] | None = None
+    src: Path,
+    dst: Path,
+    *,
+    slim: bool,
+    pack: bool,
+    started: str,
+    only: set[str] | None = None,
+    records: bool = False,
 ) -> list[str]:
     """Copy the complete stages of ``src`` (those named in ``only``, where given) that ``dst``
     lacks; an identical stage there is skipped, a different or unfinished one refused (``started``
-    says what an unfinished one is)."""
+    says what an unfinished one is). ``records``: a stage :func:`record_only` names is copied as its
+    record alone."""
     have = complete_stages(dst)
     copied = []
     for name, data in complete_stages(src).items():
@@ -187,7 +207,13 @@ def _carry(
             continue
         if (dst / name).exists():
             raise UserError(f"{dst / name}: {started}")
-        _copy_stage(src / name, dst, slim=slim and data["group"] == "metatrain", pack=pack)
+        _copy_stage(
+            src / name,
+            dst,
+            slim=slim and data["group"] == "metatrain",
+            pack=pack,
+            record=records and record_only(data),
+        )
         copied.append(name)
     return copied
 
@@ -244,7 +270,8 @@ def publish(out: Path, dest: Path) -> tuple[list[str], list[str]]:
     ``ledger.jsonl`` (where there is one) and ``figures/*.png``; and save each stage the report
     read (``results.json``'s ``stages``) into the archive ``dest/stages`` as :func:`save` does, so
     every number in the report traces to a record there (``tables-*/errors.json`` named in the
-    report is ``dest/stages/tables-*/errors.json.xz``).
+    report is ``dest/stages/tables-*/errors.json.xz``). A recipe's meta-training is archived as its
+    record alone (:func:`record_only`; also one an earlier call archived whole).
 
     ``dest``'s figures that this report did not draw are removed, and so are the stage records an
     earlier version of this function wrote beside the report; anything else in ``dest`` (a README,
@@ -269,7 +296,21 @@ def publish(out: Path, dest: Path) -> tuple[list[str], list[str]]:
     complete_stages(out)  # an edited stage.json is refused before anything is written
     try:
         (dest / ARCHIVE).mkdir(parents=True, exist_ok=True)
-        _carry(out, dest / ARCHIVE, slim=True, pack=True, started=ARCHIVE_STARTED, only=set(stages))
+        archive = dest / ARCHIVE
+        _carry(
+            out,
+            archive,
+            slim=True,
+            pack=True,
+            started=ARCHIVE_STARTED,
+            only=set(stages),
+            records=True,
+        )
+        for name, data in complete_stages(archive).items():  # archived by an earlier publish
+            if name in stages and record_only(data):
+                for extra in sorted((archive / name).iterdir()):
+                    if extra.name not in (STAGE_FILE, STAGE_FILE + PACKED):
+                        shutil.rmtree(extra) if extra.is_dir() else extra.unlink()
         figures = sorted((out / "figures").glob("*.png"))
         (dest / "figures").mkdir(exist_ok=True)
         keep = {p.name for p in figures}
