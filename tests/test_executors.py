@@ -207,3 +207,48 @@ def test_a_failing_unit_under_jobs_stops_the_driver(tmp_path):
     assert p.returncode == 1, p.stderr[-2000:]
     assert "diverged: iteration 0" in p.stderr
     assert not list(out.glob("metatrain-kuka-ours-*/stage.json"))  # stopped, left to resume
+
+
+def test_unit_progress_reads_the_runs_metrics(tmp_path):
+    """The driver's progress line: the iteration every seed has reached, of the unit's iterations,
+    the rate of the last rows and the time left; an evaluation unit (no metrics) is running."""
+    from warp_critic.reproduce.executors import Unit, unit_progress
+
+    unit = Unit("metatrain-x", "metatrain-x-0", "m:f", {"values": {"iterations": 100}})
+    assert unit_progress(unit, tmp_path) == "reproduce: metatrain-x: running"
+    for seed, n in ((0, 30), (1, 25)):
+        run = tmp_path / "metatrain-x-0" / "run" / f"seed{seed}"
+        run.mkdir(parents=True)
+        rows = [json.dumps({"iteration": i, "seconds": 3.0}) for i in range(n)]
+        (run / "metrics.jsonl").write_text("".join(r + "\n" for r in rows))
+    line = unit_progress(unit, tmp_path)
+    assert line == (
+        "reproduce: metatrain-x: iteration 25 of 100 (2 run(s)), 3.00 s/iteration, "
+        "about 4 min of training left"
+    ), line
+    other = Unit("maps", "metatrain-x-0", "m:f", {})  # no iteration count given
+    assert unit_progress(other, tmp_path) == "reproduce: maps: iteration 25 (2 run(s))"
+
+
+def test_jobs_driver_logs_the_progress_of_its_running_units(tmp_path):
+    """Under --jobs the workers draw no progress bars: the driver logs each running unit's
+    iteration every ``progress_every`` seconds."""
+    from warp_critic.reproduce.executors import LocalProcesses, Unit
+
+    units = [
+        Unit(
+            f"u{k}",
+            f"u{k}-0",
+            "progress_unit:slow_iterations",
+            {"values": {"iterations": 12}, "pause": 0.25},
+        )
+        for k in range(2)
+    ]
+    lines: list[str] = []
+    finished: list[str] = []
+    LocalProcesses(2, progress_every=0.5).run(
+        units, tmp_path, lambda u, result, s: finished.append(u.name), lines.append
+    )
+    assert sorted(finished) == ["u0", "u1"]
+    progress = [x for x in lines if " of 12 (2 run(s))" in x]
+    assert {x.split(":")[1].strip() for x in progress} == {"u0", "u1"}, lines

@@ -10,7 +10,8 @@ complete one, and a restarted driver skips exactly the units that finished.
 * :class:`InProcess` (the default): one after the other, here, with progress bars.
 * :class:`LocalProcesses` (``--jobs N``): ``N`` fresh processes on this machine writing into the
   output folder directly; a process that dies costs only its unit, which is run again (up to
-  ``retries`` times).
+  ``retries`` times). Its units show no progress bars; every ``progress_every`` seconds (10 min)
+  the driver logs a line per running unit from its runs' ``metrics.jsonl`` (:func:`unit_progress`).
 * :class:`RayExecutor` (``--ray [ADDRESS]``): one Ray task per unit with its resource request (one
   GPU for a CUDA run, one CPU otherwise). No shared filesystem is assumed: a task gets the files of
   the stage directories it reads (and of its own unfinished stage directory, to resume) and returns
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import json
 import os
 import signal
 import sys
@@ -73,6 +75,44 @@ def _maybe_fail(unit: Unit) -> None:
     if name == unit.name and marker and not os.path.exists(marker):
         Path(marker).write_text(str(os.getpid()))
         os.kill(os.getpid(), signal.SIGKILL)
+
+
+def unit_progress(unit: Unit, root: Path) -> str:
+    """One line on how far ``unit`` has come, read from the ``metrics.jsonl`` of its runs under
+    ``root/unit.dir_name`` (one row per finished iteration): the iteration every seed has reached,
+    of the unit's ``values["iterations"]`` where it names them, the mean seconds per iteration of
+    the last 20 rows and the time left at that rate. A unit without metrics (an evaluation) is
+    "running"."""
+    files = sorted((Path(root) / unit.dir_name).rglob("metrics.jsonl"))
+    rows: list[list[str]] = []
+    for f in files:
+        try:
+            rows.append(f.read_text(encoding="utf-8").splitlines())
+        except OSError:
+            continue
+    if not rows:
+        return f"reproduce: {unit.name}: running"
+    if not min(len(r) for r in rows):
+        return f"reproduce: {unit.name}: running, no iteration finished yet"
+    done = min(len(r) for r in rows)
+    values = unit.kwargs.get("values")
+    total = values.get("iterations") if isinstance(values, dict) else None
+    seconds = []
+    for line in rows[0][max(0, done - 20) : done]:
+        try:
+            seconds.append(float(json.loads(line)["seconds"]))
+        except (ValueError, KeyError, TypeError):
+            continue
+    runs = f"{len(rows)} run(s)"
+    if not isinstance(total, int) or isinstance(total, bool):
+        return f"reproduce: {unit.name}: iteration {done} ({runs})"
+    line = f"reproduce: {unit.name}: iteration {done} of {total} ({runs})"
+    if seconds and done < total:
+        rate = sum(seconds) / len(seconds)
+        line += (
+            f", {rate:.2f} s/iteration, about {(total - done) * rate / 60:.0f} min of training left"
+        )
+    return line
 
 
 # ------------------------------------------------------------------------------------------------
@@ -184,9 +224,10 @@ class LocalProcesses:
 
     name = "local processes"
 
-    def __init__(self, jobs: int, retries: int = 2):
+    def __init__(self, jobs: int, retries: int = 2, progress_every: float = 600.0):
         check_jobs(jobs)
         self.jobs, self.retries = jobs, retries
+        self.progress_every = progress_every  # s between the driver's progress lines
         self._pool_now: ProcessPoolExecutor | None = None
         # stopping workers mid-unit (Ctrl-C) leaves the pool's queue semaphores to the tracker process,
         # which would warn about them on its own stderr: that is expected here, not a leak
@@ -239,8 +280,18 @@ class LocalProcesses:
                 futures[pool.submit(_process_unit, u, str(root))] = u
             pending = []
             broken = False
+            next_progress = time.monotonic() + self.progress_every
             while futures:
-                finished, _ = wait(futures, return_when=FIRST_COMPLETED)
+                finished, _ = wait(
+                    futures,
+                    timeout=max(0.0, next_progress - time.monotonic()),
+                    return_when=FIRST_COMPLETED,
+                )
+                if time.monotonic() >= next_progress:
+                    for f, u in futures.items():
+                        if f.running() and not f.done():
+                            log(unit_progress(u, root))
+                    next_progress = time.monotonic() + self.progress_every
                 for f in finished:
                     u = futures.pop(f)
                     try:
@@ -292,4 +343,5 @@ __all__ = [
     "LocalProcesses",
     "make_executor",
     "check_jobs",
+    "unit_progress",
 ]
