@@ -252,3 +252,17 @@ def test_jobs_driver_logs_the_progress_of_its_running_units(tmp_path):
     assert sorted(finished) == ["u0", "u1"]
     progress = [x for x in lines if " of 12 (2 run(s))" in x]
     assert {x.split(":")[1].strip() for x in progress} == {"u0", "u1"}, lines
+
+
+def test_an_in_process_call_on_several_cores_names_jobs(monkeypatch):
+    """One line names --jobs where stages could run at once on more than one core; none where they
+    cannot (one core, one stage a wave) or already do."""
+    from warp_critic.reproduce import executors as ex
+
+    monkeypatch.setattr(ex.os, "cpu_count", lambda: 8)
+    line = ex.jobs_hint(ex.InProcess(), [6, 3])
+    assert line is not None and "--jobs 6" in line and "8 cores" in line
+    assert ex.jobs_hint(ex.InProcess(), [1, 1]) is None
+    assert ex.jobs_hint(ex.LocalProcesses(2), [6, 3]) is None
+    monkeypatch.setattr(ex.os, "cpu_count", lambda: 1)
+    assert ex.jobs_hint(ex.InProcess(), [6, 3]) is None

@@ -324,6 +324,7 @@ def reproduce(rc: ReproduceConfig, executor=None) -> dict:
 
 def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict:
     from warp_critic.physics.simulator import resolve_device
+    from warp_critic.reproduce.executors import jobs_hint
     from warp_critic.reproduce.ledger import Call
 
     device = resolve_device(rc.device)
@@ -332,12 +333,15 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
     stages = plan(settings, beyond=rc.plans_beyond, extra=rc.extra)
     call = Call(out, rc.command, rc.selected(), device)  # the folder's ledger
     waves = needed(rc, stages)
-    runner.total = sum(  # reads every stage record first: a damaged one refuses the call here
-        1
+    todo = [  # reads every stage record first: a damaged one refuses the call here
+        [
+            n
+            for n in wave
+            if read_complete(runner.stage_dir(n, stages[n]["hash"]), stages[n]["group"]) is None
+        ]
         for wave in waves
-        for n in wave
-        if read_complete(runner.stage_dir(n, stages[n]["hash"]), stages[n]["group"]) is None
-    )
+    ]
+    runner.total = sum(len(wave) for wave in todo)
     with call:
 
         def done(unit, result, seconds):
@@ -356,6 +360,9 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
         runner.log(
             f"reproduce: {runner.total} stage(s) to run ({executor.name}); complete ones are skipped"
         )
+        hint = jobs_hint(executor, [len(wave) for wave in todo])
+        if hint:
+            runner.log(hint)
         try:
             for wave in waves:
                 units = [
