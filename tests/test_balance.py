@@ -74,8 +74,8 @@ def test_import_home_bends_the_arm_out_of_balance_and_bad_homes_are_one_line(
     """``warp-critic import --home``: the given joints start there (the goals around them), the
     warning goes; an unknown joint, a value outside the limits or a malformed list is one line."""
     from warp_critic.cli.main import main
+    from warp_critic.physics.load import load_scene
     from warp_critic.physics.robot import RobotOptions
-    from warp_critic.physics.scene import load_scene
 
     bent = load_robot(arms["upright"], RobotOptions(home=(("shoulder", 0.8), ("elbow", -0.6))))
     assert bent.home.tolist() == pytest.approx([0.8, -0.6])

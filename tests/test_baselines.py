@@ -21,7 +21,7 @@ from warp_critic.methods.baseline_config import BaselineConfig
 from warp_critic.methods.ddpg import train_ddpg
 from warp_critic.methods.meta_critic import train_meta_critic
 from warp_critic.methods.replay import ReplayBuffer, rewards
-from warp_critic.physics.scene import load_scene
+from warp_critic.physics.load import load_scene
 from warp_critic.running.recording import read_entity_paths, read_times
 from warp_critic.running.rundir import CHECKPOINT_KIND
 from warp_critic.running.task import TaskConfig

@@ -17,7 +17,8 @@ from conftest import ROOT
 from warp_critic.core.errors import DivergenceError
 from warp_critic.learning.networks import Normalizer, init_policy, policy_action
 from warp_critic.learning.rollout import rollout
-from warp_critic.physics.scene import Variant, load_scene
+from warp_critic.physics.load import load_scene
+from warp_critic.physics.scene import Variant
 from warp_critic.physics.simulator import Simulator
 
 

@@ -12,7 +12,8 @@ import pytest
 import torch
 from conftest import KUKA, REACHER
 
-from warp_critic.physics.scene import Variant, load_scene
+from warp_critic.physics.load import load_scene
+from warp_critic.physics.scene import Variant
 from warp_critic.physics.simulator import AUTO_PICKS_CUDA, Simulator, resolve_device
 
 

@@ -15,7 +15,8 @@ from warp_critic.learning.critic import Critic
 from warp_critic.learning.networks import MLPPolicy, Normalizer, init_policy
 from warp_critic.learning.outer import meta_loss
 from warp_critic.learning.rollout import DIVERGED, settled_worlds
-from warp_critic.physics.scene import Variant, load_scene
+from warp_critic.physics.load import load_scene
+from warp_critic.physics.scene import Variant
 from warp_critic.physics.simulator import Simulator
 
 GOAL = [0.5, 0.3]

@@ -17,8 +17,8 @@ import torch
 from conftest import REACHER
 
 from warp_critic.physics.descriptor import PER_BODY, PER_JOINT, DynamicsDescriptor
+from warp_critic.physics.load import load_scene
 from warp_critic.physics.redraw import set_variants
-from warp_critic.physics.scene import load_scene
 from warp_critic.physics.variants import Variant
 
 

@@ -15,7 +15,8 @@ from warp_critic.learning.outer import meta_loss
 from warp_critic.learning.rollout import Trajectory
 from warp_critic.methods import ours as train
 from warp_critic.physics.inertia import NominalInertia
-from warp_critic.physics.scene import Variant, load_scene
+from warp_critic.physics.load import load_scene
+from warp_critic.physics.scene import Variant
 from warp_critic.physics.simulator import Simulator
 from warp_critic.running.rundir import load_checkpoint
 

@@ -5,6 +5,9 @@
   relative ones -- and so is every module-path string (``"warp_critic.x.y:func"``,
   ``"warp_critic.x.y"``) that a registry imports later. The imports up a layer that exist today are
   listed in :data:`KNOWN_UPWARD`: a new one fails, and so does a listed one that is gone.
+* No import circle: no module reaches itself through the modules it imports (at the top, in
+  functions, under ``TYPE_CHECKING``, or by a module-path string), so an import inside a function
+  never hides one. A package's ``__init__`` counts as importing nothing: its exports are lazy.
 * Every module has at most 400 lines (the ones still over are listed, and must stay listed only
   while they are over).
 * ``docs/design.md``'s module table is the one ``tools/design_table.py`` generates: every module,
@@ -154,6 +157,81 @@ def test_no_module_imports_a_later_layer():
     )
     gone = KNOWN_UPWARD - set(found)
     assert not gone, f"no longer imported up a layer: remove from KNOWN_UPWARD: {sorted(gone)}"
+
+
+def import_graph(package: Path = PACKAGE) -> dict[str, set[str]]:
+    """Module -> the modules of the package it imports, every form (``from pkg import mod`` names
+    ``pkg.mod`` where that is a module); a package ``__init__`` imports nothing (lazy exports)."""
+    modules = {module_name(p, package): p for p in sorted(package.rglob("*.py"))}
+    graph: dict[str, set[str]] = {}
+    for module, path in modules.items():
+        if path.name == "__init__.py":
+            graph[module] = set()
+            continue
+        targets = set()
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for target, _ in references(path.read_text(encoding="utf-8"), module):
+            targets.add(target)
+        for node in ast.walk(tree):  # ``from warp_critic.physics import derive``: the module
+            if isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                targets |= {f"{node.module}.{a.name}" for a in node.names}
+        graph[module] = {t for t in targets if t in modules and t != module}
+    return graph
+
+
+def circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The import circles of ``graph``: its strongly connected parts of two or more modules."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            part = []
+            while True:
+                w = stack.pop()
+                part.append(w)
+                if w == v:
+                    break
+            if len(part) > 1:
+                found.append(sorted(part))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_no_import_circle():
+    assert circles(import_graph()) == [], (
+        "modules that import each other (move the shared piece down)"
+    )
+
+
+def test_an_import_circle_hidden_in_a_function_is_found(tmp_path):
+    pkg = tmp_path / "warp_critic"
+    (pkg / "physics").mkdir(parents=True)
+    (pkg / "physics" / "__init__.py").write_text("LAZY = {'warp_critic.physics.a': ('f',)}\n")
+    (pkg / "physics" / "a.py").write_text("from warp_critic.physics import b\n")
+    (pkg / "physics" / "b.py").write_text("def f():\n    from warp_critic.physics.c import g\n")
+    (pkg / "physics" / "c.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import warp_critic.physics.a\n"
+    )
+    (pkg / "physics" / "d.py").write_text("from warp_critic.physics.a import f\n")
+    assert circles(import_graph(pkg)) == [
+        ["warp_critic.physics.a", "warp_critic.physics.b", "warp_critic.physics.c"]
+    ]
+    (pkg / "physics" / "c.py").write_text("x = 1\n")
+    assert circles(import_graph(pkg)) == []
 
 
 def test_every_module_has_at_most_400_lines():

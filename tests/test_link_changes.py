@@ -14,7 +14,8 @@ from test_bridge import drm_robot, drm_step
 
 from warp_critic.core.errors import FieldError
 from warp_critic.physics.link_changes import parse_changes
-from warp_critic.physics.scene import Variant, load_scene
+from warp_critic.physics.load import load_scene
+from warp_critic.physics.scene import Variant
 from warp_critic.physics.simulator import Simulator
 
 

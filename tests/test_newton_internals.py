@@ -38,7 +38,8 @@ def pin(ok: bool, what: str) -> None:
 @pytest.fixture(scope="module")
 def sim():
     from warp_critic.core import runtime
-    from warp_critic.physics.scene import Variant, load_scene
+    from warp_critic.physics.load import load_scene
+    from warp_critic.physics.scene import Variant
     from warp_critic.physics.simulator import Simulator
 
     runtime.init_warp()

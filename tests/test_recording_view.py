@@ -23,7 +23,7 @@ from warp_critic.running.recording_view import (
 
 def drawing_of(scene_path: str) -> tuple[RobotDrawing, object]:
     from warp_critic.core import runtime
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.load import load_scene
     from warp_critic.physics.variants import Variant
 
     runtime.init()
@@ -105,7 +105,7 @@ def test_a_mesh_robot_logs_its_meshes_once_then_only_their_transforms(mesh_arm):
     """Each link mesh's geometry is logged once, statically, per entity; a later pose logs only
     its transform (a small recording); no line strips; the camera frames the meshes' extent."""
     from warp_critic.core import runtime
-    from warp_critic.physics.robot import load_any
+    from warp_critic.physics.load import load_any
     from warp_critic.physics.variants import Variant
 
     runtime.init()

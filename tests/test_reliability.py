@@ -385,7 +385,7 @@ def test_ray_address_must_speak_grpc():
 
 
 def test_config_records_the_scene_file_and_its_content_hash(tmp_path):
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.load import load_scene
 
     run = tmp_path / "run"
     assert main(["meta-train", REACHER, *TINY, "--iterations", "1", "--out", str(run)]) == 0

@@ -189,7 +189,7 @@ def test_a_file_that_cannot_be_trained_never_gives_a_traceback(path, reason, tmp
 def test_import_writes_the_model_and_its_help_states_the_rules(tmp_path, capfd):
     """The written scene carries the file's armature and the derived damping/limit springs; the
     help states the armature, damping and torque rules."""
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.load import load_scene
 
     out = tmp_path / "xarm7.usda"
     path = ERD / "xarm_description/urdf/xarm7.urdf"

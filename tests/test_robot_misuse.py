@@ -245,7 +245,7 @@ def _import(tmp_path, capfd, name: str, text: str, *flags: str):
 
 def test_repair_inertia_projects_to_the_nearest_valid_tensor_and_records_it(tmp_path, capfd):
     from warp_critic.physics.inertia_checks import inertia_problem, nearest_valid
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.load import load_scene
 
     stdout, _, repairs = _import(
         tmp_path, capfd, "r.urdf", urdf(inertia=TRIANGLE), "--repair-inertia"

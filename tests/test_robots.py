@@ -201,7 +201,7 @@ def test_derived_home_goals_torques_and_energy_cap_by_hand(two_link):
     assert d["gravity"] == 9.81
     from conftest import KUKA
 
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.load import load_scene
 
     kuka = load_scene(KUKA).defaults
     for key in derive.KUKA:
@@ -379,7 +379,7 @@ def test_import_round_trip_trains_to_the_same_first_iteration(two_link, tmp_path
     assert "warp_critic:goals" in text and "warp_critic:maxTorque" in text
     code, err = _run(["import", str(two_link), "--out", str(out)], capfd)
     assert code == 2 and "never overwrites" in err and len(err.strip().splitlines()) == 1
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.load import load_scene
 
     scene, robot = load_scene(out), load_robot(two_link)
     assert not getattr(scene, "derived", False)  # a plain scene now: its attributes are the truth

@@ -24,7 +24,8 @@ from conftest import ROOT, SCENES
 
 from warp_critic.core.errors import SceneError, UserError
 from warp_critic.physics import schema
-from warp_critic.physics.scene import Variant, load_scene
+from warp_critic.physics.load import load_scene
+from warp_critic.physics.scene import Variant
 
 DT = 1e-2  # s; any dt gives the same qdd (see the module docstring)
 
@@ -808,7 +809,7 @@ def test_edited_scene_file_is_read_again_in_the_same_process(tmp_path):
 _HASH_SCRIPT = """
 import json, shutil, sys
 from pathlib import Path
-from warp_critic.physics.scene import load_scene
+from warp_critic.physics.load import load_scene
 src, out = Path(sys.argv[1]), Path(sys.argv[2])
 hashes = []
 for k in range(3):

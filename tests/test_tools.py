@@ -653,7 +653,7 @@ def test_scene_presets_take_their_values_from_the_scene(tmp_path, monkeypatch):
     """A meta-training preset names settings; the numbers are the scene's (one place to edit)."""
     import warp_critic.physics.scene as scene_module
     from warp_critic.evaluation.presets import PRESETS, SCENES, FromScene, preset
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.load import load_scene
 
     for name, entry in PRESETS.items():
         if isinstance(entry, FromScene):

@@ -16,7 +16,7 @@ from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
 from warp_critic.methods import ours as train
 from warp_critic.methods.ours import TrainConfig
 from warp_critic.physics import bridge
-from warp_critic.physics.scene import load_scene
+from warp_critic.physics.load import load_scene
 from warp_critic.running.recording import read_entity_paths, read_times
 from warp_critic.running.rundir import load_checkpoint
 
@@ -141,7 +141,8 @@ def test_outer_gradient_reaches_the_critic_through_model_and_inner_update(tmp_pa
     from warp_critic.learning.critic import Critic
     from warp_critic.learning.networks import MLPPolicy, Normalizer, init_policy
     from warp_critic.learning.outer import meta_loss
-    from warp_critic.physics.scene import Variant, load_scene
+    from warp_critic.physics.load import load_scene
+    from warp_critic.physics.scene import Variant
     from warp_critic.physics.simulator import Simulator
 
     scene = load_scene(REACHER)

@@ -15,8 +15,8 @@ import torch
 from conftest import REACHER
 
 from warp_critic.core.errors import FieldError
+from warp_critic.physics.load import load_scene
 from warp_critic.physics.redraw import BODY_FIELDS, DERIVED_FIELDS, JOINT_FIELDS, set_variants
-from warp_critic.physics.scene import load_scene
 from warp_critic.physics.variant_draws import (
     draw,
     format_ranges,

@@ -44,8 +44,13 @@ def bench_newton(
 ) -> tuple[float, float]:
     """(fwd+bwd, fwd) world-steps/s of the checkout whose ``warp_critic`` is imported."""
     try:
-        from warp_critic.physics.scene import Variant, load_scene
+        from warp_critic.physics.scene import Variant
         from warp_critic.physics.simulator import Simulator
+
+        try:
+            from warp_critic.physics.load import load_scene
+        except ImportError:  # before physics/load.py (e.g. 11105f8)
+            from warp_critic.physics.scene import load_scene
     except ImportError:  # before the layer folders (e.g. 4268102)
         from warp_critic.scene import Variant, load_scene
         from warp_critic.simulator import Simulator

@@ -38,7 +38,7 @@ def run_case(tile: bool, worlds: int, steps: int, repeats: int) -> dict:
 
     from warp_critic.core import runtime
     from warp_critic.physics.bridge import NewtonBridge
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.load import load_scene
     from warp_critic.physics.schema import STANDARD_GRAVITY
     from warp_critic.physics.variants import Variant
 

@@ -92,7 +92,7 @@ def settings(n: int, seed: int) -> list[dict]:
 def train_one(scene: str, method: str, setting: dict, args, out: Path) -> dict:
     from warp_critic.methods.ddpg import train_ddpg
     from warp_critic.methods.meta_critic import aux_alive, train_meta_critic
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.load import load_scene
     from warp_critic.reproduce.metatrain import make_config, scene_file
     from warp_critic.reproduce.settings import default_settings
 

@@ -16,7 +16,8 @@ __all__, __getattr__, __dir__ = lazy_exports(
     {
         "warp_critic.core.errors": ("UserError", "FieldError", "SceneError", "DivergenceError"),
         "warp_critic.core.runtime": ("init",),
-        "warp_critic.physics.scene": ("Scene", "load_scene"),
+        "warp_critic.physics.scene": ("Scene",),
+        "warp_critic.physics.load": ("load_scene",),
         "warp_critic.physics.variants": ("Variant",),
         "warp_critic.physics.simulator": ("Simulator",),
         "warp_critic.running.rundir": ("RunDir",),

@@ -1,6 +1,6 @@
 """``warp-critic import``: a robot file (URDF, MJCF, USD) written as a warp-critic scene.
 
-The work is :func:`warp_critic.physics.robot.load_any` (the file read, checked and given the model it
+The work is :func:`warp_critic.physics.load.load_any` (the file read, checked and given the model it
 lacks) and :func:`warp_critic.physics.export.write_scene`; registered in
 ``warp_critic/cli/main.py``'s ``build_parser``. :func:`derived_rules_epilog` is the rules text that
 ``meta-train``, ``baseline`` and ``import`` print under ``--help``.
@@ -20,7 +20,7 @@ __all__ = ["add_parser", "cmd_import", "derived_rules_epilog"]
 def cmd_import(args: argparse.Namespace) -> int:
     from warp_critic.physics.export import write_scene
     from warp_critic.physics.file_format import file_format
-    from warp_critic.physics.robot import load_any
+    from warp_critic.physics.load import load_any
 
     robot = args.robot
     if Path(robot).is_file() and file_format(robot) == "scene":

@@ -108,7 +108,8 @@ def preset(name: str) -> dict[str, Any]:
     entry = _lookup(PRESETS, name)
     if not isinstance(entry, FromScene):
         return entry
-    from warp_critic.physics.scene import load_scene, scenes_dir
+    from warp_critic.physics.load import load_scene
+    from warp_critic.physics.scene import scenes_dir
 
     scene = load_scene(scenes_dir() / f"{SCENES[name]}.usda")
     defaults = scene.defaults

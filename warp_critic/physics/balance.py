@@ -19,6 +19,8 @@ import math
 
 import numpy as np
 
+from warp_critic.physics import derive
+
 LEAN = 0.01  # rad: a pose is balanced when gravity there pulls less than this lean would
 GROWTH = 10.0  # x over the horizon: a slower fall is no concern
 EPS = 1e-3  # rad: the finite-difference step of the gravity stiffness
@@ -27,8 +29,6 @@ EPS = 1e-3  # rad: the finite-difference step of the gravity stiffness
 def upright_joints(scene, gravity: float) -> tuple[list[int], float]:
     """The joints of the fastest-growing fall from the home pose where that pose is balanced
     (empty where it is not) and the fall's growth over the horizon (x)."""
-    from warp_critic.physics import derive
-
     if gravity == 0.0:
         return [], 1.0
     n, home = scene.dof, np.asarray(scene.home, dtype=np.float64)

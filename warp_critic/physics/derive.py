@@ -301,12 +301,6 @@ def derive_defaults(scene, gravity: float = GRAVITY) -> dict[str, Any]:
     """The training defaults of ``scene`` (``Scene.defaults`` keys) by the rules of this module, at
     ``gravity`` [m/s^2]: the torque bounds hold the arm against that gravity, and the probe runs
     under it (``--gravity 0``: no holding share, a torque-mode arm's bounds)."""
-    from warp_critic.core.errors import warn
-    from warp_critic.physics.balance import upright_note
-
-    note = upright_note(scene, gravity)
-    if note:
-        warn(note)
     goals = draw_goals(scene)
     max_torque = torque_bounds(scene, goals, gravity)
     dt, substeps = time_step(scene, max_torque, gravity)

@@ -14,6 +14,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 from warp_critic.core.errors import SceneError
+from warp_critic.physics.usd_scene import _first_line
 
 __all__ = ["USD_SUFFIXES", "file_format"]
 
@@ -110,8 +111,6 @@ def _usd_kind(path: Path) -> str:
         if stage is not None:
             stage.Reload()  # a file changed on disk since this process read it
     except Exception as exc:  # pxr.Tf.ErrorException and friends
-        from warp_critic.physics.usd_scene import _first_line
-
         raise _fail(path, f"not a readable USD file ({_first_line(exc)})") from None
     if stage is None:
         raise _fail(path, "not a readable USD file")

@@ -16,6 +16,7 @@ from typing import Any
 
 from warp_critic.core.errors import SceneError
 from warp_critic.physics.actuation import Actuation, mjcf_resolver, read_mjcf, read_urdf
+from warp_critic.physics.robot_meshes import mesh_path
 
 
 def fail(path: Path, problem: str) -> SceneError:
@@ -56,7 +57,6 @@ def _urdf_without_meshes(path: Path) -> tuple[str, str | None, ET.Element]:
 
 def _mesh_exists(urdf: Path, filename: str) -> bool:
     """Whether a URDF mesh reference resolves to a file (package:// searched up from the URDF)."""
-    from warp_critic.physics.robot_meshes import mesh_path
 
     return mesh_path(urdf, filename) is not None
 

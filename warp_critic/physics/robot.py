@@ -38,14 +38,16 @@ import copy
 import hashlib
 import json
 import threading
-from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from warp_critic.core.errors import SceneError
+from warp_critic.core.errors import SceneError, warn
+from warp_critic.physics import derive
+from warp_critic.physics.actuation import arm_chain
+from warp_critic.physics.balance import upright_note
 from warp_critic.physics.file_format import USD_SUFFIXES, file_format
 from warp_critic.physics.importers import (
     check_topology,
@@ -58,9 +60,9 @@ from warp_critic.physics.importers import (
 )
 from warp_critic.physics.robot_checks import check_robot, given_home
 from warp_critic.physics.robot_meshes import link_frames
-from warp_critic.physics.scene import Scene, load_scene
+from warp_critic.physics.scene import Scene
 
-__all__ = ["RobotOptions", "ROBOT_SUFFIXES", "is_robot_file", "load_any", "load_robot"]
+__all__ = ["RobotOptions", "ROBOT_SUFFIXES", "is_robot_file", "load_robot"]
 
 ROBOT_SUFFIXES = (".urdf", ".xml", ".mjcf")
 CONTINUOUS_LIMIT = 1e9  # |limit| at or beyond this: a joint without limits (newton writes 1e10)
@@ -93,9 +95,7 @@ class RobotOptions:
 
 def is_robot_file(path: str | Path) -> bool:
     """A URDF/MJCF file, or a USD file with no ``warp_critic:*`` attribute at all (a scene file that
-    lacks one of ours is a broken scene, reported as such by :func:`load_scene`)."""
-    from warp_critic.physics.file_format import file_format
-
+    lacks one of ours is a broken scene, reported as such by :func:`warp_critic.physics.load.load_scene`)."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix in ROBOT_SUFFIXES or suffix == ".xacro":
@@ -106,50 +106,6 @@ def is_robot_file(path: str | Path) -> bool:
         return file_format(path) == "usd"
     except SceneError:  # an unreadable file: load_scene says why
         return False
-
-
-def load_any(
-    path: str | Path,
-    *,
-    ee_body: str | None = None,
-    tip_offset: Sequence[float] | None = None,
-    joints: Sequence[str] | None = None,
-    lock_mimic: bool = False,
-    repair_inertia: bool = False,
-    home: Mapping[str, float] | None = None,
-) -> Scene:
-    """A scene file (our ``warp_critic:*`` USD) or a robot file, by what the file is.
-
-    ``tip_offset``: ``(3,)`` [m], or None; ``joints``: joint names, or None; ``home``: joint name ->
-    home value [rad or m], or None (see :class:`RobotOptions`).
-    """
-    from warp_critic.physics.robot_checks import check_tip_offset
-
-    tip: tuple[float, float, float] | None = None
-    if tip_offset is not None:
-        if len(tip_offset) != 3:
-            raise SceneError(f"{path}: tip_offset needs 3 values x,y,z (got {len(tip_offset)})")
-        tip = (float(tip_offset[0]), float(tip_offset[1]), float(tip_offset[2]))
-        check_tip_offset(tip)
-    options = RobotOptions(
-        ee_body=ee_body,
-        tip_offset=tip,
-        joints=None if joints is None else tuple(joints),
-        lock_mimic=lock_mimic,
-        repair_inertia=repair_inertia,
-        home=None if home is None else tuple((str(k), float(v)) for k, v in home.items()),
-    )
-    path = Path(path).expanduser()
-    if path.exists() and not path.is_dir() and is_robot_file(path):
-        return load_robot(path, options)
-    if options.any():
-        asked = {"ee_body": ee_body, "tip_offset": tip_offset, "joints": joints, "home": home}
-        given = [flag for flag, v in asked.items() if v is not None]
-        raise SceneError(
-            f"{path}: {', '.join(given)} apply to robot files (URDF, MJCF, USD without "
-            "warp_critic attributes); this scene names its own end effector and joints"
-        )
-    return load_scene(path)
 
 
 _CACHE: dict[tuple, Scene] = {}
@@ -178,8 +134,6 @@ def load_robot(path: str | Path, options: RobotOptions = RobotOptions()) -> Scen
 def _load(path: Path, options: RobotOptions) -> Scene:
     import newton
 
-    from warp_critic.physics import derive
-
     fmt = file_format(path)
     builder, actuation, notes = import_builder(path, fmt)
     if builder.body_count == 0:
@@ -201,8 +155,6 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     repairs = check_robot(path, builder, fmt, chosen, o.lock_mimic, o.repair_inertia)
     jointed = [j for j, t in enumerate(builder.joint_type) if int(t) != fixed]
     trained = {j for j in trained if j in jointed}
-    from warp_critic.core.errors import warn
-
     for line in [*notes, note] if note else notes:  # said once the file passed its checks: a
         warn(line)  # refused file gets its one line only
     for j in jointed:  # after --joints: a joint that is neither trained nor lockable is refused
@@ -318,8 +270,6 @@ def _trained(
     """The joints to train (the others are locked at home) and, for an arm with a hand, the hand
     body (the default end effector) and the note that says so: ``--joints``, else what the file
     actuates."""
-    from warp_critic.physics.actuation import arm_chain
-
     if options.joints is not None:
         by_name = {names[j]: j for j in jointed}
         unknown = [n for n in options.joints if n not in by_name]
@@ -371,11 +321,9 @@ class RobotScene(Scene):
     @property
     def _defaults(self) -> dict[str, Any]:
         if self._derived_values is None:
-            from warp_critic.physics import derive
-
             with self._derive_lock:
                 if self._derived_values is None:
-                    self._derived_values = derive.derive_defaults(self)
+                    self._derived_values = _derive(self, derive.GRAVITY)
         return self._derived_values
 
     @_defaults.setter
@@ -387,11 +335,18 @@ class RobotScene(Scene):
     def defaults_at(self, gravity: float) -> dict[str, Any]:
         """The derived defaults (a copy) for a run under ``gravity`` [m/s^2] instead of the rules'
         9.81: the torque bounds and the time step depend on it (``derive.derive_defaults``)."""
-        from warp_critic.physics import derive
-
         if float(gravity) == derive.GRAVITY:
             return self.defaults
         with self._derive_lock:
             if float(gravity) not in self._at_gravity:
-                self._at_gravity[float(gravity)] = derive.derive_defaults(self, float(gravity))
+                self._at_gravity[float(gravity)] = _derive(self, float(gravity))
         return copy.deepcopy(self._at_gravity[float(gravity)])
+
+
+def _derive(scene: RobotScene, gravity: float) -> dict[str, Any]:
+    """The robot's derived defaults under ``gravity`` [m/s^2], after one warning line where its
+    home pose balances it upright (:mod:`warp_critic.physics.balance`)."""
+    note = upright_note(scene, gravity)
+    if note:
+        warn(note)
+    return derive.derive_defaults(scene, gravity)

@@ -36,6 +36,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError
+from warp_critic.physics import derive
+from warp_critic.physics.importers import lock
 from warp_critic.physics.inertia_checks import _fail, _g, _short, check_inertias
 
 __all__ = ["IMPORT_RULES", "TIP_OFFSET_MAX", "check_robot", "check_tip_offset", "given_home"]
@@ -195,8 +197,6 @@ def _poly_text(poly: list[float], leader: str | None) -> str:
 
 
 def _lock_follower(path: Path, builder, follower: str, leader: str | None, poly) -> str:
-    from warp_critic.physics import derive
-    from warp_critic.physics.importers import lock
 
     labels = [_short(lb) for lb in builder.joint_label]
     if follower not in labels or (leader is not None and leader not in labels):

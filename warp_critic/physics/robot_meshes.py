@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from warp_critic.physics.file_format import file_format
+
 IDENTITY = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
 
 
@@ -73,8 +75,6 @@ def link_meshes(scene) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
     scene's links (none for other scenes): ``local`` is the mesh's frame in the body (body -1: the
     world)."""
     import warp as wp
-
-    from warp_critic.physics.file_format import file_format
 
     frames = getattr(scene, "link_frames", None)
     path = Path(getattr(scene, "path", "") or "")

@@ -1,9 +1,9 @@
 """Scenes: robots loaded from files, and the newton models built from them.
 
-:func:`load_scene` is the one way in: it finds the reader of the file's format, keeps each file
-version loaded once (:mod:`.scene_cache`) and returns a :class:`Scene`. What a scene file holds
-is :mod:`.schema`; reading a USD file is :mod:`.usd_scene`; :attr:`Scene.content_hash` is
-:mod:`.scene_hash`.
+:func:`warp_critic.physics.load.load_scene` is the one way in: it finds the reader of the
+file's format, keeps each file version loaded once (:mod:`.scene_cache`) and returns a
+:class:`Scene`. What a scene file holds is :mod:`.schema`; reading a USD file is :mod:`.usd_scene`;
+:attr:`Scene.content_hash` is :mod:`.scene_hash`.
 
 Layout: a :class:`newton.Model` built by :meth:`Scene.build_model` holds one newton *world* per
 :class:`Variant`. Bodies, joints, coordinates and DoFs are world-major: world ``w`` owns bodies
@@ -26,8 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from warp_critic.core.errors import SceneError, UserError
-from warp_critic.physics.scene_cache import FileCache
+from warp_critic.core.errors import UserError
 from warp_critic.physics.variants import (
     Variant,
     apply_changes,
@@ -39,7 +38,7 @@ from warp_critic.physics.variants import (
 if TYPE_CHECKING:
     import newton
 
-__all__ = ["Variant", "Scene", "load_scene", "scenes_dir"]
+__all__ = ["Variant", "Scene", "scenes_dir"]
 
 
 def scenes_dir() -> Path:
@@ -216,36 +215,3 @@ class Scene:
 
 def _array(values) -> np.ndarray:
     return np.array(values, dtype=np.float64)
-
-
-# ------------------------------------------------------------------------------------------------
-# Loading
-# ------------------------------------------------------------------------------------------------
-
-_CACHE: FileCache[Scene] = FileCache()
-
-
-def load_scene(path: str | Path) -> Scene:
-    """Parse and validate a scene file (once per file version; later calls hit a cache).
-
-    Raises:
-        SceneError: one line naming the file and the problem (missing file, not USD, no
-            articulation root, unsupported joint, bad mass properties, ...).
-    """
-    path = Path(path).expanduser()
-    if not path.exists():
-        raise SceneError(f"{path}: no such scene file")
-    if path.is_dir():
-        raise SceneError(f"{path}: is a directory, not a USD scene file")
-    from warp_critic.physics.robot import is_robot_file, load_robot
-
-    if is_robot_file(path):  # a URDF/MJCF/plain USD robot: imported with derived defaults
-        return load_robot(path)
-    return _CACHE.get(path.resolve(), _read)
-
-
-def _read(path: Path) -> Scene:
-    """The reader of the file's format (the one place a format is chosen)."""
-    from warp_critic.physics.usd_scene import read_usd_scene  # it builds a Scene: import late
-
-    return read_usd_scene(path)

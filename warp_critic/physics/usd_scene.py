@@ -1,6 +1,6 @@
 """Reading a USD scene file: open it, check what newton's importer would silently repair, import it.
 
-:func:`read_usd_scene` is what :func:`warp_critic.physics.scene.load_scene` calls for a USD file
+:func:`read_usd_scene` is what :func:`warp_critic.physics.load.load_scene` calls for a USD file
 (the format: :mod:`warp_critic.physics.schema`). Every problem is a one-line
 :class:`~warp_critic.core.errors.SceneError` naming the file; pxr and newton errors on odd files
 never escape as tracebacks.

@@ -9,7 +9,7 @@ report.rrd) with its sections :mod:`.report_analyses` (toy, landscapes), :mod:`.
 (Figure 3), :mod:`.report_maps` (Figures 4-6) and :mod:`.report_tables` (the KUKA tables), sharing a
 :mod:`.report_draft`, and :mod:`.report_plots` (figures) and :mod:`.report_paper` (steps to error
 levels, solved seeds, 2-D maps, verdicts), :mod:`.executors` (in process, local processes) and
-:mod:`.on_ray` (Ray), :mod:`.validate` (every ``--set`` checked up front), :mod:`.pipeline` (the
+:mod:`.on_ray` (Ray), chosen by the flags in :mod:`.choose_executor`, :mod:`.validate` (every ``--set`` checked up front), :mod:`.pipeline` (the
 order). The flags live in :mod:`warp_critic.cli.reproduce`.
 """
 
@@ -19,7 +19,8 @@ __all__, __getattr__, __dir__ = lazy_exports(
     __name__,
     {
         "warp_critic.reproduce.pipeline": ("ReproduceConfig", "reproduce"),
-        "warp_critic.reproduce.executors": ("InProcess", "LocalProcesses", "make_executor"),
+        "warp_critic.reproduce.executors": ("InProcess", "LocalProcesses"),
+        "warp_critic.reproduce.choose_executor": ("make_executor",),
         "warp_critic.reproduce.on_ray": ("RayExecutor",),
     },
 )

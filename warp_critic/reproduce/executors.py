@@ -338,26 +338,11 @@ def jobs_hint(executor, widths: list[int]) -> str | None:
     )
 
 
-def make_executor(jobs: int | None, ray: str | None, device: str):
-    """The executor the flags ask for (checked before any work)."""
-    if jobs is not None and ray is not None:
-        raise FieldError("jobs", "and --ray exclude each other")
-    if ray is not None:
-        from warp_critic.reproduce.on_ray import RayExecutor
-
-        return RayExecutor(None if ray == "local" else ray, device)
-    if jobs is not None:
-        local = LocalProcesses(jobs)  # checks jobs
-        return local if jobs > 1 else InProcess()
-    return InProcess()
-
-
 __all__ = [
     "Unit",
     "call_unit",
     "InProcess",
     "LocalProcesses",
-    "make_executor",
     "check_jobs",
     "unit_progress",
     "jobs_hint",

@@ -118,7 +118,7 @@ def metatrain_names(extra: tuple[str, ...] = ()) -> list[str]:
 
 
 def scene_hashes() -> dict[str, str]:
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.load import load_scene
     from warp_critic.reproduce.metatrain import scene_file
 
     return {s: load_scene(scene_file(s)).content_hash for s in SCENES}
@@ -393,6 +393,6 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
 
 def load_point_mass_hash() -> str:
     from warp_critic.analysis.landscape.problem import default_scene
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.load import load_scene
 
     return load_scene(default_scene()).content_hash

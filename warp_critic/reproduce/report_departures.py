@@ -9,7 +9,7 @@ from warp_critic.reproduce.settings import METHOD_LABELS, TUNED
 def scene_gravity(scene: str) -> float | None:
     """The gravity the scene's runs use (m/s^2), ``None`` if the scene cannot be read."""
     try:
-        from warp_critic.physics.scene import load_scene
+        from warp_critic.physics.load import load_scene
         from warp_critic.reproduce.metatrain import scene_file
 
         g = load_scene(scene_file(scene)).defaults.get("gravity")

@@ -12,7 +12,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from warp_critic.core.errors import SceneError, UserError, warn
-from warp_critic.physics.scene import Scene, load_scene, scenes_dir
+from warp_critic.physics.load import load_scene
+from warp_critic.physics.scene import Scene, scenes_dir
 
 
 def _candidates(recorded: list[str]) -> list[Path]:
@@ -34,7 +35,7 @@ def _candidates(recorded: list[str]) -> list[Path]:
 
 def _loader(config: dict):
     """``path -> Scene`` with the run's robot options (a robot file's end effector, joints)."""
-    from warp_critic.physics.robot import load_any
+    from warp_critic.physics.load import load_any
 
     joints = config.get("joints")
     if joints is not None:

@@ -294,7 +294,7 @@ class Task:
 
 def scene_of(cfg) -> Scene:
     """The config's scene: a scene file, or a robot file with the config's robot options."""
-    from warp_critic.physics.robot import load_any
+    from warp_critic.physics.load import load_any
 
     joints = getattr(cfg, "joints", None)
     if joints is not None:

@@ -3,7 +3,8 @@ memory check of its worlds."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Protocol
 
 import torch
 
@@ -12,7 +13,21 @@ from warp_critic.core.memory import check_fits
 
 if TYPE_CHECKING:
     from warp_critic.physics.scene import Scene
-    from warp_critic.running.task import TaskConfig
+
+
+class TaskSize(Protocol):
+    """What :func:`check_memory` reads of a run's config (a ``TaskConfig``; this module sits below
+    ``running.task``, which imports it)."""
+
+    @property
+    def goals(self) -> Sequence | None: ...
+    @property
+    def horizon(self) -> int | None: ...
+    @property
+    def substeps(self) -> int | None: ...
+    @property
+    def worlds_per_goal(self) -> int: ...
+
 
 __all__ = ["check_memory", "estimate_memory", "goals_tensor", "inside_limits", "max_torque_tensor"]
 
@@ -90,7 +105,7 @@ def estimate_memory(
     return int(worlds * per_world + 200 * 2**20)
 
 
-def check_memory(cfg: TaskConfig, dof: int, graph_steps: int = 1, copies: int = 1) -> None:
+def check_memory(cfg: TaskSize, dof: int, graph_steps: int = 1, copies: int = 1) -> None:
     """Refuse settings whose memory estimate cannot fit, with the estimate, before allocating."""
     horizon, substeps = cfg.horizon, cfg.substeps
     if not (isinstance(horizon, int) and isinstance(substeps, int)):

@@ -130,7 +130,8 @@ def run_landscape(cfg: LandscapeConfig) -> dict:
     Returns the arrays (``axis``, ``values``, ``grads``, ``goals``, ``optima``, ``trace_new``, ...), the
     descent ``fractions`` per goal and method, ``goal_names``, ``wall_s`` and ``out``.
     """
-    from warp_critic.physics.scene import Variant, load_scene
+    from warp_critic.physics.load import load_scene
+    from warp_critic.physics.scene import Variant
     from warp_critic.physics.simulator import Simulator
 
     cfg.validate()

@@ -1,0 +1,24 @@
+"""The executor ``warp-critic reproduce``'s flags ask for: in this process (none), ``--jobs N`` local
+processes, or ``--ray [ADDRESS]`` (:mod:`warp_critic.reproduce.executors`,
+:mod:`warp_critic.reproduce.on_ray`; Ray itself is imported only when asked for)."""
+
+from __future__ import annotations
+
+from warp_critic.core.errors import FieldError
+from warp_critic.reproduce.executors import InProcess, LocalProcesses
+from warp_critic.reproduce.on_ray import RayExecutor
+
+
+def make_executor(jobs: int | None, ray: str | None, device: str):
+    """The executor the flags ask for (checked before any work)."""
+    if jobs is not None and ray is not None:
+        raise FieldError("jobs", "and --ray exclude each other")
+    if ray is not None:
+        return RayExecutor(None if ray == "local" else ray, device)
+    if jobs is not None:
+        local = LocalProcesses(jobs)  # checks jobs
+        return local if jobs > 1 else InProcess()
+    return InProcess()
+
+
+__all__ = ["make_executor"]
