@@ -266,3 +266,35 @@ def test_an_in_process_call_on_several_cores_names_jobs(monkeypatch):
     assert ex.jobs_hint(ex.LocalProcesses(2), [6, 3]) is None
     monkeypatch.setattr(ex.os, "cpu_count", lambda: 1)
     assert ex.jobs_hint(ex.InProcess(), [6, 3]) is None
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_stage_starts_as_soon_as_its_inputs_are_complete(tmp_path, jobs):
+    """The driver hands an executor the units that its finished stages made ready (``more``): under
+    --jobs the dependent unit runs while an independent long one still does, not after it."""
+    from warp_critic.reproduce.executors import InProcess, LocalProcesses, Unit
+
+    def unit(name: str, iterations: int) -> Unit:
+        kwargs = {"values": {"iterations": iterations}, "pause": 0.05}
+        return Unit(name, f"{name}-0", "progress_unit:slow_iterations", kwargs)
+
+    finished: list[str] = []
+    waiting = [unit("reads-short", 4)]
+
+    def more() -> list[Unit]:
+        ready = [u for u in waiting if "short" in finished]
+        for u in ready:
+            waiting.remove(u)
+        return ready
+
+    executor = LocalProcesses(2) if jobs == 2 else InProcess()
+    executor.run(
+        [unit("long", 120), unit("short", 4)],
+        tmp_path,
+        lambda u, result, s: finished.append(u.name),
+        lambda line: None,
+        more=more,
+    )
+    assert not waiting
+    expected = ["short", "reads-short", "long"] if jobs == 2 else ["long", "short", "reads-short"]
+    assert finished == expected

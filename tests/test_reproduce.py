@@ -654,8 +654,8 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
 
 def test_beyond_maps_takes_floors_only_from_a_maps_stage_of_the_same_inputs(tmp_path):
     """The floors of a maps stage are reused only with the same settings and nominal runs."""
-    from warp_critic.reproduce.pipeline import paper_maps_floors
     from warp_critic.reproduce.stages import STAGE_FILE, STAGE_KIND
+    from warp_critic.reproduce.units import paper_maps_floors
 
     nominal = {"metatrain-reacher-ours": "metatrain-reacher-ours-aaaa"}
     st = {"settings": {"grid": 3, "reach_iterations": 5}, "depends": dict(nominal, other="x")}

@@ -9,8 +9,9 @@ report.rrd) with its sections :mod:`.report_analyses` (toy, landscapes), :mod:`.
 (Figure 3), :mod:`.report_maps` (Figures 4-6) and :mod:`.report_tables` (the KUKA tables), sharing a
 :mod:`.report_draft`, and :mod:`.report_plots` (figures) and :mod:`.report_paper` (steps to error
 levels, solved seeds, 2-D maps, verdicts), :mod:`.executors` (in process, local processes) and
-:mod:`.on_ray` (Ray), chosen by the flags in :mod:`.choose_executor`, :mod:`.validate` (every ``--set`` checked up front), :mod:`.pipeline` (the
-order). The flags live in :mod:`warp_critic.cli.reproduce`.
+:mod:`.on_ray` (Ray), chosen by the flags in :mod:`.choose_executor`, :mod:`.validate` (every
+``--set`` checked up front), :mod:`.pipeline` (the order), :mod:`.units` (each stage's function and
+inputs). The flags live in :mod:`warp_critic.cli.reproduce`.
 """
 
 from warp_critic.core.exports import lazy_exports

@@ -8,6 +8,10 @@ writes ``stage.json`` (last, atomically), so a unit that did not finish is never
 complete one, and a restarted driver skips exactly the units that finished.
 
 * :class:`InProcess` (the default): one after the other, here, with progress bars.
+
+Every executor takes the units that can start and, after each stage it hands back, asks the driver
+for the ones that stage made ready (``more``): a maps or tables stage starts when its own inputs are
+complete, while other meta-trainings still run.
 * :class:`LocalProcesses` (``--jobs N``): ``N`` fresh processes on this machine writing into the
   output folder directly; a process that dies costs only its unit, which is run again (up to
   ``retries`` times). Its units show no progress bars; every ``progress_every`` seconds (10 min)
@@ -120,6 +124,12 @@ def unit_progress(unit: Unit, root: Path) -> str:
 # ------------------------------------------------------------------------------------------------
 
 Done = Callable[[Unit, dict, float], None]  # (unit, result, seconds): the driver records the stage
+#: after each recorded stage, the units that it made ready (their input stages are now complete)
+More = Callable[[], list[Unit]]
+
+
+def _nothing() -> list[Unit]:
+    return []
 
 
 class InProcess:
@@ -127,12 +137,22 @@ class InProcess:
 
     name = "in-process"
 
-    def run(self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None]) -> None:
-        for u in units:
+    def run(
+        self,
+        units: list[Unit],
+        root: Path,
+        done: Done,
+        log: Callable[[str], None],
+        more: More = _nothing,
+    ) -> None:
+        queue = list(units)
+        while queue:
+            u = queue.pop(0)
             log(f"reproduce: {u.name}: running ({u.dir_name})")
             t = time.perf_counter()
             result = call_unit(u, root)
             done(u, result, time.perf_counter() - t)
+            queue += more()
 
     def close(self) -> None:
         pass
@@ -244,9 +264,16 @@ class LocalProcesses:
             initializer=_process_init,
         )
 
-    def run(self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None]) -> None:
+    def run(
+        self,
+        units: list[Unit],
+        root: Path,
+        done: Done,
+        log: Callable[[str], None],
+        more: More = _nothing,
+    ) -> None:
         try:
-            self._run(units, root, done, log)
+            self._run(units, root, done, log, more)
         except BaseException:
             # a unit failed for good, or Ctrl-C / SIGTERM: stop the other units' processes too (each
             # resumes from its checkpoints next time) instead of waiting for them to finish
@@ -269,15 +296,22 @@ class LocalProcesses:
                 self._pool_now.shutdown(wait=True, cancel_futures=True)
             raise
 
-    def _run(self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None]) -> None:
+    def _run(
+        self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None], more: More
+    ) -> None:
         tries = {u.name: 0 for u in units}
+
+        def submit(pool: ProcessPoolExecutor, futures: dict, u: Unit) -> None:
+            log(f"reproduce: {u.name}: submitted to a local process ({u.dir_name})")
+            tries.setdefault(u.name, 0)
+            futures[pool.submit(_process_unit, u, str(root))] = u
+
         pending = list(units)
         while pending:
             pool = self._pool_now = self._pool()
-            futures = {}
+            futures: dict = {}
             for u in pending:
-                log(f"reproduce: {u.name}: submitted to a local process ({u.dir_name})")
-                futures[pool.submit(_process_unit, u, str(root))] = u
+                submit(pool, futures, u)
             pending = []
             broken = False
             next_progress = time.monotonic() + self.progress_every
@@ -304,6 +338,8 @@ class LocalProcesses:
                         pool.shutdown(wait=False, cancel_futures=True)
                         raise
                     done(u, result, seconds)
+                    for ready in more():
+                        submit(pool, futures, ready)
             pool.shutdown(wait=True, cancel_futures=True)
             if broken:
                 for u in pending:

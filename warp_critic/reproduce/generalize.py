@@ -264,7 +264,7 @@ def run_maps_stage(
     ``only``: the rows evaluated (default: every one of ``runs``; ours' runs set the grids).
 
     ``floors_from``: a complete maps stage directory next to ``d`` that computed the reachability
-    floors of the same grids from the same nominal runs (:func:`~.pipeline.paper_maps_floors`); its
+    floors of the same grids from the same nominal runs (:func:`~.units.paper_maps_floors`); its
     floors are taken instead of computed again (``reach_floor_from`` names it)."""
     import json
 

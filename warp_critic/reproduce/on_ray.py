@@ -17,7 +17,15 @@ from collections.abc import Callable
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
-from warp_critic.reproduce.executors import UNIT_FAULT_ENV, Done, Unit, _quiet, call_unit
+from warp_critic.reproduce.executors import (
+    UNIT_FAULT_ENV,
+    Done,
+    More,
+    Unit,
+    _nothing,
+    _quiet,
+    call_unit,
+)
 
 
 def _read_tree(folder: Path) -> dict[str, bytes]:
@@ -152,7 +160,14 @@ class RayExecutor:
             ray.shutdown()
             raise FieldError("device", f"{device}: the Ray cluster has no GPU")
 
-    def run(self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None]) -> None:
+    def run(
+        self,
+        units: list[Unit],
+        root: Path,
+        done: Done,
+        log: Callable[[str], None],
+        more: More = _nothing,
+    ) -> None:
         ray = self.ray
         env = {
             k: v
@@ -166,12 +181,16 @@ class RayExecutor:
             num_gpus=1 if self.gpu else 0,
         )
         refs = {}
-        for u in units:
+
+        def submit(u: Unit) -> None:
             inputs = _read_tree(root / u.dir_name)  # an unfinished stage directory resumes
             for d in u.reads:
                 inputs.update(_read_tree(root / d))
             log(f"reproduce: {u.name}: submitted to Ray ({u.dir_name}, {len(inputs)} input files)")
             refs[task.remote(u, inputs, env)] = u
+
+        for u in units:
+            submit(u)
         while refs:
             ready, _ = ray.wait(list(refs), num_returns=1)
             u = refs.pop(ready[0])
@@ -190,6 +209,8 @@ class RayExecutor:
                 if p.is_file() and rel not in files and p.name != ".lock":
                     p.unlink()
             done(u, result, seconds)
+            for ready in more():
+                submit(ready)
 
     def close(self) -> None:
         self.ray.shutdown()

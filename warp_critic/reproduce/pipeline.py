@@ -20,7 +20,6 @@ from warp_critic.reproduce.extra_baselines import (
     selected_extra,
 )
 from warp_critic.reproduce.settings import (
-    ALL_METHODS,
     BEYOND,
     METHODS,
     SCENES,
@@ -206,16 +205,6 @@ def plan_beyond(settings: dict, p: dict, hashes: dict[str, str]) -> None:
         }
 
 
-# the function each stage group runs, by import path (so that any executor can run it anywhere)
-STAGE_FUNCTIONS = {
-    "toy": "warp_critic.reproduce.analyses:run_toy_stage",
-    "landscape": "warp_critic.reproduce.analyses:run_landscape_stage",
-    "metatrain": "warp_critic.reproduce.metatrain:run_metatrain_stage",
-    "maps": "warp_critic.reproduce.generalize:run_maps_stage",
-    "tables": "warp_critic.reproduce.generalize:run_tables_stage",
-}
-
-
 def needed(rc: ReproduceConfig, stages: dict) -> list[list[str]]:
     """The stages this call needs, in two waves: what depends on nothing, then maps / tables (which
     read the meta-training of their robot, run or found complete first even when not selected)."""
@@ -239,74 +228,6 @@ def needed(rc: ReproduceConfig, stages: dict) -> list[list[str]]:
     return [list(dict.fromkeys(first)), list(dict.fromkeys(second))]
 
 
-def stages_method(name: str) -> str:
-    """The method of a ``metatrain-<robot>-<method>`` stage name."""
-    return next(m for m in ALL_METHODS if name.endswith(f"-{m}"))
-
-
-def make_unit(name: str, st: dict, settings: dict, device: str, progress: bool, out: Path):
-    from warp_critic.reproduce.executors import Unit
-    from warp_critic.reproduce.metatrain import identified_run_dirs, run_dirs
-
-    group, dir_name = st["group"], f"{name}-{st['hash']}"
-    if group == "toy":
-        kwargs = {"s": settings["toy"]}
-    elif group == "landscape":
-        kwargs = {"s": settings["landscape"], "device": device}
-    elif group == "metatrain":
-        kwargs = {
-            "scene": st["scene"],
-            "method": st["method"],
-            "values": st["settings"]["values"],
-            "seeds": settings["metatrain"]["seeds"],
-            "device": device,
-            "progress": progress,
-        }
-    else:  # maps / tables read the complete meta-training directories of their robot
-        from warp_critic.reproduce.stages import read_stage
-
-        runs = {}
-        for dep, dep_dir in st["depends"].items():  # metatrain-<robot>-<method> -> its directory
-            data = read_stage(out / dep_dir)
-            if data is None:
-                raise UserError(f"{out / dep_dir}: the stage {dep} this one needs is not complete")
-            label = st.get("labels", {}).get(dep) or stages_method(dep)
-            runs[label] = [str(p.relative_to(out)) for p in run_dirs(out / dep_dir, data)]
-            identified = identified_run_dirs(out / dep_dir, data)
-            if identified:  # the same critics fed their identifier's estimate of the model
-                runs[f"{label}-identified"] = [str(p.relative_to(out)) for p in identified]
-        kwargs = {"s": st["settings"], "runs": runs, "device": device, "progress": progress}
-        if "rows" in st:  # an extra baseline's evaluation: only its rows, ours' runs the reference
-            kwargs["only"] = st["rows"]
-    reads = tuple(st["depends"].values())
-    if group == "maps" and name != "maps":  # beyond-maps: the paper's maps' floors, if complete
-        floors = paper_maps_floors(out, st)
-        if floors is not None:
-            kwargs["floors_from"] = floors
-            reads += (floors,)
-    return Unit(name=name, dir_name=dir_name, fn=STAGE_FUNCTIONS[group], kwargs=kwargs, reads=reads)
-
-
-def paper_maps_floors(out: Path, st: dict) -> str | None:
-    """A complete ``maps`` stage directory under ``out`` whose reachability floors are exactly the
-    ones the maps stage ``st`` would compute: the same settings and the same nominal reacher runs
-    (the floors depend on nothing else: not on any critic). ``None``: none there."""
-    from warp_critic.reproduce.stages import read_stage
-
-    nominal = "metatrain-reacher-ours"
-    for d in sorted(out.glob("maps-*")):
-        data = read_stage(d)
-        if (
-            data is not None
-            and data.get("group") == "maps"
-            and data.get("settings") == st["settings"]
-            and data.get("depends", {}).get(nominal) == st["depends"].get(nominal)
-            and isinstance(data.get("result", {}).get("reach_floor"), dict)
-        ):
-            return d.name
-    return None
-
-
 def reproduce(rc: ReproduceConfig, executor=None) -> dict:
     """Run the stages of ``rc`` (with ``executor``; default: in this process) and write the report.
 
@@ -326,6 +247,7 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
     from warp_critic.physics.simulator import resolve_device
     from warp_critic.reproduce.executors import jobs_hint
     from warp_critic.reproduce.ledger import Call
+    from warp_critic.reproduce.units import make_unit
 
     device = resolve_device(rc.device)
     runner = Runner(out)
@@ -363,16 +285,28 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
         hint = jobs_hint(executor, [len(wave) for wave in todo])
         if hint:
             runner.log(hint)
+        waiting = [  # the complete ones are recorded (and said skipped) here
+            n
+            for n in dict.fromkeys(n for wave in waves for n in wave)
+            if runner.complete(stages[n]["group"], n, stages[n]["hash"]) is None
+        ]
+
+        def ready() -> list:
+            """The units of the waiting stages whose every input stage is now complete: a maps or
+            tables stage starts as soon as its robot's meta-trainings are done, not after all."""
+            units = []
+            for n in list(waiting):
+                if all(dep in runner.records for dep in stages[n]["depends"]):
+                    waiting.remove(n)
+                    units.append(make_unit(n, stages[n], settings, device, rc.progress, out))
+            return units
+
         try:
-            for wave in waves:
-                units = [
-                    make_unit(n, stages[n], settings, device, rc.progress, out)
-                    for n in wave
-                    if runner.complete(stages[n]["group"], n, stages[n]["hash"]) is None
-                ]
-                executor.run(units, out, done, runner.log)
+            executor.run(ready(), out, done, runner.log, more=ready)
         finally:
             executor.close()
+        if waiting:  # an input that this call neither found complete nor ran
+            raise UserError(f"reproduce: {', '.join(waiting)}: an input stage did not complete")
         runner.log(
             f"reproduce: writing the report, {(time.perf_counter() - t0) / 60:.1f} min elapsed"
         )
