@@ -299,21 +299,24 @@ class LocalProcesses:
     def _run(
         self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None], more: More
     ) -> None:
+        # Units are handed to the pool one per free worker (never queued inside it), so a unit
+        # counts as running once it is submitted, and one that a finished stage made ready waits
+        # only for the next free worker.
         tries = {u.name: 0 for u in units}
+        queue = list(units)  # ready, not yet submitted
 
-        def submit(pool: ProcessPoolExecutor, futures: dict, u: Unit) -> None:
-            log(f"reproduce: {u.name}: submitted to a local process ({u.dir_name})")
-            tries.setdefault(u.name, 0)
-            futures[pool.submit(_process_unit, u, str(root))] = u
+        def fill(pool: ProcessPoolExecutor, futures: dict, lost: list[Unit]) -> None:
+            while queue and len(futures) < self.jobs and not lost:
+                u = queue.pop(0)
+                log(f"reproduce: {u.name}: started in a local process ({u.dir_name})")
+                tries.setdefault(u.name, 0)
+                futures[pool.submit(_process_unit, u, str(root))] = u
 
-        pending = list(units)
-        while pending:
+        while queue:
             pool = self._pool_now = self._pool()
             futures: dict = {}
-            for u in pending:
-                submit(pool, futures, u)
-            pending = []
-            broken = False
+            lost: list[Unit] = []  # units whose worker died (the pool is broken then)
+            fill(pool, futures, lost)
             next_progress = time.monotonic() + self.progress_every
             while futures:
                 finished, _ = wait(
@@ -323,7 +326,7 @@ class LocalProcesses:
                 )
                 if time.monotonic() >= next_progress:
                     for f, u in futures.items():
-                        if f.running() and not f.done():
+                        if not f.done():
                             log(unit_progress(u, root))
                     next_progress = time.monotonic() + self.progress_every
                 for f in finished:
@@ -331,28 +334,27 @@ class LocalProcesses:
                     try:
                         result, seconds = f.result()
                     except BrokenProcessPool:
-                        broken = True
-                        pending.append(u)
+                        lost.append(u)
                         continue
                     except BaseException:
                         pool.shutdown(wait=False, cancel_futures=True)
                         raise
                     done(u, result, seconds)
-                    for ready in more():
-                        submit(pool, futures, ready)
+                    queue.extend(more())
+                fill(pool, futures, lost)
             pool.shutdown(wait=True, cancel_futures=True)
-            if broken:
-                for u in pending:
-                    tries[u.name] += 1
-                    if tries[u.name] > self.retries:
-                        raise UserError(
-                            f"reproduce: unit {u.name} lost its worker process {tries[u.name]} times; "
-                            "its stage directory is left unfinished (run again to resume)"
-                        )
-                    log(
-                        f"reproduce: {u.name}: a worker process died; running it again "
-                        f"(try {tries[u.name] + 1} of {self.retries + 1})"
+            for u in lost:
+                tries[u.name] += 1
+                if tries[u.name] > self.retries:
+                    raise UserError(
+                        f"reproduce: unit {u.name} lost its worker process {tries[u.name]} times; "
+                        "its stage directory is left unfinished (run again to resume)"
                     )
+                log(
+                    f"reproduce: {u.name}: a worker process died; running it again "
+                    f"(try {tries[u.name] + 1} of {self.retries + 1})"
+                )
+            queue[:0] = lost
 
     def close(self) -> None:
         pass
