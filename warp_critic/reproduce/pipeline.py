@@ -206,8 +206,9 @@ def plan_beyond(settings: dict, p: dict, hashes: dict[str, str]) -> None:
 
 
 def needed(rc: ReproduceConfig, stages: dict) -> list[list[str]]:
-    """The stages this call needs, in two waves: what depends on nothing, then maps / tables (which
-    read the meta-training of their robot, run or found complete first even when not selected)."""
+    """The stages this call needs: what depends on nothing, then maps / tables (which read the
+    meta-training of their robot, run or found complete first even when not selected). The driver
+    starts each stage once the stages it reads are complete, whichever list it is in."""
     selected = rc.selected()
     first, second = [], []
     for group in selected:
