@@ -124,11 +124,13 @@ def unit_progress(unit: Unit, root: Path) -> str:
 # ------------------------------------------------------------------------------------------------
 
 Done = Callable[[Unit, dict, float], None]  # (unit, result, seconds): the driver records the stage
+Log = Callable[[str], None]  # one line for the user
 #: after each recorded stage, the units that it made ready (their input stages are now complete)
 More = Callable[[], list[Unit]]
 
 
-def _nothing() -> list[Unit]:
+def no_units() -> list[Unit]:
+    """No unit made ready (an executor's ``more`` where the driver gives none)."""
     return []
 
 
@@ -138,12 +140,7 @@ class InProcess:
     name = "in-process"
 
     def run(
-        self,
-        units: list[Unit],
-        root: Path,
-        done: Done,
-        log: Callable[[str], None],
-        more: More = _nothing,
+        self, units: list[Unit], root: Path, done: Done, log: Log, more: More = no_units
     ) -> None:
         queue = list(units)
         while queue:
@@ -265,12 +262,7 @@ class LocalProcesses:
         )
 
     def run(
-        self,
-        units: list[Unit],
-        root: Path,
-        done: Done,
-        log: Callable[[str], None],
-        more: More = _nothing,
+        self, units: list[Unit], root: Path, done: Done, log: Log, more: More = no_units
     ) -> None:
         try:
             self._run(units, root, done, log, more)
@@ -296,9 +288,7 @@ class LocalProcesses:
                 self._pool_now.shutdown(wait=True, cancel_futures=True)
             raise
 
-    def _run(
-        self, units: list[Unit], root: Path, done: Done, log: Callable[[str], None], more: More
-    ) -> None:
+    def _run(self, units: list[Unit], root: Path, done: Done, log: Log, more: More) -> None:
         # Units are handed to the pool one per free worker (never queued inside it), so a unit
         # counts as running once it is submitted, and one that a finished stage made ready waits
         # only for the next free worker.

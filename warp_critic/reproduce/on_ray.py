@@ -13,18 +13,18 @@ import os
 import socket
 import tempfile
 import time
-from collections.abc import Callable
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
 from warp_critic.reproduce.executors import (
     UNIT_FAULT_ENV,
     Done,
+    Log,
     More,
     Unit,
-    _nothing,
     _quiet,
     call_unit,
+    no_units,
 )
 
 
@@ -161,12 +161,7 @@ class RayExecutor:
             raise FieldError("device", f"{device}: the Ray cluster has no GPU")
 
     def run(
-        self,
-        units: list[Unit],
-        root: Path,
-        done: Done,
-        log: Callable[[str], None],
-        more: More = _nothing,
+        self, units: list[Unit], root: Path, done: Done, log: Log, more: More = no_units
     ) -> None:
         ray = self.ray
         env = {
