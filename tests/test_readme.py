@@ -1,6 +1,7 @@
 """The README's table of the paper's claims quotes the committed report (docs/paper/results.json):
-every number in a row's "measured" cell is one the report holds for that row, and the verdicts
-are the report's."""
+it is the block ``tools/readme_claims.py --write`` gives, and, read back independently of that tool,
+every number in a row's "measured" cell is one the report holds for that row, and the verdicts are
+the report's."""
 
 from __future__ import annotations
 
@@ -96,3 +97,48 @@ def test_a_number_or_verdict_other_than_the_report_is_found():
     assert problems({**table, row: (measured.replace("0.018", "0.017"), verdict)}) != []
     other = "met" if verdict == "not met" else "not met"
     assert problems({**table, row: (measured, other)}) != []
+
+
+def _tool():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "readme_claims", ROOT / "tools" / "readme_claims.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_readme_claims_block_is_the_one_the_tool_writes(capsys):
+    tool = _tool()
+    assert tool.main(["--check"]) == 0, "python tools/readme_claims.py --write"
+
+
+def test_the_tool_writes_what_results_json_says(tmp_path, capsys):
+    """Another Table 1 cell or verdict in results.json gives another block: --check fails until
+    --write; a report without a claim the table reads is one line, exit 2."""
+    tool = _tool()
+    r = json.loads((ROOT / "docs" / "paper" / "results.json").read_text())
+    readme = tmp_path / "README.md"
+    readme.write_text((ROOT / "README.md").read_text())
+    cell = next(c for c in r["tables"] if c["table"] == "table1" and c["method"] == "ours")
+    cell["mse_mean"] = 0.5
+    next(c for c in r["claims"] if c["claim"].startswith("Figure 4"))["verdict"] = "met"
+    results = tmp_path / "results.json"
+    results.write_text(json.dumps(r))
+    args = ["--results", str(results), "--readme", str(readme)]
+    assert tool.main(["--check", *args]) == 1
+    assert tool.main(["--write", *args]) == 0 and tool.main(["--check", *args]) == 0
+    row = dict((c, (m, v)) for c, m, v in tool.rows(r))
+    assert row["Table 1 (KUKA, new goals): MSE 0.02 / 0.07 at goal std 0.1 / 0.4"][0].startswith(
+        "0.500"
+    )
+    assert row["Figure 4 (reacher): ours low over the whole goal space"][1] == "met"
+    r["claims"] = [c for c in r["claims"] if not c["claim"].startswith("Figure 1")]
+    results.write_text(json.dumps(r))
+    capsys.readouterr()
+    assert tool.main(["--check", *args]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "Figure 1" in err and len(err.splitlines()) == 1

@@ -1,0 +1,228 @@
+#!/usr/bin/env python
+"""The README's table of the paper's claims, written from the committed report's numbers.
+
+    python tools/readme_claims.py --write   # README.md's claims block, from docs/paper/results.json
+    python tools/readme_claims.py --check   # exit 1 when the block is not the one --write gives
+
+Every number and verdict in the block is read from ``results.json``: the report's table cells,
+map means and shares, and the counts its claims state (``ours first at N of M levels``, ``below
+both (all seeds) in N of M columns``, ...). A row over several claims gives their verdicts, once
+where they agree. So the README says what the report computed, never more leniently.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import sys
+from pathlib import Path
+
+PROG = "readme_claims"
+ROOT = Path(__file__).resolve().parents[1]
+BEGIN, END = "<!-- claims:begin -->", "<!-- claims:end -->"
+STDS = (0.1, 0.4)
+
+
+class Missing(ValueError):
+    """results.json lacks what a row reads (a report without that stage)."""
+
+
+def _claim(r: dict, prefix: str) -> dict:
+    found = [c for c in r.get("claims", []) if c["claim"].startswith(prefix)]
+    if len(found) != 1:
+        raise Missing(f"no claim starting {prefix!r}")
+    return found[0]
+
+
+def _find(pattern: str, text: str) -> tuple[str, ...]:
+    m = re.search(pattern, text)
+    if m is None:
+        raise Missing(f"{pattern!r} not in {text[:80]!r}")
+    return m.groups()
+
+
+def _verdict(r: dict, *prefixes: str) -> str:
+    said = [_claim(r, p)["verdict"] for p in prefixes]
+    return said[0] if len(set(said)) == 1 else " / ".join(said)
+
+
+def _cell(r: dict, method: str, std: float) -> dict:
+    for c in r["tables"]:
+        if c["table"] == "table1" and c["method"] == method and c["value"] == std:
+            return c
+    raise Missing(f"no Table 1 cell of {method} at std {std}")
+
+
+def _spread(r: dict, prefix: str) -> dict[str, str]:
+    """The std over seeds per method, as the claim states it (``L_critic (ours) 0.0039, ...``)."""
+    text = _claim(r, prefix)["ours"].split(": ", 1)[1]
+    pairs = dict(re.findall(r"(L_critic \(ours\)|DDPG|Meta-Critic) ([0-9.e+-]+)", text))
+    if len(pairs) != 3:
+        raise Missing(f"{prefix}: {text!r}")
+    return pairs
+
+
+def _and(items: list[str]) -> str:
+    return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
+
+
+def rows(r: dict) -> list[tuple[str, str, str]]:
+    """``(the paper claims, measured, verdict)`` per row, from a report's ``results.json``."""
+    out = []
+    ours = [_cell(r, "ours", s) for s in STDS]
+    paper = " / ".join(f"{c['paper'][0]:g}" for c in ours)
+    cells = {
+        m: " / ".join(f"{_cell(r, m, s)['mse_mean']:.3f}" for s in STDS)
+        for m in ("ours", "ddpg", "meta-critic")
+    }
+    out.append(
+        (
+            f"Table 1 (KUKA, new goals): MSE {paper} at goal std {' / '.join(f'{s:g}' for s in STDS)}",
+            f"{cells['ours']} (DDPG {cells['ddpg']}, Meta-Critic {cells['meta-critic']})",
+            _verdict(r, "Table 1:"),
+        )
+    )
+    tables = ("Table 1:", "Table 2:", "Table 3:")
+    below = [
+        _find(r"below both \(all seeds\) in (\d+) of (\d+) columns", _claim(r, t)["ours"])
+        for t in tables
+    ]
+    hits = [
+        _find(r"at or below the paper's own value in (\d+) of (\d+)", _claim(r, t)["ours"])
+        for t in tables
+    ]
+    if len({n for _, n in hits}) == 1:
+        at_paper = f"{_and([h for h, _ in hits])} of {hits[0][1]}"
+    else:
+        at_paper = _and([f"{h} of {n}" for h, n in hits])
+    out.append(
+        (
+            "Tables 1-3: ours below DDPG and Meta-Critic in every column, at or below the paper's own values",
+            f"below both in {_and([f'{a} of {b}' for a, b in below])} columns; at or below the paper in {at_paper}",
+            _verdict(r, *tables),
+        )
+    )
+    means = r["maps"]["grid_means"]
+    labels = {
+        "ours": "this run: L_critic (ours)",
+        "DDPG": "this run: DDPG, all seeds",
+        "Meta-Critic": "this run: Meta-Critic, all seeds",
+    }
+    grid = {
+        k: " / ".join(f"{means[axis][v]:.3f}" for axis in ("mass", "length"))
+        for k, v in labels.items()
+    }
+    out.append(
+        (
+            "Figures 5 / 6 (reacher, new link masses / lengths): ours low over the whole map",
+            f"grid mean MSE {grid['ours']}; DDPG {grid['DDPG']}; Meta-Critic {grid['Meta-Critic']}",
+            _verdict(r, "Figure 5", "Figure 6"),
+        )
+    )
+    share = r["maps"]["goals_fraction_below_0.05"]
+    out.append(
+        (
+            "Figure 4 (reacher): ours low over the whole goal space",
+            f"{share['ours']:.0%} of the goal grid below 0.05 MSE (DDPG {share['ddpg']:.0%}, "
+            f"Meta-Critic {share['meta-critic']:.0%})",
+            _verdict(r, "Figure 4"),
+        )
+    )
+    first = {
+        robot: _find(
+            r"ours first at (\d+) of (\d+) levels",
+            _claim(r, f"Figure 3 ({robot}): ours is more")["ours"],
+        )
+        for robot in ("reacher", "kuka")
+    }
+    out.append(
+        (
+            "Figure 3: ours needs the fewest environment steps",
+            f"first at {first['reacher'][0]} of {first['reacher'][1]} error levels (reacher) and "
+            f"{first['kuka'][0]} of {first['kuka'][1]} (KUKA), counted when a running mean stays "
+            "below the level",
+            _verdict(r, "Figure 3 (reacher): ours is more", "Figure 3 (kuka): ours is more"),
+        )
+    )
+    spread = {
+        robot: _spread(r, f"Figure 3 ({robot}): ours is the") for robot in ("reacher", "kuka")
+    }
+    out.append(
+        (
+            "Figure 3: ours the least sensitive to the seed",
+            "; ".join(
+                f"{name}: {'std ' if name == 'reacher' else ''}{s['L_critic (ours)']} "
+                f"(DDPG {s['DDPG']}, Meta-Critic {s['Meta-Critic']})"
+                for name, s in (("reacher", spread["reacher"]), ("KUKA", spread["kuka"]))
+            ),
+            _verdict(r, "Figure 3 (reacher): ours is the", "Figure 3 (kuka): ours is the"),
+        )
+    )
+    ours_share, sup_share = _find(
+        r"descent from (\S+) of the grid reaches theta\* of the unseen goals with L_critic vs (\S+) "
+        r"with Q_sup",
+        _claim(r, "Figure 1")["ours"],
+    )
+    reach = (
+        f"from {ours_share} of the grid with both"
+        if ours_share == sup_share
+        else f"from {ours_share} of the grid with L_critic, {sup_share} with Q_sup,"
+    )
+    out.append(
+        (
+            "Figure 1 (point-mass landscape): L_critic leads to unseen goals, a supervised Q does not",
+            f"descent reaches them {reach} in the paper's setting",
+            _verdict(r, "Figure 1"),
+        )
+    )
+    return out
+
+
+def block(r: dict) -> str:
+    """The markdown table between the README's claims markers."""
+    lines = ["| the paper claims | measured | verdict |", "|---|---|---|"]
+    lines += [f"| {c} | {m} | {v} |" for c, m, v in rows(r)]
+    return "\n".join(lines)
+
+
+def rewrite(readme: str, table: str) -> str:
+    """``readme`` with its claims block replaced by ``table``."""
+    if readme.count(BEGIN) != 1 or readme.count(END) != 1:
+        raise Missing(f"README.md: needs one {BEGIN} and one {END}")
+    head, rest = readme.split(BEGIN)
+    _, tail = rest.split(END)
+    return f"{head}{BEGIN}\n{table}\n{END}{tail}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n")[0])
+    mode = ap.add_mutually_exclusive_group(required=True)
+    mode.add_argument("--write", action="store_true", help="rewrite README.md's claims block")
+    mode.add_argument("--check", action="store_true", help="exit 1 if the block is not current")
+    ap.add_argument("--results", type=Path, default=ROOT / "docs" / "paper" / "results.json")
+    ap.add_argument("--readme", type=Path, default=ROOT / "README.md")
+    args = ap.parse_args(argv)
+    try:
+        r = json.loads(args.results.read_text())
+        text = args.readme.read_text()
+        new = rewrite(text, block(r))
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
+    if args.check:
+        if new != text:
+            print(
+                f"{PROG}: {args.readme} claims block is not current: {PROG} --write",
+                file=sys.stderr,
+            )
+            return 1
+        print(f"{PROG}: {args.readme} claims block is current")
+        return 0
+    args.readme.write_text(new)
+    print(f"{PROG}: wrote {len(rows(r))} rows into {args.readme}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
