@@ -82,7 +82,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         type=_int,
         default=None,
         metavar="N",
-        help="run independent stages in N local processes (default: one after the other, in this process)",
+        help="run independent stages in N local processes, each as soon as the stages it reads are "
+        "complete, with a progress line per running stage every 10 minutes (default: one after "
+        "the other, in this process, with progress bars)",
     )
     A(
         "--ray",
