@@ -134,11 +134,10 @@ def record_only(data: dict) -> bool:
     return data.get("group") == "metatrain" and str(data.get("stage", "")).startswith("beyond-")
 
 
-def _copy_stage(src: Path, dst_parent: Path, slim: bool, pack: bool, record: bool = False) -> None:
+def _copy_stage(src: Path, dst_parent: Path, slim: bool, pack: bool) -> None:
     """``src`` -> ``dst_parent/src.name`` through a temporary sibling renamed into place; ``slim``:
     checkpoints and metrics cut to what is read (a meta-training stage), ``pack``: JSON stored
-    compressed (into an archive); else a packed file is unpacked (out of one); ``record``: the
-    stage's record alone."""
+    compressed (into an archive); else a packed file is unpacked (out of one)."""
     from warp_critic.running.rundir import atomic_write_bytes
 
     final = dst_parent / src.name
@@ -149,8 +148,6 @@ def _copy_stage(src: Path, dst_parent: Path, slim: bool, pack: bool, record: boo
         for path in sorted(src.rglob("*")):
             rel = path.relative_to(src)
             if path.is_dir() or path.name in SKIPPED_NAMES or path.suffix in SKIPPED_SUFFIXES:
-                continue
-            if record and rel != Path(STAGE_FILE):
                 continue
             target = tmp / rel
             target.parent.mkdir(parents=True, exist_ok=True)
@@ -180,19 +177,11 @@ def _copy_stage(src: Path, dst_parent: Path, slim: bool, pack: bool, record: boo
 
 
 def _carry(
-    src: Path,
-    dst: Path,
-    *,
-    slim: bool,
-    pack: bool,
-    started: str,
-    only: set[str] | None = None,
-    records: bool = False,
+    src: Path, dst: Path, *, slim: bool, pack: bool, started: str, only: set[str] | None = None
 ) -> list[str]:
     """Copy the complete stages of ``src`` (those named in ``only``, where given) that ``dst``
     lacks; an identical stage there is skipped, a different or unfinished one refused (``started``
-    says what an unfinished one is). ``records``: a stage :func:`record_only` names is copied as its
-    record alone."""
+    says what an unfinished one is)."""
     have = complete_stages(dst)
     copied = []
     for name, data in complete_stages(src).items():
@@ -207,13 +196,7 @@ def _carry(
             continue
         if (dst / name).exists():
             raise UserError(f"{dst / name}: {started}")
-        _copy_stage(
-            src / name,
-            dst,
-            slim=slim and data["group"] == "metatrain",
-            pack=pack,
-            record=records and record_only(data),
-        )
+        _copy_stage(src / name, dst, slim=slim and data["group"] == "metatrain", pack=pack)
         copied.append(name)
     return copied
 
@@ -297,16 +280,8 @@ def publish(out: Path, dest: Path) -> tuple[list[str], list[str]]:
     try:
         (dest / ARCHIVE).mkdir(parents=True, exist_ok=True)
         archive = dest / ARCHIVE
-        _carry(
-            out,
-            archive,
-            slim=True,
-            pack=True,
-            started=ARCHIVE_STARTED,
-            only=set(stages),
-            records=True,
-        )
-        for name, data in complete_stages(archive).items():  # archived by an earlier publish
+        _carry(out, archive, slim=True, pack=True, started=ARCHIVE_STARTED, only=set(stages))
+        for name, data in complete_stages(archive).items():  # now or by an earlier publish
             if name in stages and record_only(data):
                 for extra in sorted((archive / name).iterdir()):
                     if extra.name not in (STAGE_FILE, STAGE_FILE + PACKED):
