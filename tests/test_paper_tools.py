@@ -18,18 +18,26 @@ def test_tune_draws_the_published_setting_first_without_repetition():
     assert tool.settings(6, seed=0) == drawn and tool.settings(6, seed=1) != drawn
 
 
-def test_tune_one_at_a_time_adds_meta_critics_virtual_step_and_adopts_only_a_live_h_omega():
+def test_tune_one_at_a_time_adds_meta_critics_virtual_step_and_one_rule_adopts_for_both():
+    """One adoption rule for both baselines: better than the published setting by more than half
+    its seed spread; whether Meta-Critic's h_omega was alive does not enter it."""
     tool = load_tool("tune_baselines")
     ddpg, mc = tool.one_at_a_time("ddpg"), tool.one_at_a_time("meta-critic")
     assert len(ddpg) == 7 and ddpg[0] == tool.PUBLISHED and mc[:7] == ddpg
     assert [s.get("virtual_lr") for s in mc[7:]] == [1e-3, 1e-2]
-    row = {"method": "meta-critic", "setting": mc[7]}
-    assert not tool.eligible_row(row)  # no record of h_omega: not adoptable
-    assert not tool.eligible_row({**row, "aux_alive": [1.0, 0.0]})  # one seed's h_omega collapsed
-    assert not tool.eligible_row({**row, "aux_alive": [0.4, 0.5]})
-    assert not tool.eligible_row({**row, "aux_alive": [1.0, None]})
-    assert tool.eligible_row({**row, "aux_alive": [0.5, 0.6]})
-    assert tool.eligible_row({"method": "ddpg", "setting": ddpg[1]})
+    assert not hasattr(tool, "eligible_row")
+    for method, setting in (("ddpg", ddpg[5]), ("meta-critic", mc[5])):
+        published = {
+            "method": method,
+            "setting": tool.PUBLISHED,
+            "score": 0.9,
+            "per_seed": [1.0, 0.8],
+        }
+        for alive in (None, [0.0, 0.0], [1.0, 1.0]):
+            better = {"method": method, "setting": setting, "score": 0.79, "aux_alive": alive}
+            assert tool.adopted(better, published), (method, alive)  # margin 0.11 > 0.1
+            assert not tool.adopted({**better, "score": 0.81}, published), (method, alive)
+        assert not tool.adopted({**published, "score": 0.1}, published)  # the published itself
 
 
 def test_reproduce_adopts_exactly_what_the_committed_baseline_search_adopts():
@@ -57,9 +65,14 @@ def test_reproduce_adopts_exactly_what_the_committed_baseline_search_adopts():
             if not all(any(r["setting"] == d for r in mine) for d in design):
                 continue  # incomplete: nothing may be adopted from it
             published = next(r for r in mine if r["setting"] == tool.PUBLISHED)
-            top = next((r for r in mine if tool.eligible_row(r)), published)
+            top = mine[0]
             if tool.adopted(top, published):
                 change = {k: v for k, v in top["setting"].items() if v != tool.PUBLISHED.get(k)}
+                if "updates_per_iteration" in change:  # the search's unit: x the horizon
+                    horizon = tool.horizon_of(scene, method)
+                    change["updates_per_iteration"] = round(
+                        change["updates_per_iteration"] * horizon
+                    )
                 expected.setdefault(scene, {})[method] = change
     assert expected, "no complete search committed"
     assert TUNED == expected
