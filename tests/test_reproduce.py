@@ -586,8 +586,8 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     assert "### Targets" in beyond and "randomised" in beyond
     results = json.loads((other / "results.json").read_text())
     targets = results["beyond"]["targets"]
-    # 11 recipes and one identified, 2 KUKA recipes x (goals + 2 maps; Table 1 + 2 tables)
-    assert len(targets) == 12 * 3 + 2 * 3
+    # 7 reacher recipes and one identified, 2 KUKA recipes x (goals + 2 maps; Table 1 + 2 tables)
+    assert len(targets) == 8 * 3 + 2 * 3
     assert "pose-dynamics-full-identified" in results["beyond"]["maps"]  # its own row
     # the goal grid split by the arrival's elbow: the two parts add up to the whole grid's share
     (bmaps_stage,) = [json.loads(p.read_text()) for p in other.glob("beyond-maps-*/stage.json")]
