@@ -241,7 +241,7 @@ ADOPT_RULE = (
 def horizon_of(scene: str, method: str) -> int:
     """The rollout length a search's ``updates_per_iteration`` multiplies (its unit is the horizon):
     the stage's own setting, else the scene's default."""
-    from warp_critic.physics.scene import load_scene
+    from warp_critic.physics.load import load_scene
     from warp_critic.reproduce.metatrain import scene_file
     from warp_critic.reproduce.settings import default_settings
 
