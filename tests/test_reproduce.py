@@ -680,7 +680,7 @@ def test_ledger_records_every_call_and_a_refused_call_writes_nothing(tmp_path, c
     assert rows[0]["call"] == rows[2]["call"] != rows[3]["call"]
     text = (out / "REPORT.md").read_text()
     assert "- ledger (`ledger.jsonl`): 2 call(s) on this folder" in text
-    assert "sum of the report's 1 stage times" in text and "before the ledger" not in text
+    assert "sum of the report's 1 stage times" in text and "by no call of this ledger" not in text
     book = json.loads((out / "results.json").read_text())["ledger"]
     assert book["calls"] == 2 and book["stages_before_ledger"] == []
     before = (out / "ledger.jsonl").read_bytes()
@@ -728,4 +728,6 @@ def test_ledger_total_wall_time_counts_every_call():
     assert s["first"] == "2026-12-01T10:00:00Z" and s["last"] == "2026-12-02T09:20:00Z"
     line = ledger.header_line(s, {"toy": 5.0, "maps": 100.0, "tables": 50.0})
     assert "total wall time 4800 s" in line and "stage times 155 s" in line
-    assert "(1 without an end)" in line and "1 of these stages completed in calls before" in line
+    assert "(1 without an end)" in line
+    assert "1 of these stages were completed by no call of this ledger" in line
+    assert line.endswith("not in the ledger's total): tables")  # named, not only counted

@@ -177,10 +177,10 @@ def header_line(s: dict, stage_seconds: dict[str, float]) -> str:
         f"{len(stage_seconds)} stage times {sum(stage_seconds.values()):.0f} s "
         f"({sum(stage_seconds.values()) / 3600:.1f} h; each stage's time is its completing call's)"
     )
-    if before:
+    if before:  # carried in (``tools/carry_stages.py restore``) or run before the ledger existed
         line += (
-            f"; {len(before)} of these stages completed in calls before the ledger was kept "
-            f"(their times {sum(stage_seconds[n] for n in before):.0f} s are in the sum, not in the "
-            "ledger's total)"
+            f"; {len(before)} of these stages were completed by no call of this ledger (carried in "
+            f"with their records; their times {sum(stage_seconds[n] for n in before):.0f} s are in "
+            f"the sum, not in the ledger's total): {', '.join(sorted(before))}"
         )
     return line
