@@ -9,6 +9,7 @@ import json
 import re
 
 from conftest import ROOT
+from test_tools import load_tool
 
 NUMBER = re.compile(r"\d+(?:\.\d+)?%?")
 
@@ -99,27 +100,15 @@ def test_a_number_or_verdict_other_than_the_report_is_found():
     assert problems({**table, row: (measured, other)}) != []
 
 
-def _tool():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location(
-        "readme_claims", ROOT / "tools" / "readme_claims.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_readme_claims_block_is_the_one_the_tool_writes(capsys):
-    tool = _tool()
+    tool = load_tool("readme_claims")
     assert tool.main(["--check"]) == 0, "python tools/readme_claims.py --write"
 
 
 def test_the_tool_writes_what_results_json_says(tmp_path, capsys):
     """Another Table 1 cell or verdict in results.json gives another block: --check fails until
     --write; a report without a claim the table reads is one line, exit 2."""
-    tool = _tool()
+    tool = load_tool("readme_claims")
     r = json.loads((ROOT / "docs" / "paper" / "results.json").read_text())
     readme = tmp_path / "README.md"
     readme.write_text((ROOT / "README.md").read_text())
