@@ -426,8 +426,8 @@ def reproduce_output(w):
 
 def empty_stage_results(w):
     """A reproduce output whose reacher meta-training stages are complete but hold ``"result": {}``."""
+    from warp_critic.reproduce.engine.stages import MARKER, STAGE_KIND
     from warp_critic.reproduce.pipeline import ReproduceConfig, plan
-    from warp_critic.reproduce.stages import MARKER, STAGE_KIND
 
     rep = w.t / "rep"
     rep.mkdir()

@@ -313,9 +313,9 @@ def test_grid_figure_shows_a_diverged_cell_in_black(tmp_path):
 def test_interrupted_metatrain_resumes(tmp_path, capsys):
     """A sub-stage without stage.json (killed mid-training) resumes its run directories to the end;
     seed directories without a checkpoint (killed before the first one) are started afresh."""
+    from warp_critic.reproduce.engine.stages import prepare_out
     from warp_critic.reproduce.metatrain import run_metatrain_stage
     from warp_critic.reproduce.pipeline import ReproduceConfig, plan
-    from warp_critic.reproduce.stages import prepare_out
 
     out = prepare_out(tmp_path / "r")
     settings = ReproduceConfig(out=out, quick=True, seeds=2).validate()
@@ -360,7 +360,7 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     meta-training checkpoints, to the same cells; the archive holds no optimiser or buffer state."""
     import torch
 
-    from warp_critic.reproduce.carry import TRAINING_ONLY
+    from warp_critic.reproduce.experiments.records import CARRY
 
     out, rc, _ = quick
     assert rc == 0
@@ -376,7 +376,7 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     shipped = str(scenes_dir().resolve())
     for c in ckpts:
         ckpt = torch.load(c, weights_only=True)
-        assert not set(ckpt) & set(TRAINING_ONLY), c
+        assert not set(ckpt) & set(CARRY.training_only), c
         # no machine's folders: a shipped scene is named scenes/NAME (found by its content hash)
         assert ckpt["scene_file"].startswith("scenes/") and ckpt["config"]["scene"].startswith(
             "scenes/"
@@ -451,9 +451,10 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
     read = {v["dir"] for v in results["stages"].values()}
     assert f"{len(read)} stage record(s)" in printed and "tables-0000000000" in printed
     # the records of the stages it read are in the archive dest/stages, none beside the report
-    from warp_critic.reproduce.carry import complete_stages
+    from warp_critic.reproduce.engine.carry import complete_stages
+    from warp_critic.reproduce.experiments.records import stage_problem
 
-    archived = complete_stages(dest / "stages")
+    archived = complete_stages(dest / "stages", stage_problem)
     assert read <= set(archived) and "toy-0000000000" in {
         p.name for p in (dest / "stages").iterdir()
     }
@@ -473,7 +474,7 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
     assert f"{tables}/errors.json" in (dest / "REPORT.md").read_text()
     import shutil
 
-    from warp_critic.reproduce.stages import MARKER
+    from warp_critic.reproduce.engine.stages import MARKER
 
     # a recipe's meta-training is archived as its record alone, also one archived whole before
     mine = tmp_path / "with-recipes"
@@ -642,7 +643,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
 
 def test_beyond_maps_takes_floors_only_from_a_maps_stage_of_the_same_inputs(tmp_path):
     """The floors of a maps stage are reused only with the same settings and nominal runs."""
-    from warp_critic.reproduce.stages import STAGE_FILE, STAGE_KIND
+    from warp_critic.reproduce.engine.stages import STAGE_FILE, STAGE_KIND
     from warp_critic.reproduce.units import paper_maps_floors
 
     nominal = {"metatrain-reacher-ours": "metatrain-reacher-ours-aaaa"}
@@ -665,7 +666,7 @@ def test_beyond_maps_takes_floors_only_from_a_maps_stage_of_the_same_inputs(tmp_
 
 
 def test_ledger_records_every_call_and_a_refused_call_writes_nothing(tmp_path, capsys):
-    from warp_critic.reproduce import ledger
+    from warp_critic.reproduce.engine import ledger
 
     out = tmp_path / "r"
     args = ["--quick", "--only", "toy", "--out", str(out), "--device", "cpu"]
@@ -697,7 +698,7 @@ def test_ledger_records_every_call_and_a_refused_call_writes_nothing(tmp_path, c
 def test_ledger_calls_a_run_stopped_inside_a_stage_interrupted(tmp_path):
     """A stage's run stops with its own ``Interrupted`` (a KeyboardInterrupt subclass that says
     what it kept): the ledger says interrupted, not failed; any other error says failed."""
-    from warp_critic.reproduce import ledger
+    from warp_critic.reproduce.engine import ledger
     from warp_critic.running.loop import Interrupted
 
     for error, status in (
@@ -713,7 +714,7 @@ def test_ledger_calls_a_run_stopped_inside_a_stage_interrupted(tmp_path):
 
 
 def test_ledger_total_wall_time_counts_every_call():
-    from warp_critic.reproduce import ledger
+    from warp_critic.reproduce.engine import ledger
 
     rows = [
         {"event": "start", "call": "a", "time": "2026-12-01T10:00:00Z"},

@@ -167,7 +167,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     """Validate the flags, run the stages, write the report; returns the exit code (0)."""
     from warp_critic.core.runtime import init
     from warp_critic.physics.simulator import resolve_device
-    from warp_critic.reproduce.choose_executor import make_executor
+    from warp_critic.reproduce.engine.choose_executor import make_executor
     from warp_critic.reproduce.pipeline import reproduce
     from warp_critic.running.loop import Interrupted
 

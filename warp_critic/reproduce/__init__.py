@@ -1,6 +1,6 @@
 """``warp-critic reproduce``: the paper's experiments end to end, resumable stage by stage, and a report.
 
-Modules: :mod:`.settings` (paper and ``--quick`` settings, hashes), :mod:`.stages` (stage directories,
+Modules: :mod:`.settings` (paper and ``--quick`` settings, hashes), :mod:`~warp_critic.reproduce.engine.stages` (stage directories,
 ``stage.json``, the output marker), :mod:`.analyses` (toy, landscape), :mod:`.metatrain`
 (meta-training of the three methods, every seed batched), :mod:`.evaluate` (batched meta-test: many
 runs, goals and dynamics variants in one model), :mod:`.generalize` (KUKA tables, reacher maps),
@@ -8,8 +8,8 @@ runs, goals and dynamics variants in one model), :mod:`.generalize` (KUKA tables
 report.rrd) with its sections :mod:`.report_analyses` (toy, landscapes), :mod:`.report_training`
 (Figure 3), :mod:`.report_maps` (Figures 4-6) and :mod:`.report_tables` (the KUKA tables), sharing a
 :mod:`.report_draft`, and :mod:`.report_plots` (figures) and :mod:`.report_paper` (steps to error
-levels, solved seeds, 2-D maps, verdicts), :mod:`.executors` (in process, local processes) and
-:mod:`.on_ray` (Ray), chosen by the flags in :mod:`.choose_executor`, :mod:`.validate` (every
+levels, solved seeds, 2-D maps, verdicts), :mod:`~warp_critic.reproduce.engine.executors` (in process, local processes) and
+:mod:`~warp_critic.reproduce.engine.on_ray` (Ray), chosen by the flags in :mod:`~warp_critic.reproduce.engine.choose_executor`, :mod:`.validate` (every
 ``--set`` checked up front), :mod:`.pipeline` (the order), :mod:`.units` (each stage's function and
 inputs). The flags live in :mod:`warp_critic.cli.reproduce`.
 """
@@ -20,8 +20,8 @@ __all__, __getattr__, __dir__ = lazy_exports(
     __name__,
     {
         "warp_critic.reproduce.pipeline": ("ReproduceConfig", "reproduce"),
-        "warp_critic.reproduce.executors": ("InProcess", "LocalProcesses"),
-        "warp_critic.reproduce.choose_executor": ("make_executor",),
-        "warp_critic.reproduce.on_ray": ("RayExecutor",),
+        "warp_critic.reproduce.engine.executors": ("InProcess", "LocalProcesses"),
+        "warp_critic.reproduce.engine.choose_executor": ("make_executor",),
+        "warp_critic.reproduce.engine.on_ray": ("RayExecutor",),
     },
 )

@@ -16,8 +16,8 @@ import copy
 from dataclasses import replace
 
 from warp_critic.core.errors import FieldError
+from warp_critic.reproduce.engine.stages import StageRecord
 from warp_critic.reproduce.settings import EXTRA_BASELINES, METHODS, SCENES, stage_hash
-from warp_critic.reproduce.stages import StageRecord
 
 #: the evaluation groups an extra baseline gets, and the robot each reads
 EVALUATIONS = (("maps", "reacher"), ("tables", "kuka"))

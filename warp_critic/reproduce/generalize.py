@@ -338,7 +338,7 @@ def run_maps_stage(
         "length": {},
     }
     if int(s["reach_iterations"]) > 0 and floors_from is not None:
-        from warp_critic.reproduce.stages import read_stage
+        from warp_critic.reproduce.engine.stages import read_stage
 
         done = (read_stage(d.parent / floors_from) or {}).get("result", {})
         keys = ("reach_floor", "reach_iterations", "reach_lrs")

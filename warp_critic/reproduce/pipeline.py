@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
+from warp_critic.reproduce.engine.stages import Runner, claim_out, read_complete
+from warp_critic.reproduce.experiments.records import stage_problem
 from warp_critic.reproduce.extra_baselines import (
     check_baselines,
     metatrain_stage,
@@ -28,7 +30,6 @@ from warp_critic.reproduce.settings import (
     default_settings,
     stage_hash,
 )
-from warp_critic.reproduce.stages import Runner, claim_out, read_complete
 
 
 @dataclass
@@ -234,7 +235,7 @@ def reproduce(rc: ReproduceConfig, executor=None) -> dict:
 
     Returns ``{"report": path, "records": ..., "out": ..., "plan": ...}``.
     """
-    from warp_critic.reproduce.executors import InProcess
+    from warp_critic.reproduce.engine.executors import InProcess
 
     settings = rc.validate()
     out, lock = claim_out(Path(rc.out))
@@ -246,12 +247,12 @@ def reproduce(rc: ReproduceConfig, executor=None) -> dict:
 
 def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict:
     from warp_critic.physics.simulator import resolve_device
-    from warp_critic.reproduce.executors import jobs_hint
-    from warp_critic.reproduce.ledger import Call
+    from warp_critic.reproduce.engine.executors import jobs_hint
+    from warp_critic.reproduce.engine.ledger import Call
     from warp_critic.reproduce.units import make_unit
 
     device = resolve_device(rc.device)
-    runner = Runner(out)
+    runner = Runner(out, stage_problem)
     t0 = time.perf_counter()
     stages = plan(settings, beyond=rc.plans_beyond, extra=rc.extra)
     call = Call(out, rc.command, rc.selected(), device)  # the folder's ledger
@@ -260,7 +261,10 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
         [
             n
             for n in wave
-            if read_complete(runner.stage_dir(n, stages[n]["hash"]), stages[n]["group"]) is None
+            if read_complete(
+                runner.stage_dir(n, stages[n]["hash"]), stages[n]["group"], stage_problem
+            )
+            is None
         ]
         for wave in waves
     ]

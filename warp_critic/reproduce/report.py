@@ -16,8 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from warp_critic.reproduce import ledger
 from warp_critic.reproduce import report_paper as rp
+from warp_critic.reproduce.engine import ledger
+from warp_critic.reproduce.engine.stages import STAGE_FILE, StageRecord, read_stage
 from warp_critic.reproduce.extra_baselines import merge_rows
 from warp_critic.reproduce.report_analyses import landscape_section, toy_section
 from warp_critic.reproduce.report_beyond import beyond_section
@@ -26,7 +27,6 @@ from warp_critic.reproduce.report_maps import maps_section
 from warp_critic.reproduce.report_tables import tables_section
 from warp_critic.reproduce.report_training import metatrain_section
 from warp_critic.reproduce.settings import SCENES, STAGES
-from warp_critic.reproduce.stages import STAGE_FILE, StageRecord, read_stage
 from warp_critic.running.rundir import atomic_write_text
 
 #: The sections after the stage table, in the report's order (each appends to the :class:`Draft`).
@@ -82,7 +82,7 @@ def write_report(
     call: str | None = None,
 ) -> Path:
     """Write the report of ``out``'s complete stages of ``plan``; ``call`` is this call's id in
-    the folder's ledger (:mod:`.ledger`), whose total wall time the header gives."""
+    the folder's ledger (:mod:`~warp_critic.reproduce.engine.ledger`), whose total wall time the header gives."""
     out = Path(out)
     recs = merge_rows(
         collect(out, plan, records), plan

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from warp_critic.reproduce.stages import StageRecord
+from warp_critic.reproduce.engine.stages import StageRecord
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""The unit of work of each stage (:class:`~warp_critic.reproduce.executors.Unit`): the function
+"""The unit of work of each stage (:class:`~warp_critic.reproduce.engine.executors.Unit`): the function
 that runs it, by import path, and its inputs, with the run directories of the stages it reads
 resolved (so that any executor can run it anywhere)."""
 
@@ -7,10 +7,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from warp_critic.core.errors import UserError
-from warp_critic.reproduce.executors import Unit
+from warp_critic.reproduce.engine.executors import Unit
+from warp_critic.reproduce.engine.stages import read_stage
 from warp_critic.reproduce.metatrain import identified_run_dirs, run_dirs
 from warp_critic.reproduce.settings import ALL_METHODS
-from warp_critic.reproduce.stages import read_stage
 
 # the function each stage group runs, by import path (so that any executor can run it anywhere)
 STAGE_FUNCTIONS = {
