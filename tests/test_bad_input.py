@@ -427,7 +427,7 @@ def reproduce_output(w):
 def empty_stage_results(w):
     """A reproduce output whose reacher meta-training stages are complete but hold ``"result": {}``."""
     from warp_critic.reproduce.engine.stages import MARKER, STAGE_KIND
-    from warp_critic.reproduce.pipeline import ReproduceConfig, plan
+    from warp_critic.reproduce.experiments.plan import ReproduceConfig, plan
 
     rep = w.t / "rep"
     rep.mkdir()

@@ -236,7 +236,7 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
 
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
     from warp_critic.physics.scene import Variant
-    from warp_critic.reproduce.evaluate import Job, evaluate
+    from warp_critic.reproduce.experiments.evaluate import Job, evaluate
 
     out, rc, _ = quick
     runs = {
@@ -276,8 +276,8 @@ def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
     import torch
 
     from warp_critic.physics.scene import Variant
-    from warp_critic.reproduce.evaluate import Job, evaluate
-    from warp_critic.reproduce.generalize import _pool
+    from warp_critic.reproduce.experiments.evaluate import Job, evaluate
+    from warp_critic.reproduce.experiments.generalize import _pool
 
     out, rc, _ = quick
     run = str(sorted((next(out.glob("metatrain-reacher-ours-*")) / "run").glob("seed*"))[0])
@@ -295,8 +295,8 @@ def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
 
 def test_grid_figure_shows_a_diverged_cell_in_black(tmp_path):
     from warp_critic.reproduce import report_paper as rp
+    from warp_critic.reproduce.experiments.settings import METHODS
     from warp_critic.reproduce.report_plots import figure
-    from warp_critic.reproduce.settings import METHODS
 
     values = [0.5, 1.0]
     cells = [{"mse_mean": v} for v in (0.01, 0.2, float("inf"), 0.05)]
@@ -314,8 +314,8 @@ def test_interrupted_metatrain_resumes(tmp_path, capsys):
     """A sub-stage without stage.json (killed mid-training) resumes its run directories to the end;
     seed directories without a checkpoint (killed before the first one) are started afresh."""
     from warp_critic.reproduce.engine.stages import prepare_out
-    from warp_critic.reproduce.metatrain import run_metatrain_stage
-    from warp_critic.reproduce.pipeline import ReproduceConfig, plan
+    from warp_critic.reproduce.experiments.metatrain import run_metatrain_stage
+    from warp_critic.reproduce.experiments.plan import ReproduceConfig, plan
 
     out = prepare_out(tmp_path / "r")
     settings = ReproduceConfig(out=out, quick=True, seeds=2).validate()
@@ -515,7 +515,7 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
 
 
 def test_only_one_beyond_evaluation_plans_it_and_what_it_reads():
-    from warp_critic.reproduce.pipeline import ReproduceConfig, needed, plan
+    from warp_critic.reproduce.experiments.plan import ReproduceConfig, needed, plan
 
     rc = ReproduceConfig(out="unused", only=["beyond-maps"], quick=True)
     settings = rc.validate()
@@ -552,8 +552,8 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     critic, and the report's "Beyond the paper" section has computed verdicts, outside the claims."""
     import shutil
 
-    from warp_critic.reproduce.pipeline import plan
-    from warp_critic.reproduce.settings import default_settings
+    from warp_critic.reproduce.experiments.plan import plan
+    from warp_critic.reproduce.experiments.settings import default_settings
 
     settings = default_settings(True, 2)
     paper, both = plan(settings), plan(settings, beyond=True)
@@ -644,7 +644,7 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
 def test_beyond_maps_takes_floors_only_from_a_maps_stage_of_the_same_inputs(tmp_path):
     """The floors of a maps stage are reused only with the same settings and nominal runs."""
     from warp_critic.reproduce.engine.stages import STAGE_FILE, STAGE_KIND
-    from warp_critic.reproduce.units import paper_maps_floors
+    from warp_critic.reproduce.experiments.units import paper_maps_floors
 
     nominal = {"metatrain-reacher-ours": "metatrain-reacher-ours-aaaa"}
     st = {"settings": {"grid": 3, "reach_iterations": 5}, "depends": dict(nominal, other="x")}

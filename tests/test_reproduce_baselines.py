@@ -10,9 +10,9 @@ import pytest
 
 from warp_critic.cli.main import main as cli_main
 from warp_critic.reproduce.engine.stages import StageRecord
-from warp_critic.reproduce.extra_baselines import merge_rows
-from warp_critic.reproduce.pipeline import ReproduceConfig, plan
-from warp_critic.reproduce.settings import default_settings
+from warp_critic.reproduce.experiments.extra_baselines import merge_rows
+from warp_critic.reproduce.experiments.plan import ReproduceConfig, plan
+from warp_critic.reproduce.experiments.settings import default_settings
 
 TD3_STAGES = ["metatrain-kuka-td3", "metatrain-reacher-td3", "td3-maps", "td3-tables"]
 

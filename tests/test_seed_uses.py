@@ -17,8 +17,8 @@ def test_the_held_out_seed_chose_nothing_and_seed_1_is_not_held_out():
 
 
 def test_the_held_out_stage_keeps_the_tables_stage_and_its_hash():
-    from warp_critic.reproduce.pipeline import plan
-    from warp_critic.reproduce.settings import default_settings
+    from warp_critic.reproduce.experiments.plan import plan
+    from warp_critic.reproduce.experiments.settings import default_settings
 
     p = plan(default_settings(True, 2))
     held, tables = p["tables-heldout"], p["tables"]

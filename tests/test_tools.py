@@ -141,7 +141,7 @@ def test_tables_of_runs_prints_the_stress_tables_and_their_rule(tmp_path, capsys
     a, b = tmp_path / "a", tmp_path / "b"
     meta_train(tiny_cfg(a, iterations=1))
     meta_train(tiny_cfg(b, iterations=1, seed=1))
-    from warp_critic.reproduce.settings import default_settings
+    from warp_critic.reproduce.experiments.settings import default_settings
 
     s = dict(default_settings(quick=False, seeds=1)["tables"], num_goals=2)
     # below the untrained error (about 0.15 here) on both: 2e-9 is met nowhere, 0.2 everywhere
@@ -187,7 +187,7 @@ def test_tables_of_runs_prints_the_stress_tables_and_their_rule(tmp_path, capsys
 
 def test_goal_grid_tool_writes_the_maps_goals_as_a_goals_file(tmp_path, capsys):
     from warp_critic.cli.flags import parse_goals
-    from warp_critic.reproduce.settings import default_settings
+    from warp_critic.reproduce.experiments.settings import default_settings
 
     tool = load_tool("goal_grid")
     out = tmp_path / "g.txt"

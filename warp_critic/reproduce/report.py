@@ -19,14 +19,14 @@ import numpy as np
 from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.engine import ledger
 from warp_critic.reproduce.engine.stages import STAGE_FILE, StageRecord, read_stage
-from warp_critic.reproduce.extra_baselines import merge_rows
+from warp_critic.reproduce.experiments.extra_baselines import merge_rows
+from warp_critic.reproduce.experiments.settings import SCENES, STAGES
 from warp_critic.reproduce.report_analyses import landscape_section, toy_section
 from warp_critic.reproduce.report_beyond import beyond_section
 from warp_critic.reproduce.report_draft import Draft, rel
 from warp_critic.reproduce.report_maps import maps_section
 from warp_critic.reproduce.report_tables import tables_section
 from warp_critic.reproduce.report_training import metatrain_section
-from warp_critic.reproduce.settings import SCENES, STAGES
 from warp_critic.running.rundir import atomic_write_text
 
 #: The sections after the stage table, in the report's order (each appends to the :class:`Draft`).

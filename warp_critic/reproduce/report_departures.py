@@ -3,14 +3,14 @@ prints next to each table and figure of that robot (read from the stage records 
 
 from __future__ import annotations
 
-from warp_critic.reproduce.settings import METHOD_LABELS, TUNED
+from warp_critic.reproduce.experiments.settings import METHOD_LABELS, TUNED
 
 
 def scene_gravity(scene: str) -> float | None:
     """The gravity the scene's runs use (m/s^2), ``None`` if the scene cannot be read."""
     try:
         from warp_critic.physics.load import load_scene
-        from warp_critic.reproduce.metatrain import scene_file
+        from warp_critic.reproduce.experiments.metatrain import scene_file
 
         g = load_scene(scene_file(scene)).defaults.get("gravity")
     except Exception:  # the report states what it can

@@ -7,11 +7,11 @@ import numpy as np
 
 from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.engine.stages import STAGE_FILE
+from warp_critic.reproduce.experiments.settings import METHOD_LABELS, METHODS, present
 from warp_critic.reproduce.report_departures import departures_line
 from warp_critic.reproduce.report_draft import Draft, fmt
 from warp_critic.reproduce.report_plots import figure, plot_goal_maps
 from warp_critic.reproduce.rules import map_reason, map_verdict
-from warp_critic.reproduce.settings import METHOD_LABELS, METHODS, present
 
 
 def maps_section(d: Draft) -> None:

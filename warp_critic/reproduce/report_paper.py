@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from warp_critic.methods import method
+from warp_critic.reproduce.experiments.settings import ALL_METHODS, METHOD_LABELS, METHODS, present
 from warp_critic.reproduce.report_plots import diverged_cmap, log_limits
 from warp_critic.reproduce.rules import WINDOW, sample_efficiency, settled_index
-from warp_critic.reproduce.settings import ALL_METHODS, METHOD_LABELS, METHODS, present
 
 LEVELS = (0.3, 0.1, 0.03)
 #: rad^2 (summed over the joints): a baseline seed "solved the training task" at or below this final

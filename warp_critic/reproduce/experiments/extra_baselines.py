@@ -1,7 +1,7 @@
 """Baselines beyond the paper's two in ``reproduce`` (``--baselines ddpg,meta-critic,td3``): their
 own stages, and their rows merged into the paper's maps and tables for the report.
 
-A baseline ``m`` that the registry does not reproduce by default (:data:`~.settings.EXTRA_BASELINES`)
+A baseline ``m`` that the registry does not reproduce by default (:data:`~warp_critic.reproduce.experiments.settings.EXTRA_BASELINES`)
 adds, when selected, ``metatrain-<robot>-<m>`` (as the paper's baselines, with its published settings
 at the baselines' budget) and two evaluations: ``<m>-maps`` (reacher) and ``<m>-tables`` (KUKA), the
 paper's maps and tables settings for its runs only, with the same goals, initialisations and policy
@@ -17,7 +17,7 @@ from dataclasses import replace
 
 from warp_critic.core.errors import FieldError
 from warp_critic.reproduce.engine.stages import StageRecord
-from warp_critic.reproduce.settings import EXTRA_BASELINES, METHODS, SCENES, stage_hash
+from warp_critic.reproduce.experiments.settings import EXTRA_BASELINES, METHODS, SCENES, stage_hash
 
 #: the evaluation groups an extra baseline gets, and the robot each reads
 EVALUATIONS = (("maps", "reacher"), ("tables", "kuka"))

@@ -9,16 +9,16 @@ from pathlib import Path
 from warp_critic.core.errors import UserError
 from warp_critic.reproduce.engine.executors import Unit
 from warp_critic.reproduce.engine.stages import read_stage
-from warp_critic.reproduce.metatrain import identified_run_dirs, run_dirs
-from warp_critic.reproduce.settings import ALL_METHODS
+from warp_critic.reproduce.experiments.metatrain import identified_run_dirs, run_dirs
+from warp_critic.reproduce.experiments.settings import ALL_METHODS
 
 # the function each stage group runs, by import path (so that any executor can run it anywhere)
 STAGE_FUNCTIONS = {
-    "toy": "warp_critic.reproduce.analyses:run_toy_stage",
-    "landscape": "warp_critic.reproduce.analyses:run_landscape_stage",
-    "metatrain": "warp_critic.reproduce.metatrain:run_metatrain_stage",
-    "maps": "warp_critic.reproduce.generalize:run_maps_stage",
-    "tables": "warp_critic.reproduce.generalize:run_tables_stage",
+    "toy": "warp_critic.reproduce.experiments.analyses:run_toy_stage",
+    "landscape": "warp_critic.reproduce.experiments.analyses:run_landscape_stage",
+    "metatrain": "warp_critic.reproduce.experiments.metatrain:run_metatrain_stage",
+    "maps": "warp_critic.reproduce.experiments.generalize:run_maps_stage",
+    "tables": "warp_critic.reproduce.experiments.generalize:run_tables_stage",
 }
 
 

@@ -15,7 +15,7 @@ method, as ``mean_j (q_T,j - g_j)^2`` (MSE over the joints); ``mean(std)`` over 
 * Stress tables (this project's earlier, harsher variants): ``stress_mass`` ADDS a point mass at the
   tip (``Variant(ee_mass=m)``), ``stress_length`` SETS link 7's length by stretching the link
   (``Variant(link_length=L)``). Each column also gets the open-loop reachability floor
-  (:mod:`.reach`): the error the best open-loop torques with the same bounds and horizon reach.
+  (:mod:`~warp_critic.reproduce.experiments.reach`): the error the best open-loop torques with the same bounds and horizon reach.
 * Tables 2, 3 and the stress tables use one set of ``num_goals`` goals drawn as Table 1's at
   ``dynamics_goal_std``.
 
@@ -37,7 +37,7 @@ import torch
 from warp_critic.core.errors import UserError
 from warp_critic.physics.link_changes import parse_changes
 from warp_critic.physics.scene import Variant
-from warp_critic.reproduce.evaluate import Job, default_steps, evaluate, relpath
+from warp_critic.reproduce.experiments.evaluate import Job, default_steps, evaluate, relpath
 from warp_critic.running.task_inputs import inside_limits
 
 
@@ -208,7 +208,7 @@ def run_tables_stage(
                 cells.append(cell)
     floors = {}
     if int(s["reach_iterations"]) > 0:
-        from warp_critic.reproduce.reach import open_loop_floor
+        from warp_critic.reproduce.experiments.reach import open_loop_floor
 
         for table in ("stress_mass", "stress_length"):
             best = open_loop_floor(
@@ -264,7 +264,7 @@ def run_maps_stage(
     ``only``: the rows evaluated (default: every one of ``runs``; ours' runs set the grids).
 
     ``floors_from``: a complete maps stage directory next to ``d`` that computed the reachability
-    floors of the same grids from the same nominal runs (:func:`~.units.paper_maps_floors`); its
+    floors of the same grids from the same nominal runs (:func:`~warp_critic.reproduce.experiments.units.paper_maps_floors`); its
     floors are taken instead of computed again (``reach_floor_from`` names it)."""
     import json
 
@@ -368,8 +368,8 @@ def _maps_floor(
     """The open-loop reachability floor (MSE over the joints) of every goal of the goal grid ``(n, n,
     dof)`` and of every cell of the 2-D maps (mean over the training goals): what the best open-loop
     torques within the policy's bounds and horizon reach from home
-    (:func:`~.reach.best_open_loop_floor`)."""
-    from warp_critic.reproduce.reach import best_open_loop_floor
+    (:func:`~warp_critic.reproduce.experiments.reach.best_open_loop_floor`)."""
+    from warp_critic.reproduce.experiments.reach import best_open_loop_floor
 
     its, lrs = int(s["reach_iterations"]), [float(x) for x in s["reach_lrs"]]
 
