@@ -19,7 +19,7 @@ from warp_critic.running.task import TaskConfig
 ALLOWED_LITERALS = {
     "warp_critic/evaluation/paper.py",
     "warp_critic/reproduce/experiments/settings.py",
-    "warp_critic/reproduce/report_training.py",
+    "warp_critic/reproduce/report/training.py",
 }
 
 
@@ -52,7 +52,7 @@ def test_the_readers_follow_the_registry():
     from warp_critic.evaluation.presets import DESCRIPTIONS, PRESETS
     from warp_critic.reproduce.experiments.metatrain import STEPS_COUNTED
     from warp_critic.reproduce.experiments.settings import METHOD_LABELS
-    from warp_critic.reproduce.report_plots import COLORS
+    from warp_critic.reproduce.report.plots import COLORS
 
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")

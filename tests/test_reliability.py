@@ -397,7 +397,7 @@ def test_config_records_the_scene_file_and_its_content_hash(tmp_path):
 
 def test_report_names_the_seeds_that_were_trained():
     from warp_critic.reproduce.experiments.plan import ReproduceConfig, plan
-    from warp_critic.reproduce.report import seeds_trained
+    from warp_critic.reproduce.report.write import seeds_trained
 
     rc = ReproduceConfig(quick=True, seeds=2, overrides=["metatrain.seeds=[5]"])
     assert seeds_trained(plan(rc.validate())) == [5]

@@ -15,7 +15,7 @@ import pytest
 import torch
 
 from warp_critic.cli.main import main as cli_main
-from warp_critic.reproduce.report_maps import elbow_bent
+from warp_critic.reproduce.report.maps import elbow_bent
 
 
 def reproduce_main(argv):
@@ -294,9 +294,9 @@ def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
 
 
 def test_grid_figure_shows_a_diverged_cell_in_black(tmp_path):
-    from warp_critic.reproduce import report_paper as rp
     from warp_critic.reproduce.experiments.settings import METHODS
-    from warp_critic.reproduce.report_plots import figure
+    from warp_critic.reproduce.report import paper as rp
+    from warp_critic.reproduce.report.plots import figure
 
     values = [0.5, 1.0]
     cells = [{"mse_mean": v} for v in (0.01, 0.2, float("inf"), 0.05)]

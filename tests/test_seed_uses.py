@@ -4,7 +4,7 @@ planned from it, and the report's line on the settings that differ from the pape
 from __future__ import annotations
 
 from warp_critic.evaluation import seed_uses
-from warp_critic.reproduce.report_departures import departures
+from warp_critic.reproduce.report.departures import departures
 
 
 def test_the_held_out_seed_chose_nothing_and_seed_1_is_not_held_out():

@@ -1,17 +1,23 @@
 """``warp-critic reproduce``: the paper's experiments end to end, resumable stage by stage, and a report.
 
-Modules: :mod:`~warp_critic.reproduce.experiments.settings` (paper and ``--quick`` settings, hashes), :mod:`~warp_critic.reproduce.engine.stages` (stage directories,
-``stage.json``, the output marker), :mod:`~warp_critic.reproduce.experiments.analyses` (toy, landscape), :mod:`~warp_critic.reproduce.experiments.metatrain`
-(meta-training of the three methods, every seed batched), :mod:`~warp_critic.reproduce.experiments.evaluate` (batched meta-test: many
-runs, goals and dynamics variants in one model), :mod:`~warp_critic.reproduce.experiments.generalize` (KUKA tables, reacher maps),
-:mod:`~warp_critic.reproduce.experiments.reach` (open-loop reachability floors), :mod:`.report` (REPORT.md, results.json, figures,
-report.rrd) with its sections :mod:`.report_analyses` (toy, landscapes), :mod:`.report_training`
-(Figure 3), :mod:`.report_maps` (Figures 4-6) and :mod:`.report_tables` (the KUKA tables), sharing a
-:mod:`.report_draft`, and :mod:`.report_plots` (figures) and :mod:`.report_paper` (steps to error
-levels, solved seeds, 2-D maps, verdicts), :mod:`~warp_critic.reproduce.engine.executors` (in process, local processes) and
-:mod:`~warp_critic.reproduce.engine.on_ray` (Ray), chosen by the flags in :mod:`~warp_critic.reproduce.engine.choose_executor`, :mod:`~warp_critic.reproduce.experiments.validate` (every
-``--set`` checked up front), :mod:`.pipeline` (the order), :mod:`~warp_critic.reproduce.experiments.units` (each stage's function and
-inputs). The flags live in :mod:`warp_critic.cli.reproduce`.
+Three layers, each importing only the ones before it (``tests/test_layers.py``):
+
+* :mod:`~warp_critic.reproduce.engine`: a general stage workflow that knows no paper and no method
+  -- :mod:`~warp_critic.reproduce.engine.stages` (stage directories, ``stage.json``, the output
+  marker), the executors (:mod:`~warp_critic.reproduce.engine.executors`: in process, local
+  processes; :mod:`~warp_critic.reproduce.engine.on_ray`: Ray; chosen by the flags in
+  :mod:`~warp_critic.reproduce.engine.choose_executor`), :mod:`~warp_critic.reproduce.engine.ledger`
+  (the calls on a folder) and :mod:`~warp_critic.reproduce.engine.carry` (stages to another machine).
+* :mod:`~warp_critic.reproduce.experiments`: the paper's stages -- settings (paper and ``--quick``,
+  hashes), recipes, validation (every ``--set`` checked up front), the plan
+  (:mod:`~warp_critic.reproduce.experiments.plan`), each stage's function and inputs
+  (:mod:`~warp_critic.reproduce.experiments.units`: toy, landscape, meta-training, the reacher maps
+  and KUKA tables with batched meta-test and open-loop reachability floors).
+* :mod:`~warp_critic.reproduce.report`: the verdict rules and the report's sections, written by
+  :mod:`~warp_critic.reproduce.report.write` (REPORT.md, results.json, figures, report.rrd).
+
+:mod:`~warp_critic.reproduce.pipeline` joins them: it runs the stages a call needs, then writes the
+report. The flags live in :mod:`warp_critic.cli.reproduce`.
 """
 
 from warp_critic.core.exports import lazy_exports

@@ -101,7 +101,7 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
         runner.log(
             f"reproduce: writing the report, {(time.perf_counter() - t0) / 60:.1f} min elapsed"
         )
-        from warp_critic.reproduce.report import write_report
+        from warp_critic.reproduce.report.write import write_report
 
         report = write_report(
             out,

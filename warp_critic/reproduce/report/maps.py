@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.engine.stages import STAGE_FILE
 from warp_critic.reproduce.experiments.settings import METHOD_LABELS, METHODS, present
-from warp_critic.reproduce.report_departures import departures_line
-from warp_critic.reproduce.report_draft import Draft, fmt
-from warp_critic.reproduce.report_plots import figure, plot_goal_maps
-from warp_critic.reproduce.rules import map_reason, map_verdict
+from warp_critic.reproduce.report import paper as rp
+from warp_critic.reproduce.report.departures import departures_line
+from warp_critic.reproduce.report.draft import Draft, fmt
+from warp_critic.reproduce.report.plots import figure, plot_goal_maps
+from warp_critic.reproduce.report.rules import map_reason, map_verdict
 
 
 def maps_section(d: Draft) -> None:

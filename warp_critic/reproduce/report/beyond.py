@@ -16,11 +16,11 @@ from __future__ import annotations
 import numpy as np
 
 from warp_critic.evaluation.paper import PAPER_TABLE1
-from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.experiments.recipes import RECIPES
 from warp_critic.reproduce.experiments.settings import BEYOND, SCENES
-from warp_critic.reproduce.report_draft import Draft, fmt
-from warp_critic.reproduce.report_maps import elbow_bent, floor_shares
+from warp_critic.reproduce.report import paper as rp
+from warp_critic.reproduce.report.draft import Draft, fmt
+from warp_critic.reproduce.report.maps import elbow_bent, floor_shares
 
 GOALS_TARGET, MAPS_TARGET, LEVEL = 0.9, 0.8, 0.05
 

@@ -6,7 +6,7 @@ Definitions (stated in the report):
 
 * **steps to a level**: the first iteration after which the running mean of the training error
   ``||q_T - g||^2`` (rad^2, summed over the joints; the curve of Figure 3) over
-  :data:`~.rules.WINDOW` iterations stays at or below the level (:mod:`.rules`), as environment steps
+  :data:`~warp_critic.reproduce.report.rules.WINDOW` iterations stays at or below the level (:mod:`~warp_critic.reproduce.report.rules`), as environment steps
   ``(iteration + 1) x steps per iteration`` and as wall time (the sum of the iteration times up to
   it); mean and min-max over the seeds that reach it, and the count that never does.
 * **solved the training task** (the paper: "for our baselines, we selected seeds that solved the
@@ -22,8 +22,8 @@ import numpy as np
 
 from warp_critic.methods import method
 from warp_critic.reproduce.experiments.settings import ALL_METHODS, METHOD_LABELS, METHODS, present
-from warp_critic.reproduce.report_plots import diverged_cmap, log_limits
-from warp_critic.reproduce.rules import WINDOW, sample_efficiency, settled_index
+from warp_critic.reproduce.report.plots import diverged_cmap, log_limits
+from warp_critic.reproduce.report.rules import WINDOW, sample_efficiency, settled_index
 
 LEVELS = (0.3, 0.1, 0.03)
 #: rad^2 (summed over the joints): a baseline seed "solved the training task" at or below this final
@@ -72,7 +72,7 @@ def steps_to_levels(
     res: dict, budget: float | None = None, window: int = WINDOW
 ) -> dict[float, dict]:
     """level -> {steps: [per reaching seed], seconds: [...], never: int, seeds: int}: a seed reaches
-    a level at :func:`~.rules.settled_index` (the running mean over ``window`` iterations stays at
+    a level at :func:`~warp_critic.reproduce.report.rules.settled_index` (the running mean over ``window`` iterations stays at
     or below it to the end of the curve, the curve cut at ``budget`` env steps when given)."""
     curves = seed_curves(res)
     out = {}
@@ -129,7 +129,7 @@ def steps_table(got: dict) -> tuple[list[str], dict]:
 
 def sample_efficiency_verdict(data: dict, within: dict | None = None) -> tuple[str, str]:
     """(verdict, measurement) for 'ours reaches the training error levels in fewer steps', under
-    :data:`~.rules.STEPS_RULE`: ``data`` from the whole curves, ``within`` from the curves cut at
+    :data:`~warp_critic.reproduce.report.rules.STEPS_RULE`: ``data`` from the whole curves, ``within`` from the curves cut at
     the common budget (the same when the budgets are equal)."""
     return sample_efficiency(data, data if within is None else within)
 

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.engine.stages import STAGE_FILE
 from warp_critic.reproduce.experiments.settings import ALL_METHODS, METHOD_LABELS, METHODS, SCENES
-from warp_critic.reproduce.report_departures import departures_line
-from warp_critic.reproduce.report_draft import Draft, fmt
-from warp_critic.reproduce.report_plots import plot_metatrain
-from warp_critic.reproduce.rules import SPREAD_RULE, STEPS_RULE, WINDOW
+from warp_critic.reproduce.report import paper as rp
+from warp_critic.reproduce.report.departures import departures_line
+from warp_critic.reproduce.report.draft import Draft, fmt
+from warp_critic.reproduce.report.plots import plot_metatrain
+from warp_critic.reproduce.report.rules import SPREAD_RULE, STEPS_RULE, WINDOW
 
 
 def metatrain_section(d: Draft) -> None:

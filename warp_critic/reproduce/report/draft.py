@@ -1,5 +1,5 @@
 """The report being written: its markdown lines, ``results.json`` dict, figures and claims,
-shared by the report's sections (:mod:`.report`, which renders them)."""
+shared by the report's sections (:mod:`~warp_critic.reproduce.report.write`, which renders them)."""
 
 from __future__ import annotations
 

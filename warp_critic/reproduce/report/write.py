@@ -3,8 +3,8 @@
 Every number comes from a stage's ``stage.json`` (or a file it names); nothing is typed in. The
 paper's values come from :data:`warp_critic.evaluation.paper.PAPER_TABLES`. The report covers
 every stage of the current settings that is complete, whether it ran in this call or earlier. The
-sections live in :mod:`.report_analyses`, :mod:`.report_training`, :mod:`.report_maps` and
-:mod:`.report_tables`; they share one :class:`~.report_draft.Draft`.
+sections live in :mod:`~warp_critic.reproduce.report.analyses`, :mod:`~warp_critic.reproduce.report.training`, :mod:`~warp_critic.reproduce.report.maps` and
+:mod:`~warp_critic.reproduce.report.tables`; they share one :class:`~warp_critic.reproduce.report.draft.Draft`.
 """
 
 from __future__ import annotations
@@ -16,17 +16,17 @@ from pathlib import Path
 
 import numpy as np
 
-from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.engine import ledger
 from warp_critic.reproduce.engine.stages import STAGE_FILE, StageRecord, read_stage
 from warp_critic.reproduce.experiments.extra_baselines import merge_rows
 from warp_critic.reproduce.experiments.settings import SCENES, STAGES
-from warp_critic.reproduce.report_analyses import landscape_section, toy_section
-from warp_critic.reproduce.report_beyond import beyond_section
-from warp_critic.reproduce.report_draft import Draft, rel
-from warp_critic.reproduce.report_maps import maps_section
-from warp_critic.reproduce.report_tables import tables_section
-from warp_critic.reproduce.report_training import metatrain_section
+from warp_critic.reproduce.report import paper as rp
+from warp_critic.reproduce.report.analyses import landscape_section, toy_section
+from warp_critic.reproduce.report.beyond import beyond_section
+from warp_critic.reproduce.report.draft import Draft, rel
+from warp_critic.reproduce.report.maps import maps_section
+from warp_critic.reproduce.report.tables import tables_section
+from warp_critic.reproduce.report.training import metatrain_section
 from warp_critic.running.rundir import atomic_write_text
 
 #: The sections after the stage table, in the report's order (each appends to the :class:`Draft`).

@@ -7,13 +7,13 @@ from __future__ import annotations
 from warp_critic.evaluation.paper import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE3
 from warp_critic.evaluation.seed_uses import seed_note
 from warp_critic.methods import methods
-from warp_critic.reproduce import report_paper as rp
 from warp_critic.reproduce.engine.stages import STAGE_FILE
 from warp_critic.reproduce.experiments.settings import METHOD_LABELS, METHODS, present
-from warp_critic.reproduce.report_departures import departures_line
-from warp_critic.reproduce.report_draft import Draft
-from warp_critic.reproduce.report_paper import beats_baselines, method_rows
-from warp_critic.reproduce.rules import table_verdict
+from warp_critic.reproduce.report import paper as rp
+from warp_critic.reproduce.report.departures import departures_line
+from warp_critic.reproduce.report.draft import Draft
+from warp_critic.reproduce.report.paper import beats_baselines, method_rows
+from warp_critic.reproduce.report.rules import table_verdict
 
 MARK = "✓"
 #: on a baseline's rows: better than the paper's baseline, i.e. the paper's gap is not reproduced

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from warp_critic.reproduce.engine.stages import STAGE_FILE
-from warp_critic.reproduce.report_draft import Draft
-from warp_critic.reproduce.rules import LANDSCAPE_RULE
+from warp_critic.reproduce.report.draft import Draft
+from warp_critic.reproduce.report.rules import LANDSCAPE_RULE
 
 
 def _descent_table(L: dict) -> list[str]:
