@@ -435,7 +435,7 @@ def empty_stage_results(w):
     st = plan(ReproduceConfig(out=rep, quick=True, seeds=2).validate())
     for name, stage in st.items():
         if name.startswith("metatrain-reacher-"):
-            d = rep / f"{name}-{stage['hash']}"
+            d = rep / stage.dir_name
             d.mkdir()
             (d / "stage.json").write_text(
                 json.dumps({"kind": STAGE_KIND, "stage": name, "seconds": 1.0, "result": {}})

@@ -320,7 +320,7 @@ def test_interrupted_metatrain_resumes(tmp_path, capsys):
     out = prepare_out(tmp_path / "r")
     settings = ReproduceConfig(out=out, quick=True, seeds=2).validate()
     st = plan(settings)["metatrain-reacher-ours"]
-    d = out / f"metatrain-reacher-ours-{st['hash']}"
+    d = out / st.dir_name
     values = dict(settings["metatrain"]["reacher"]["ours"], iterations=3)
     run_metatrain_stage(
         d, "reacher", "ours", values, [0, 1], "cpu", progress=False
@@ -328,7 +328,7 @@ def test_interrupted_metatrain_resumes(tmp_path, capsys):
     lines = (d / "run" / "seed0" / "metrics.jsonl").read_text().splitlines()
     assert len(lines) == 3 and not (d / "stage.json").exists()
     other = plan(settings)["metatrain-reacher-ddpg"]
-    stray = out / f"metatrain-reacher-ddpg-{other['hash']}" / "run" / "seed0"
+    stray = out / other.dir_name / "run" / "seed0"
     stray.mkdir(parents=True)
     (stray / ".warp-critic-run").write_text("{}")  # claimed, but no checkpoint was ever written
     assert (
@@ -557,8 +557,8 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
 
     settings = default_settings(True, 2)
     paper, both = plan(settings), plan(settings, beyond=True)
-    assert {k: v["hash"] for k, v in paper.items()} == {
-        k: both[k]["hash"] for k in paper
+    assert {k: v.hash for k, v in paper.items()} == {
+        k: both[k].hash for k in paper
     }  # the recipes change no stage of the paper
     assert sorted(set(both) - set(paper)) == [
         "beyond-maps",
@@ -643,11 +643,13 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
 
 def test_beyond_maps_takes_floors_only_from_a_maps_stage_of_the_same_inputs(tmp_path):
     """The floors of a maps stage are reused only with the same settings and nominal runs."""
+    from warp_critic.reproduce.engine.stage import Stage
     from warp_critic.reproduce.engine.stages import STAGE_FILE, STAGE_KIND
     from warp_critic.reproduce.experiments.units import paper_maps_floors
 
     nominal = {"metatrain-reacher-ours": "metatrain-reacher-ours-aaaa"}
-    st = {"settings": {"grid": 3, "reach_iterations": 5}, "depends": dict(nominal, other="x")}
+    settings = {"grid": 3, "reach_iterations": 5}
+    st = Stage("beyond-maps", "maps", settings, dict(nominal, other="x"), "0")
 
     def stage(name, settings, depends, floor=True):
         d = tmp_path / name
@@ -658,10 +660,10 @@ def test_beyond_maps_takes_floors_only_from_a_maps_stage_of_the_same_inputs(tmp_
 
     assert paper_maps_floors(tmp_path, st) is None
     stage("maps-1", {"grid": 4, "reach_iterations": 5}, nominal)  # other grid
-    stage("maps-2", st["settings"], {"metatrain-reacher-ours": "metatrain-reacher-ours-bbbb"})
-    stage("maps-3", st["settings"], nominal, floor=False)  # computed no floor
+    stage("maps-2", settings, {"metatrain-reacher-ours": "metatrain-reacher-ours-bbbb"})
+    stage("maps-3", settings, nominal, floor=False)  # computed no floor
     assert paper_maps_floors(tmp_path, st) is None
-    stage("maps-4", st["settings"], {**nominal, "metatrain-reacher-ddpg": "d"})
+    stage("maps-4", settings, {**nominal, "metatrain-reacher-ddpg": "d"})
     assert paper_maps_floors(tmp_path, st) == "maps-4"
 
 

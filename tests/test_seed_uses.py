@@ -22,10 +22,10 @@ def test_the_held_out_stage_keeps_the_tables_stage_and_its_hash():
 
     p = plan(default_settings(True, 2))
     held, tables = p["tables-heldout"], p["tables"]
-    assert held["group"] == "tables" and held["depends"] == tables["depends"]
-    assert held["settings"]["seed"] == seed_uses.HELD_OUT_SEED != tables["settings"]["seed"]
-    assert held["settings"]["stds"] == tables["settings"]["stds"]
-    assert held["hash"] != tables["hash"]
+    assert held.kind == "tables" and held.depends == tables.depends
+    assert held.settings["seed"] == seed_uses.HELD_OUT_SEED != tables.settings["seed"]
+    assert held.settings["stds"] == tables.settings["stds"]
+    assert held.hash != tables.hash
 
 
 def test_departures_name_what_differs_from_the_papers_text():

@@ -16,12 +16,13 @@ import json
 import lzma
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from warp_critic.core.errors import FieldError, UserError
+from warp_critic.reproduce.engine.stage import dir_name
 from warp_critic.running.locks import LOCK, REPRODUCE_MARKER, FolderLock, check_not_owned
 from warp_critic.running.rundir import atomic_write_text, check_output_dir
 
@@ -159,7 +160,7 @@ class Runner:
     done: int = 0  # stages that ran to completion in this call
 
     def stage_dir(self, name: str, h: str) -> Path:
-        return self.out / f"{name}-{h}"
+        return self.out / dir_name(name, h)
 
     def complete(self, group: str, name: str, h: str) -> StageRecord | None:
         """The record of a stage already complete in ``out`` (skipped), or ``None``."""
@@ -180,7 +181,7 @@ class Runner:
         settings: Any,
         result: dict,
         seconds: float,
-        depends: dict[str, str] | None = None,
+        depends: Mapping[str, str] | None = None,
     ) -> StageRecord:
         """Record a stage that ran: ``stage.json`` is written last, atomically (then it is complete)."""
         d = self.stage_dir(name, h)
@@ -190,7 +191,7 @@ class Runner:
             "group": group,
             "hash": h,
             "settings": settings,
-            "depends": depends or {},
+            "depends": dict(depends or {}),
             "seconds": seconds,
             "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "result": result,

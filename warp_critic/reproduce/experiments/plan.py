@@ -13,14 +13,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
+from warp_critic.reproduce.engine.stage import Stage
 from warp_critic.reproduce.experiments.extra_baselines import (
+    EVALUATIONS,
     check_baselines,
     metatrain_stage,
     plan_extra,
     selected_extra,
 )
+from warp_critic.reproduce.experiments.naming import BEYOND, Outputs, is_beyond, stage_name
 from warp_critic.reproduce.experiments.settings import (
-    BEYOND,
     METHODS,
     SCENES,
     STAGES,
@@ -98,11 +100,11 @@ class ReproduceConfig:
     @property
     def plans_beyond(self) -> bool:
         """Whether this call's plan holds the stages beyond the paper."""
-        return any(s == BEYOND or s.startswith(f"{BEYOND}-") for s in self.selected())
+        return any(is_beyond(s) for s in self.selected())
 
 
 #: the beyond group's evaluations, each also accepted alone by ``--only``
-BEYOND_EVALS = (f"{BEYOND}-maps", f"{BEYOND}-tables")
+BEYOND_EVALS = (stage_name("maps", by=BEYOND), stage_name("tables", by=BEYOND))
 
 
 def metatrain_names(extra: tuple[str, ...] = ()) -> list[str]:
@@ -110,8 +112,10 @@ def metatrain_names(extra: tuple[str, ...] = ()) -> list[str]:
     baselines' and the recipes beyond the paper)."""
     from warp_critic.reproduce.experiments.recipes import RECIPES
 
-    return [f"metatrain-{scene}-{m}" for scene in SCENES for m in (*METHODS, *extra)] + [
-        f"{BEYOND}-metatrain-{scene}-{recipe}" for scene in SCENES for recipe in RECIPES[scene]
+    return [stage_name("metatrain", scene, m) for scene in SCENES for m in (*METHODS, *extra)] + [
+        stage_name("metatrain", scene, recipe=recipe)
+        for scene in SCENES
+        for recipe in RECIPES[scene]
     ]
 
 
@@ -122,89 +126,70 @@ def scene_hashes() -> dict[str, str]:
     return {s: load_scene(scene_file(s)).content_hash for s in SCENES}
 
 
-def plan(settings: dict, beyond: bool = False, extra: tuple[str, ...] = ()) -> dict[str, dict]:
-    """Every stage (sub-stage) of ``settings``: name -> group, hash, settings, depends (dir names);
-    with ``beyond``, also the recipes beyond the paper (:func:`plan_beyond`); with ``extra``, the
-    stages of those baselines (:func:`~warp_critic.reproduce.experiments.extra_baselines.plan_extra`)."""
+def plan(settings: dict, beyond: bool = False, extra: tuple[str, ...] = ()) -> dict[str, Stage]:
+    """Every stage (sub-stage) of ``settings``, by name; with ``beyond``, also the recipes beyond
+    the paper (:func:`plan_beyond`); with ``extra``, the stages of those baselines
+    (:func:`~warp_critic.reproduce.experiments.extra_baselines.plan_extra`)."""
     hashes = scene_hashes()
-    p: dict[str, dict] = {}
-    p["toy"] = {
-        "group": "toy",
-        "settings": settings["toy"],
-        "hash": stage_hash("toy", settings["toy"]),
-        "depends": {},
-    }
-    p["landscape"] = {
-        "group": "landscape",
-        "settings": settings["landscape"],
-        "depends": {},
-        "hash": stage_hash("landscape", settings["landscape"], load_point_mass_hash()),
-    }
+    p: dict[str, Stage] = {}
+    p["toy"] = Stage("toy", "toy", settings["toy"], {}, stage_hash("toy", settings["toy"]))
+    landscape_hash = stage_hash("landscape", settings["landscape"], load_point_mass_hash())
+    p["landscape"] = Stage("landscape", "landscape", settings["landscape"], {}, landscape_hash)
     for scene in SCENES:
         for m in METHODS:
-            p[f"metatrain-{scene}-{m}"] = metatrain_stage(settings, scene, m, hashes)
-    for group, scene in (("maps", "reacher"), ("tables", "kuka")):
-        dep = {
-            f"metatrain-{scene}-{m}": f"metatrain-{scene}-{m}-{p[f'metatrain-{scene}-{m}']['hash']}"
-            for m in METHODS
-        }
-        p[group] = {
-            "group": group,
-            "scene": scene,
-            "settings": settings[group],
-            "depends": dep,
-            "hash": stage_hash(group, settings[group], dep),
-        }
+            st = metatrain_stage(settings, scene, m, hashes)
+            p[st.name] = st
+    for group, scene in EVALUATIONS:
+        dep = {n: p[n].dir_name for n in (stage_name("metatrain", scene, m) for m in METHODS)}
+        h = stage_hash(group, settings[group], dep)
+        p[group] = Stage(group, group, settings[group], dep, h, Outputs(scene=scene))
     from warp_critic.evaluation.seed_uses import HELDOUT_TABLES
 
     held = {**settings["tables"], **HELDOUT_TABLES}  # Tables 1-3 on a goal seed that chose nothing
-    p["tables-heldout"] = {
-        "group": "tables",
-        "scene": "kuka",
-        "settings": held,
-        "depends": p["tables"]["depends"],
-        "hash": stage_hash("tables", held, p["tables"]["depends"]),
-    }
+    tables_dep = p["tables"].depends
+    name = stage_name("tables", heldout=True)
+    p[name] = Stage(
+        name,
+        "tables",
+        held,
+        tables_dep,
+        stage_hash("tables", held, tables_dep),
+        Outputs(scene="kuka"),
+    )
     plan_extra(settings, p, hashes, extra)
     if beyond:
         plan_beyond(settings, p, hashes)
     return p
 
 
-def plan_beyond(settings: dict, p: dict, hashes: dict[str, str]) -> None:
+def plan_beyond(settings: dict, p: dict[str, Stage], hashes: dict[str, str]) -> None:
     """Add the stages beyond the paper to ``p``: one meta-training per robot and recipe
     (``beyond-metatrain-<robot>-<recipe>``, group metatrain), and ``beyond-maps`` / ``beyond-tables``:
     the paper's maps and tables (the same settings) of the nominal critic (``ours``) next to each
     recipe's. The paper's stages and their hashes are unchanged."""
     seeds = settings["metatrain"]["seeds"]
-    for group, scene in (("maps", "reacher"), ("tables", "kuka")):
-        nominal = f"metatrain-{scene}-ours"
-        dep = {nominal: f"{nominal}-{p[nominal]['hash']}"}
+    for group, scene in EVALUATIONS:
+        nominal = stage_name("metatrain", scene, "ours")
+        dep = {nominal: p[nominal].dir_name}
         labels = {nominal: "ours"}
         for recipe, values in settings[BEYOND][scene].items():
-            name = f"{BEYOND}-metatrain-{scene}-{recipe}"
-            p[name] = {
-                "group": "metatrain",
-                "scene": scene,
-                "method": "ours",
-                "recipe": recipe,
-                "depends": {},
-                "settings": {"values": values, "seeds": seeds, "scene_hash": hashes[scene]},
-                "hash": stage_hash(name, values, seeds, hashes[scene]),
-            }
-            dep[name] = f"{name}-{p[name]['hash']}"
+            name = stage_name("metatrain", scene, recipe=recipe)
+            p[name] = Stage(
+                name,
+                "metatrain",
+                {"values": values, "seeds": seeds, "scene_hash": hashes[scene]},
+                {},
+                stage_hash(name, values, seeds, hashes[scene]),
+                Outputs(scene=scene, method="ours", recipe=recipe),
+            )
+            dep[name] = p[name].dir_name
             labels[name] = recipe
-        p[f"{BEYOND}-{group}"] = {
-            "group": group,
-            "scene": scene,
-            "settings": settings[group],
-            "depends": dep,
-            "labels": labels,  # dependency -> the row it fills (the run sets of the stage)
-            "hash": stage_hash(f"{BEYOND}-{group}", settings[group], dep),
-        }
+        name = stage_name(group, by=BEYOND)
+        h = stage_hash(name, settings[group], dep)
+        p[name] = Stage(name, group, settings[group], dep, h, Outputs(scene=scene, labels=labels))
 
 
-def needed(rc: ReproduceConfig, stages: dict) -> list[list[str]]:
+def needed(rc: ReproduceConfig, stages: dict[str, Stage]) -> list[list[str]]:
     """The stages this call needs: what depends on nothing, then maps / tables (which read the
     meta-training of their robot, run or found complete first even when not selected). The driver
     starts each stage once the stages it reads are complete, whichever list it is in."""
@@ -213,16 +198,20 @@ def needed(rc: ReproduceConfig, stages: dict) -> list[list[str]]:
     for group in selected:
         if group in ("toy", "landscape"):
             first.append(group)
-        elif group == "metatrain":  # the paper's six
-            first += [n for n in stages if n.startswith("metatrain-")]
-        elif group in stages and stages[group]["group"] == "metatrain":  # one meta-training
+        elif group == "metatrain":  # the paper's six, and the extra baselines'
+            first += [
+                n
+                for n, st in stages.items()
+                if st.kind == "metatrain" and st.outputs.recipe is None
+            ]
+        elif group in stages and stages[group].kind == "metatrain":  # one meta-training
             first.append(group)
         elif group == BEYOND:
-            for ev in (f"{BEYOND}-maps", f"{BEYOND}-tables"):
-                first += list(stages[ev]["depends"])
+            for ev in BEYOND_EVALS:
+                first += list(stages[ev].depends)
                 second.append(ev)
         else:
-            first += [n for n in stages[group]["depends"]]
+            first += list(stages[group].depends)
             second.append(group)
     # each stage once: --beyond with --only beyond-maps names that stage twice
     return [list(dict.fromkeys(first)), list(dict.fromkeys(second))]

@@ -3,6 +3,7 @@ prints next to each table and figure of that robot (read from the stage records 
 
 from __future__ import annotations
 
+from warp_critic.reproduce.experiments.naming import stage_name
 from warp_critic.reproduce.experiments.settings import METHOD_LABELS, TUNED
 
 
@@ -47,7 +48,7 @@ def departures(scene: str, values: dict, gravity: float | None) -> list[str]:
 
 def departures_line(scene: str, recs: dict) -> str:
     """The report's sentence for ``scene`` (``recs``: the stage records by name)."""
-    rec = recs.get(f"metatrain-{scene}-ours")
+    rec = recs.get(stage_name("metatrain", scene, "ours"))
     values = rec.data.get("settings", {}).get("values", {}) if rec is not None else {}
     items = departures(scene, values, scene_gravity(scene))
     if not items:

@@ -151,6 +151,15 @@ def solved_cell(cell: dict, solved: list[bool]) -> tuple[float, float] | None:
     return mean, float(np.sqrt(max(var, 0.0)))
 
 
+#: the start of the label of a row of this run's numbers (beside the paper's own rows)
+THIS_RUN = "this run: "
+
+
+def shown(label: str) -> str:
+    """A row's label as a sentence names it: without :data:`THIS_RUN`."""
+    return label.removeprefix(THIS_RUN)
+
+
 def method_rows(
     cells_of, n_cols: int, solved: dict[str, list[bool]], fmt_cell, shown=METHODS
 ) -> list[tuple]:
@@ -160,7 +169,7 @@ def method_rows(
     for m in shown:
         rows.append(
             (
-                f"this run: {METHOD_LABELS[m]}" + (", all seeds" if m != "ours" else ""),
+                f"{THIS_RUN}{METHOD_LABELS[m]}" + (", all seeds" if m != "ours" else ""),
                 m,
                 [(c["mse_mean"], c["mse_std"]) for c in (cells_of(ci, m) for ci in range(n_cols))],
             )
@@ -168,7 +177,7 @@ def method_rows(
         if m in ALL_BASELINES:
             ok = solved.get(m, [])
             label = (
-                f"this run: {METHOD_LABELS[m]}, seeds that solved training ({sum(ok)} of {len(ok)})"
+                f"{THIS_RUN}{METHOD_LABELS[m]}, seeds that solved training ({sum(ok)} of {len(ok)})"
             )
             rows.append((label, m, [solved_cell(cells_of(ci, m), ok) for ci in range(n_cols)]))
     return rows

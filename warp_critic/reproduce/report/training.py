@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from warp_critic.reproduce.engine.stages import STAGE_FILE
+from warp_critic.reproduce.experiments.naming import stage_name
 from warp_critic.reproduce.experiments.settings import ALL_METHODS, METHOD_LABELS, METHODS, SCENES
 from warp_critic.reproduce.report import paper as rp
 from warp_critic.reproduce.report.departures import departures_line
@@ -20,7 +21,9 @@ def metatrain_section(d: Draft) -> None:
     md += ["## Figure 3: meta-training (reacher, KUKA)", ""]
     for scene in SCENES:
         got = {
-            m: rec for m in ALL_METHODS if (rec := recs.get(f"metatrain-{scene}-{m}")) is not None
+            m: rec
+            for m in ALL_METHODS
+            if (rec := recs.get(stage_name("metatrain", scene, m))) is not None
         }
         if not got:
             md += [f"{scene}: not run (stage `metatrain`).", ""]

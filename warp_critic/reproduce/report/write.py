@@ -17,8 +17,10 @@ from pathlib import Path
 import numpy as np
 
 from warp_critic.reproduce.engine import ledger
+from warp_critic.reproduce.engine.stage import Stage
 from warp_critic.reproduce.engine.stages import STAGE_FILE, StageRecord, read_stage
 from warp_critic.reproduce.experiments.extra_baselines import merge_rows
+from warp_critic.reproduce.experiments.naming import stage_name
 from warp_critic.reproduce.experiments.settings import SCENES, STAGES
 from warp_critic.reproduce.report import paper as rp
 from warp_critic.reproduce.report.analyses import landscape_section, toy_section
@@ -45,15 +47,15 @@ SECTIONS = (
 # ------------------------------------------------------------------------------------------------
 
 
-def collect(out: Path, plan: dict, records: dict) -> dict[str, StageRecord | None]:
+def collect(out: Path, plan: dict[str, Stage], records: dict) -> dict[str, StageRecord | None]:
     got: dict[str, StageRecord | None] = {}
     for name, st in plan.items():
         if name in records:
             got[name] = records[name]
             continue
-        d = out / f"{name}-{st['hash']}"
+        d = out / st.dir_name
         data = read_stage(d)
-        got[name] = StageRecord(st["group"], name, d, data, ran=False) if data is not None else None
+        got[name] = StageRecord(st.kind, name, d, data, ran=False) if data is not None else None
     return got
 
 
@@ -73,7 +75,7 @@ def versions() -> dict[str, str]:
 
 def write_report(
     out: Path,
-    plan: dict,
+    plan: dict[str, Stage],
     records: dict,
     *,
     config,
@@ -123,7 +125,7 @@ def write_report(
     for scene in SCENES:
         solved[scene] = {}
         for m in rp.ALL_BASELINES:
-            rec = recs.get(f"metatrain-{scene}-{m}")
+            rec = recs.get(stage_name("metatrain", scene, m))
             if rec is not None:
                 solved[scene][m] = rp.solved_seeds(rec.data["result"], scene)
     md += [
@@ -139,7 +141,7 @@ def write_report(
     for name, st in plan.items():
         r = recs.get(name)
         if r is None:
-            md.append(f"| {name} | `{name}-{st['hash']}` | not run | — | — |")
+            md.append(f"| {name} | `{st.dir_name}` | not run | — | — |")
             continue
         status = "ran" if r.ran else "complete, skipped"
         per_seed = r.data["result"].get("seeds") if r.group == "metatrain" else None
@@ -198,9 +200,9 @@ def write_report(
     return out / "REPORT.md"
 
 
-def seeds_trained(plan: dict) -> list[int]:
+def seeds_trained(plan: dict[str, Stage]) -> list[int]:
     """The meta-training seeds of a plan (``metatrain.seeds``, which ``--set`` may have changed)."""
-    return next(list(st["settings"]["seeds"]) for st in plan.values() if st["group"] == "metatrain")
+    return next(list(st.settings["seeds"]) for st in plan.values() if st.kind == "metatrain")
 
 
 def write_recording(path: Path, text: str, figures: list[tuple[str, Path, str]]) -> None:
