@@ -5,6 +5,9 @@
   relative ones -- and so is every module-path string (``"warp_critic.x.y:func"``,
   ``"warp_critic.x.y"``) that a registry imports later. The imports up a layer that exist today are
   listed in :data:`KNOWN_UPWARD`: a new one fails, and so does a listed one that is gone.
+* Inside ``reproduce/`` the same holds for its own layers, :data:`REPRODUCE_LAYERS`: ``engine/``
+  below ``experiments/`` below ``report/``, its root modules (``pipeline``) above all three; and the
+  engine knows no paper and no method: it imports only :data:`ENGINE_MAY_IMPORT` besides itself.
 * No import circle: no module reaches itself through the modules it imports (at the top, in
   functions, under ``TYPE_CHECKING``, or by a module-path string), so an import inside a function
   never hides one. A package's ``__init__`` counts as importing nothing: its exports are lazy.
@@ -157,6 +160,73 @@ def test_no_module_imports_a_later_layer():
     )
     gone = KNOWN_UPWARD - set(found)
     assert not gone, f"no longer imported up a layer: remove from KNOWN_UPWARD: {sorted(gone)}"
+
+
+#: ``reproduce/``'s own layers in import order; its root modules (``pipeline``) join all three
+REPRODUCE_LAYERS = ("engine", "experiments", "report")
+#: the layers the reproduce engine may import besides itself: no method, evaluation or analysis
+ENGINE_MAY_IMPORT = ("core", "physics", "running")
+
+
+def reproduce_layer(module: str) -> int:
+    """The index of a module of ``reproduce/`` in :data:`REPRODUCE_LAYERS` (the root: after them)."""
+    parts = module.split(".")
+    assert parts[:2] == ["warp_critic", "reproduce"], module
+    if len(parts) > 2 and parts[2] in REPRODUCE_LAYERS:
+        return REPRODUCE_LAYERS.index(parts[2])
+    return len(REPRODUCE_LAYERS)
+
+
+def reproduce_breaches(package: Path = PACKAGE) -> dict[tuple[str, str], list[str]]:
+    """``(module, imported module) -> ['path:line', ...]`` for every import of a module of
+    ``reproduce/`` up one of its own layers, and every import of the engine outside itself and
+    :data:`ENGINE_MAY_IMPORT`."""
+    found: dict[tuple[str, str], list[str]] = {}
+    for path in sorted((package / "reproduce").rglob("*.py")):
+        module = module_name(path, package)
+        own = reproduce_layer(module)
+        source = path.read_text(encoding="utf-8")
+        for target, line in references(source, module, path.name == "__init__.py"):
+            parts = target.split(".")
+            if parts[:2] == ["warp_critic", "reproduce"]:
+                bad = reproduce_layer(target) > own
+            else:
+                bad = own == 0 and (len(parts) < 2 or parts[1] not in ENGINE_MAY_IMPORT)
+            if bad:
+                where = f"{path.relative_to(package.parent)}:{line}"
+                found.setdefault((module, target), []).append(where)
+    return found
+
+
+def test_reproduce_engine_below_experiments_below_report():
+    found = reproduce_breaches()
+    assert not found, "reproduce/: engine < experiments < report, the engine knows no method: " + (
+        "; ".join(f"{a} -> {b} at {', '.join(w)}" for (a, b), w in sorted(found.items()))
+    )
+
+
+def test_the_reproduce_scanner_sees_a_breach(tmp_path):
+    pkg = tmp_path / "warp_critic"
+    for sub in ("engine", "experiments", "report"):
+        (pkg / "reproduce" / sub).mkdir(parents=True)
+    (pkg / "reproduce" / "pipeline.py").write_text("from warp_critic.reproduce.report import w\n")
+    (pkg / "reproduce" / "report" / "w.py").write_text("from ..experiments import plan\n")
+    (pkg / "reproduce" / "engine" / "carry.py").write_text(
+        "from warp_critic.running.locks import LOCK\n"
+        "def keys():\n    from warp_critic.methods.meta_critic import AUX_KEYS\n"
+    )
+    (pkg / "reproduce" / "experiments" / "plan.py").write_text(
+        "from warp_critic.reproduce.engine import carry\n"
+        "LAZY = {'warp_critic.reproduce.report.w': ('x',)}\n"
+    )
+    assert reproduce_breaches(pkg) == {
+        ("warp_critic.reproduce.engine.carry", "warp_critic.methods.meta_critic"): [
+            "warp_critic/reproduce/engine/carry.py:3"
+        ],
+        ("warp_critic.reproduce.experiments.plan", "warp_critic.reproduce.report.w"): [
+            "warp_critic/reproduce/experiments/plan.py:2"
+        ],
+    }
 
 
 def import_graph(package: Path = PACKAGE) -> dict[str, set[str]]:

@@ -93,7 +93,6 @@ def write_report(
     stage_seconds = {r.dir.name: float(r.data["seconds"]) for r in recs.values() if r is not None}
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
-    md: list[str] = []
     results: dict = {
         "kind": "warp-critic/reproduce-results-v1",
         "tables": [],
@@ -106,19 +105,7 @@ def write_report(
     figures: list[tuple[str, Path, str]] = []  # (title, png, sentence)
     ver = versions()
     seeds = seeds_trained(plan)
-
-    md += [
-        "# Reproduction: Model Based Meta Learning of Critics for Policy Gradients (ICML 2022)",
-        "",
-        f"- command: `{config.command}`",
-        f"- device: {device}; seeds: {len(seeds)} ({', '.join(map(str, seeds))}); "
-        f"{'QUICK settings (plumbing check, not the paper setting)' if config.quick else 'paper settings, except where a section states the settings that differ from the paper text'}",
-        f"- versions: python {ver['python']}, warp {ver['warp']}, newton {ver['newton']}, torch {ver['torch']} "
-        f"({ver['platform']})",
-        f"- written {time.strftime('%Y-%m-%d %H:%M:%S')}; this call took {wall:.1f} s",
-        ledger.header_line(book, stage_seconds),
-        "",
-    ]
+    md = _header(config, device, seeds, ver, wall, ledger.header_line(book, stage_seconds))
     claims_at = len(md)
     claims: list[dict] = []  # filled by the sections below, rendered here
     solved: dict[str, dict[str, list[bool]]] = {}  # robot -> baseline -> per seed
@@ -128,51 +115,12 @@ def write_report(
             rec = recs.get(stage_name("metatrain", scene, m))
             if rec is not None:
                 solved[scene][m] = rp.solved_seeds(rec.data["result"], scene)
-    md += [
-        "## Stages",
-        "",
-        "Wall time: of the call that completed the stage (a stage resumed over several calls counts only the "
-        "last). Training time: the sum of the stage's iteration times over all calls (the seeds of a "
-        "meta-training run batched, so it is the whole stage's).",
-        "",
-        "| stage | directory | this call | wall time (s) | training time, all calls (s) |",
-        "|---|---|---|---|---|",
-    ]
-    for name, st in plan.items():
-        r = recs.get(name)
-        if r is None:
-            md.append(f"| {name} | `{st.dir_name}` | not run | — | — |")
-            continue
-        status = "ran" if r.ran else "complete, skipped"
-        per_seed = r.data["result"].get("seeds") if r.group == "metatrain" else None
-        train = f"{next(iter(per_seed.values()))['seconds']:.1f}" if per_seed else "—"
-        md.append(f"| {name} | `{r.dir.name}` | {status} | {r.data['seconds']:.1f} | {train} |")
-        results["stages"][name] = {
-            "dir": r.dir.name,
-            "file": f"{r.dir.name}/{STAGE_FILE}",
-            "seconds": r.data["seconds"],
-            "ran_this_call": r.ran,
-        }
-    md.append("")
-
+    md += _stage_table(plan, recs, results)
     d = Draft(out, figs, recs, config, solved, md, results, figures, claims)
     for section in SECTIONS:
         section(d)
-
-    head = [
-        "## The paper's claims: verdicts computed from the numbers below",
-        "",
-        "| claim | the paper's evidence | this run's measurement | verdict | why |",
-        "|---|---|---|---|---|",
-    ] + [
-        f"| {c['claim']} | {c['paper']} | {c['ours']} | **{c['verdict']}** | {c['reason']} |"
-        for c in claims
-    ]
-    if not claims:
-        head.append("| (no stage ran) | — | — | not comparable | nothing measured |")
-    md[claims_at:claims_at] = head + [""]
+    md[claims_at:claims_at] = _claims_table(claims) + [""]
     results["claims"] = claims
-
     md += ["## Figures", ""]
     for title, png, sentence in figures:
         md += [f"### {title}", "", f"![{title}]({rel(png, out)})", "", sentence, ""]
@@ -198,6 +146,70 @@ def write_report(
     atomic_write_text(out / "REPORT.md", text)
     write_recording(out / "report.rrd", text, figures)
     return out / "REPORT.md"
+
+
+def _header(config, device: str, seeds: list[int], ver: dict, wall: float, book: str) -> list[str]:
+    """The report's title and header lines: command, device, seeds, versions, time, ledger."""
+    return [
+        "# Reproduction: Model Based Meta Learning of Critics for Policy Gradients (ICML 2022)",
+        "",
+        f"- command: `{config.command}`",
+        f"- device: {device}; seeds: {len(seeds)} ({', '.join(map(str, seeds))}); "
+        f"{'QUICK settings (plumbing check, not the paper setting)' if config.quick else 'paper settings, except where a section states the settings that differ from the paper text'}",
+        f"- versions: python {ver['python']}, warp {ver['warp']}, newton {ver['newton']}, torch {ver['torch']} "
+        f"({ver['platform']})",
+        f"- written {time.strftime('%Y-%m-%d %H:%M:%S')}; this call took {wall:.1f} s",
+        book,
+        "",
+    ]
+
+
+def _stage_table(plan: dict[str, Stage], recs: dict, results: dict) -> list[str]:
+    """The "Stages" section's lines: each stage of the plan, run, skipped or not run; fills
+    ``results["stages"]``."""
+    md = [
+        "## Stages",
+        "",
+        "Wall time: of the call that completed the stage (a stage resumed over several calls counts only the "
+        "last). Training time: the sum of the stage's iteration times over all calls (the seeds of a "
+        "meta-training run batched, so it is the whole stage's).",
+        "",
+        "| stage | directory | this call | wall time (s) | training time, all calls (s) |",
+        "|---|---|---|---|---|",
+    ]
+    for name, st in plan.items():
+        r = recs.get(name)
+        if r is None:
+            md.append(f"| {name} | `{st.dir_name}` | not run | — | — |")
+            continue
+        status = "ran" if r.ran else "complete, skipped"
+        per_seed = r.data["result"].get("seeds") if r.group == "metatrain" else None
+        train = f"{next(iter(per_seed.values()))['seconds']:.1f}" if per_seed else "—"
+        md.append(f"| {name} | `{r.dir.name}` | {status} | {r.data['seconds']:.1f} | {train} |")
+        results["stages"][name] = {
+            "dir": r.dir.name,
+            "file": f"{r.dir.name}/{STAGE_FILE}",
+            "seconds": r.data["seconds"],
+            "ran_this_call": r.ran,
+        }
+    md.append("")
+    return md
+
+
+def _claims_table(claims: list[dict]) -> list[str]:
+    """The claims table, at the report's top: one row per claim the sections computed."""
+    head = [
+        "## The paper's claims: verdicts computed from the numbers below",
+        "",
+        "| claim | the paper's evidence | this run's measurement | verdict | why |",
+        "|---|---|---|---|---|",
+    ] + [
+        f"| {c['claim']} | {c['paper']} | {c['ours']} | **{c['verdict']}** | {c['reason']} |"
+        for c in claims
+    ]
+    if not claims:
+        head.append("| (no stage ran) | — | — | not comparable | nothing measured |")
+    return head
 
 
 def seeds_trained(plan: dict[str, Stage]) -> list[int]:
