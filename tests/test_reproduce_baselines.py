@@ -12,7 +12,7 @@ from warp_critic.cli.main import main as cli_main
 from warp_critic.reproduce.engine.stage import Stage
 from warp_critic.reproduce.engine.stages import StageRecord
 from warp_critic.reproduce.experiments.extra_baselines import merge_rows
-from warp_critic.reproduce.experiments.naming import Outputs
+from warp_critic.reproduce.experiments.naming import BEYOND, Outputs, stage_name
 from warp_critic.reproduce.experiments.plan import ReproduceConfig, plan
 from warp_critic.reproduce.experiments.settings import default_settings
 
@@ -106,3 +106,17 @@ def test_merge_rows_adds_an_extra_evaluation_to_the_paper_stage_it_joins(tmp_pat
     assert [c["method"] for c in paper.data["result"]["cells"]] == ["ours"]  # a copy
     # the extra stage not complete (or not planned): the paper's record as it is
     assert merge_rows({"tables": paper, "td3-tables": None}, planned)["tables"] is paper
+
+
+def test_stage_name_is_the_one_spelling_of_every_stage():
+    """The names the plan, ``--only``, the report and the stage directories share."""
+    assert stage_name("metatrain", "kuka", "td3") == "metatrain-kuka-td3"
+    assert stage_name("metatrain", "reacher", recipe="wide-long") == (
+        "beyond-metatrain-reacher-wide-long"
+    )
+    assert stage_name("maps") == "maps" and stage_name("maps", by="td3") == "td3-maps"
+    assert stage_name("tables", by=BEYOND) == "beyond-tables"
+    assert stage_name("tables", heldout=True) == "tables-heldout"
+    for bad in ({}, {"method": "ours", "recipe": "wide-long"}):  # neither, or both
+        with pytest.raises(ValueError, match="a method or a recipe"):
+            stage_name("metatrain", "kuka", **bad)

@@ -91,7 +91,7 @@ class ReproduceConfig:
             return list(STAGES) + selected_extra(list(STAGES), self.extra) + extra
         singles = [s for s in metatrain_names(self.extra) if s in self.only]
         if "metatrain" in self.only:
-            singles = [s for s in singles if not s.startswith("metatrain-")]
+            singles = [s for s in singles if is_beyond(s)]  # the paper's are in the group
         if BEYOND not in self.only:  # one of the beyond evaluations alone (with what it reads)
             singles += [s for s in BEYOND_EVALS if s in self.only]
         groups = [s for s in STAGES if s in self.only]

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from warp_critic.methods.meta_critic import AUX_KEYS
 from warp_critic.reproduce.engine.carry import CarryRules
+from warp_critic.reproduce.experiments.naming import is_beyond
 
 #: what the report and the stages that read a stage take from its result: key -> JSON type
 RESULT_KEYS: dict[str, dict[str, type | tuple[type, ...]]] = {
@@ -48,7 +49,7 @@ def stage_problem(group: str, data: dict) -> str | None:
 def record_only(data: dict) -> bool:
     """Whether publishing keeps only the record of the stage whose ``stage.json`` is ``data``:
     a recipe's meta-training (its critics were scored by ``beyond-maps`` / ``beyond-tables``)."""
-    return data.get("group") == "metatrain" and str(data.get("stage", "")).startswith("beyond-")
+    return data.get("group") == "metatrain" and is_beyond(str(data.get("stage", "")))
 
 
 #: what carrying keeps of the paper's stages: a meta-training's runs lose the checkpoint entries

@@ -38,10 +38,10 @@ from typing import Any
 from warp_critic.core.errors import FieldError
 from warp_critic.evaluation.presets import preset
 from warp_critic.methods import method, methods
-from warp_critic.reproduce.experiments.naming import BEYOND
+from warp_critic.reproduce.experiments.naming import BEYOND, stage_name
 from warp_critic.reproduce.experiments.recipes import RECIPES
 
-STAGES = ("toy", "landscape", "metatrain", "maps", "tables", "tables-heldout")
+STAGES = ("toy", "landscape", "metatrain", "maps", "tables", stage_name("tables", heldout=True))
 SCENES = ("reacher", "kuka")
 #: the methods reproduced by default (the method registry's, ours first)
 METHODS = tuple(m.name for m in methods() if m.reproduced_by_default)

@@ -8,6 +8,7 @@ from warp_critic.evaluation.paper import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE
 from warp_critic.evaluation.seed_uses import seed_note
 from warp_critic.methods import methods
 from warp_critic.reproduce.engine.stages import STAGE_FILE
+from warp_critic.reproduce.experiments.naming import stage_name
 from warp_critic.reproduce.experiments.settings import METHOD_LABELS, METHODS, present
 from warp_critic.reproduce.report import paper as rp
 from warp_critic.reproduce.report.departures import departures_line
@@ -207,7 +208,7 @@ def tables_section(d: Draft) -> None:
         ]
         md += [departures_line("kuka", recs), "", f"Goals: {seed_note(T_seed(r))}.", ""]
         table_blocks(d, r, sv, heldout=False)
-    h = recs.get("tables-heldout")
+    h = recs.get(stage_name("tables", heldout=True))
     md += ["## Tables 1-3 on a held-out goal seed", ""]
     if h is None:
         md += ["Not run (stage `tables-heldout`).", ""]
