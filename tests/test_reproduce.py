@@ -276,8 +276,7 @@ def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
     import torch
 
     from warp_critic.physics.scene import Variant
-    from warp_critic.reproduce.experiments.evaluate import Job, evaluate
-    from warp_critic.reproduce.experiments.generalize import _pool
+    from warp_critic.reproduce.experiments.evaluate import Job, evaluate, pool_errors
 
     out, rc, _ = quick
     run = str(sorted((next(out.glob("metatrain-reacher-ours-*")) / "run").glob("seed*"))[0])
@@ -289,7 +288,7 @@ def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
     assert np.array_equal(r["errors"][0], alone["errors"][0]) and np.isfinite(r["errors"][0]).all()
     assert np.isinf(r["errors"][1]).any() and r["diverged"] == int(np.isinf(r["errors"][1]).sum())
     assert alone["diverged"] == 0
-    cell = _pool([r["errors"][1]], 2)
+    cell = pool_errors([r["errors"][1]], 2)
     assert cell["mse_mean"] == float("inf") and cell["diverged"] == r["diverged"]
 
 
