@@ -1,6 +1,6 @@
-"""The baselines' config (DDPG and Meta-Critic; TD3's adds to it): the shared task fields of
-:class:`~warp_critic.running.task.TaskConfig` plus the published DDPG / Meta-Critic settings; the
-protocol they train with is described in :mod:`warp_critic.methods.baseline`."""
+"""The baselines' config (DDPG and Meta-Critic; TD3's and SAC's subclass it): the shared task
+fields of :class:`~warp_critic.running.task.TaskConfig` plus the published DDPG and Meta-Critic
+settings; the protocol they train with is described in :mod:`warp_critic.methods.baseline`."""
 
 from __future__ import annotations
 
@@ -15,7 +15,8 @@ from warp_critic.running.task import TaskConfig
 
 @dataclass
 class BaselineConfig(TaskConfig):
-    """DDPG / Meta-Critic training. ``None`` = the scene's default (as for meta-train).
+    """The baselines' training (DDPG and Meta-Critic; TD3's and SAC's configs subclass it, with their
+    own published defaults). ``None`` = the scene's default (as for meta-train).
 
     Defaults follow the published DDPG settings (Lillicrap et al. 2015): Adam with actor lr 1e-4 and
     critic lr 1e-3, gamma 0.99, minibatch 64, replay buffer 1e6, Ornstein-Uhlenbeck exploration
