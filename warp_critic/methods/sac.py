@@ -253,26 +253,18 @@ class SACAgent:
         return stats
 
     # -- checkpoints ------------------------------------------------------------------------------
+    #: the networks and optimisers a checkpoint holds, by attribute (and key) name
+    PARTS = ("actor", "q", "q_target", "actor_opt", "q_opt", "temperature_opt")
+
     def state_dict(self) -> dict:
-        return {
-            "actor": self.actor.state_dict(),
-            "q": self.q.state_dict(),
-            "q_target": self.q_target.state_dict(),
-            "log_temperature": self.log_temperature.detach().cpu().clone(),
-            "actor_opt": self.actor_opt.state_dict(),
-            "q_opt": self.q_opt.state_dict(),
-            "temperature_opt": self.temperature_opt.state_dict(),
-        }
+        state = {k: getattr(self, k).state_dict() for k in self.PARTS}
+        return {**state, "log_temperature": self.log_temperature.detach().cpu().clone()}
 
     def load_state_dict(self, state: dict) -> None:
-        self.actor.load_state_dict(state["actor"])
-        self.q.load_state_dict(state["q"])
-        self.q_target.load_state_dict(state["q_target"])
+        for k in self.PARTS:
+            getattr(self, k).load_state_dict(state[k])
         with torch.no_grad():
             self.log_temperature.copy_(state["log_temperature"])
-        self.actor_opt.load_state_dict(state["actor_opt"])
-        self.q_opt.load_state_dict(state["q_opt"])
-        self.temperature_opt.load_state_dict(state["temperature_opt"])
 
 
 def train_sac(cfg: SACConfig, **kwargs) -> TrainResult:
