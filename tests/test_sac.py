@@ -222,6 +222,8 @@ def test_sac_resumes_exactly_and_meta_tests_min_q_through_the_cli(tmp_path, caps
         (["baseline", "sac", REACHER, "--init-temperature", "0"], "--init-temperature must be > 0"),
         (["baseline", "sac", REACHER, "--target-entropy", "nan"], "--target-entropy"),
         (["baseline", "sac", REACHER, "--temperature-lr=-1"], "--temperature-lr"),
+        (["baseline", "sac", REACHER, "--noise-std", "0.3"], "--noise-std: SAC adds no"),
+        (["baseline", "sac", REACHER, "--ou-theta", "0.5"], "--ou-theta: SAC adds no"),
         (["baseline", "ddpg", REACHER, "--init-temperature", "0.5"], "--init-temperature"),
     ],
 )

@@ -32,13 +32,14 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from functools import partial
 
 import torch
 from torch import nn
 from torch.nn import functional as F
 
+from warp_critic.core.errors import FieldError
 from warp_critic.learning.losses import td_loss
 from warp_critic.learning.networks import Normalizer
 from warp_critic.methods.baseline import train_baseline
@@ -59,6 +60,12 @@ _SOURCE = "Haarnoja et al. 2018, and the authors' code github.com/rail-berkeley/
 #: the policy's log standard deviation lies in this range (a smooth tanh map, as CleanRL's SAC):
 #: below, the policy is deterministic to float precision; above, ``tanh`` saturates anyway
 LOG_STD_RANGE = (-5.0, 2.0)
+
+
+#: the added-noise fields of the baselines' protocol that SAC has no use for, at their defaults
+_NOISE_DEFAULTS = {
+    f.name: f.default for f in fields(BaselineConfig) if f.name in ("noise_std", "ou_theta")
+}
 
 
 @dataclass
@@ -98,6 +105,16 @@ class SACConfig(BaselineConfig):
         ge=-1e4,
         le=1e4,
     )
+
+    def check(self, scene=None) -> None:
+        """As every config's check, and the added-noise fields left at their defaults: SAC
+        explores by sampling its policy, so a noise setting would be silently ignored."""
+        super().check(scene)
+        for name in ("noise_std", "ou_theta"):
+            if getattr(self, name) != _NOISE_DEFAULTS[name]:
+                raise FieldError(
+                    name, "SAC adds no exploration noise (it samples its own policy); leave it out"
+                )
 
 
 class GaussianActor(_GoalInput):
