@@ -37,8 +37,8 @@ def test_every_method_is_one_complete_entry():
 
 
 def test_unknown_method_is_a_user_error_and_a_name_is_registered_once():
-    with pytest.raises(UserError, match="unknown method 'sac'; known: ours, ddpg"):
-        method("sac")
+    with pytest.raises(UserError, match="unknown method 'ppo'; known: ours, ddpg"):
+        method("ppo")
     ddpg = method("ddpg")
     assert register(ddpg) is ddpg  # the same entry again (a module imported twice) is fine
     other = Method(**{**ddpg.__dict__, "label": "another DDPG"})

@@ -105,7 +105,7 @@ def train_one(scene: str, method: str, setting: dict, args, out: Path) -> dict:
         values,
         iterations=args.iterations,
         checkpoint_every=max(1, args.iterations // 4),
-        alpha=1e-3,
+        metatest_alpha=1e-3,
     )
     resume = all((out / f"seed{s}" / "checkpoint.pt").is_file() for s in args.seeds)
     cfg = make_config(scene, method, base, args.seeds, out, args.device, resume)
