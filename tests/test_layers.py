@@ -47,13 +47,6 @@ KNOWN_LONG_FUNCTIONS: dict[str, int] = {
     "export.write_scene": 135,
     "robot._load": 131,
     "scene_writer.write_robot": 121,
-    "evaluate.evaluate": 139,
-    "generalize.run_tables_stage": 130,
-    "generalize.run_maps_stage": 109,
-    "report.write_report": 125,
-    "report_analyses.landscape_section": 112,
-    "report_maps.maps_section": 148,
-    "report_training.metatrain_section": 107,
     "metatest_setup.setup_meta_test": 105,
 }
 #: packages that are no layer: shipped with the package, first used by this layer
