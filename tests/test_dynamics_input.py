@@ -327,6 +327,26 @@ def test_identify_command_writes_a_run_that_meta_tests_without_the_model(tmp_pat
         assert words in err, err
 
 
+def test_identify_with_one_seed_gives_one_result(tmp_path):
+    """Two identifications of one run with one --seed agree loss for loss, whatever torch's global
+    RNG holds (the identifier's initial weights come from the seed)."""
+    from test_train_variants import _train
+
+    from warp_critic.cli.main import main
+
+    told = tmp_path / "told"
+    assert main(_train(told, "--critic-input", "pose-dynamics", iterations=1)) == 0
+    losses = []
+    for k in range(2):
+        torch.manual_seed(100 + k)  # a different global RNG state before each call
+        out = tmp_path / f"identified{k}"
+        argv = [str(told), "--out", str(out), "--iterations", "2", "--goals", "2", "--inits", "1"]
+        assert main(["identify", *argv, "--seed", "3"]) == 0
+        rows = (out / "identify.jsonl").read_text().splitlines()
+        losses.append([json.loads(x)["loss"] for x in rows])
+    assert len(losses[0]) == 2 and losses[0] == losses[1]
+
+
 def test_identified_critic_feeds_each_seed_its_own_identifier():
     """Batched seeds (worlds seed-major): each block of worlds is estimated by its own identifier,
     exactly as that identifier alone on those worlds."""

@@ -75,7 +75,9 @@ def train_identifier(
         raise UserError(f"--out {out}: exists and is not an empty folder")
     m, ranges, variants = _told_run(run_dir, goals, inits, seed, device, variants)
     dev = m.sim.torch_device
-    ident = Identifier(m.scene.dof, m.sim.dynamics_size, hidden, version).to(dev)
+    with torch.random.fork_rng(devices=[]):  # the initial weights from the seed, so that two runs
+        torch.manual_seed(seed)  # with one --seed agree (torch's global RNG is left as it was)
+        ident = Identifier(m.scene.dof, m.sim.dynamics_size, hidden, version).to(dev)
     opt = torch.optim.Adam(ident.parameters(), lr=lr)
     gen = torch.Generator().manual_seed(seed)
     samples = _sampler(m, ranges, seed, gen)
