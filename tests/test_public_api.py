@@ -45,9 +45,8 @@ def test_the_top_level_api_is_the_layers_objects():
     assert warp_critic.train_sac is train_sac and warp_critic.SACConfig is SACConfig
 
 
-# analysis exports one plain function; reproduce's package is reorganised by another change (issue
-# 57, item 1), whose __init__ gets the same block
-LAZY = [p for p in PACKAGES if p not in ("warp_critic.analysis", "warp_critic.reproduce")]
+# analysis exports one plain function, not lazily
+LAZY = [p for p in PACKAGES if p != "warp_critic.analysis"]
 
 
 @pytest.mark.parametrize("name", LAZY)

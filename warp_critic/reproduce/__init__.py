@@ -20,7 +20,19 @@ Three layers, each importing only the ones before it (``tests/test_layers.py``):
 report. The flags live in :mod:`warp_critic.cli.reproduce`.
 """
 
+# ruff: noqa: F401  (the TYPE_CHECKING imports name the lazy exports)
+
+from typing import TYPE_CHECKING
+
 from warp_critic.core.exports import lazy_exports
+
+if TYPE_CHECKING:  # the names for IDEs and type checkers (Newton's pattern); at run time
+    # they load lazily, on first use (Ray is imported only by a call that asks for it)
+    from warp_critic.reproduce.engine.choose_executor import make_executor
+    from warp_critic.reproduce.engine.executors import InProcess, LocalProcesses
+    from warp_critic.reproduce.engine.on_ray import RayExecutor
+    from warp_critic.reproduce.experiments.plan import ReproduceConfig
+    from warp_critic.reproduce.pipeline import reproduce
 
 __all__, __getattr__, __dir__ = lazy_exports(
     __name__,
