@@ -731,3 +731,12 @@ def test_ledger_total_wall_time_counts_every_call():
     assert "(1 without an end)" in line
     assert "1 of these stages were completed by no call of this ledger" in line
     assert line.endswith("not in the ledger's total): tables")  # named, not only counted
+    # a carried stage resumed over calls: its compute is its iteration times, not its last call's
+    line = ledger.header_line(s, {"toy": 5.0, "maps": 100.0, "tables": 50.0}, {"tables": 7200.0})
+    assert "tables. Their compute" in line and ": 7200 s (2.0 h), which the ledger's 1.3 h" in line
+
+    class _Rec:
+        group = "metatrain"
+        data = {"seconds": 19.0, "result": {"seeds": {"0": {"seconds": 2715.0}}}}
+
+    assert ledger.stage_compute(_Rec()) == 2715.0
