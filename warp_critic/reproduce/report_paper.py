@@ -22,7 +22,12 @@ import numpy as np
 
 from warp_critic.methods import method
 from warp_critic.reproduce.report_plots import diverged_cmap, log_limits
-from warp_critic.reproduce.rules import WINDOW, sample_efficiency, settled_index
+from warp_critic.reproduce.rules import (
+    WINDOW,
+    final_training_error,
+    sample_efficiency,
+    settled_index,
+)
 from warp_critic.reproduce.settings import ALL_METHODS, METHOD_LABELS, METHODS, present
 
 LEVELS = (0.3, 0.1, 0.03)
@@ -56,11 +61,6 @@ def seed_curves(res: dict) -> dict[str, dict]:
             "seconds": np.cumsum(sec) if sec else None,
         }
     return out
-
-
-def final_training_error(curve: np.ndarray) -> float:
-    """Mean of the last 10% of a training curve (at least one value)."""
-    return float(np.mean(curve[-max(1, len(curve) // 10) :]))
 
 
 def solved_seeds(res: dict, scene: str) -> list[bool]:

@@ -32,7 +32,7 @@ def metatrain_section(d: Draft) -> None:
             "",
             departures_line(scene, recs),
             "",
-            "| method | iterations | env steps | env steps counted | final ||q_T-g||^2 mean(std) over seeds | first iteration |",
+            "| method | iterations | env steps | env steps counted | final training error ||q_T-g||^2 (mean of the last 10% iterations), mean(std) over seeds | first iteration |",
             "|---|---|---|---|---|---|",
         ]
         for m, s in summary.items():

@@ -81,6 +81,13 @@ LANDSCAPE_RULE = (
 )
 
 
+def final_training_error(curve) -> float:
+    """A training curve's final error: the mean of its last 10% iterations (at least one value),
+    the one definition the report uses (Figure 3's table, the solved seeds)."""
+    x = np.asarray(curve, dtype=float)
+    return float(np.mean(x[-max(1, len(x) // 10) :]))
+
+
 def settled_index(loss, level: float, window: int = WINDOW) -> int | None:
     """The first iteration after which the trailing running mean of ``loss`` over ``window``
     iterations (fewer at the start) stays at or below ``level`` to the end; ``None`` if it does
