@@ -60,36 +60,23 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="multiples of each run's own meta-test step size (default "
         f"{','.join(map(str, ALPHA_SCALES))})",
     )
-    p.add_argument(
-        "--inits", type=int, default=d.inits, help=f"initialisations per goal (default {d.inits})"
-    )
-    p.add_argument(
-        "--choose-seed",
-        dest="choose_seed",
-        type=int,
-        default=d.choose_seed,
-        help=f"seed of the initialisations on the training goals (default {d.choose_seed})",
-    )
-    p.add_argument(
-        "--report-seed",
-        dest="report_seed",
-        type=int,
-        default=d.report_seed,
-        help=f"goal seed of the reporting goals, column c uses seed+c (default {d.report_seed})",
-    )
+    ints = {  # whole-number flags: (field, help)
+        "--inits": ("inits", "fresh policy initialisations per goal"),
+        "--choose-seed": ("choose_seed", "seed of the initialisations on the training goals"),
+        "--report-seed": ("report_seed", "goal seed of the reporting goals (column c: seed + c)"),
+        "--num-goals": ("num_goals", "reporting goals per std"),
+    }
+    for flag, (field, text) in ints.items():
+        default = getattr(d, field)
+        p.add_argument(
+            flag, dest=field, type=int, default=default, help=f"{text} (default {default})"
+        )
     p.add_argument(
         "--report-stds",
         dest="report_stds",
         type=comma_list(float),
         default=d.report_stds,
         help="goal stds of the reporting goals, rad (default 0.1,0.5,1.0)",
-    )
-    p.add_argument(
-        "--num-goals",
-        dest="num_goals",
-        type=int,
-        default=d.num_goals,
-        help="reporting goals per std",
     )
     p.add_argument("--device", default="auto", help="cpu, cuda or auto (default auto)")
 
