@@ -119,7 +119,7 @@ def run_from_args(args: argparse.Namespace) -> int:
             num_goals=args.num_goals,
             device=args.device,
         )
-        result = run_budget(cfg, out, log=print)
+        result = run_budget(cfg, out, log=print, base=src)
     except UserError as e:
         raise UserError(user_message(e, rename=rename)) from None
     for m, c in result["chosen"].items():

@@ -268,13 +268,23 @@ def _keys_to_numbers(curve: dict) -> dict[float, dict[int, Any]]:
 
 
 def run_budget(
-    cfg: BudgetConfig, out: Path, log: Callable[[str], None] | None = None
+    cfg: BudgetConfig,
+    out: Path,
+    log: Callable[[str], None] | None = None,
+    base: Path | None = None,
 ) -> dict[str, Any]:
     """Steps 1-3 for every method of ``cfg.runs``, resumable: ``out`` (JSON) is rewritten after each
-    method's sweep and report, and a rerun with the same settings and runs skips what it holds."""
+    method's sweep and report, and a rerun with the same settings and runs skips what it holds.
+    ``base``: the run directories are written relative to it (the reproduce folder)."""
+    from warp_critic.reproduce.evaluate import relpath
+
     cfg.validate()
     say = log or (lambda _: None)
-    runs = {m: [str(d) for d in ds] for m, ds in cfg.runs.items()}
+
+    def shown(d: str) -> str:
+        return relpath(d, base) if base is not None else str(d)
+
+    runs = {m: [shown(d) for d in ds] for m, ds in cfg.runs.items()}
     result: dict[str, Any] = {"kind": RESULT_KIND, "settings": cfg.settings(), "runs": runs}
     if out.is_file():
         try:
@@ -300,6 +310,7 @@ def run_budget(
             continue
         say(f"{m}: sweeping {len(cfg.alpha_scales)} step sizes to {max(cfg.budgets)} steps")
         sweeps[m] = {**sweep_method(cfg, m), "runs": runs[m]}
+        sweeps[m]["alphas"] = {shown(k): v for k, v in sweeps[m]["alphas"].items()}
         say(f"{m}: {sweeps[m]['seconds']:.0f} s")
         save()
     curves = {m: _keys_to_numbers(sweeps[m]["curve"]) for m in runs}
