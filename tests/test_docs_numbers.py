@@ -325,3 +325,36 @@ def test_verdicts_quoted_in_the_docs_match_the_claims_table():
         ),
     ):
         assert row.format(_claim(r, start)["verdict"]) in text, start
+
+
+@pytest.mark.parametrize("robot", ["reacher"])
+def test_the_budget_readme_quotes_its_sweep(robot):
+    """docs/paper/budget/README.md's table rows: each method's chosen budget and errors, read from
+    the sweep's JSON (warp-critic budget)."""
+    from warp_critic.evaluation.budget import best_scale_at, numeric_keys
+
+    b = json.loads((ROOT / "docs" / "paper" / "budget" / f"{robot}.json").read_text())
+    text = _text("docs/paper/budget/README.md")
+    labels = {"ours": "L_critic (ours)", "ddpg": "DDPG", "meta-critic": "Meta-Critic", "td3": "TD3"}
+    for m, c in b["chosen"].items():
+        own = next(
+            x
+            for x in b["report"][m]["cells"]
+            if (x["scale"], x["steps"]) == (c["scale"], c["steps"])
+        )
+        if m == "ours":
+            same = "-"
+        else:
+            scale, _ = best_scale_at(numeric_keys(b["sweep"]["ours"]["curve"]), c["steps"])
+            same = _g(
+                next(
+                    x["mse_mean"]
+                    for x in b["report"]["ours"]["cells"]
+                    if (x["scale"], x["steps"]) == (scale, c["steps"])
+                )
+            )
+        row = (
+            f"| {labels[m]} | {c['steps']}, x{c['scale']:g} | {_g(c['mse_train'])} | "
+            f"{_g(own['mse_mean'])} | {same} |"
+        )
+        assert row in text, row

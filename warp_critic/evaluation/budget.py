@@ -262,7 +262,7 @@ def report_method(
 # ------------------------------------------------------------------------------------------------
 
 
-def _keys_to_numbers(curve: dict) -> dict[float, dict[int, Any]]:
+def numeric_keys(curve: dict) -> dict[float, dict[int, Any]]:
     """JSON's string keys back to ``{scale: {N: value}}``."""
     return {float(s): {int(n): v for n, v in row.items()} for s, row in curve.items()}
 
@@ -313,7 +313,7 @@ def run_budget(
         sweeps[m]["alphas"] = {shown(k): v for k, v in sweeps[m]["alphas"].items()}
         say(f"{m}: {sweeps[m]['seconds']:.0f} s")
         save()
-    curves = {m: _keys_to_numbers(sweeps[m]["curve"]) for m in runs}
+    curves = {m: numeric_keys(sweeps[m]["curve"]) for m in runs}
     chosen = {}
     for m in runs:
         s, n, err = choose(curves[m])
@@ -367,7 +367,7 @@ def plot_budget(result: dict[str, Any], path: Path, title: str) -> Path:
     fig = figure(6.5, 4.2)
     ax = fig.subplots()
     for m, sw in result["sweep"].items():
-        env = envelope(_keys_to_numbers(sw["curve"]))
+        env = envelope(numeric_keys(sw["curve"]))
         ns = sorted(env)
         colour = COLORS.get(m)
         label = METHOD_LABELS.get(m, m)
@@ -375,9 +375,13 @@ def plot_budget(result: dict[str, Any], path: Path, title: str) -> Path:
         ax.axhline(sw["untrained"], color=colour, ls=":", lw=1)
         c = result["chosen"][m]
         ax.plot([c["steps"]], [c["mse_train"]], "o", ms=13, mfc="none", color=colour)
+    ax.plot([], [], ":", color="grey", label="untrained policies")
+    ax.plot([], [], "o", ms=13, mfc="none", color="grey", label="chosen (step size, N)")
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("critic-gradient steps per fresh policy at meta-test (N)")
+    ax.set_xlabel(
+        "critic-gradient steps per fresh policy at meta-test (N; best step size at each N)"
+    )
     ax.set_ylabel("final MSE on the training goals (rad$^2$)")
     ax.set_title(title)
     ax.legend(fontsize=8)
