@@ -327,7 +327,7 @@ def test_verdicts_quoted_in_the_docs_match_the_claims_table():
         assert row.format(_claim(r, start)["verdict"]) in text, start
 
 
-@pytest.mark.parametrize("robot", ["reacher"])
+@pytest.mark.parametrize("robot", ["reacher", "kuka"])
 def test_the_budget_readme_quotes_its_sweep(robot):
     """docs/paper/budget/README.md's table rows: each method's chosen budget and errors, read from
     the sweep's JSON (warp-critic budget)."""
