@@ -45,6 +45,7 @@ class Job:
     run_dir: str
     goals: torch.Tensor  # (G, dof) rad
     variant: Variant
+    alpha_scale: float = 1.0  # the policies' step size: the run's own alpha times this
 
     @property
     def G(self) -> int:
@@ -172,10 +173,15 @@ def evaluate(
     horizon: int | None = None,
     max_worlds: int = 4096,
     progress: bool = True,
+    at: tuple[int, ...] = (),
 ) -> dict:
     """Meta-test every job; returns ``{"errors": [(G, inits) final ||q_T-g||^2 per job], "before": [...],
     "dof", "horizon", "steps", "alphas": {run_dir: alpha}, "worlds", "batches", "diverged"}``
-    (``inf`` errors for diverged worlds, module docstring; ``"diverged"``: their count)."""
+    (``inf`` errors for diverged worlds, module docstring; ``"diverged"``: their count).
+
+    ``at``: policy-update counts (each in ``1..steps``) after which the errors are also kept, in
+    ``"errors_at": {n: [(G, inits) per job]}`` -- one descent of ``steps`` updates read at several
+    budgets (a world that diverged by ``n`` is ``inf`` from ``n`` on)."""
     from warp_critic.evaluation.metatest import build_test_critic
     from warp_critic.learning.inner import inner_update, policy_fn
     from warp_critic.learning.losses import final_error
@@ -188,6 +194,10 @@ def evaluate(
 
     if not jobs:
         raise UserError("nothing to evaluate")
+    if any(not 1 <= int(n) <= steps for n in at):
+        raise UserError(f"budgets {sorted(at)}: each must be between 1 and the {steps} steps")
+    stops = sorted({int(n) for n in at} | {int(steps)})
+    errors_at: dict[int, list[np.ndarray | None]] = {n: [None] * len(jobs) for n in at}
     runs = load_runs([j.run_dir for j in jobs])
     first = next(iter(runs.values()))
     cfg0 = first.cfg
@@ -242,7 +252,7 @@ def evaluate(
                 assert run.alpha is not None  # set with the critic above
                 n = job.G * inits
                 segments.append((run.critic, start, start + n))
-                rates.append(torch.full((n,), run.alpha))
+                rates.append(torch.full((n,), run.alpha * float(job.alpha_scale)))
                 goals.append(job.goals.to(torch.float32).repeat_interleave(inits, dim=0))
                 if job.G not in inits_cache:
                     gen = torch.Generator().manual_seed(int(seed))
@@ -257,35 +267,38 @@ def evaluate(
             critic = MultiCritic(segments)
             untrained = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
             err0 = final_error(untrained.q[-1], goal).detach().cpu().numpy()
-            p, trajs = inner_update(
-                critic,
-                policy,
-                p,
-                sim,
-                q0,
-                qd0,
-                goal,
-                horizon=horizon,
-                alpha=PerWorldRate(torch.cat(rates).to(dev)),
-                steps=steps,
-                create_graph=False,
-                check=False,
-            )
-            after = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
-            err = final_error(after.q[-1], goal).detach().cpu().numpy()
             ok0 = finite_worlds(untrained)
-            ok = ok0 & finite_worlds(after)
-            for t in trajs:
-                ok &= finite_worlds(t)
+            ok = ok0.clone()
+            done = 0
+            err = err0
+            for stop in stops:  # one descent, read after each budget in ``at``
+                p, trajs = inner_update(
+                    critic,
+                    policy,
+                    p,
+                    sim,
+                    q0,
+                    qd0,
+                    goal,
+                    horizon=horizon,
+                    alpha=PerWorldRate(torch.cat(rates).to(dev)),
+                    steps=stop - done,
+                    create_graph=False,
+                    check=False,
+                )
+                done = stop
+                after = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
+                err = final_error(after.q[-1], goal).detach().cpu().numpy()
+                ok &= finite_worlds(after)
+                for t in trajs:
+                    ok &= finite_worlds(t)
+                err = np.where(ok.cpu().numpy(), err, np.inf)
+                if stop in errors_at:
+                    _split(errors_at[stop], group, jobs, inits, err)
             err0 = np.where(ok0.cpu().numpy(), err0, np.inf)
-            err = np.where(ok.cpu().numpy(), err, np.inf)
             diverged += int((~ok).sum())
-            start = 0
-            for i in group:
-                n = jobs[i].G * inits
-                errors[i] = err[start : start + n].reshape(jobs[i].G, inits).astype(np.float64)
-                before[i] = err0[start : start + n].reshape(jobs[i].G, inits).astype(np.float64)
-                start += n
+            _split(errors, group, jobs, inits, err)
+            _split(before, group, jobs, inits, err0)
             bar.update(1)
             interrupts.check()  # a signal whose KeyboardInterrupt a callback swallowed
     finally:
@@ -300,7 +313,17 @@ def evaluate(
         "worlds": sum(j.G * inits for j in jobs),
         "batches": len(groups),
         "diverged": diverged,
+        **({"errors_at": errors_at} if at else {}),
     }
+
+
+def _split(out: list, group: list[int], jobs: list[Job], inits: int, err: np.ndarray) -> None:
+    """Each job's ``(G, inits)`` slice of a batch's per-world ``err``, into ``out[job index]``."""
+    start = 0
+    for i in group:
+        n = jobs[i].G * inits
+        out[i] = err[start : start + n].reshape(jobs[i].G, inits).astype(np.float64)
+        start += n
 
 
 def relpath(p, base: Path) -> str:

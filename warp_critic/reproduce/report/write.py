@@ -89,6 +89,9 @@ def write_report(
     )  # an extra baseline's rows join the paper's
     book = ledger.summary(ledger.read(out), open_call=call, open_wall=wall)
     stage_seconds = {r.dir.name: float(r.data["seconds"]) for r in recs.values() if r is not None}
+    # a stage's compute: its completing call's wall time, or its iteration times over all calls
+    # where that is more (a stage resumed over several calls records only the last call's time)
+    stage_compute = {r.dir.name: ledger.stage_compute(r) for r in recs.values() if r is not None}
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
     md: list[str] = []
@@ -114,7 +117,7 @@ def write_report(
         f"- versions: python {ver['python']}, warp {ver['warp']}, newton {ver['newton']}, torch {ver['torch']} "
         f"({ver['platform']})",
         f"- written {time.strftime('%Y-%m-%d %H:%M:%S')}; this call took {wall:.1f} s",
-        ledger.header_line(book, stage_seconds),
+        ledger.header_line(book, stage_seconds, stage_compute),
         "",
     ]
     claims_at = len(md)
@@ -189,6 +192,9 @@ def write_report(
             "last_end": book["last"],
             "stage_seconds_sum": sum(stage_seconds.values()),
             "stages_before_ledger": [n for n in stage_seconds if n not in book["stages_run"]],
+            "carried_compute_seconds": sum(
+                stage_compute[n] for n in stage_seconds if n not in book["stages_run"]
+            ),
         },
     )
     text = "\n".join(md) + "\n"
