@@ -63,8 +63,11 @@ def test_sample_efficiency_verdict_is_computed():
 
 def test_error_at_budget_reads_the_curve_at_equal_steps():
     res = _result({"0": [1.0, 0.5, 0.2, 0.1]}, per=100)
-    assert rp.error_at_budget(res, 250) == [0.5]
-    assert rp.error_at_budget(res, 50) == [1.0]
+    assert rp.error_at_budget(res, 250, window=1) == [0.5]
+    assert rp.error_at_budget(res, 50, window=1) == [1.0]
+    # the steps rule's window: the running mean over the iterations up to the budget
+    assert rp.error_at_budget(res, 350, window=2) == [pytest.approx(0.35)]
+    assert rp.error_at_budget(res, 250) == [0.75]  # fewer iterations than WINDOW: all of them
 
 
 def test_meta_critic_aux_alive_from_the_record_else_the_run_directory(tmp_path):

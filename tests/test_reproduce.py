@@ -15,6 +15,7 @@ import pytest
 import torch
 
 from warp_critic.cli.main import main as cli_main
+from warp_critic.core.errors import UserError
 from warp_critic.reproduce.report.maps import elbow_bent
 
 
@@ -267,6 +268,29 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
         )
         ref = np.asarray(meta_test(tc, progress=None)["final_error_all"])
         np.testing.assert_allclose(err, ref, rtol=1e-4, atol=1e-6)
+
+
+def test_one_descent_read_at_several_budgets_equals_separate_descents(quick):
+    """``evaluate(at=...)`` (the budget sweep's one descent) gives each budget's errors exactly as a
+    separate evaluation of that many steps; ``alpha_scale`` scales the run's step size."""
+    import torch
+
+    from warp_critic.physics.scene import Variant
+    from warp_critic.reproduce.experiments.evaluate import Job, evaluate
+
+    out, rc, _ = quick
+    run = str(sorted((next(out.glob("metatrain-reacher-ours-*")) / "run").glob("seed*"))[0])
+    goals = torch.tensor([[0.3, -0.2], [-1.0, 0.8]])
+    jobs = [Job("x1", run, goals, Variant()), Job("x3", run, goals, Variant(), alpha_scale=3.0)]
+    r = evaluate(jobs, inits=2, steps=3, seed=5, device="cpu", progress=False, at=(1, 3))
+    for n in (1, 3):
+        alone = evaluate(jobs, inits=2, steps=n, seed=5, device="cpu", progress=False)
+        for k in range(2):
+            np.testing.assert_allclose(r["errors_at"][n][k], alone["errors"][k], rtol=1e-5)
+    np.testing.assert_array_equal(r["errors_at"][3][0], r["errors"][0])
+    assert not np.allclose(r["errors"][0], r["errors"][1])  # 3x the step: other policies
+    with pytest.raises(UserError, match="between 1 and the 3 steps"):
+        evaluate(jobs, inits=2, steps=3, seed=5, device="cpu", progress=False, at=(4,))
 
 
 def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
@@ -733,3 +757,12 @@ def test_ledger_total_wall_time_counts_every_call():
     assert "(1 without an end)" in line
     assert "1 of these stages were completed by no call of this ledger" in line
     assert line.endswith("not in the ledger's total): tables")  # named, not only counted
+    # a carried stage resumed over calls: its compute is its iteration times, not its last call's
+    line = ledger.header_line(s, {"toy": 5.0, "maps": 100.0, "tables": 50.0}, {"tables": 7200.0})
+    assert "tables. Their compute" in line and ": 7200 s (2.0 h), which the ledger's 1.3 h" in line
+
+    class _Rec:
+        group = "metatrain"
+        data = {"seconds": 19.0, "result": {"seeds": {"0": {"seconds": 2715.0}}}}
+
+    assert ledger.stage_compute(_Rec()) == 2715.0

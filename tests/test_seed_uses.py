@@ -29,9 +29,18 @@ def test_the_held_out_stage_keeps_the_tables_stage_and_its_hash():
 
 
 def test_departures_name_what_differs_from_the_papers_text():
-    kuka = departures("kuka", {"critic_input": "relative", "start_std": 0.4, "home_starts": 2}, 0.0)
+    kuka = departures(
+        "kuka",
+        {"critic_input": "relative", "start_std": 0.4, "home_starts": 2, "inner_steps": 3},
+        0.0,
+    )
     text = " ".join(kuka)
     assert "goal-relative critic" in text and "N(0, 0.4^2)" in text and "gravity 0" in text
+    assert "3 inner steps per meta-training iteration" in text
+    assert "take 3 critic-gradient step(s)" in text and "while not done" in text
+    assert "final error ||q_T - g||^2" in text and "once per goal" in text
+    one = " ".join(departures("kuka", {"inner_steps": 1, "running_weight": 1.0}, 0.0))
+    assert "inner steps" not in one and "final error" not in one and "take 1 critic" in one
     reacher = departures("reacher", {"critic_input": "full"}, 9.81)
     assert not any("gravity" in x or "goal-relative" in x for x in reacher)
     assert any("DDPG with actor_lr 0.001" in x for x in reacher)  # the search's pick (TUNED)

@@ -197,6 +197,7 @@ def build_parser() -> argparse.ArgumentParser:
     landscape.add_arguments(al)
     al.set_defaults(func=landscape.run_from_args)
 
+    from warp_critic.cli import budget as budget_cli
     from warp_critic.cli import identify as identify_cli
     from warp_critic.cli import reproduce as reproduce_cli
     from warp_critic.cli import score as score_cli
@@ -205,6 +206,7 @@ def build_parser() -> argparse.ArgumentParser:
         ("score", score_cli),
         ("identify", identify_cli),
         ("reproduce", reproduce_cli),
+        ("budget", budget_cli),
     ):
         sp = sub.add_parser(name, help=module.HELP, description=module.DESCRIPTION)
         module.add_arguments(sp)

@@ -21,6 +21,9 @@ class SeedUse:
     where: str
 
 
+#: the goal seed that chooses each method's meta-test budget (:mod:`warp_critic.evaluation.budget`)
+CHOOSE_BUDGET_SEED = 2000
+
 SEED_USES: tuple[SeedUse, ...] = (
     SeedUse(
         1,
@@ -38,6 +41,13 @@ SEED_USES: tuple[SeedUse, ...] = (
         "the reacher's setting (preset reacher: 3 inner steps at alpha 3e-4, 400 iterations), "
         "meta-tested at std 0.3",
         "evaluation/presets.py EVALUATIONS['reacher']",
+    ),
+    SeedUse(
+        CHOOSE_BUDGET_SEED,
+        "chose",
+        "each method's meta-test budget (step size and number of critic-gradient steps): the "
+        "initialisations of the fresh policies on the run's training goals",
+        "warp-critic budget --choose-seed (its default); evaluation/budget.py",
     ),
     SeedUse(
         1,

@@ -165,9 +165,22 @@ def summary(rows: list[dict], open_call: str | None = None, open_wall: float = 0
     }
 
 
-def header_line(s: dict, stage_seconds: dict[str, float]) -> str:
+def stage_compute(rec) -> float:
+    """A stage record's compute (s): its completing call's wall time, or the sum of its iteration
+    times over all calls where that is more (a meta-training stage resumed over several calls
+    records only its last call's wall time; its seeds are batched, so one seed's sum is the
+    stage's)."""
+    seeds = (rec.data.get("result", {}).get("seeds") if rec.group == "metatrain" else None) or {}
+    trained = max((float(v.get("seconds", 0.0)) for v in seeds.values()), default=0.0)
+    return max(float(rec.data["seconds"]), trained)
+
+
+def header_line(
+    s: dict, stage_seconds: dict[str, float], compute: dict[str, float] | None = None
+) -> str:
     """The report header's line: the ledger's total wall time and the sum of the stage times
-    (``stage_seconds``: stage directory, or name for records without one -> seconds)."""
+    (``stage_seconds``: stage directory, or name for records without one -> seconds); ``compute``
+    (the same keys, :func:`stage_compute`) adds the compute of the stages carried in."""
     before = [n for n in stage_seconds if n not in s["stages_run"]]
     line = (
         f"- ledger (`{LEDGER}`): {s['calls']} call(s) on this folder"
@@ -183,4 +196,11 @@ def header_line(s: dict, stage_seconds: dict[str, float]) -> str:
             f"with their records; their times {sum(stage_seconds[n] for n in before):.0f} s are in "
             f"the sum, not in the ledger's total): {', '.join(sorted(before))}"
         )
+        if compute:
+            carried = sum(compute.get(n, stage_seconds[n]) for n in before)
+            line += (
+                f". Their compute, each the larger of its record's time and its iteration times "
+                f"over all calls: {carried:.0f} s ({carried / 3600:.1f} h), which the ledger's "
+                f"{s['wall'] / 3600:.1f} h of wall time does not include"
+            )
     return line

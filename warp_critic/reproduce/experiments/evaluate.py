@@ -45,6 +45,7 @@ class Job:
     run_dir: str
     goals: torch.Tensor  # (G, dof) rad
     variant: Variant
+    alpha_scale: float = 1.0  # the policies' step size: the run's own alpha times this
 
     @property
     def G(self) -> int:
@@ -186,16 +187,23 @@ def evaluate(
     horizon: int | None = None,
     max_worlds: int = 4096,
     progress: bool = True,
+    at: tuple[int, ...] = (),
 ) -> dict:
     """Meta-test every job; returns ``{"errors": [(G, inits) final ||q_T-g||^2 per job], "before": [...],
     "dof", "horizon", "steps", "alphas": {run_dir: alpha}, "worlds", "batches", "diverged"}``
-    (``inf`` errors for diverged worlds, module docstring; ``"diverged"``: their count)."""
+    (``inf`` errors for diverged worlds, module docstring; ``"diverged"``: their count).
+
+    ``at``: policy-update counts (each in ``1..steps``) after which the errors are also kept, in
+    ``"errors_at": {n: [(G, inits) per job]}`` -- one descent of ``steps`` updates read at several
+    budgets (a world that diverged by ``n`` is ``inf`` from ``n`` on)."""
     from warp_critic.physics.simulator import STANDARD_GRAVITY
     from warp_critic.running.loop import progress_bar
     from warp_critic.running.scenefile import find_run_scene
 
     if not jobs:
         raise UserError("nothing to evaluate")
+    if any(not 1 <= int(n) <= steps for n in at):
+        raise UserError(f"budgets {sorted(at)}: each must be between 1 and the {steps} steps")
     runs = load_runs([j.run_dir for j in jobs])
     first = next(iter(runs.values()))
     cfg0 = first.cfg
@@ -209,6 +217,7 @@ def evaluate(
     groups = batches(jobs, inits, max_worlds)
     errors: list[np.ndarray | None] = [None] * len(jobs)
     before: list[np.ndarray | None] = [None] * len(jobs)
+    errors_at: dict[int, list[np.ndarray | None]] = {n: [None] * len(jobs) for n in at}
     inits_cache: dict[int, dict] = {}
     diverged = 0
     bar = progress_bar(len(groups), enabled=progress, desc="meta-test batches")
@@ -220,14 +229,14 @@ def evaluate(
             critic, rate, goal, p = _batch_inputs(
                 [jobs[i] for i in group], runs, policy, inits, seed, inits_cache, sim.torch_device
             )
-            err0, err, bad = _meta_test(sim, policy, critic, rate, goal, p, horizon, steps)
+            err0, err, bad, err_at = _meta_test(
+                sim, policy, critic, rate, goal, p, horizon, steps, at
+            )
             diverged += bad
-            start = 0
-            for i in group:
-                n = jobs[i].G * inits
-                errors[i] = err[start : start + n].reshape(jobs[i].G, inits).astype(np.float64)
-                before[i] = err0[start : start + n].reshape(jobs[i].G, inits).astype(np.float64)
-                start += n
+            _split(errors, group, jobs, inits, err)
+            _split(before, group, jobs, inits, err0)
+            for n, e in err_at.items():
+                _split(errors_at[n], group, jobs, inits, e)
             bar.update(1)
             interrupts.check()  # a signal whose KeyboardInterrupt a callback swallowed
     finally:
@@ -242,7 +251,17 @@ def evaluate(
         "worlds": sum(j.G * inits for j in jobs),
         "batches": len(groups),
         "diverged": diverged,
+        **({"errors_at": errors_at} if at else {}),
     }
+
+
+def _split(out: list, group: list[int], jobs: list[Job], inits: int, err: np.ndarray) -> None:
+    """Each job's ``(G, inits)`` slice of a batch's per-world ``err``, into ``out[job index]``."""
+    start = 0
+    for i in group:
+        n = jobs[i].G * inits
+        out[i] = err[start : start + n].reshape(jobs[i].G, inits).astype(np.float64)
+        start += n
 
 
 def _batch_model(scene, group: list[Job], inits: int, cfg0, gravity: float, device: str):
@@ -294,7 +313,7 @@ def _batch_inputs(group: list[Job], runs: dict, policy, inits: int, seed: int, i
         assert run.alpha is not None  # set with the critic above
         n = job.G * inits
         segments.append((run.critic, start, start + n))
-        rates.append(torch.full((n,), run.alpha))
+        rates.append(torch.full((n,), run.alpha * float(job.alpha_scale)))
         goals.append(job.goals.to(torch.float32).repeat_interleave(inits, dim=0))
         if job.G not in inits_cache:
             gen = torch.Generator().manual_seed(int(seed))
@@ -306,9 +325,10 @@ def _batch_inputs(group: list[Job], runs: dict, policy, inits: int, seed: int, i
     return MultiCritic(segments), torch.cat(rates).to(dev), goal, p
 
 
-def _meta_test(sim, policy, critic, rate, goal, p, horizon: int, steps: int):
+def _meta_test(sim, policy, critic, rate, goal, p, horizon: int, steps: int, at=()):
     """``steps`` policy updates with the critics from home; returns the final errors before and
-    after ``(W,)`` rad^2 (``inf`` where a world diverged) and the number of diverged worlds."""
+    after ``(W,)`` rad^2 (``inf`` where a world diverged), the number of diverged worlds and
+    ``{n: (W,) errors after n updates}`` for each ``n`` in ``at`` (one descent, read on the way)."""
     from warp_critic.learning.inner import inner_update, policy_fn
     from warp_critic.learning.losses import final_error
     from warp_critic.learning.rollout import finite_worlds, rollout
@@ -316,29 +336,36 @@ def _meta_test(sim, policy, critic, rate, goal, p, horizon: int, steps: int):
     q0, qd0 = sim.zeros(), sim.zeros()
     untrained = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
     err0 = final_error(untrained.q[-1], goal).detach().cpu().numpy()
-    p, trajs = inner_update(
-        critic,
-        policy,
-        p,
-        sim,
-        q0,
-        qd0,
-        goal,
-        horizon=horizon,
-        alpha=PerWorldRate(rate),
-        steps=steps,
-        create_graph=False,
-        check=False,
-    )
-    after = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
-    err = final_error(after.q[-1], goal).detach().cpu().numpy()
     ok0 = finite_worlds(untrained)
-    ok = ok0 & finite_worlds(after)
-    for t in trajs:
-        ok &= finite_worlds(t)
+    ok = ok0.clone()
+    err_at: dict[int, np.ndarray] = {}
+    done = 0
+    for stop in sorted({int(n) for n in at} | {int(steps)}):
+        p, trajs = inner_update(
+            critic,
+            policy,
+            p,
+            sim,
+            q0,
+            qd0,
+            goal,
+            horizon=horizon,
+            alpha=PerWorldRate(rate),
+            steps=stop - done,
+            create_graph=False,
+            check=False,
+        )
+        done = stop
+        after = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
+        err = final_error(after.q[-1], goal).detach().cpu().numpy()
+        ok &= finite_worlds(after)
+        for t in trajs:
+            ok &= finite_worlds(t)
+        err = np.where(ok.cpu().numpy(), err, np.inf)
+        if stop in at:
+            err_at[stop] = err
     err0 = np.where(ok0.cpu().numpy(), err0, np.inf)
-    err = np.where(ok.cpu().numpy(), err, np.inf)
-    return err0, err, int((~ok).sum())
+    return err0, err, int((~ok).sum()), err_at
 
 
 def relpath(p, base: Path) -> str:

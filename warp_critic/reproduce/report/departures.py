@@ -23,6 +23,27 @@ def departures(scene: str, values: dict, gravity: float | None) -> list[str]:
     """What differs from the paper's text in ``scene``'s runs: ``values`` are ours' meta-training
     settings (the stage record's), ``gravity`` the scene's."""
     out = []
+    inner = int(values.get("inner_steps", 1))
+    if inner != 1:
+        out.append(
+            f"{inner} inner steps per meta-training iteration (Algorithm 2 takes one step of "
+            "L_critic's gradient before the task loss)"
+        )
+    per_policy = inner * int(values.get("policy_lifetime", 1))
+    out.append(
+        f"meta-test: every method's fresh policies take {per_policy} critic-gradient step(s) "
+        "(Algorithm 3 trains 'while not done'; `warp-critic budget` sweeps 1-300 steps per method, "
+        "docs/paper/budget)"
+    )
+    out.append(
+        "one critic update per iteration on the mean task loss over all training goals at once "
+        "(Algorithm 2 updates the critic once per goal, in turn)"
+    )
+    if not values.get("running_weight"):
+        out.append(
+            "the task loss is the final error ||q_T - g||^2 (the paper's L_task sums the cost "
+            "along the trajectory)"
+        )
     if values.get("critic_input") == "relative":
         out.append(
             "a goal-relative critic (input q - g, not the state and the goal) and the random starts "

@@ -11,7 +11,13 @@ from warp_critic.reproduce.report import paper as rp
 from warp_critic.reproduce.report.departures import departures_line
 from warp_critic.reproduce.report.draft import Draft, fmt
 from warp_critic.reproduce.report.plots import figure, plot_goal_maps
-from warp_critic.reproduce.report.rules import map_reason, map_verdict
+from warp_critic.reproduce.report.rules import (
+    COMPARE_RULE,
+    MAP_LEVEL,
+    compare_verdict,
+    map_reason,
+    map_verdict,
+)
 
 
 def maps_section(d: Draft) -> None:
@@ -140,6 +146,9 @@ def _dynamics_claim(
         if m != "ours" and all(c is not None for c in vals)
     }
     v = map_verdict(ours, cells)
+    # the claim is comparative ("better than the baselines"): judged cell by cell
+    v["verdict"], share = compare_verdict(v["below_all"], v["cells"])
+    v["rule"] = "comparative"
     solved_row = any(m != "ours" and lab in means and "solved" in lab for lab, m, _ in claimed)
     d.figures.append(
         (
@@ -160,7 +169,10 @@ def _dynamics_claim(
             "ours": "grid mean MSE: "
             + ", ".join(f"{rp.shown(k)} {fmt(v)}" for k, v in means.items()),
             "verdict": v["verdict"],
-            "reason": map_reason(v) + ("" if solved_row else "; no baseline seed solved training"),
+            "reason": f"{share}; lowest grid mean: "
+            f"{'ours' if v['lowest'] == 'ours' else v['lowest']}; ours below "
+            f"{MAP_LEVEL:g} MSE on {v['share']:.1%} of the cells. {COMPARE_RULE}"
+            + ("" if solved_row else "; no baseline seed solved training"),
         }
     )
     return v

@@ -23,7 +23,12 @@ import numpy as np
 from warp_critic.methods import method
 from warp_critic.reproduce.experiments.settings import ALL_METHODS, METHOD_LABELS, METHODS, present
 from warp_critic.reproduce.report.plots import diverged_cmap, log_limits
-from warp_critic.reproduce.report.rules import WINDOW, sample_efficiency, settled_index
+from warp_critic.reproduce.report.rules import (
+    WINDOW,
+    final_training_error,
+    sample_efficiency,
+    settled_index,
+)
 
 LEVELS = (0.3, 0.1, 0.03)
 #: rad^2 (summed over the joints): a baseline seed "solved the training task" at or below this final
@@ -58,11 +63,6 @@ def seed_curves(res: dict) -> dict[str, dict]:
     return out
 
 
-def final_training_error(curve: np.ndarray) -> float:
-    """Mean of the last 10% of a training curve (at least one value)."""
-    return float(np.mean(curve[-max(1, len(curve) // 10) :]))
-
-
 def solved_seeds(res: dict, scene: str) -> list[bool]:
     """Per seed (seed order): did it solve the training task (:data:`SOLVED`)?"""
     return [final_training_error(c["loss"]) <= SOLVED[scene] for c in seed_curves(res).values()]
@@ -91,13 +91,19 @@ def steps_to_levels(
     return out
 
 
-def error_at_budget(res: dict, budget: float) -> list[float]:
-    """Per seed: the training error at ``budget`` environment steps (the last iteration within it)."""
+def error_at_budget(res: dict, budget: float, window: int = WINDOW) -> list[float]:
+    """Per seed: the training error at ``budget`` environment steps, the running mean over the
+    ``window`` iterations up to the last iteration within it (the steps rule's smoothing)."""
     out = []
     for c in seed_curves(res).values():
-        k = int(np.searchsorted(c["steps"], budget, side="right")) - 1
-        out.append(float(c["loss"][max(k, 0)]))
+        k = max(int(np.searchsorted(c["steps"], budget, side="right")) - 1, 0)
+        out.append(float(np.mean(c["loss"][max(k + 1 - window, 0) : k + 1])))
     return out
+
+
+def per_iteration(res: dict) -> dict:
+    """The stage result with one "step" per iteration: steps-to-level and budgets in iterations."""
+    return {**res, "env_steps_per_iteration": 1}
 
 
 def steps_table(got: dict) -> tuple[list[str], dict]:
@@ -127,11 +133,13 @@ def steps_table(got: dict) -> tuple[list[str], dict]:
     return lines, data
 
 
-def sample_efficiency_verdict(data: dict, within: dict | None = None) -> tuple[str, str]:
+def sample_efficiency_verdict(
+    data: dict, within: dict | None = None, unit: str = "env steps"
+) -> tuple[str, str]:
     """(verdict, measurement) for 'ours reaches the training error levels in fewer steps', under
-    :data:`~warp_critic.reproduce.report.rules.STEPS_RULE`: ``data`` from the whole curves, ``within`` from the curves cut at
-    the common budget (the same when the budgets are equal)."""
-    return sample_efficiency(data, data if within is None else within)
+    :func:`~.rules.steps_rule`: ``data`` from the whole curves, ``within`` from the curves cut at
+    the common budget (the same when the budgets are equal); counted in ``unit``."""
+    return sample_efficiency(data, data if within is None else within, unit)
 
 
 # -- two rows per baseline -------------------------------------------------------------------------

@@ -9,6 +9,7 @@ import numpy as np
 from warp_critic.methods import methods
 from warp_critic.reproduce.engine.stages import StageRecord
 from warp_critic.reproduce.experiments.settings import METHOD_LABELS, present
+from warp_critic.reproduce.report.rules import final_training_error
 from warp_critic.running.rundir import save_figure
 
 COLORS = {m.name: m.colour for m in methods()}
@@ -66,10 +67,11 @@ def plot_metatrain(path: Path, scene: str, recs: dict[str, StageRecord]) -> dict
                 x, mean, color=COLORS[m], label=f"{METHOD_LABELS[m]} (mean of {len(curves)} seeds)"
             )
             ax.fill_between(x, lo, hi, color=COLORS[m], alpha=0.2)
+        final = np.array([final_training_error(row) for row in y])  # the report's one definition
         summary[m] = {
-            "final_mean": float(y[:, -1].mean()),
-            "final_std": float(y[:, -1].std()),
-            "final_per_seed": y[:, -1].tolist(),
+            "final_mean": float(final.mean()),
+            "final_std": float(final.std()),
+            "final_per_seed": final.tolist(),
             "iterations": int(n),
             "env_steps": int(env[-1]),
             "first_mean": float(y[:, 0].mean()),

@@ -91,6 +91,9 @@ def write_report(
     )  # an extra baseline's rows join the paper's
     book = ledger.summary(ledger.read(out), open_call=call, open_wall=wall)
     stage_seconds = {r.dir.name: float(r.data["seconds"]) for r in recs.values() if r is not None}
+    # a stage's compute: its completing call's wall time, or its iteration times over all calls
+    # where that is more (a stage resumed over several calls records only the last call's time)
+    stage_compute = {r.dir.name: ledger.stage_compute(r) for r in recs.values() if r is not None}
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
     results: dict = {
@@ -105,7 +108,9 @@ def write_report(
     figures: list[tuple[str, Path, str]] = []  # (title, png, sentence)
     ver = versions()
     seeds = seeds_trained(plan)
-    md = _header(config, device, seeds, ver, wall, ledger.header_line(book, stage_seconds))
+    md = _header(
+        config, device, seeds, ver, wall, ledger.header_line(book, stage_seconds, stage_compute)
+    )
     claims_at = len(md)
     claims: list[dict] = []  # filled by the sections below, rendered here
     solved: dict[str, dict[str, list[bool]]] = {}  # robot -> baseline -> per seed
@@ -139,6 +144,9 @@ def write_report(
             "last_end": book["last"],
             "stage_seconds_sum": sum(stage_seconds.values()),
             "stages_before_ledger": [n for n in stage_seconds if n not in book["stages_run"]],
+            "carried_compute_seconds": sum(
+                stage_compute[n] for n in stage_seconds if n not in book["stages_run"]
+            ),
         },
     )
     text = "\n".join(md) + "\n"
