@@ -1,4 +1,4 @@
-"""The meta-test budget sweep (warp_critic/evaluation/budget.py): the choice is the argmin on the
+"""The meta-test budget sweep (warp_critic/reproduce/budget.py): the choice is the argmin on the
 training goals, the reporting goals come from seeds that chose nothing, and the command's bad
 input is one line."""
 
@@ -10,7 +10,8 @@ import pytest
 
 from warp_critic.cli.main import main
 from warp_critic.core.errors import FieldError, UserError
-from warp_critic.evaluation import budget, seed_uses
+from warp_critic.evaluation import seed_uses
+from warp_critic.reproduce import budget
 
 
 def test_the_choice_is_the_lowest_finite_error_ties_to_fewer_steps():

@@ -331,7 +331,7 @@ def test_verdicts_quoted_in_the_docs_match_the_claims_table():
 def test_the_budget_readme_quotes_its_sweep(robot):
     """docs/paper/budget/README.md's table rows: each method's chosen budget and errors, read from
     the sweep's JSON (warp-critic budget)."""
-    from warp_critic.evaluation.budget import best_scale_at, numeric_keys
+    from warp_critic.reproduce.budget import best_scale_at, numeric_keys
 
     b = json.loads((ROOT / "docs" / "paper" / "budget" / f"{robot}.json").read_text())
     text = _text("docs/paper/budget/README.md")

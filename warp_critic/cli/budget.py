@@ -1,4 +1,4 @@
-"""``warp-critic budget``: the meta-test budget sweep (:mod:`warp_critic.evaluation.budget`).
+"""``warp-critic budget``: the meta-test budget sweep (:mod:`warp_critic.reproduce.budget`).
 
 For each method's meta-trained critics (the ``metatrain-<scene>-<method>`` stages of a ``warp-critic
 reproduce`` output), fresh policies descend the critic for up to ``max(--budgets)`` steps at several
@@ -27,7 +27,7 @@ DESCRIPTION = (
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the arguments of ``warp-critic budget`` to ``p``."""
-    from warp_critic.evaluation.budget import ALPHA_SCALES, BUDGETS, BudgetConfig
+    from warp_critic.reproduce.budget import ALPHA_SCALES, BUDGETS, BudgetConfig
 
     d = BudgetConfig()
     p.add_argument(
@@ -83,7 +83,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run_from_args(args: argparse.Namespace) -> int:
     """Run the sweep and print each method's choice; a user mistake raises ``UserError``."""
-    from warp_critic.evaluation.budget import (
+    from warp_critic.reproduce.budget import (
         BudgetConfig,
         plot_budget,
         run_budget,

@@ -21,7 +21,7 @@ class SeedUse:
     where: str
 
 
-#: the goal seed that chooses each method's meta-test budget (:mod:`warp_critic.evaluation.budget`)
+#: the goal seed that chooses each method's meta-test budget (:mod:`warp_critic.reproduce.budget`)
 CHOOSE_BUDGET_SEED = 2000
 
 SEED_USES: tuple[SeedUse, ...] = (
@@ -47,7 +47,7 @@ SEED_USES: tuple[SeedUse, ...] = (
         "chose",
         "each method's meta-test budget (step size and number of critic-gradient steps): the "
         "initialisations of the fresh policies on the run's training goals",
-        "warp-critic budget --choose-seed (its default); evaluation/budget.py",
+        "warp-critic budget --choose-seed (its default); reproduce/budget.py",
     ),
     SeedUse(
         1,

@@ -62,34 +62,9 @@ def table_markdown(
     """Markdown rows, the results.json cells, summary lines and the numbers behind the verdicts."""
     label, paper, _ = TABLES[table]
     values = res["columns"][table]
-    trained = res.get("trained", {}).get(table)
     cells = {(c["column"], c["method"]): c for c in res["cells"] if c["table"] == table}
 
-    def head(v: float) -> str:
-        return f"{label}={v:g}" + (" (trained)" if trained is not None and v == trained else "")
-
-    lines = ["| Method | " + " | ".join(head(v) for v in values) + " |"]
-    lines.append("|---" * (len(values) + 1) + "|")
-    if paper is not None:
-        for m in (m for m in METHODS if m in paper):  # the methods the paper reports
-            row = [
-                f"{paper[m][v][0]:g}({paper[m][v][1]:g})" if v in paper[m] else "—" for v in values
-            ]
-            lines.append(f"| {PAPER_ROW[m]} | " + " | ".join(row) + " |")
-    untrained = [cells[(ci, METHODS[0])].get("untrained_mse_mean") for ci in range(len(values))]
-    if all(u is not None for u in untrained):
-        lines.append(
-            "| this run: untrained policies (no update) | "
-            + " | ".join(_fmt(u) for u in untrained)
-            + " |"
-        )
-    floor = res.get("reach_floor", {}).get(table)
-    if floor:
-        lines.append(
-            "| open-loop reachability floor (best open-loop torques) | "
-            + " | ".join(_fmt(x) for x in floor)
-            + " |"
-        )
+    lines, untrained, floor = _head_lines(table, res, cells)
     measured = present({m for _, m in cells})  # the paper's methods, and any extra baseline's
     rows = method_rows(lambda ci, m: cells[(ci, m)], len(values), solved, None, measured)
     out_cells, summary = [], []
@@ -160,6 +135,41 @@ def table_markdown(
         summary,
         {"all": wins_all, "solved": wins_solved, "paper": paper_hits, "paper_value": value_verdict},
     )
+
+
+def _head_lines(table: str, res: dict, cells: dict) -> tuple[list[str], list, list | None]:
+    """A table's header, the paper's rows, the untrained policies' row and the open-loop floor's
+    row; with the untrained means per column and the floor (``None``: not measured)."""
+    label, paper, _ = TABLES[table]
+    values = res["columns"][table]
+    trained = res.get("trained", {}).get(table)
+
+    def head(v: float) -> str:
+        return f"{label}={v:g}" + (" (trained)" if trained is not None and v == trained else "")
+
+    lines = ["| Method | " + " | ".join(head(v) for v in values) + " |"]
+    lines.append("|---" * (len(values) + 1) + "|")
+    if paper is not None:
+        for m in (m for m in METHODS if m in paper):  # the methods the paper reports
+            row = [
+                f"{paper[m][v][0]:g}({paper[m][v][1]:g})" if v in paper[m] else "—" for v in values
+            ]
+            lines.append(f"| {PAPER_ROW[m]} | " + " | ".join(row) + " |")
+    untrained = [cells[(ci, METHODS[0])].get("untrained_mse_mean") for ci in range(len(values))]
+    if all(u is not None for u in untrained):
+        lines.append(
+            "| this run: untrained policies (no update) | "
+            + " | ".join(_fmt(u) for u in untrained)
+            + " |"
+        )
+    floor = res.get("reach_floor", {}).get(table)
+    if floor:
+        lines.append(
+            "| open-loop reachability floor (best open-loop torques) | "
+            + " | ".join(_fmt(x) for x in floor)
+            + " |"
+        )
+    return lines, untrained, floor
 
 
 def tables_section(d: Draft) -> None:
