@@ -22,7 +22,7 @@ from pathlib import Path  # noqa: E402
 
 from warp_critic import __version__
 from warp_critic.cli import import_robot
-from warp_critic.cli.environment import check_utf8, cwd_gone, utf8_mode
+from warp_critic.cli.environment import check_utf8, console_never_fails, cwd_gone, utf8_mode
 from warp_critic.cli.flags import (
     Parser,
     add_dataclass_arguments,
@@ -218,6 +218,7 @@ def main(argv: list[str] | None = None) -> int:
 
     if argv is None:
         utf8_mode()
+        console_never_fails()
     gone = cwd_gone()  # before torch: its libraries abort the process without a working directory
     if gone:
         sys.stderr.write(f"warp-critic: error: {gone}\n")
