@@ -113,6 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     from warp_critic.analysis.toy import command as toy
     from warp_critic.evaluation.metatest import MetaTestConfig
     from warp_critic.methods import methods
+    from warp_critic.methods.baseline_config import META_CRITIC_FIELDS
     from warp_critic.methods.ours import TrainConfig
 
     p = Parser(
@@ -177,6 +178,10 @@ def build_parser() -> argparse.ArgumentParser:
             help="USD scene, e.g. scenes/reacher.usda, or a robot file (.urdf, .xml, .usd)",
         )
         add_dataclass_arguments(one, entry.config, skip=("scene", "method"))
+        if entry.name != "meta-critic":  # not offered; given anyway, the config names the method
+            for action in one._actions:
+                if action.dest in META_CRITIC_FIELDS:
+                    action.help = argparse.SUPPRESS
         one.set_defaults(func=cmd_baseline)
 
     import_robot.add_parser(sub)
