@@ -40,7 +40,14 @@ from warp_critic.physics import derive
 from warp_critic.physics.importers import lock
 from warp_critic.physics.inertia_checks import _fail, _g, _short, check_inertias
 
-__all__ = ["IMPORT_RULES", "TIP_OFFSET_MAX", "check_robot", "check_tip_offset", "given_home"]
+__all__ = [
+    "IMPORT_RULES",
+    "TIP_OFFSET_MAX",
+    "check_model",
+    "check_robot",
+    "check_tip_offset",
+    "given_home",
+]
 
 TIP_OFFSET_MAX = 10.0  # m
 LOCK_MIMIC = "import with --lock-mimic to lock it where the coupling puts it at the home pose"
@@ -73,6 +80,15 @@ def check_tip_offset(tip: Sequence[float]) -> None:
             f"{','.join(_g(float(v)) for v in tip)} is {_g(norm)} m from the end-effector body; "
             f"a tip is at most {TIP_OFFSET_MAX:g} m from it",
         )
+
+
+def check_model(path: Path, builder) -> None:
+    """The checks of :func:`check_robot` that a scene file gets too (no repairs: a scene is loaded
+    as it is): masses and inertias, joint limits and axes of every joint (a scene trains each)."""
+    check_inertias(path, builder, repair=False)
+    movable = _movable(builder)
+    _limits(path, builder, movable, {_short(builder.joint_label[j]) for j in movable})
+    _axes(path, builder, movable)
 
 
 def check_robot(
