@@ -16,6 +16,7 @@ This module imports only the standard library (and the stdlib-only ``core.interr
 
 from __future__ import annotations
 
+import atexit
 import os
 import signal
 
@@ -26,6 +27,7 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 _phase = "off"
 _said = False  # the command already wrote its line about the interruption
+_registered: list[bool] = []  # _last_word is an exit handler
 _note = ""  # what is true if a signal stops the command from now on (said in its line)
 
 
@@ -71,6 +73,9 @@ def install() -> dict:
         return {}
     _phase, _said = "starting", False
     note("")
+    if not _registered:
+        atexit.register(_last_word)  # first: runs after the exit handlers registered later
+        _registered.append(True)
     interrupts.clear()
     return {s: signal.signal(s, _handler) for s in SIGNALS}
 
@@ -82,9 +87,20 @@ def running() -> None:
 
 
 def exiting(said: bool) -> None:
-    """The command is over (``said``: it wrote its line about an interruption)."""
+    """The command is over (``said``: it wrote its line about an interruption): a signal while the
+    exit handlers run still ends the process with one line (:func:`stop_now`)."""
     global _phase, _said
     _phase, _said = "exiting", _said or said
+
+
+def _last_word() -> None:
+    """The last exit handler (registered first). Python then puts the default handler back for every
+    signal it handles, so a signal while it tears the interpreter down would end the process without
+    a line (exit 143): from here on the signals are ignored (Python leaves an ignored one so), and
+    the command ends as it finished."""
+    if _phase == "exiting":
+        for s in SIGNALS:
+            signal.signal(s, signal.SIG_IGN)
 
 
 def restore(previous: dict) -> None:
