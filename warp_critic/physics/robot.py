@@ -100,10 +100,10 @@ def is_robot_file(path: str | Path) -> bool:
     suffix = path.suffix.lower()
     if suffix in ROBOT_SUFFIXES or suffix == ".xacro":
         return True
-    if suffix not in USD_SUFFIXES or not path.is_file():
+    if not path.is_file():
         return False
-    try:
-        return file_format(path) == "usd"
+    try:  # the format is read from the content: a URDF saved as .txt is a URDF
+        return file_format(path) in (("usd",) if suffix in USD_SUFFIXES else ("urdf", "mjcf"))
     except SceneError:  # an unreadable file: load_scene says why
         return False
 
