@@ -152,7 +152,9 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     # options' flags (robot_checks); --lock-mimic welds followers, which then leave the trained set
     o = options
     chosen = sorted(names[j] for j in trained)
-    repairs = check_robot(path, builder, fmt, chosen, o.lock_mimic, o.repair_inertia)
+    repairs = check_robot(
+        path, builder, fmt, chosen, o.lock_mimic, o.repair_inertia, home=dict(o.home or ())
+    )
     jointed = [j for j, t in enumerate(builder.joint_type) if int(t) != fixed]
     trained = {j for j in trained if j in jointed}
     for line in [*notes, note] if note else notes:  # said once the file passed its checks: a

@@ -98,17 +98,19 @@ def check_robot(
     trained: Sequence[str] | None = None,
     lock_mimic: bool = False,
     repair_inertia: bool = False,
+    home: dict[str, float] | None = None,
 ) -> tuple[str, ...]:
     """Refuse what the module docstring lists (a :class:`SceneError`), or repair it on request.
 
     ``builder``: newton's ``ModelBuilder`` straight from the importer (fixed joints not merged);
-    ``fmt``: ``urdf``/``mjcf``/``usd``; ``trained``: the joints to train (None: every movable one).
+    ``fmt``: ``urdf``/``mjcf``/``usd``; ``trained``: the joints to train (None: every movable one);
+    ``home``: joint name -> the home the user gave (``--home``; a locked follower follows it).
     Returns the repairs made, one line each (changed in ``builder``)."""
     root = _xml_root(path) if fmt in ("urdf", "mjcf") else None
     if root is not None:
         _check_names(path, root, fmt)
     repairs: list[str] = []
-    repairs += _couplings(path, builder, root, fmt, lock_mimic, trained)
+    repairs += _couplings(path, builder, root, fmt, lock_mimic, trained, home or {})
     repairs += check_inertias(path, builder, repair_inertia)
     movable = _movable(builder)
     trained_set = (
@@ -161,7 +163,13 @@ def _check_names(path: Path, root, fmt: str) -> None:
 
 
 def _couplings(
-    path: Path, builder, root, fmt: str, lock_mimic: bool, trained: Sequence[str] | None
+    path: Path,
+    builder,
+    root,
+    fmt: str,
+    lock_mimic: bool,
+    trained: Sequence[str] | None,
+    home: dict[str, float],
 ) -> list[str]:
     """``(follower, leader or None, polynomial coefficients)`` per coupling: locked or refused."""
     found: list[tuple[str, str | None, list[float]]] = []
@@ -202,7 +210,7 @@ def _couplings(
             f"would vanish from the scene and the goals would ask for poses it forbids "
             f"({LOCK_MIMIC})",
         )
-    return [_lock_follower(path, builder, *c) for c in found]
+    return [_lock_follower(path, builder, *c, home) for c in found]
 
 
 def _poly_text(poly: list[float], leader: str | None) -> str:
@@ -212,7 +220,9 @@ def _poly_text(poly: list[float], leader: str | None) -> str:
     return " + ".join(terms)
 
 
-def _lock_follower(path: Path, builder, follower: str, leader: str | None, poly) -> str:
+def _lock_follower(
+    path: Path, builder, follower: str, leader: str | None, poly, given: dict[str, float]
+) -> str:
 
     labels = [_short(lb) for lb in builder.joint_label]
     if follower not in labels or (leader is not None and leader not in labels):
@@ -225,7 +235,10 @@ def _lock_follower(path: Path, builder, follower: str, leader: str | None, poly)
         q = float(builder.joint_q[builder.joint_q_start[j]])
         return derive.home_value(lo, hi, q, 1e9)
 
-    x = home(labels.index(leader)) if leader is not None else 0.0
+    if leader is None:
+        x = 0.0
+    else:  # the leader's home: the one given (--home), else the one derived from the file
+        x = given[leader] if leader in given else home(labels.index(leader))
     value = float(sum(c * x**i for i, c in enumerate(poly)))
     dof = builder.joint_qd_start[jf]
     lo, hi = float(builder.joint_limit_lower[dof]), float(builder.joint_limit_upper[dof])
