@@ -10,7 +10,8 @@ is refused here, in one :class:`SceneError` line naming the body or joint and th
   trained; repair on request: ``lock_mimic`` welds the coupled joint at the position the coupling
   gives at the home pose;
 * a body's mass that is not a finite number in 1e-6..1e6 kg (a frame link welded to its parent may
-  be lighter: it is merged); a mass of 0 with an inertia; an inertia with a non-finite entry, a
+  be lighter: it is merged); a mass of 0 with an inertia; an inertia entry that is not a finite
+  number (named as the file writes it; never repaired: no nearest valid tensor exists); a
   negative diagonal entry, a negative principal moment (a large off-diagonal entry), principal
   moments that violate the triangle inequality, or (on a body its own joint moves) a smallest
   principal moment below newton's floor (1e-6 of the largest); repair on request:
@@ -57,10 +58,11 @@ IMPORT_RULES = """\
 refused, in one line naming the body or joint and the value (nothing is written):
   a joint coupled to another (URDF <mimic>, MJCF <equality><joint>): --lock-mimic welds it where
     the coupling puts it at the home pose;
-  a mass that is not a finite number in 1e-6..1e6 kg; mass 0 with an inertia; an inertia that is
-    not finite, has a negative diagonal entry, is not positive definite, violates the triangle
-    inequality or (on a moving link) is degenerate: --repair-inertia projects it to the nearest
-    valid inertia;
+  a mass that is not a finite number in 1e-6..1e6 kg; mass 0 with an inertia; an inertia entry
+    that is not a finite number (no repair: give the number); an inertia with a negative diagonal
+    entry, not positive definite, violating the triangle inequality or (on a moving link)
+    degenerate: --repair-inertia projects it to the nearest valid inertia;
+  a joint axis that is zero or not finite;
   joint limits lower > upper, or lower = upper on a trained joint; a URDF effort < 0 or not a
     number; effort="0" (no actuator) on a trained joint (leave it out of --joints to lock it);
   a link, body or joint defined twice; a --tip-offset over 10 m.
@@ -109,6 +111,7 @@ def check_robot(
     root = _xml_root(path) if fmt in ("urdf", "mjcf") else None
     if root is not None:
         _check_names(path, root, fmt)
+        _finite_in_file(path, root, fmt)
     repairs: list[str] = []
     repairs += _couplings(path, builder, root, fmt, lock_mimic, trained, home or {})
     repairs += check_inertias(path, builder, repair_inertia)
@@ -160,6 +163,56 @@ def _check_names(path: Path, root, fmt: str) -> None:
                     "silently (rename or remove the other)",
                 )
             seen.add(name)
+
+
+#: The inertia entries as a URDF ``<inertia>`` and an MJCF ``fullinertia`` / ``diaginertia`` list them.
+_INERTIA = ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")
+
+
+def _attr(element, name: str) -> str | None:
+    return None if element is None else element.get(name)
+
+
+def _finite_in_file(path: Path, root, fmt: str) -> None:
+    """A non-finite inertia entry or joint axis, named as the file writes it: the importer spreads
+    a NaN over the whole tensor (every entry then reads ``nan``) and normalises a NaN axis to zero."""
+
+    def numbers(text: str | None) -> list[float]:
+        try:
+            return [float(x) for x in (text or "").split()]
+        except ValueError:
+            return []
+
+    def bad(values) -> bool:
+        return any(not math.isfinite(v) for v in values)
+
+    if fmt == "urdf":
+        inertias = [(e.get("name", "?"), e.find("inertial/inertia")) for e in root.findall("link")]
+        for name, el in inertias:
+            if el is None:
+                continue
+            for key in _INERTIA:
+                v = numbers(el.get(key))
+                if bad(v):
+                    raise _fail(path, f"body {name!r}: inertia {key}={v[0]:g} is not a finite "
+                                "number (give its value; --repair-inertia cannot project it)")  # fmt: skip
+        axes = [(j.get("name", "?"), numbers(_attr(j.find("axis"), "xyz"))) for j in root.findall("joint")]  # fmt: skip
+    else:
+        for body in root.iter("body"):
+            el = body.find("inertial")
+            if el is None:
+                continue
+            for attr in ("fullinertia", "diaginertia"):
+                v = numbers(el.get(attr))
+                i = next((k for k, x in enumerate(v) if not math.isfinite(x)), None)
+                if i is not None and i < len(_INERTIA):
+                    raise _fail(path, f"body {body.get('name', '?')!r}: inertia {_INERTIA[i]}={v[i]:g} "
+                                "is not a finite number (give its value; --repair-inertia cannot project it)")  # fmt: skip
+        axes = [(j.get("name", "?"), numbers(j.get("axis"))) for j in root.iter("joint")]
+    for name, axis in axes:
+        if bad(axis):
+            raise _fail(path, f"joint {name!r} has a joint axis ({', '.join(f'{x:g}' for x in axis)}) "
+                        "that is not finite: it moves nothing")  # fmt: skip
 
 
 def _couplings(
