@@ -81,10 +81,10 @@ def run_from_args(args: argparse.Namespace) -> int:
             progress=progress,
         )
     except FieldError as e:  # a field of the run's or the meta-test's config: identify's flag
-        flag = {"train_variants": "variants", "num_goals": "goals"}.get(e.field)
-        if flag is None:
+        own = {"train_variants": "variants", "num_goals": "goals"}.get(e.field)
+        if own is None:
             raise
-        raise FieldError(flag, e.problem) from None
+        raise FieldError(own, e.problem) from None
     except KeyboardInterrupt:  # the interruption line says what is on disk
         from warp_critic.cli import signals
         from warp_critic.methods.identify import identified

@@ -254,7 +254,7 @@ def read_usd_scene(path: Path) -> Scene:
     # the tip), checked the same way on a scene file (a copy of a scene edited by hand)
     check_model(path, builder)
     try:
-        check_tip_offset(tip)
+        check_tip_offset(tip.tolist())
     except FieldError as e:
         raise _fail(path, f"{TIP_ATTR} {e.problem}") from None
 
