@@ -426,8 +426,8 @@ def reproduce_output(w):
 
 def empty_stage_results(w):
     """A reproduce output whose reacher meta-training stages are complete but hold ``"result": {}``."""
-    from warp_critic.reproduce.pipeline import ReproduceConfig, plan
-    from warp_critic.reproduce.stages import MARKER, STAGE_KIND
+    from warp_critic.reproduce.engine.stages import MARKER, STAGE_KIND
+    from warp_critic.reproduce.experiments.plan import ReproduceConfig, plan
 
     rep = w.t / "rep"
     rep.mkdir()
@@ -435,7 +435,7 @@ def empty_stage_results(w):
     st = plan(ReproduceConfig(out=rep, quick=True, seeds=2).validate())
     for name, stage in st.items():
         if name.startswith("metatrain-reacher-"):
-            d = rep / f"{name}-{stage['hash']}"
+            d = rep / stage.dir_name
             d.mkdir()
             (d / "stage.json").write_text(
                 json.dumps({"kind": STAGE_KIND, "stage": name, "seconds": 1.0, "result": {}})

@@ -315,7 +315,7 @@ def test_default_out_directory():
 @pytest.mark.parametrize(
     "argv, fragment",
     [
-        (["baseline", "sac", REACHER], "invalid choice"),
+        (["baseline", "ppo", REACHER], "invalid choice"),
         (["baseline", "ddpg", REACHER, "--gamma", "1.5"], "--gamma must be in (0, 1]"),
         (["baseline", "ddpg", REACHER, "--gamma", "0"], "--gamma must be in (0, 1]"),
         (["baseline", "meta-critic", REACHER, "--tau", "0"], "--tau must be in (0, 1]"),

@@ -212,7 +212,7 @@ def test_a_failing_unit_under_jobs_stops_the_driver(tmp_path):
 def test_unit_progress_reads_the_runs_metrics(tmp_path):
     """The driver's progress line: the iteration every seed has reached, of the unit's iterations,
     the rate of the last rows and the time left; an evaluation unit (no metrics) is running."""
-    from warp_critic.reproduce.executors import Unit, unit_progress
+    from warp_critic.reproduce.engine.executors import Unit, unit_progress
 
     unit = Unit("metatrain-x", "metatrain-x-0", "m:f", {"values": {"iterations": 100}})
     assert unit_progress(unit, tmp_path) == "reproduce: metatrain-x: running"
@@ -233,7 +233,7 @@ def test_unit_progress_reads_the_runs_metrics(tmp_path):
 def test_jobs_driver_logs_the_progress_of_its_running_units(tmp_path):
     """Under --jobs the workers draw no progress bars: the driver logs each running unit's
     iteration every ``progress_every`` seconds."""
-    from warp_critic.reproduce.executors import LocalProcesses, Unit
+    from warp_critic.reproduce.engine.executors import LocalProcesses, Unit
 
     units = [
         Unit(
@@ -257,7 +257,7 @@ def test_jobs_driver_logs_the_progress_of_its_running_units(tmp_path):
 def test_an_in_process_call_on_several_cores_names_jobs(monkeypatch):
     """One line names --jobs where stages could run at once on more than one core; none where they
     cannot (one core, one stage a wave) or already do."""
-    from warp_critic.reproduce import executors as ex
+    from warp_critic.reproduce.engine import executors as ex
 
     monkeypatch.setattr(ex.os, "cpu_count", lambda: 8)
     line = ex.jobs_hint(ex.InProcess(), [6, 3])
@@ -272,7 +272,7 @@ def test_an_in_process_call_on_several_cores_names_jobs(monkeypatch):
 def test_a_stage_starts_as_soon_as_its_inputs_are_complete(tmp_path, jobs):
     """The driver hands an executor the units that its finished stages made ready (``more``): under
     --jobs the dependent unit runs while an independent long one still does, not after it."""
-    from warp_critic.reproduce.executors import InProcess, LocalProcesses, Unit
+    from warp_critic.reproduce.engine.executors import InProcess, LocalProcesses, Unit
 
     def unit(name: str, iterations: int) -> Unit:
         kwargs = {"values": {"iterations": iterations}, "pause": 0.05}

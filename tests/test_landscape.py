@@ -285,8 +285,8 @@ def test_task_distribution_flag_errors(argv, flag, capsys, tmp_path):
 
 
 def test_reproduce_stage_runs_the_paper_setting_and_the_generalising_one(tmp_path):
-    from warp_critic.reproduce.analyses import GENERALISING_DIR, landscape_configs
-    from warp_critic.reproduce.settings import default_settings
+    from warp_critic.reproduce.experiments.analyses import GENERALISING_DIR, landscape_configs
+    from warp_critic.reproduce.experiments.settings import default_settings
 
     s = default_settings(quick=False, seeds=1)["landscape"]
     paper, gen = landscape_configs(tmp_path, s, "cpu")

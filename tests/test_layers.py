@@ -5,11 +5,14 @@
   relative ones -- and so is every module-path string (``"warp_critic.x.y:func"``,
   ``"warp_critic.x.y"``) that a registry imports later. The imports up a layer that exist today are
   listed in :data:`KNOWN_UPWARD`: a new one fails, and so does a listed one that is gone.
+* Inside ``reproduce/`` the same holds for its own layers, :data:`REPRODUCE_LAYERS`: ``engine/``
+  below ``experiments/`` below ``report/``, its root modules (``pipeline``) above all three; and the
+  engine knows no paper and no method: it imports only :data:`ENGINE_MAY_IMPORT` besides itself.
 * No import circle: no module reaches itself through the modules it imports (at the top, in
   functions, under ``TYPE_CHECKING``, or by a module-path string), so an import inside a function
   never hides one. A package's ``__init__`` counts as importing nothing: its exports are lazy.
 * Every module has at most 400 lines (the ones still over are listed, and must stay listed only
-  while they are over).
+  while they are over); every function at most 100 (the same, by module file name and function).
 * ``docs/design.md``'s module table is the one ``tools/design_table.py`` generates: every module,
   described by its own docstring.
 
@@ -33,6 +36,19 @@ MAX_LINES = 400
 KNOWN_UPWARD: set[tuple[str, str]] = set()
 #: modules still over MAX_LINES (path under warp_critic/ -> why it is allowed for now)
 KNOWN_LONG: dict[str, str] = {}  # module -> why it may stay over the limit for now
+MAX_FUNCTION_LINES = 100
+#: functions still over MAX_FUNCTION_LINES, as "<module file stem>.<function>" (so a module moved to
+#: another package keeps its entry) -> their lines when listed; one may leave the list, never join it
+KNOWN_LONG_FUNCTIONS: dict[str, int] = {
+    "command.add_arguments": 158,
+    "run.run_landscape": 139,
+    "report.run_toy": 105,
+    "main.build_parser": 102,
+    "export.write_scene": 135,
+    "robot._load": 131,
+    "scene_writer.write_robot": 121,
+    "metatest_setup.setup_meta_test": 105,
+}
 #: packages that are no layer: shipped with the package, first used by this layer
 RESOURCES = {"kernels": "physics", "scenes": "physics"}
 _MODULE_PATH = re.compile(r"^warp_critic(?:\.[A-Za-z_]\w*)+(?::[A-Za-z_][\w.]*)?$")
@@ -159,6 +175,73 @@ def test_no_module_imports_a_later_layer():
     assert not gone, f"no longer imported up a layer: remove from KNOWN_UPWARD: {sorted(gone)}"
 
 
+#: ``reproduce/``'s own layers in import order; its root modules (``pipeline``) join all three
+REPRODUCE_LAYERS = ("engine", "experiments", "report")
+#: the layers the reproduce engine may import besides itself: no method, evaluation or analysis
+ENGINE_MAY_IMPORT = ("core", "physics", "running")
+
+
+def reproduce_layer(module: str) -> int:
+    """The index of a module of ``reproduce/`` in :data:`REPRODUCE_LAYERS` (the root: after them)."""
+    parts = module.split(".")
+    assert parts[:2] == ["warp_critic", "reproduce"], module
+    if len(parts) > 2 and parts[2] in REPRODUCE_LAYERS:
+        return REPRODUCE_LAYERS.index(parts[2])
+    return len(REPRODUCE_LAYERS)
+
+
+def reproduce_breaches(package: Path = PACKAGE) -> dict[tuple[str, str], list[str]]:
+    """``(module, imported module) -> ['path:line', ...]`` for every import of a module of
+    ``reproduce/`` up one of its own layers, and every import of the engine outside itself and
+    :data:`ENGINE_MAY_IMPORT`."""
+    found: dict[tuple[str, str], list[str]] = {}
+    for path in sorted((package / "reproduce").rglob("*.py")):
+        module = module_name(path, package)
+        own = reproduce_layer(module)
+        source = path.read_text(encoding="utf-8")
+        for target, line in references(source, module, path.name == "__init__.py"):
+            parts = target.split(".")
+            if parts[:2] == ["warp_critic", "reproduce"]:
+                bad = reproduce_layer(target) > own
+            else:
+                bad = own == 0 and (len(parts) < 2 or parts[1] not in ENGINE_MAY_IMPORT)
+            if bad:
+                where = f"{path.relative_to(package.parent)}:{line}"
+                found.setdefault((module, target), []).append(where)
+    return found
+
+
+def test_reproduce_engine_below_experiments_below_report():
+    found = reproduce_breaches()
+    assert not found, "reproduce/: engine < experiments < report, the engine knows no method: " + (
+        "; ".join(f"{a} -> {b} at {', '.join(w)}" for (a, b), w in sorted(found.items()))
+    )
+
+
+def test_the_reproduce_scanner_sees_a_breach(tmp_path):
+    pkg = tmp_path / "warp_critic"
+    for sub in ("engine", "experiments", "report"):
+        (pkg / "reproduce" / sub).mkdir(parents=True)
+    (pkg / "reproduce" / "pipeline.py").write_text("from warp_critic.reproduce.report import w\n")
+    (pkg / "reproduce" / "report" / "w.py").write_text("from ..experiments import plan\n")
+    (pkg / "reproduce" / "engine" / "carry.py").write_text(
+        "from warp_critic.running.locks import LOCK\n"
+        "def keys():\n    from warp_critic.methods.meta_critic import AUX_KEYS\n"
+    )
+    (pkg / "reproduce" / "experiments" / "plan.py").write_text(
+        "from warp_critic.reproduce.engine import carry\n"
+        "LAZY = {'warp_critic.reproduce.report.w': ('x',)}\n"
+    )
+    assert reproduce_breaches(pkg) == {
+        ("warp_critic.reproduce.engine.carry", "warp_critic.methods.meta_critic"): [
+            "warp_critic/reproduce/engine/carry.py:3"
+        ],
+        ("warp_critic.reproduce.experiments.plan", "warp_critic.reproduce.report.w"): [
+            "warp_critic/reproduce/experiments/plan.py:2"
+        ],
+    }
+
+
 def import_graph(package: Path = PACKAGE) -> dict[str, set[str]]:
     """Module -> the modules of the package it imports, every form (``from pkg import mod`` names
     ``pkg.mod`` where that is a module); a package ``__init__`` imports nothing (lazy exports)."""
@@ -249,6 +332,40 @@ def test_every_module_has_at_most_400_lines():
     assert not long, f"modules over {MAX_LINES} lines (split along a seam): {long}"
     short = [p for p in KNOWN_LONG if lengths.get(p, 0) <= MAX_LINES]
     assert not short, f"now at most {MAX_LINES} lines (or gone): remove from KNOWN_LONG: {short}"
+
+
+def function_lengths(package: Path = PACKAGE) -> dict[str, int]:
+    """``"<module file stem>.<function>" -> lines`` of every function (nested ones too; the
+    longest where a name repeats), decorators and docstring included."""
+    out: dict[str, int] = {}
+    for path in sorted(package.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                key = f"{path.stem}.{node.name}"
+                lines = (node.end_lineno or node.lineno) - node.lineno + 1
+                out[key] = max(out.get(key, 0), lines)
+    return out
+
+
+def test_every_function_has_at_most_100_lines(tmp_path):
+    lengths = function_lengths()
+    long = {
+        f: n for f, n in lengths.items() if n > MAX_FUNCTION_LINES and f not in KNOWN_LONG_FUNCTIONS
+    }
+    assert not long, f"functions over {MAX_FUNCTION_LINES} lines (split them): {long}"
+    short = [f for f in KNOWN_LONG_FUNCTIONS if lengths.get(f, 0) <= MAX_FUNCTION_LINES]
+    assert not short, (
+        f"now at most {MAX_FUNCTION_LINES} lines (or gone): remove from KNOWN_LONG_FUNCTIONS: {short}"
+    )
+    grown = {
+        f: lengths[f] for f in KNOWN_LONG_FUNCTIONS if lengths.get(f, 0) > KNOWN_LONG_FUNCTIONS[f]
+    }
+    assert not grown, f"listed functions may only shrink: {grown}"
+    # the counter itself: a nested function and a long one are found
+    (tmp_path / "m.py").write_text(
+        "def outer():\n    def inner():\n" + "        x = 1\n" * 101 + "    return inner\n"
+    )
+    assert function_lengths(tmp_path) == {"m.outer": 104, "m.inner": 102}
 
 
 def test_the_design_table_is_complete_and_current():

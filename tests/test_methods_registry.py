@@ -18,8 +18,8 @@ from warp_critic.running.task import TaskConfig
 #: own rows (data read from its LaTeX), a committed tuning result, and a Meta-Critic-only finding
 ALLOWED_LITERALS = {
     "warp_critic/evaluation/paper.py",
-    "warp_critic/reproduce/settings.py",
-    "warp_critic/reproduce/report_training.py",
+    "warp_critic/reproduce/experiments/settings.py",
+    "warp_critic/reproduce/report/training.py",
 }
 
 
@@ -37,8 +37,8 @@ def test_every_method_is_one_complete_entry():
 
 
 def test_unknown_method_is_a_user_error_and_a_name_is_registered_once():
-    with pytest.raises(UserError, match="unknown method 'sac'; known: ours, ddpg"):
-        method("sac")
+    with pytest.raises(UserError, match="unknown method 'ppo'; known: ours, ddpg"):
+        method("ppo")
     ddpg = method("ddpg")
     assert register(ddpg) is ddpg  # the same entry again (a module imported twice) is fine
     other = Method(**{**ddpg.__dict__, "label": "another DDPG"})
@@ -50,9 +50,9 @@ def test_unknown_method_is_a_user_error_and_a_name_is_registered_once():
 def test_the_readers_follow_the_registry():
     from warp_critic.cli.main import build_parser
     from warp_critic.evaluation.presets import DESCRIPTIONS, PRESETS
-    from warp_critic.reproduce.metatrain import STEPS_COUNTED
-    from warp_critic.reproduce.report_plots import COLORS
-    from warp_critic.reproduce.settings import METHOD_LABELS
+    from warp_critic.reproduce.experiments.metatrain import STEPS_COUNTED
+    from warp_critic.reproduce.experiments.settings import METHOD_LABELS
+    from warp_critic.reproduce.report.plots import COLORS
 
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")

@@ -47,7 +47,7 @@ def test_reproduce_adopts_exactly_what_the_committed_baseline_search_adopts():
     import json
     from pathlib import Path
 
-    from warp_critic.reproduce.settings import TUNED
+    from warp_critic.reproduce.experiments.settings import TUNED
 
     tool = load_tool("tune_baselines")
     expected: dict = {}

@@ -1,4 +1,4 @@
-"""The open-loop reachability floor (:mod:`warp_critic.reproduce.reach`): a world whose rollout goes
+"""The open-loop reachability floor (:mod:`warp_critic.reproduce.experiments.reach`): a world whose rollout goes
 non-finite backtracks without touching the others, and the best over learning rates is the
 per-world minimum."""
 
@@ -9,7 +9,7 @@ import torch
 
 from warp_critic.learning import rollout as rollout_module
 from warp_critic.physics.scene import Variant
-from warp_critic.reproduce import reach
+from warp_critic.reproduce.experiments import reach
 
 GOALS = torch.tensor([[0.5, -1.0], [-0.5, 1.0], [0.3, 0.2]])
 

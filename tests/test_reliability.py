@@ -329,7 +329,7 @@ def test_user_errors_survive_pickling():
 def test_a_user_error_in_a_ray_task_arrives_as_one_line(capfd):
     """What Ray hands back for a task that raised (a RayTaskError with the cause) is the one line."""
     from warp_critic.core.errors import FieldError, UserError
-    from warp_critic.reproduce.on_ray import unit_failure
+    from warp_critic.reproduce.engine.on_ray import unit_failure
 
     class RayTaskError(Exception):  # Ray's wrapper keeps the task's exception as ``cause``
         def __init__(self, cause):
@@ -359,7 +359,7 @@ def _serve(sock: socket.socket, reply: bytes) -> None:
 
 def test_ray_address_must_speak_grpc():
     from warp_critic.core.errors import FieldError
-    from warp_critic.reproduce.on_ray import check_ray_address
+    from warp_critic.reproduce.engine.on_ray import check_ray_address
 
     http = socket.create_server(("127.0.0.1", 0))
     _serve(http, b"HTTP/1.1 400 Bad Request\r\nContent-Length: 0\r\n\r\n")
@@ -396,8 +396,8 @@ def test_config_records_the_scene_file_and_its_content_hash(tmp_path):
 
 
 def test_report_names_the_seeds_that_were_trained():
-    from warp_critic.reproduce.pipeline import ReproduceConfig, plan
-    from warp_critic.reproduce.report import seeds_trained
+    from warp_critic.reproduce.experiments.plan import ReproduceConfig, plan
+    from warp_critic.reproduce.report.write import seeds_trained
 
     rc = ReproduceConfig(quick=True, seeds=2, overrides=["metatrain.seeds=[5]"])
     assert seeds_trained(plan(rc.validate())) == [5]

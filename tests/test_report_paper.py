@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from warp_critic.reproduce import report_paper as rp
+from warp_critic.reproduce.report import paper as rp
 
 
 def _result(curves: dict[str, list[float]], per: int = 100, seconds: float = 2.0) -> dict:
@@ -71,7 +71,7 @@ def test_meta_critic_aux_alive_from_the_record_else_the_run_directory(tmp_path):
     import json
     from types import SimpleNamespace
 
-    from warp_critic.reproduce.report_training import (
+    from warp_critic.reproduce.report.training import (
         aux_alive_bases_of,
         aux_alive_of,
         aux_alive_sentence,

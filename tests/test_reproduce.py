@@ -15,7 +15,7 @@ import pytest
 import torch
 
 from warp_critic.cli.main import main as cli_main
-from warp_critic.reproduce.report_maps import elbow_bent
+from warp_critic.reproduce.report.maps import elbow_bent
 
 
 def reproduce_main(argv):
@@ -236,7 +236,7 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
 
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
     from warp_critic.physics.scene import Variant
-    from warp_critic.reproduce.evaluate import Job, evaluate
+    from warp_critic.reproduce.experiments.evaluate import Job, evaluate
 
     out, rc, _ = quick
     runs = {
@@ -276,8 +276,7 @@ def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
     import torch
 
     from warp_critic.physics.scene import Variant
-    from warp_critic.reproduce.evaluate import Job, evaluate
-    from warp_critic.reproduce.generalize import _pool
+    from warp_critic.reproduce.experiments.evaluate import Job, evaluate, pool_errors
 
     out, rc, _ = quick
     run = str(sorted((next(out.glob("metatrain-reacher-ours-*")) / "run").glob("seed*"))[0])
@@ -289,14 +288,14 @@ def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
     assert np.array_equal(r["errors"][0], alone["errors"][0]) and np.isfinite(r["errors"][0]).all()
     assert np.isinf(r["errors"][1]).any() and r["diverged"] == int(np.isinf(r["errors"][1]).sum())
     assert alone["diverged"] == 0
-    cell = _pool([r["errors"][1]], 2)
+    cell = pool_errors([r["errors"][1]], 2)
     assert cell["mse_mean"] == float("inf") and cell["diverged"] == r["diverged"]
 
 
 def test_grid_figure_shows_a_diverged_cell_in_black(tmp_path):
-    from warp_critic.reproduce import report_paper as rp
-    from warp_critic.reproduce.report_plots import figure
-    from warp_critic.reproduce.settings import METHODS
+    from warp_critic.reproduce.experiments.settings import METHODS
+    from warp_critic.reproduce.report import paper as rp
+    from warp_critic.reproduce.report.plots import figure
 
     values = [0.5, 1.0]
     cells = [{"mse_mean": v} for v in (0.01, 0.2, float("inf"), 0.05)]
@@ -313,14 +312,14 @@ def test_grid_figure_shows_a_diverged_cell_in_black(tmp_path):
 def test_interrupted_metatrain_resumes(tmp_path, capsys):
     """A sub-stage without stage.json (killed mid-training) resumes its run directories to the end;
     seed directories without a checkpoint (killed before the first one) are started afresh."""
-    from warp_critic.reproduce.metatrain import run_metatrain_stage
-    from warp_critic.reproduce.pipeline import ReproduceConfig, plan
-    from warp_critic.reproduce.stages import prepare_out
+    from warp_critic.reproduce.engine.stages import prepare_out
+    from warp_critic.reproduce.experiments.metatrain import run_metatrain_stage
+    from warp_critic.reproduce.experiments.plan import ReproduceConfig, plan
 
     out = prepare_out(tmp_path / "r")
     settings = ReproduceConfig(out=out, quick=True, seeds=2).validate()
     st = plan(settings)["metatrain-reacher-ours"]
-    d = out / f"metatrain-reacher-ours-{st['hash']}"
+    d = out / st.dir_name
     values = dict(settings["metatrain"]["reacher"]["ours"], iterations=3)
     run_metatrain_stage(
         d, "reacher", "ours", values, [0, 1], "cpu", progress=False
@@ -328,7 +327,7 @@ def test_interrupted_metatrain_resumes(tmp_path, capsys):
     lines = (d / "run" / "seed0" / "metrics.jsonl").read_text().splitlines()
     assert len(lines) == 3 and not (d / "stage.json").exists()
     other = plan(settings)["metatrain-reacher-ddpg"]
-    stray = out / f"metatrain-reacher-ddpg-{other['hash']}" / "run" / "seed0"
+    stray = out / other.dir_name / "run" / "seed0"
     stray.mkdir(parents=True)
     (stray / ".warp-critic-run").write_text("{}")  # claimed, but no checkpoint was ever written
     assert (
@@ -360,7 +359,7 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     meta-training checkpoints, to the same cells; the archive holds no optimiser or buffer state."""
     import torch
 
-    from warp_critic.reproduce.carry import TRAINING_ONLY
+    from warp_critic.reproduce.experiments.records import CARRY
 
     out, rc, _ = quick
     assert rc == 0
@@ -376,7 +375,7 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     shipped = str(scenes_dir().resolve())
     for c in ckpts:
         ckpt = torch.load(c, weights_only=True)
-        assert not set(ckpt) & set(TRAINING_ONLY), c
+        assert not set(ckpt) & set(CARRY.training_only), c
         # no machine's folders: a shipped scene is named scenes/NAME (found by its content hash)
         assert ckpt["scene_file"].startswith("scenes/") and ckpt["config"]["scene"].startswith(
             "scenes/"
@@ -451,9 +450,10 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
     read = {v["dir"] for v in results["stages"].values()}
     assert f"{len(read)} stage record(s)" in printed and "tables-0000000000" in printed
     # the records of the stages it read are in the archive dest/stages, none beside the report
-    from warp_critic.reproduce.carry import complete_stages
+    from warp_critic.reproduce.engine.carry import complete_stages
+    from warp_critic.reproduce.experiments.records import stage_problem
 
-    archived = complete_stages(dest / "stages")
+    archived = complete_stages(dest / "stages", stage_problem)
     assert read <= set(archived) and "toy-0000000000" in {
         p.name for p in (dest / "stages").iterdir()
     }
@@ -473,7 +473,7 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
     assert f"{tables}/errors.json" in (dest / "REPORT.md").read_text()
     import shutil
 
-    from warp_critic.reproduce.stages import MARKER
+    from warp_critic.reproduce.engine.stages import MARKER
 
     # a recipe's meta-training is archived as its record alone, also one archived whole before
     mine = tmp_path / "with-recipes"
@@ -514,7 +514,7 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
 
 
 def test_only_one_beyond_evaluation_plans_it_and_what_it_reads():
-    from warp_critic.reproduce.pipeline import ReproduceConfig, needed, plan
+    from warp_critic.reproduce.experiments.plan import ReproduceConfig, needed, plan
 
     rc = ReproduceConfig(out="unused", only=["beyond-maps"], quick=True)
     settings = rc.validate()
@@ -551,13 +551,13 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     critic, and the report's "Beyond the paper" section has computed verdicts, outside the claims."""
     import shutil
 
-    from warp_critic.reproduce.pipeline import plan
-    from warp_critic.reproduce.settings import default_settings
+    from warp_critic.reproduce.experiments.plan import plan
+    from warp_critic.reproduce.experiments.settings import default_settings
 
     settings = default_settings(True, 2)
     paper, both = plan(settings), plan(settings, beyond=True)
-    assert {k: v["hash"] for k, v in paper.items()} == {
-        k: both[k]["hash"] for k in paper
+    assert {k: v.hash for k, v in paper.items()} == {
+        k: both[k].hash for k in paper
     }  # the recipes change no stage of the paper
     assert sorted(set(both) - set(paper)) == [
         "beyond-maps",
@@ -642,11 +642,13 @@ def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
 
 def test_beyond_maps_takes_floors_only_from_a_maps_stage_of_the_same_inputs(tmp_path):
     """The floors of a maps stage are reused only with the same settings and nominal runs."""
-    from warp_critic.reproduce.stages import STAGE_FILE, STAGE_KIND
-    from warp_critic.reproduce.units import paper_maps_floors
+    from warp_critic.reproduce.engine.stage import Stage
+    from warp_critic.reproduce.engine.stages import STAGE_FILE, STAGE_KIND
+    from warp_critic.reproduce.experiments.units import paper_maps_floors
 
     nominal = {"metatrain-reacher-ours": "metatrain-reacher-ours-aaaa"}
-    st = {"settings": {"grid": 3, "reach_iterations": 5}, "depends": dict(nominal, other="x")}
+    settings = {"grid": 3, "reach_iterations": 5}
+    st = Stage("beyond-maps", "maps", settings, dict(nominal, other="x"), "0")
 
     def stage(name, settings, depends, floor=True):
         d = tmp_path / name
@@ -657,15 +659,15 @@ def test_beyond_maps_takes_floors_only_from_a_maps_stage_of_the_same_inputs(tmp_
 
     assert paper_maps_floors(tmp_path, st) is None
     stage("maps-1", {"grid": 4, "reach_iterations": 5}, nominal)  # other grid
-    stage("maps-2", st["settings"], {"metatrain-reacher-ours": "metatrain-reacher-ours-bbbb"})
-    stage("maps-3", st["settings"], nominal, floor=False)  # computed no floor
+    stage("maps-2", settings, {"metatrain-reacher-ours": "metatrain-reacher-ours-bbbb"})
+    stage("maps-3", settings, nominal, floor=False)  # computed no floor
     assert paper_maps_floors(tmp_path, st) is None
-    stage("maps-4", st["settings"], {**nominal, "metatrain-reacher-ddpg": "d"})
+    stage("maps-4", settings, {**nominal, "metatrain-reacher-ddpg": "d"})
     assert paper_maps_floors(tmp_path, st) == "maps-4"
 
 
 def test_ledger_records_every_call_and_a_refused_call_writes_nothing(tmp_path, capsys):
-    from warp_critic.reproduce import ledger
+    from warp_critic.reproduce.engine import ledger
 
     out = tmp_path / "r"
     args = ["--quick", "--only", "toy", "--out", str(out), "--device", "cpu"]
@@ -697,7 +699,7 @@ def test_ledger_records_every_call_and_a_refused_call_writes_nothing(tmp_path, c
 def test_ledger_calls_a_run_stopped_inside_a_stage_interrupted(tmp_path):
     """A stage's run stops with its own ``Interrupted`` (a KeyboardInterrupt subclass that says
     what it kept): the ledger says interrupted, not failed; any other error says failed."""
-    from warp_critic.reproduce import ledger
+    from warp_critic.reproduce.engine import ledger
     from warp_critic.running.loop import Interrupted
 
     for error, status in (
@@ -713,7 +715,7 @@ def test_ledger_calls_a_run_stopped_inside_a_stage_interrupted(tmp_path):
 
 
 def test_ledger_total_wall_time_counts_every_call():
-    from warp_critic.reproduce import ledger
+    from warp_critic.reproduce.engine import ledger
 
     rows = [
         {"event": "start", "call": "a", "time": "2026-12-01T10:00:00Z"},

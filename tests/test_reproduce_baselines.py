@@ -9,10 +9,12 @@ import json
 import pytest
 
 from warp_critic.cli.main import main as cli_main
-from warp_critic.reproduce.extra_baselines import merge_rows
-from warp_critic.reproduce.pipeline import ReproduceConfig, plan
-from warp_critic.reproduce.settings import default_settings
-from warp_critic.reproduce.stages import StageRecord
+from warp_critic.reproduce.engine.stage import Stage
+from warp_critic.reproduce.engine.stages import StageRecord
+from warp_critic.reproduce.experiments.extra_baselines import merge_rows
+from warp_critic.reproduce.experiments.naming import BEYOND, Outputs, stage_name
+from warp_critic.reproduce.experiments.plan import ReproduceConfig, plan
+from warp_critic.reproduce.experiments.settings import default_settings
 
 TD3_STAGES = ["metatrain-kuka-td3", "metatrain-reacher-td3", "td3-maps", "td3-tables"]
 
@@ -21,17 +23,18 @@ def test_td3_adds_its_stages_and_changes_none_of_the_paper():
     paper = plan(default_settings(False, 5))
     extra = ("td3",)
     both = plan(default_settings(False, 5, extra), extra=extra)
-    assert {k: v["hash"] for k, v in paper.items()} == {k: both[k]["hash"] for k in paper}
+    assert {k: v.hash for k, v in paper.items()} == {k: both[k].hash for k in paper}
     assert sorted(set(both) - set(paper)) == TD3_STAGES
     # TD3's published settings at the baselines' budget, on the paper's task
-    td3 = both["metatrain-reacher-td3"]["settings"]["values"]
-    ddpg = both["metatrain-reacher-ddpg"]["settings"]["values"]
+    td3 = both["metatrain-reacher-td3"].settings["values"]
+    ddpg = both["metatrain-reacher-ddpg"].settings["values"]
     assert td3["iterations"] == ddpg["iterations"] and td3["inner_steps"] == ddpg["inner_steps"]
     assert "actor_lr" not in td3  # the tuned DDPG lr is DDPG's; TD3 keeps its own default
     # its evaluations read ours' nominal runs (the reference) and its own, and evaluate its rows
     maps = both["td3-maps"]
-    assert sorted(maps["depends"]) == ["metatrain-reacher-ours", "metatrain-reacher-td3"]
-    assert maps["rows"] == ["td3"] and maps["settings"] == both["maps"]["settings"]
+    assert sorted(maps.depends) == ["metatrain-reacher-ours", "metatrain-reacher-td3"]
+    assert maps.outputs.rows == ("td3",) and maps.settings == both["maps"].settings
+    assert maps.outputs.adds_to == "maps" and maps.kind == "maps"
     rc = ReproduceConfig(out="unused", only=["tables"], baselines=["ddpg", "meta-critic", "td3"])
     assert rc.selected() == ["tables", "td3-tables"]
     assert ReproduceConfig(out="unused", only=["tables"]).selected() == ["tables"]
@@ -86,8 +89,15 @@ def test_merge_rows_adds_an_extra_evaluation_to_the_paper_stage_it_joins(tmp_pat
     paper = rec("tables", {"cells": [{**cell, "method": "ours"}]})
     extra = rec("td3-tables", {"cells": [{**cell, "method": "td3"}]})
     planned = {
-        "tables": {"group": "tables"},
-        "td3-tables": {"group": "tables", "adds_to": "tables"},
+        "tables": Stage("tables", "tables", {}, {}, "0", Outputs(scene="kuka")),
+        "td3-tables": Stage(
+            "td3-tables",
+            "tables",
+            {},
+            {},
+            "1",
+            Outputs(scene="kuka", rows=("td3",), adds_to="tables"),
+        ),
     }
     merged = merge_rows({"tables": paper, "td3-tables": extra}, planned)
     merged_tables = merged["tables"]
@@ -96,3 +106,17 @@ def test_merge_rows_adds_an_extra_evaluation_to_the_paper_stage_it_joins(tmp_pat
     assert [c["method"] for c in paper.data["result"]["cells"]] == ["ours"]  # a copy
     # the extra stage not complete (or not planned): the paper's record as it is
     assert merge_rows({"tables": paper, "td3-tables": None}, planned)["tables"] is paper
+
+
+def test_stage_name_is_the_one_spelling_of_every_stage():
+    """The names the plan, ``--only``, the report and the stage directories share."""
+    assert stage_name("metatrain", "kuka", "td3") == "metatrain-kuka-td3"
+    assert stage_name("metatrain", "reacher", recipe="wide-long") == (
+        "beyond-metatrain-reacher-wide-long"
+    )
+    assert stage_name("maps") == "maps" and stage_name("maps", by="td3") == "td3-maps"
+    assert stage_name("tables", by=BEYOND) == "beyond-tables"
+    assert stage_name("tables", heldout=True) == "tables-heldout"
+    for bad in ({}, {"method": "ours", "recipe": "wide-long"}):  # neither, or both
+        with pytest.raises(ValueError, match="a method or a recipe"):
+            stage_name("metatrain", "kuka", **bad)

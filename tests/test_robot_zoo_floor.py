@@ -27,7 +27,7 @@ def test_floor_reads_the_newest_runs_and_optimises_on_their_meta_test_goals(
 ):
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
     from warp_critic.physics.scene import Variant
-    from warp_critic.reproduce.reach import best_open_loop_floor
+    from warp_critic.reproduce.experiments.reach import best_open_loop_floor
 
     zoo = _zoo()
     runs = tmp_path / "runs"

@@ -4,7 +4,7 @@ planned from it, and the report's line on the settings that differ from the pape
 from __future__ import annotations
 
 from warp_critic.evaluation import seed_uses
-from warp_critic.reproduce.report_departures import departures
+from warp_critic.reproduce.report.departures import departures
 
 
 def test_the_held_out_seed_chose_nothing_and_seed_1_is_not_held_out():
@@ -17,15 +17,15 @@ def test_the_held_out_seed_chose_nothing_and_seed_1_is_not_held_out():
 
 
 def test_the_held_out_stage_keeps_the_tables_stage_and_its_hash():
-    from warp_critic.reproduce.pipeline import plan
-    from warp_critic.reproduce.settings import default_settings
+    from warp_critic.reproduce.experiments.plan import plan
+    from warp_critic.reproduce.experiments.settings import default_settings
 
     p = plan(default_settings(True, 2))
     held, tables = p["tables-heldout"], p["tables"]
-    assert held["group"] == "tables" and held["depends"] == tables["depends"]
-    assert held["settings"]["seed"] == seed_uses.HELD_OUT_SEED != tables["settings"]["seed"]
-    assert held["settings"]["stds"] == tables["settings"]["stds"]
-    assert held["hash"] != tables["hash"]
+    assert held.kind == "tables" and held.depends == tables.depends
+    assert held.settings["seed"] == seed_uses.HELD_OUT_SEED != tables.settings["seed"]
+    assert held.settings["stds"] == tables.settings["stds"]
+    assert held.hash != tables.hash
 
 
 def test_departures_name_what_differs_from_the_papers_text():

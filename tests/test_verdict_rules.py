@@ -1,4 +1,4 @@
-"""The claims table's verdict rules (warp_critic/reproduce/rules.py), each on small synthetic stage
+"""The claims table's verdict rules (warp_critic/reproduce/report/rules.py), each on small synthetic stage
 data where the earlier, more lenient rule said "met" and the rule now applied says "not met"."""
 
 from __future__ import annotations
@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 
 from warp_critic.evaluation.paper import PAPER_TABLE2
-from warp_critic.reproduce import report_paper as rp
-from warp_critic.reproduce import rules
-from warp_critic.reproduce.report_tables import BASELINE_MARK, MARK, table_markdown
-from warp_critic.reproduce.report_training import budget_sentence
+from warp_critic.reproduce.report import paper as rp
+from warp_critic.reproduce.report import rules
+from warp_critic.reproduce.report.tables import BASELINE_MARK, MARK, table_markdown
+from warp_critic.reproduce.report.training import budget_sentence
 
 
 class _Rec:

@@ -161,7 +161,7 @@ def _train_baseline(job: dict, out: Path, callback):
         checkpoint_every=10**6,
         record_every=10**6,
         warmup_iterations=1,
-        alpha=1e-3,
+        metatest_alpha=1e-3,
     )
     train = train_ddpg if job["method"] == "ddpg" else train_meta_critic
     return train(cfg, callbacks=[callback], progress=False, record=False)

@@ -3,7 +3,7 @@
 
 A paper-setting reproduce runs for hours on a laptop CPU. ``save`` copies its complete stages into a
 small archive folder (meta-training checkpoints without optimiser state or replay buffers, no
-recordings; see :mod:`warp_critic.reproduce.carry`); ``restore`` copies them into an output folder
+recordings; see :mod:`warp_critic.reproduce.engine.carry`); ``restore`` copies them into an output folder
 elsewhere, where the same ``reproduce`` command then skips them and runs only the rest.
 
 Usage::
@@ -44,14 +44,15 @@ def main(argv: list[str] | None = None) -> int:
     pb.add_argument("out", metavar="OUT", help="a reproduce output folder with its report")
     pb.add_argument("dest", metavar="DEST", help="the folder to commit (created if new)")
     args = p.parse_args(argv)
-    from warp_critic.reproduce import carry
+    from warp_critic.reproduce.engine import carry
+    from warp_critic.reproduce.experiments.records import CARRY
 
     try:
         if args.what == "list":
-            print(carry.summary(Path(args.archive)))
+            print(carry.summary(Path(args.archive), CARRY.check))
             return 0
         if args.what == "publish":
-            names, pruned = carry.publish(Path(args.out), Path(args.dest))
+            names, pruned = carry.publish(Path(args.out), Path(args.dest), CARRY)
             print(
                 f"{PROG}: the report written to {args.dest}, with the {len(names)} stage record(s) "
                 f"it read in {Path(args.dest) / carry.ARCHIVE}"
@@ -59,10 +60,10 @@ def main(argv: list[str] | None = None) -> int:
             )
             return 0
         if args.what == "save":
-            names = carry.save(Path(args.out), Path(args.archive))
+            names = carry.save(Path(args.out), Path(args.archive), CARRY)
             dest = args.archive
         else:
-            names = carry.restore(Path(args.archive), Path(args.out))
+            names = carry.restore(Path(args.archive), Path(args.out), CARRY)
             dest = args.out
     except UserError as e:
         p.exit(2, f"{PROG}: error: {user_message(e)}\n")

@@ -174,7 +174,7 @@ def main(argv=None) -> int:
         )
 
     if args.reachability:
-        from warp_critic.reproduce.reach import open_loop_floor
+        from warp_critic.reproduce.experiments.reach import open_loop_floor
 
         variant = Variant(ee_mass=args.ee_mass, link_length=args.link_length)
         home = torch.as_tensor(scene.home, dtype=torch.float32).expand(G, -1).clone()

@@ -48,9 +48,9 @@ def main(argv=None) -> int:
     from warp_critic.core import runtime
 
     runtime.init()  # before the imports below, which would start Warp with its banner
-    from warp_critic.reproduce.generalize import run_maps_stage
-    from warp_critic.reproduce.report_maps import elbow_bent
-    from warp_critic.reproduce.settings import default_settings
+    from warp_critic.reproduce.experiments.generalize import run_maps_stage
+    from warp_critic.reproduce.experiments.settings import default_settings
+    from warp_critic.reproduce.report.maps import elbow_bent
 
     s = dict(default_settings(quick=False, seeds=1)["maps"], reach_iterations=0)
     if args.grid is not None:

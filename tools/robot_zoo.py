@@ -15,7 +15,7 @@ ratio to the KUKA's, the untrained MSE and the MSE after the 3 meta-test updates
 ``--goals`` goals x ``--inits`` fresh policies). ``--floor`` adds the open-loop floor on the same
 meta-test goals: the MSE of open-loop torques optimised through the model within the run's torque
 bounds and horizon (``--floor-iterations`` Adam steps at each of two step sizes, the better per goal:
-``warp_critic/reproduce/reach.py``), an upper bound of the best any controller reaches. Without
+``warp_critic/reproduce/experiments/reach.py``), an upper bound of the best any controller reaches. Without
 ``--train``, ``--floor`` reads the newest run of each robot (and of the KUKA) in ``--runs-dir``, as a
 ``--train`` pass left it, and prints the table with its floor.
 
@@ -143,7 +143,7 @@ def floor_mse(out: Path, goals: list, iterations: int) -> float:
     import torch
 
     from warp_critic.physics.scene import Variant
-    from warp_critic.reproduce.reach import best_open_loop_floor
+    from warp_critic.reproduce.experiments.reach import best_open_loop_floor
 
     g = torch.as_tensor(goals, dtype=torch.float32)
     with contextlib.redirect_stderr(io.StringIO()):

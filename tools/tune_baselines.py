@@ -7,7 +7,7 @@ the published defaults, each on the scene's training task with ``--seeds`` (seed
 reported 0-4, so the reported runs stay untouched by the choice), for ``--iterations`` iterations,
 and scores a setting by its training error: the mean over seeds of the mean ``task_loss``
 (``||q_T - g||^2`` of the actor on the training goals, rad^2) over the last quarter of the iterations.
-The task (goals, starts, horizon, meta-test updates) is reproduce's (``reproduce/settings.py``).
+The task (goals, starts, horizon, meta-test updates) is reproduce's (``reproduce/experiments/settings.py``).
 
 Grid (a few values around the published ones, each a factor of 2-10):
 
@@ -94,8 +94,8 @@ def settings(n: int, seed: int) -> list[dict]:
 def train_one(scene: str, method: str, setting: dict, args, out: Path) -> dict:
     from warp_critic.methods.ddpg import train_ddpg
     from warp_critic.methods.meta_critic import aux_alive, train_meta_critic
-    from warp_critic.reproduce.metatrain import make_config
-    from warp_critic.reproduce.settings import default_settings
+    from warp_critic.reproduce.experiments.metatrain import make_config
+    from warp_critic.reproduce.experiments.settings import default_settings
 
     base = dict(default_settings(False, 1)["metatrain"][scene][method])
     horizon = horizon_of(scene, method)
@@ -105,7 +105,7 @@ def train_one(scene: str, method: str, setting: dict, args, out: Path) -> dict:
         values,
         iterations=args.iterations,
         checkpoint_every=max(1, args.iterations // 4),
-        alpha=1e-3,
+        metatest_alpha=1e-3,
     )
     resume = all((out / f"seed{s}" / "checkpoint.pt").is_file() for s in args.seeds)
     cfg = make_config(scene, method, base, args.seeds, out, args.device, resume)
@@ -242,8 +242,8 @@ def horizon_of(scene: str, method: str) -> int:
     """The rollout length a search's ``updates_per_iteration`` multiplies (its unit is the horizon):
     the stage's own setting, else the scene's default."""
     from warp_critic.physics.load import load_scene
-    from warp_critic.reproduce.metatrain import scene_file
-    from warp_critic.reproduce.settings import default_settings
+    from warp_critic.reproduce.experiments.metatrain import scene_file
+    from warp_critic.reproduce.experiments.settings import default_settings
 
     base = default_settings(False, 1)["metatrain"][scene][method]
     return int(base.get("horizon") or load_scene(scene_file(scene)).defaults.get("horizon", 50))

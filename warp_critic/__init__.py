@@ -9,7 +9,29 @@ The layers, each importing only the ones before it: ``core`` -> ``physics`` -> `
 ``running`` -> ``methods`` -> ``evaluation`` -> ``analysis`` -> ``reproduce`` -> ``cli`` (README.md).
 """
 
+# ruff: noqa: F401  (the TYPE_CHECKING imports name the lazy exports)
+
+from typing import TYPE_CHECKING
+
 from warp_critic.core.exports import lazy_exports
+
+if TYPE_CHECKING:  # the names for IDEs and type checkers (Newton's pattern); at run time
+    # they load lazily, on first use
+    from warp_critic.core.errors import DivergenceError, FieldError, SceneError, UserError
+    from warp_critic.core.runtime import init
+    from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
+    from warp_critic.evaluation.protocol import ProtocolConfig, run_protocol
+    from warp_critic.methods.baseline_config import BaselineConfig
+    from warp_critic.methods.ddpg import train_ddpg
+    from warp_critic.methods.meta_critic import train_meta_critic
+    from warp_critic.methods.ours import TrainConfig, meta_train
+    from warp_critic.methods.sac import SACConfig, train_sac
+    from warp_critic.methods.td3 import TD3Config, train_td3
+    from warp_critic.physics.load import load_scene
+    from warp_critic.physics.scene import Scene
+    from warp_critic.physics.simulator import Simulator
+    from warp_critic.physics.variants import Variant
+    from warp_critic.running.rundir import RunDir
 
 __all__, __getattr__, __dir__ = lazy_exports(
     __name__,
@@ -25,6 +47,8 @@ __all__, __getattr__, __dir__ = lazy_exports(
         "warp_critic.methods.baseline_config": ("BaselineConfig",),
         "warp_critic.methods.ddpg": ("train_ddpg",),
         "warp_critic.methods.meta_critic": ("train_meta_critic",),
+        "warp_critic.methods.td3": ("TD3Config", "train_td3"),
+        "warp_critic.methods.sac": ("SACConfig", "train_sac"),
         "warp_critic.evaluation.metatest": ("MetaTestConfig", "meta_test"),
         "warp_critic.evaluation.protocol": ("ProtocolConfig", "run_protocol"),
     },

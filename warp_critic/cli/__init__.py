@@ -5,6 +5,8 @@ Ctrl-C / SIGTERM handlers (:mod:`warp_critic.cli.signals`, standard library only
 else is imported, so that a signal at any moment of start-up is one line and exit code 130.
 """
 
+# ruff: noqa: F401  (the TYPE_CHECKING imports name the lazy exports)
+
 import os as _os
 import sys as _sys
 
@@ -13,6 +15,12 @@ if _sys.argv and _os.path.basename(_sys.argv[0]) == "warp-critic":
 
     _signals.install()
 
+from typing import TYPE_CHECKING  # noqa: E402
+
 from warp_critic.core.exports import lazy_exports  # noqa: E402
+
+if TYPE_CHECKING:  # the names for IDEs and type checkers (Newton's pattern); at run time
+    # they load lazily, on first use
+    from warp_critic.cli.main import main
 
 __all__, __getattr__, __dir__ = lazy_exports(__name__, {"warp_critic.cli.main": ("main",)})

@@ -14,7 +14,7 @@ import argparse
 import shlex
 from pathlib import Path
 
-from warp_critic.reproduce.settings import EXTRA_BASELINES, METHODS, STAGES
+from warp_critic.reproduce.experiments.settings import EXTRA_BASELINES, METHODS, STAGES
 
 __all__ = ["add_arguments", "run_from_args", "config_from_args"]
 
@@ -145,8 +145,8 @@ def command_line(args: argparse.Namespace) -> str:
 
 
 def config_from_args(args: argparse.Namespace):
-    from warp_critic.reproduce.pipeline import ReproduceConfig
-    from warp_critic.reproduce.settings import default_seeds
+    from warp_critic.reproduce.experiments.plan import ReproduceConfig
+    from warp_critic.reproduce.experiments.settings import default_seeds
 
     seeds = args.seeds if args.seeds is not None else default_seeds(bool(args.quick))
     return ReproduceConfig(
@@ -167,7 +167,7 @@ def run_from_args(args: argparse.Namespace) -> int:
     """Validate the flags, run the stages, write the report; returns the exit code (0)."""
     from warp_critic.core.runtime import init
     from warp_critic.physics.simulator import resolve_device
-    from warp_critic.reproduce.choose_executor import make_executor
+    from warp_critic.reproduce.engine.choose_executor import make_executor
     from warp_critic.reproduce.pipeline import reproduce
     from warp_critic.running.loop import Interrupted
 

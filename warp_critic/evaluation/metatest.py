@@ -2,7 +2,8 @@
 
 The simulator is built **without gradients** (``requires_grad=False``): it only produces rollouts,
 and the policies follow ``-alpha * grad_theta sum_t L(s_t, pi_theta(s_t), g)`` of the saved critic.
-Works for every method's run directory: our critic, and the Q functions of DDPG / Meta-Critic
+Works for every method's run directory: our critic, and the Q functions of the baselines (DDPG,
+Meta-Critic, TD3, SAC: every registered method)
 (through the critic loader its method registered, e.g. :func:`~warp_critic.methods.q_networks.test_critic_from_checkpoint`, which returns a module with the same signature
 ``L(q, qd, tau, g)`` -- for a Q function, ``L = -Q``).
 

@@ -43,14 +43,14 @@ SEED_USES: tuple[SeedUse, ...] = (
         1,
         "scored",
         "the report's KUKA Tables 1-3 and stress tables (stage tables)",
-        "reproduce/settings.py tables.seed",
+        "reproduce/experiments/settings.py tables.seed",
     ),
     SeedUse(
         1,
         "scored",
         "the policy initialisations of the report's reacher maps (Figures 4-6; the goal grid is "
         "fixed, not drawn)",
-        "reproduce/settings.py maps.seed",
+        "reproduce/experiments/settings.py maps.seed",
     ),
 )
 

@@ -13,14 +13,14 @@ from warp_critic.learning.inner import inner_update, policy_fn
 from warp_critic.learning.losses import critic_loss, final_error
 from warp_critic.learning.networks import MLPPolicy, Normalizer
 from warp_critic.learning.rollout import rollout
-from warp_critic.methods.q_networks import NegQ, QNetwork
+from warp_critic.methods.q_networks import NegQ
 from warp_critic.physics.simulator import Simulator
 
 ALPHA_GRID = tuple(10.0 ** (k / 2) for k in range(-12, 1))  # 1e-6, 3.2e-6, ..., 0.32, 1
 
 
 def fresh_policy_errors(
-    qnet: QNetwork,
+    qnet: torch.nn.Module,
     norm: Normalizer,
     sim: Simulator,
     goal: torch.Tensor,
@@ -30,7 +30,8 @@ def fresh_policy_errors(
     seed: int,
     q0: torch.Tensor | None = None,
 ) -> list[float]:
-    """Meta-test's protocol on the training worlds, for every ``alpha``: fresh policies (the same
+    """Meta-test's protocol on the training worlds, for every ``alpha``, with the critic ``qnet``
+    (``(q, qd, tau, g) -> (W,)``, a baseline agent's ``q``): fresh policies (the same
     initialisation for every alpha), ``steps`` descents of ``sum_t -Q``, mean final ``||q_T - g||^2``."""
     neg_q = NegQ(copy.deepcopy(qnet)).requires_grad_(False)
     policy = MLPPolicy(norm)

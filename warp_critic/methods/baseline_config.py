@@ -1,6 +1,6 @@
-"""The baselines' config (DDPG, Meta-Critic): the shared task fields of
-:class:`~warp_critic.running.task.TaskConfig` plus the published DDPG / Meta-Critic settings; the
-protocol they train with is described in :mod:`warp_critic.methods.baseline`."""
+"""The baselines' config (DDPG and Meta-Critic; TD3's and SAC's subclass it): the shared task
+fields of :class:`~warp_critic.running.task.TaskConfig` plus the published DDPG and Meta-Critic
+settings; the protocol they train with is described in :mod:`warp_critic.methods.baseline`."""
 
 from __future__ import annotations
 
@@ -27,7 +27,8 @@ META_CRITIC_FIELDS = (
 
 @dataclass
 class BaselineConfig(TaskConfig):
-    """DDPG / Meta-Critic training. ``None`` = the scene's default (as for meta-train).
+    """The baselines' training (DDPG and Meta-Critic; TD3's and SAC's configs subclass it, with their
+    own published defaults). ``None`` = the scene's default (as for meta-train).
 
     Defaults follow the published DDPG settings (Lillicrap et al. 2015): Adam with actor lr 1e-4 and
     critic lr 1e-3, gamma 0.99, minibatch 64, replay buffer 1e6, Ornstein-Uhlenbeck exploration
@@ -107,9 +108,10 @@ class BaselineConfig(TaskConfig):
         cap=1e3,
     )
     # -- meta-test defaults stored in the checkpoint ---------------------------------------------
-    alpha: float | None = spec(
+    # named ``alpha`` before 2026-12 (a run's config.json / checkpoint may still say so: from_dict)
+    metatest_alpha: float | None = spec(
         None,
-        "policy learning rate meta-test uses with -Q (default: grid search on the training goals at every checkpoint)",
+        "meta-test's step size for fresh policies descending -Q (default: grid search on the training goals at every checkpoint)",
         gt=0,
         cap=1e6,
     )
@@ -153,6 +155,14 @@ class BaselineConfig(TaskConfig):
                 f"{seeds} replay buffer(s) of {held:,} transitions ({scene.dof} dof)",
                 seeds * held * (7 * scene.dof + 2) * 4,
             )
+
+    @classmethod
+    def from_dict(cls, d: dict):
+        """As :meth:`SerializableConfig.from_dict`; a saved config's old key ``alpha`` (the field
+        :attr:`metatest_alpha`'s name in runs written before 2026-12) is read as ``metatest_alpha``."""
+        if "alpha" in d and "metatest_alpha" not in d:
+            d = {**{k: v for k, v in d.items() if k != "alpha"}, "metatest_alpha": d["alpha"]}
+        return super().from_dict(d)
 
     def n_updates(self) -> int:
         if self.updates_per_iteration is not None:

@@ -8,8 +8,9 @@ goal-conditioned, ``s - g``; see :mod:`warp_critic.methods.baseline`):
 * actor: deterministic policy gradient, descend ``-mean Q(s, mu(s))`` (Adam, ``--actor-lr``);
 * targets: soft updates ``theta' <- tau theta + (1 - tau) theta'``.
 
-Experience collection, exploration noise, rewards, checkpoints and the training loop are shared
-with Meta-Critic in :mod:`warp_critic.methods.baseline`. The learned Q is what meta-test uses
+Exploration: the actor's torques plus noise (``--noise`` Ornstein-Uhlenbeck or Gaussian, clipped to
+``+-max_torque``; :meth:`DDPGAgent.explore`). Experience collection, rewards, checkpoints and the
+training loop are the baselines' protocol (:mod:`warp_critic.methods.baseline`). The learned Q is what meta-test uses
 (``L = -Q``).
 """
 
@@ -30,7 +31,7 @@ from warp_critic.methods.q_networks import (
     soft_update,
     test_critic_from_checkpoint,
 )
-from warp_critic.methods.replay import ReplayBuffer
+from warp_critic.methods.replay import ExplorationNoise, ReplayBuffer
 from warp_critic.running.loop import TrainResult
 from warp_critic.running.methods import Method, register
 
@@ -39,7 +40,8 @@ class DDPGAgent:
     """Actor, Q, their target copies and optimisers."""
 
     def __init__(self, cfg: BaselineConfig, dof: int, norm: Normalizer, device):
-        self.cfg = cfg
+        self.cfg, self.norm, self.device = cfg, norm, device
+        self.noise: ExplorationNoise | None = None  # per episode: begin_episode
         self.actor = Actor(dof, norm, cfg.actor_hidden).to(device)
         self.q = QNetwork(dof, norm, cfg.critic_hidden).to(device)
         self.actor_target = copy.deepcopy(self.actor).requires_grad_(False)
@@ -53,6 +55,28 @@ class DDPGAgent:
             weight_decay=cfg.critic_weight_decay,
             foreach=True,
         )
+
+    # -- exploration (the :class:`~warp_critic.methods.baseline.Agent` protocol) ----------------------
+    def begin_episode(self, worlds: int, gen: torch.Generator) -> None:
+        """A new exploration episode: the noise process (built at the first, drawing from ``gen``)
+        restarts (OU: from 0)."""
+        if self.noise is None:
+            cfg = self.cfg
+            shape = (worlds, self.actor.dof)
+            self.noise = ExplorationNoise(
+                cfg.noise, cfg.noise_std, cfg.ou_theta, shape, gen, self.device
+            )
+        self.noise.reset()
+
+    def explore(
+        self, q: torch.Tensor, qd: torch.Tensor, g: torch.Tensor, gen: torch.Generator
+    ) -> torch.Tensor:
+        """``clip(mu(s - g) + noise max_torque, +-max_torque)`` ``(W, dof)`` [N m]; the noise draws
+        from the generator :meth:`begin_episode` got."""
+        assert self.noise is not None, "begin_episode() first"
+        limit = self.norm.max_torque
+        tau = self.actor(q, qd, g) + self.noise.sample() * limit
+        return torch.maximum(torch.minimum(tau, limit), -limit)
 
     # -- one update -------------------------------------------------------------------------------
     def critic_step(self, b: dict[str, torch.Tensor]) -> dict[str, float]:

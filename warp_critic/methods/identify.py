@@ -66,71 +66,19 @@ def train_identifier(
     (identifier, Adam, generator, losses) is saved there, and a call that finds it for the same
     run and settings continues from it, to exactly the identifier an uninterrupted call trains;
     it is removed once ``out`` is complete."""
-    from warp_critic.learning.critic_inputs import DYNAMICS, rollout_data_of
     from warp_critic.learning.identify import Identifier, trajectory_inputs
-    from warp_critic.learning.rollout import settled_worlds
-    from warp_critic.physics.redraw import set_variants
-    from warp_critic.physics.variant_draws import draw, parse_ranges, ranges_on_scene, with_draws
-    from warp_critic.running.metatest_setup import MetaTestConfig, setup_meta_test
     from warp_critic.running.rundir import atomic_torch_save, atomic_write_text
-    from warp_critic.running.task import task_variant
 
     t0 = time.perf_counter()
     dst = Path(out)
     if dst.exists() and (not dst.is_dir() or any(dst.iterdir())):
         raise UserError(f"--out {out}: exists and is not an empty folder")
-    tc = MetaTestConfig(
-        run_dir=run_dir, num_goals=goals, inits=inits, goal_std=0.3, seed=seed, device=device
-    )
-    m = setup_meta_test(tc)
-    if DYNAMICS not in rollout_data_of(m.critic):
-        raise UserError(
-            f"{run_dir}: its critic is not told the model (critic input "
-            f"{m.ckpt.get('critic_input')!r}); identify a pose-dynamics or relative-dynamics run"
-        )
-    variants = variants or None
-    if variants is None:
-        ranges = parse_ranges(m.ckpt["config"].get("train_variants"))
-        if not ranges:
-            raise UserError(
-                f"{run_dir}: trained on one model (no train_variants): nothing to identify"
-            )
-    else:  # other draws than training's (the same text form, checked on the scene before any work)
-        ranges = ranges_on_scene(m.scene, task_variant(m.cfg), variants)
-        if m.ckpt["config"].get("on_divergence", "stop") == "stop":
-            # the models the run's step cannot hold are refused up front, as meta-train refuses them
-            from warp_critic.methods.train_variants import check_held
-
-            check_held(m.cfg, m.scene, ranges, variants)
-    base, W, dev = task_variant(m.cfg), m.sim.worlds, m.sim.torch_device
-    drop = m.ckpt["config"].get("on_divergence") == "drop"  # as the run's meta-train did
+    m, ranges, variants = _told_run(run_dir, goals, inits, seed, device, variants)
+    dev = m.sim.torch_device
     ident = Identifier(m.scene.dof, m.sim.dynamics_size, hidden, version).to(dev)
     opt = torch.optim.Adam(ident.parameters(), lr=lr)
     gen = torch.Generator().manual_seed(seed)
-
-    def samples(it: int):
-        """The rollouts of one iteration's fresh and updated policies, and their settled worlds."""
-        values = draw(ranges, W, DRAW_SEED_OFFSET + seed, it)
-        set_variants(m.sim, [with_draws(base, ranges, v) for v in values])
-        params = {
-            k: v.requires_grad_(True)
-            for k, v in m.policy.init(W, generator=gen, device=dev).items()
-        }
-        _, trajs = m.update(params, check=False, guard=True)
-        settled = torch.stack([settled_worlds(t) for t in trajs]).all(0)
-        if not bool(settled.all()) and (not drop or not bool(settled.any())):
-            w = int((~settled).nonzero()[0, 0])
-            model = "; ".join(c.text() for c in with_draws(base, ranges, values[w]).changes)
-            raise DivergenceError(
-                f"iteration {it} of the identification: world {w} diverged under the drawn model {model!r} "
-                + (
-                    "(every world did)"
-                    if drop
-                    else "(the run stops on divergence, on_divergence stop)"
-                ),
-                world=w,
-            )
-        return trajs, settled
+    samples = _sampler(m, ranges, seed, gen)
 
     def loss_of(trajs, settled) -> torch.Tensor:
         errs = [((ident.of_trajectory(t) - t.dynamics) ** 2).mean(-1) for t in trajs]
@@ -170,22 +118,8 @@ def train_identifier(
         err = torch.stack([(ident.of_trajectory(t) - t.dynamics).abs() for t in trajs])
         held_out = err[:, settled].mean((0, 1))
         varied = torch.stack([t.dynamics for t in trajs]).abs().amax((0, 1)) > 0
-    shutil.copytree(
-        run_dir,
-        dst,
-        ignore=shutil.ignore_patterns("recording.rrd", "metatest.json", ".lock"),
-        dirs_exist_ok=True,
-    )
-    ckpt = dict(m.ckpt)
-    ckpt["identifier_state"] = {k: v.detach().cpu() for k, v in ident.state_dict().items()}
-    ckpt["identifier"] = {
-        "hidden": hidden,
-        "size": ident.size,
-        "iterations": iterations,
-        "version": version,
-    }
-    atomic_torch_save(ckpt, dst / "checkpoint.pt")
-    atomic_write_text(dst / IDENTIFY_FILE, "".join(json.dumps(r) + "\n" for r in rows))
+    info = {"hidden": hidden, "size": ident.size, "iterations": iterations, "version": version}
+    _write_run(run_dir, dst, m.ckpt, ident, info, rows)
     summary = {
         "loss": rows[-1]["loss"] if rows else float("nan"),
         "held_out": float(held_out[varied].mean()) if bool(varied.any()) else 0.0,
@@ -199,6 +133,97 @@ def train_identifier(
     if resume_file is not None:
         Path(resume_file).unlink(missing_ok=True)
     return summary
+
+
+def _told_run(run_dir: str, goals: int, inits: int, seed: int, device: str, variants: str | None):
+    """The told run's meta-test set-up (``goals x inits`` worlds), the ranges the models are drawn
+    from and the ``variants`` text (``None``: the run's own ``train_variants``); the runs and ranges
+    an identifier cannot be trained for are refused here, before any work."""
+    from warp_critic.learning.critic_inputs import DYNAMICS, rollout_data_of
+    from warp_critic.physics.variant_draws import parse_ranges, ranges_on_scene
+    from warp_critic.running.metatest_setup import MetaTestConfig, setup_meta_test
+    from warp_critic.running.task import task_variant
+
+    tc = MetaTestConfig(
+        run_dir=run_dir, num_goals=goals, inits=inits, goal_std=0.3, seed=seed, device=device
+    )
+    m = setup_meta_test(tc)
+    if DYNAMICS not in rollout_data_of(m.critic):
+        raise UserError(
+            f"{run_dir}: its critic is not told the model (critic input "
+            f"{m.ckpt.get('critic_input')!r}); identify a pose-dynamics or relative-dynamics run"
+        )
+    variants = variants or None
+    if variants is None:
+        ranges = parse_ranges(m.ckpt["config"].get("train_variants"))
+        if not ranges:
+            raise UserError(
+                f"{run_dir}: trained on one model (no train_variants): nothing to identify"
+            )
+    else:  # other draws than training's (the same text form, checked on the scene before any work)
+        ranges = ranges_on_scene(m.scene, task_variant(m.cfg), variants)
+        if m.ckpt["config"].get("on_divergence", "stop") == "stop":
+            # the models the run's step cannot hold are refused up front, as meta-train refuses them
+            from warp_critic.methods.train_variants import check_held
+
+            check_held(m.cfg, m.scene, ranges, variants)
+    return m, ranges, variants
+
+
+def _sampler(m, ranges, seed: int, gen: torch.Generator):
+    """``samples(it)``: iteration ``it``'s rollouts of fresh policies (drawn from ``gen``) and of
+    their updates by the told critic, each world under a model drawn for ``(seed, it)``, and the
+    worlds that stayed settled; a diverged world is handled as the run's ``on_divergence``."""
+    from warp_critic.learning.rollout import settled_worlds
+    from warp_critic.physics.redraw import set_variants
+    from warp_critic.physics.variant_draws import draw, with_draws
+    from warp_critic.running.task import task_variant
+
+    base, W, dev = task_variant(m.cfg), m.sim.worlds, m.sim.torch_device
+    drop = m.ckpt["config"].get("on_divergence") == "drop"  # as the run's meta-train did
+
+    def samples(it: int):
+        values = draw(ranges, W, DRAW_SEED_OFFSET + seed, it)
+        set_variants(m.sim, [with_draws(base, ranges, v) for v in values])
+        params = {
+            k: v.requires_grad_(True)
+            for k, v in m.policy.init(W, generator=gen, device=dev).items()
+        }
+        _, trajs = m.update(params, check=False, guard=True)
+        settled = torch.stack([settled_worlds(t) for t in trajs]).all(0)
+        if not bool(settled.all()) and (not drop or not bool(settled.any())):
+            w = int((~settled).nonzero()[0, 0])
+            model = "; ".join(c.text() for c in with_draws(base, ranges, values[w]).changes)
+            raise DivergenceError(
+                f"iteration {it} of the identification: world {w} diverged under the drawn model {model!r} "
+                + (
+                    "(every world did)"
+                    if drop
+                    else "(the run stops on divergence, on_divergence stop)"
+                ),
+                world=w,
+            )
+        return trajs, settled
+
+    return samples
+
+
+def _write_run(run_dir: str, dst: Path, ckpt: dict, ident, info: dict, rows: list[dict]) -> None:
+    """``dst``: a copy of the told run, its checkpoint ``ckpt`` with the identifier's state and
+    settings ``info``, and the regression's losses ``rows``."""
+    from warp_critic.running.rundir import atomic_torch_save, atomic_write_text
+
+    shutil.copytree(
+        run_dir,
+        dst,
+        ignore=shutil.ignore_patterns("recording.rrd", "metatest.json", ".lock"),
+        dirs_exist_ok=True,
+    )
+    ckpt = dict(ckpt)
+    ckpt["identifier_state"] = {k: v.detach().cpu() for k, v in ident.state_dict().items()}
+    ckpt["identifier"] = info
+    atomic_torch_save(ckpt, dst / "checkpoint.pt")
+    atomic_write_text(dst / IDENTIFY_FILE, "".join(json.dumps(r) + "\n" for r in rows))
 
 
 def _load_progress(path: str | Path | None, key: list) -> dict | None:

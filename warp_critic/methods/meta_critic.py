@@ -119,7 +119,7 @@ ALIVE_SHARE = 0.5
 collapsed, and its setting cannot be adopted by the baselines' search."""
 
 #: the metrics columns :func:`aux_alive` and :func:`aux_alive_basis` read (a carried archive keeps
-#: only these of a run's metrics: :mod:`warp_critic.reproduce.carry`)
+#: only these of a run's metrics: :mod:`warp_critic.reproduce.engine.carry`)
 AUX_KEYS = ("iteration", "aux_loss", "aux_grad_ratio", "meta_improvement")
 
 

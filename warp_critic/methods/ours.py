@@ -165,35 +165,51 @@ def meta_train(
         given=given,
         require=("critic_state", "optimizer_state", "policy_params"),
     ) as session:
-        filled_cfg, task = session.cfg, session.task  # the scene's defaults filled in
-        assert isinstance(filled_cfg, TrainConfig)
-        cfg = filled_cfg
-        critic_input = filled(cfg.critic_input, "critic_input")
-        S, dev = task.S, task.device
-        policy = MLPPolicy(task.norm)
-        gens: list[torch.Generator] = []
+        run = _MetaTrainRun(session)  # set-up, then the checkpoint's states (resume)
+        result = session.run(
+            run.step,
+            run.state,
+            callbacks=callbacks,
+            progress=progress,
+            record=record,
+            describe=lambda r: f"task {r['task_loss']:.4f} (before {r['task_loss_before']:.3f})",
+        )
+    for i, r in enumerate(result.seeds):
+        r.model = run.critic.critic(i)
+    return result
+
+
+class _MetaTrainRun:
+    """One meta-training's critics (one per seed, stacked), optimiser, policies and iteration."""
+
+    IDENTIFIED = ("identifier", "identifier_state")  # an identified run's checkpoint entries
+
+    def __init__(self, session: Session):
+        cfg, task = session.cfg, session.task  # the scene's defaults filled in
+        assert isinstance(cfg, TrainConfig)
+        self.cfg, self.task = cfg, task
+        self.critic_input = filled(cfg.critic_input, "critic_input")
+        S, dev, dof, hidden = task.S, task.device, task.scene.dof, cfg.critic_hidden
+        self.policy = MLPPolicy(task.norm)
+        self.gens: list[torch.Generator] = []
         critics: list[Critic] = []
         seed_params: list[PolicyParams] = []
         for i in range(S):  # each seed's draws in the order of a single-seed run
-            gens.append(session.seed(i))
-            critics.append(
-                Critic(task.scene.dof, task.norm, hidden=cfg.critic_hidden, inputs=critic_input).to(
-                    dev
-                )
-            )
-            seed_params.append(policy.init(task.Wc, generator=gens[-1], device=dev))
+            self.gens.append(session.seed(i))
+            critics.append(Critic(dof, task.norm, hidden, inputs=self.critic_input).to(dev))
+            seed_params.append(self.policy.init(task.Wc, generator=self.gens[-1], device=dev))
             session.seeded(i)
-        critic = StackedCritic(critics)
-        opt = torch.optim.Adam(critic.ordered(), lr=filled(cfg.lr, "lr"))
+        self.critic = StackedCritic(critics)
+        self.opt = torch.optim.Adam(self.critic.ordered(), lr=filled(cfg.lr, "lr"))
         # an identified run's identifiers (warp-critic identify), and their checkpoint entries, kept
         identifiers: list = []
-        identified: list[dict] = []
+        self.identified: list[dict] = []
         for i in range(S):
             ckpt = session.restore(i)
             if ckpt is not None:
                 with session.loading(i):
-                    critic.load_critic_state(i, ckpt["critic_state"])
-                    load_optimizer_slice(opt, critic, i, ckpt["optimizer_state"])
+                    self.critic.load_critic_state(i, ckpt["critic_state"])
+                    load_optimizer_slice(self.opt, self.critic, i, ckpt["optimizer_state"])
                     seed_params[i] = {
                         k: ckpt["policy_params"][k].to(dev).reshape(v.shape)
                         for k, v in seed_params[i].items()
@@ -201,136 +217,142 @@ def meta_train(
                     ident = identifier_from_checkpoint(ckpt)
                     if ident is not None:
                         identifiers.append(ident.to(dev).requires_grad_(False))
-                        identified.append({k: ckpt[k] for k in ("identifier", "identifier_state")})
+                        self.identified.append({k: ckpt[k] for k in self.IDENTIFIED})
         # the critic the inner loop descends: an identified run trains on its identifiers'
         # estimates from every rollout, as at meta-test, never on the told model
-        inner_critic: torch.nn.Module = critic
-        if identified:
-            if len(identified) != S:
+        self.inner_critic: torch.nn.Module = self.critic
+        if self.identified:
+            if len(self.identified) != S:
                 raise UserError(
                     "identified and told runs cannot resume together: resume the identified ones "
                     "(warp-critic identify's outputs) apart"
                 )
-            inner_critic = IdentifiedCritic(critic, identifiers)
-        params = _cat(seed_params)
-        q0, qd0 = task.home, torch.zeros_like(task.home)
-        seeds = [r.cfg.seed for r in session.runs]  # of the task's copies, in order
-        redraw = VariantRedraw(cfg, task, seeds) if cfg.train_variants else None
-        drop = cfg.on_divergence == "drop"
+            self.inner_critic = IdentifiedCritic(self.critic, identifiers)
+        self.params = _cat(seed_params)
+        self.q0, self.qd0 = task.home, torch.zeros_like(task.home)
+        self.seeds = [r.cfg.seed for r in session.runs]  # of the task's copies, in order
+        self.redraw = VariantRedraw(cfg, task, self.seeds) if cfg.train_variants else None
+        self.drop = cfg.on_divergence == "drop"
 
-        def step(it: int):
-            nonlocal params, q0
-            drawn = redraw(it) if redraw is not None else None
-            if cfg.policy_init == "fresh":  # Algorithm 2: new random policies every iteration ...
-                fresh = _cat([policy.init(task.Wc, generator=g, device=dev) for g in gens])
-                if cfg.policy_lifetime == 1:
-                    params = fresh
-                else:  # ... or, staggered, in the worlds whose policy has reached its lifetime
-                    reset = (it + task.slot) % cfg.policy_lifetime == 0  # (W,)
-                    params = {
-                        k: torch.where(reset.view(-1, *[1] * (v.dim() - 1)), fresh[k], v)
-                        for k, v in params.items()
-                    }
-            if cfg.start_std:
-                q0 = torch.cat([task.start_states(g, i) for i, g in enumerate(gens)])
-            res = meta_loss(
-                inner_critic,
-                policy,
-                detach_params(params),
-                task.sim,
-                q0,
-                qd0,
-                task.goal,
-                horizon=filled(cfg.horizon, "horizon"),
-                alpha=filled(cfg.alpha, "alpha"),
-                inner_steps=filled(cfg.inner_steps, "inner_steps"),
-                running_weight=cfg.running_weight,
-                velocity_weight=cfg.velocity_weight,
-                drop_diverged=drop,
-            )
-            settled = res.settled.view(S, -1)
-            if drop:  # each seed's mean over its settled worlds
-                kept = settled.sum(1)
-                if bool((kept == 0).any()):
-                    gone = [str(seeds[i]) for i in range(S) if int(kept[i]) == 0]
-                    raise DivergenceError(f"every world diverged (seed {', '.join(gone)})")
-                loss = res.losses.view(S, -1).sum(1) / kept
-            else:
-                loss = res.losses.view(S, -1).mean(1)  # (S,) each seed's task loss
-            opt.zero_grad(set_to_none=True)
-            loss.sum().backward()  # seeds share no parameter: each gets its own gradient
-            norms = [slice_norm(critic, i) for i in range(S)]
-            bad = [
-                seeds[i]
-                for i in range(S)
-                if not (math.isfinite(loss[i].item()) and math.isfinite(norms[i]))
-            ]
-            if bad:
-                raise DivergenceError(
-                    f"non-finite task loss or critic gradient (seed {', '.join(map(str, bad))})"
-                )
-            if cfg.clip_grad:
-                for i in range(S):
-                    clip_slice_(critic, i, cfg.clip_grad)
-            for group in opt.param_groups:
-                group["lr"] = cfg.lr_at(it)
-            opt.step()
-            if (
-                cfg.policy_init == "persistent" or cfg.policy_lifetime > 1
-            ):  # lifetime > 1 implies fresh
-                params = res.params_new
-            before = ((res.before.q[-1] - task.goal) ** 2).sum(-1)
-            rows: list[dict] = []
-            for i in range(S):
-                sl = task.copy(i)
-                after_i, before_i = res.per_world[sl], before[sl]
-                keep = settled[i] if drop else None  # drop: means over the settled worlds
-                mean_after, mean_before = (
-                    (x if keep is None else x[keep]).mean().item() for x in (after_i, before_i)
-                )
-                rows.append(
-                    {
-                        "task_loss": mean_after,
-                        "task_loss_before": mean_before,
-                        "task_loss_per_goal": [  # null: a goal whose worlds all diverged
-                            None if v != v else v for v in task.per_goal(after_i, keep).tolist()
-                        ],
-                        "grad_norm": norms[i],
-                    }
-                )
-                if drop:
-                    rows[-1]["diverged_worlds"] = int((~settled[i]).sum())
-                if identified:  # the critic learned on its identifier's estimates, not the model
-                    rows[-1]["critic_fed"] = "identified"
-                if drawn is not None:
-                    # null: a range of another '|' group than the world's at this iteration
-                    rows[-1]["train_variant_values"] = [
-                        [None if v != v else v for v in world] for world in drawn[i].tolist()
-                    ]
-            return rows, res
-
-        def state(i: int) -> dict:
-            sl = task.copy(i)
-            return {
-                "critic_state": critic.critic_state(i),
-                "critic_hidden": cfg.critic_hidden,
-                "critic_input": critic_input,
-                "optimizer_state": optimizer_slice(opt, critic, i),
-                "policy_params": {k: v[sl].cpu().clone() for k, v in params.items()},  # own storage
-                **(identified[i] if identified else {}),
-            }
-
-        result = session.run(
-            step,
-            state,
-            callbacks=callbacks,
-            progress=progress,
-            record=record,
-            describe=lambda r: f"task {r['task_loss']:.4f} (before {r['task_loss_before']:.3f})",
+    def step(self, it: int):
+        """Policies, the inner update and rollout through the model, one critic step; a row per seed."""
+        cfg, task = self.cfg, self.task
+        drawn = self.redraw(it) if self.redraw is not None else None
+        self.new_policies(it)
+        if cfg.start_std:
+            self.q0 = torch.cat([task.start_states(g, i) for i, g in enumerate(self.gens)])
+        res = meta_loss(
+            self.inner_critic,
+            self.policy,
+            detach_params(self.params),
+            task.sim,
+            self.q0,
+            self.qd0,
+            task.goal,
+            horizon=filled(cfg.horizon, "horizon"),
+            alpha=filled(cfg.alpha, "alpha"),
+            inner_steps=filled(cfg.inner_steps, "inner_steps"),
+            running_weight=cfg.running_weight,
+            velocity_weight=cfg.velocity_weight,
+            drop_diverged=self.drop,
         )
-    for i, r in enumerate(result.seeds):
-        r.model = critic.critic(i)
-    return result
+        settled = res.settled.view(task.S, -1)
+        norms = self.update_critic(it, res, settled)
+        if cfg.policy_init == "persistent" or cfg.policy_lifetime > 1:  # lifetime > 1: fresh
+            self.params = res.params_new
+        return self.rows(res, settled, norms, drawn), res
+
+    def new_policies(self, it: int) -> None:
+        """Algorithm 2: new random policies every iteration, or (staggered) in the worlds whose
+        policy has reached its lifetime; persistent policies carry on."""
+        cfg, task = self.cfg, self.task
+        if cfg.policy_init != "fresh":
+            return
+        fresh = _cat(
+            [self.policy.init(task.Wc, generator=g, device=task.device) for g in self.gens]
+        )
+        if cfg.policy_lifetime == 1:
+            self.params = fresh
+            return
+        reset = (it + task.slot) % cfg.policy_lifetime == 0  # (W,)
+        self.params = {
+            k: torch.where(reset.view(-1, *[1] * (v.dim() - 1)), fresh[k], v)
+            for k, v in self.params.items()
+        }
+
+    def update_critic(self, it: int, res, settled: torch.Tensor) -> list[float]:
+        """One Adam step on each seed's task loss (its mean over the settled worlds with
+        ``on_divergence`` drop); returns each seed's gradient norm (before clipping)."""
+        S, seeds, critic = self.task.S, self.seeds, self.critic
+        if self.drop:  # each seed's mean over its settled worlds
+            kept = settled.sum(1)
+            if bool((kept == 0).any()):
+                gone = [str(seeds[i]) for i in range(S) if int(kept[i]) == 0]
+                raise DivergenceError(f"every world diverged (seed {', '.join(gone)})")
+            loss = res.losses.view(S, -1).sum(1) / kept
+        else:
+            loss = res.losses.view(S, -1).mean(1)  # (S,) each seed's task loss
+        self.opt.zero_grad(set_to_none=True)
+        loss.sum().backward()  # seeds share no parameter: each gets its own gradient
+        norms = [slice_norm(critic, i) for i in range(S)]
+        finite = [math.isfinite(loss[i].item()) and math.isfinite(norms[i]) for i in range(S)]
+        bad = [seeds[i] for i in range(S) if not finite[i]]
+        if bad:
+            raise DivergenceError(
+                f"non-finite task loss or critic gradient (seed {', '.join(map(str, bad))})"
+            )
+        if self.cfg.clip_grad:
+            for i in range(S):
+                clip_slice_(critic, i, self.cfg.clip_grad)
+        for group in self.opt.param_groups:
+            group["lr"] = self.cfg.lr_at(it)
+        self.opt.step()
+        return norms
+
+    def rows(self, res, settled: torch.Tensor, norms: list[float], drawn) -> list[dict]:
+        """Each seed's metrics row (with ``on_divergence`` drop: means over its settled worlds)."""
+        task = self.task
+        before = ((res.before.q[-1] - task.goal) ** 2).sum(-1)
+        rows: list[dict] = []
+        for i in range(task.S):
+            sl = task.copy(i)
+            after_i, before_i = res.per_world[sl], before[sl]
+            keep = settled[i] if self.drop else None
+            mean_after, mean_before = (
+                (x if keep is None else x[keep]).mean().item() for x in (after_i, before_i)
+            )
+            row = {
+                "task_loss": mean_after,
+                "task_loss_before": mean_before,
+                "task_loss_per_goal": [  # null: a goal whose worlds all diverged
+                    None if v != v else v for v in task.per_goal(after_i, keep).tolist()
+                ],
+                "grad_norm": norms[i],
+            }
+            if self.drop:
+                row["diverged_worlds"] = int((~settled[i]).sum())
+            if self.identified:  # the critic learned on its identifier's estimates, not the model
+                row["critic_fed"] = "identified"
+            if drawn is not None:
+                # null: a range of another '|' group than the world's at this iteration
+                row["train_variant_values"] = [
+                    [None if v != v else v for v in world] for world in drawn[i].tolist()
+                ]
+            rows.append(row)
+        return rows
+
+    def state(self, i: int) -> dict:
+        sl = self.task.copy(i)
+        return {
+            "critic_state": self.critic.critic_state(i),
+            "critic_hidden": self.cfg.critic_hidden,
+            "critic_input": self.critic_input,
+            "optimizer_state": optimizer_slice(self.opt, self.critic, i),
+            "policy_params": {
+                k: v[sl].cpu().clone() for k, v in self.params.items()
+            },  # own storage
+            **(self.identified[i] if self.identified else {}),
+        }
 
 
 def _cat(per_seed: list[PolicyParams]) -> PolicyParams:

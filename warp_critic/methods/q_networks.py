@@ -7,6 +7,8 @@ scales) and the action ``tau / max_torque``, as in the paper ("the state becomes
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import torch
 from torch import nn
 
@@ -108,7 +110,7 @@ class QNetwork(_GoalInput):
 class NegQ(nn.Module):
     """The loss a fresh policy descends at meta-test: ``L(q, qd, tau, g) = -Q(s - g, a)``."""
 
-    def __init__(self, q: QNetwork):
+    def __init__(self, q: nn.Module):
         super().__init__()
         self.q = q
 
@@ -118,27 +120,31 @@ class NegQ(nn.Module):
         return -self.q(q, qd, tau, goal)
 
 
-def test_critic_from_checkpoint(ckpt: dict, norm: Normalizer) -> tuple[torch.nn.Module, dict]:
-    """``-Q`` of a DDPG / Meta-Critic checkpoint (Meta-Critic: its main Q, not h_omega), and the run's
+def test_critic_from_checkpoint(
+    ckpt: dict, norm: Normalizer, make_q: Callable[..., nn.Module] = QNetwork
+) -> tuple[torch.nn.Module, dict]:
+    """``-Q`` of a baseline's checkpoint (Meta-Critic: its main Q, not h_omega), and the run's
     meta-test defaults (the alpha selected at its last checkpoint, its inner steps).
 
-    ``norm`` is meta-test's normaliser (built from the run's ``max_torque``/``qd_scale``); the
-    checkpoint's own normaliser buffers are loaded over it, so the Q sees exactly the inputs it was
-    trained on.
+    ``make_q(dof, norm, hidden)`` builds the network the checkpoint's ``q_state`` holds (the
+    agent's ``q``: one :class:`QNetwork`, or e.g. a twin Q's minimum). ``norm`` is meta-test's
+    normaliser (built from the run's ``max_torque``/``qd_scale``); the checkpoint's own normaliser
+    buffers are loaded over it, so the Q sees exactly the inputs it was trained on.
     """
     method = ckpt.get("method")
     if method not in names(baseline=True):
         baselines = ", ".join(names(baseline=True))
         raise UserError(f"checkpoint method {method!r} is not a baseline ({baselines})")
     try:
-        qnet = QNetwork(int(ckpt["dof"]), norm, hidden=int(ckpt.get("critic_hidden", 400)))
+        qnet = make_q(int(ckpt["dof"]), norm, int(ckpt.get("critic_hidden", 400)))
         qnet.load_state_dict(ckpt["q_state"])
     except (KeyError, RuntimeError) as e:
         raise UserError(
             f"{method} checkpoint has no usable Q network ({type(e).__name__}: {str(e).splitlines()[0]})"
         ) from None
     cfg = ckpt.get("config", {})
-    alpha = cfg.get("alpha") if cfg.get("alpha") is not None else ckpt.get("selected_alpha")
+    given = cfg.get("metatest_alpha", cfg.get("alpha"))  # "alpha": runs written before 2026-12
+    alpha = given if given is not None else ckpt.get("selected_alpha")
     return NegQ(qnet.eval()), {"alpha": alpha, "steps": int(cfg.get("inner_steps", 1))}
 
 

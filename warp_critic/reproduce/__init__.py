@@ -1,17 +1,23 @@
 """``warp-critic reproduce``: the paper's experiments end to end, resumable stage by stage, and a report.
 
-Modules: :mod:`.settings` (paper and ``--quick`` settings, hashes), :mod:`.stages` (stage directories,
-``stage.json``, the output marker), :mod:`.analyses` (toy, landscape), :mod:`.metatrain`
-(meta-training of the three methods, every seed batched), :mod:`.evaluate` (batched meta-test: many
-runs, goals and dynamics variants in one model), :mod:`.generalize` (KUKA tables, reacher maps),
-:mod:`.reach` (open-loop reachability floors), :mod:`.report` (REPORT.md, results.json, figures,
-report.rrd) with its sections :mod:`.report_analyses` (toy, landscapes), :mod:`.report_training`
-(Figure 3), :mod:`.report_maps` (Figures 4-6) and :mod:`.report_tables` (the KUKA tables), sharing a
-:mod:`.report_draft`, and :mod:`.report_plots` (figures) and :mod:`.report_paper` (steps to error
-levels, solved seeds, 2-D maps, verdicts), :mod:`.executors` (in process, local processes) and
-:mod:`.on_ray` (Ray), chosen by the flags in :mod:`.choose_executor`, :mod:`.validate` (every
-``--set`` checked up front), :mod:`.pipeline` (the order), :mod:`.units` (each stage's function and
-inputs). The flags live in :mod:`warp_critic.cli.reproduce`.
+Three layers, each importing only the ones before it (``tests/test_layers.py``):
+
+* :mod:`~warp_critic.reproduce.engine`: a general stage workflow that knows no paper and no method
+  -- :mod:`~warp_critic.reproduce.engine.stages` (stage directories, ``stage.json``, the output
+  marker), the executors (:mod:`~warp_critic.reproduce.engine.executors`: in process, local
+  processes; :mod:`~warp_critic.reproduce.engine.on_ray`: Ray; chosen by the flags in
+  :mod:`~warp_critic.reproduce.engine.choose_executor`), :mod:`~warp_critic.reproduce.engine.ledger`
+  (the calls on a folder) and :mod:`~warp_critic.reproduce.engine.carry` (stages to another machine).
+* :mod:`~warp_critic.reproduce.experiments`: the paper's stages -- settings (paper and ``--quick``,
+  hashes), recipes, validation (every ``--set`` checked up front), the plan
+  (:mod:`~warp_critic.reproduce.experiments.plan`), each stage's function and inputs
+  (:mod:`~warp_critic.reproduce.experiments.units`: toy, landscape, meta-training, the reacher maps
+  and KUKA tables with batched meta-test and open-loop reachability floors).
+* :mod:`~warp_critic.reproduce.report`: the verdict rules and the report's sections, written by
+  :mod:`~warp_critic.reproduce.report.write` (REPORT.md, results.json, figures, report.rrd).
+
+:mod:`~warp_critic.reproduce.pipeline` joins them: it runs the stages a call needs, then writes the
+report. The flags live in :mod:`warp_critic.cli.reproduce`.
 """
 
 from warp_critic.core.exports import lazy_exports
@@ -19,9 +25,10 @@ from warp_critic.core.exports import lazy_exports
 __all__, __getattr__, __dir__ = lazy_exports(
     __name__,
     {
-        "warp_critic.reproduce.pipeline": ("ReproduceConfig", "reproduce"),
-        "warp_critic.reproduce.executors": ("InProcess", "LocalProcesses"),
-        "warp_critic.reproduce.choose_executor": ("make_executor",),
-        "warp_critic.reproduce.on_ray": ("RayExecutor",),
+        "warp_critic.reproduce.experiments.plan": ("ReproduceConfig",),
+        "warp_critic.reproduce.pipeline": ("reproduce",),
+        "warp_critic.reproduce.engine.executors": ("InProcess", "LocalProcesses"),
+        "warp_critic.reproduce.engine.choose_executor": ("make_executor",),
+        "warp_critic.reproduce.engine.on_ray": ("RayExecutor",),
     },
 )

@@ -25,7 +25,7 @@ if TYPE_CHECKING:
     from filelock import BaseFileLock
 
 LOCK = ".lock"
-#: The marker of a ``warp-critic reproduce`` output folder (written by :mod:`warp_critic.reproduce.stages`).
+#: The marker of a ``warp-critic reproduce`` output folder (written by :mod:`warp_critic.reproduce.engine.stages`).
 REPRODUCE_MARKER = ".warp-critic-reproduce"
 
 

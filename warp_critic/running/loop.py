@@ -1,4 +1,4 @@
-"""The one training harness every method runs through (ours, DDPG, Meta-Critic).
+"""The one training harness every method runs through (ours and every baseline of the registry).
 
 A method builds its networks and writes one function, ``step(iteration) -> (one metrics row per seed,
 result)``, plus ``state(seed index) -> dict`` for its checkpoints; :class:`Session` does everything

@@ -116,7 +116,7 @@ def check_toy(s: dict) -> None:
 def check_landscape(s: dict) -> None:
     from pathlib import Path
 
-    from warp_critic.reproduce.analyses import landscape_configs
+    from warp_critic.reproduce.experiments.analyses import landscape_configs
 
     try:
         landscape_configs(Path("unused"), s, "cpu")
@@ -129,7 +129,7 @@ def check_landscape(s: dict) -> None:
 def check_metatrain(m: dict) -> dict[str, int]:
     """Every method x robot config against its scene; returns each robot's number of training goals."""
     from warp_critic.core.runtime import MAX_SEED, MAX_SEEDS  # a stage's seeds: one process
-    from warp_critic.reproduce.settings import SCENES
+    from warp_critic.reproduce.experiments.settings import SCENES
 
     seeds = m["seeds"]
     if not isinstance(seeds, list) or not seeds or len(seeds) > MAX_SEEDS:
@@ -152,7 +152,7 @@ def check_metatrain(m: dict) -> dict[str, int]:
 def _check_train(scene: str, method: str, values: dict, seeds: list, where: str):
     """One meta-training config (``values``) against its scene; returns the filled config and the
     loaded robot."""
-    from warp_critic.reproduce.metatrain import check_fields_known, make_config
+    from warp_critic.reproduce.experiments.metatrain import check_fields_known, make_config
     from warp_critic.running.task import load_task_scene
     from warp_critic.running.task_inputs import check_memory
 
@@ -224,7 +224,7 @@ def check_all(settings: dict, defaults: dict) -> None:
 
 def check_beyond(b: dict, seeds: list) -> None:
     """Every recipe beyond the paper: an ours config, against its robot's scene."""
-    from warp_critic.reproduce.settings import SCENES
+    from warp_critic.reproduce.experiments.settings import SCENES
 
     for scene in SCENES:
         if not isinstance(b.get(scene), dict) or not b[scene]:

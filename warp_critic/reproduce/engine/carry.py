@@ -5,12 +5,11 @@ can be saved into a small archive (a folder that can be committed or copied), an
 output folder on another machine, where ``reproduce`` then skips them and runs only what is left.
 
 * :func:`save` copies every complete stage of ``out`` (its ``stage.json`` is present and usable)
-  into ``archive/<stage dir>``, without recordings (``*.rrd``) and locks. Meta-training checkpoints
-  lose the state that only a resumed training needs (:data:`TRAINING_ONLY`: optimisers, ours' last
-  policies, the baselines' target networks and replay buffers); what meta-test, the maps and the
-  tables read stays (networks, config, scene identity). A run's ``metrics.jsonl`` is carried only
-  as far as the report reads it (:func:`thin_metrics`: Meta-Critic's auxiliary-loss columns; the
-  curves are in ``stage.json``). JSON and JSONL files are stored xz-compressed (``NAME.xz``: the
+  into ``archive/<stage dir>``, without recordings (``*.rrd``) and locks. What a stage keeps is told
+  by the stages' owner (:class:`CarryRules`; the engine knows no stage and no method): the
+  checkpoints of the slimmed group's runs lose the state only a resumed training needs, and a
+  run's ``metrics.jsonl`` is carried only as far as a reader of the archive needs it
+  (:func:`thin_metrics`). JSON and JSONL files are stored xz-compressed (``NAME.xz``: the
   records compress about 5x, and an archive is meant to be committed). A shipped scene's absolute
   path is written ``scenes/NAME`` (the scene is found by its content hash). A stage already in the
   archive is skipped when its ``stage.json`` is the same, refused when it differs.
@@ -21,9 +20,7 @@ output folder on another machine, where ``reproduce`` then skips them and runs o
 * :func:`publish` copies a finished report (``REPORT.md``, ``results.json``, the ledger and the
   figures) into a folder to commit, such as ``docs/paper``, and saves the stages it read into that
   folder's ``stages/`` archive, so every number in the report traces to a record there. A recipe's
-  meta-training (``beyond-metatrain-*``) is published as its record alone: the beyond stages that
-  scored its critics are published whole, and the critics kept for anyone to meta-test are the
-  paper's methods'.
+  stage the rules name (:attr:`CarryRules.record_only`) is published as its record alone.
 
 Each stage is copied into a temporary sibling directory and renamed into place, so an interrupted
 call leaves no half-copied stage behind.
@@ -34,21 +31,35 @@ from __future__ import annotations
 import json
 import lzma
 import shutil
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 from warp_critic.core.errors import UserError
-from warp_critic.reproduce.stages import (
+from warp_critic.reproduce.engine.stages import (
     MARKER,
     PACKED,
     STAGE_FILE,
+    Check,
     claim_out,
     read_complete,
     read_stage,
 )
 from warp_critic.running.locks import LOCK
 
-#: checkpoint entries only a resumed training reads
-TRAINING_ONLY = ("optimizer_state", "policy_params", "agent_state", "buffer")
+
+@dataclass(frozen=True)
+class CarryRules:
+    """What carrying keeps of a stage, told by the stages' owner."""
+
+    check: Check  # what makes a complete record unusable (``stages.read_complete``)
+    slim_group: str  # the stage group whose runs are slimmed: checkpoints, metrics
+    training_only: tuple[str, ...]  # the checkpoint entries only a resumed training reads
+    metrics_keys: tuple[str, ...]  # the columns of ``metrics.jsonl`` kept...
+    metrics_row: str  # ...of the rows that hold this one
+    record_only: Callable[[dict], bool]  # ``stage.json`` -> publish keeps only the record
+
+
 #: files never carried
 SKIPPED_SUFFIXES = (".rrd",)
 SKIPPED_NAMES = (LOCK,)
@@ -58,13 +69,13 @@ METRICS = "metrics.jsonl"
 ARCHIVE_STARTED = "exists but is not a complete stage; not replacing it"
 
 
-def complete_stages(folder: Path) -> dict[str, dict]:
+def complete_stages(folder: Path, check: Check) -> dict[str, dict]:
     """Stage directory name -> ``stage.json`` of every complete stage directly under ``folder``."""
     found = {}
     for d in sorted(Path(folder).iterdir()) if Path(folder).is_dir() else []:
         data = read_stage(d) if d.is_dir() else None
         if data is not None and isinstance(data.get("group"), str):
-            read_complete(d, data["group"])  # an edited or damaged stage.json: one line
+            read_complete(d, data["group"], check)  # an edited or damaged stage.json: one line
             found[d.name] = data
     return found
 
@@ -90,11 +101,11 @@ def _portable(record: dict) -> dict:
     return out
 
 
-def _slim_checkpoint(src: Path, dst: Path) -> None:
+def _slim_checkpoint(src: Path, dst: Path, training_only: tuple[str, ...]) -> None:
     from warp_critic.running.rundir import atomic_torch_save, load_checkpoint_file
 
     ckpt = load_checkpoint_file(src)
-    slim = _portable({k: v for k, v in ckpt.items() if k not in TRAINING_ONLY})
+    slim = _portable({k: v for k, v in ckpt.items() if k not in training_only})
     if isinstance(slim.get("config"), dict):
         slim["config"] = _portable(slim["config"])
     atomic_torch_save(slim, dst)
@@ -110,16 +121,13 @@ def _portable_config(src: Path) -> bytes:
     return (text + "\n").encode()
 
 
-def thin_metrics(text: str) -> str | None:
-    """A run's ``metrics.jsonl`` cut to what a reader of an archive takes from it: Meta-Critic's
-    rows, with only the columns of its per-seed auxiliary-loss share
-    (:data:`~warp_critic.methods.meta_critic.AUX_KEYS`; the report reads them for records written
-    before the share was kept in ``stage.json``). ``None`` for a run without such rows (ours,
-    DDPG): its curves are in the stage's record, and the file is not carried."""
-    from warp_critic.methods.meta_critic import AUX_KEYS
-
+def thin_metrics(text: str, rules: CarryRules) -> str | None:
+    """A run's ``metrics.jsonl`` cut to what a reader of an archive takes from it: the rows that
+    hold ``rules.metrics_row``, with only the columns ``rules.metrics_keys``. ``None`` for a run
+    without such rows: the file is not carried."""
     rows = [json.loads(line) for line in text.splitlines() if line.strip()]
-    kept = [{k: r[k] for k in AUX_KEYS if k in r} for r in rows if "aux_loss" in r]
+    keys = rules.metrics_keys
+    kept = [{k: r[k] for k in keys if k in r} for r in rows if rules.metrics_row in r]
     return "".join(json.dumps(r) + "\n" for r in kept) if kept else None
 
 
@@ -128,15 +136,10 @@ def _pack(data: bytes) -> bytes:
     return lzma.compress(data, preset=9)
 
 
-def record_only(data: dict) -> bool:
-    """Whether :func:`publish` keeps only the record of the stage whose ``stage.json`` is ``data``:
-    a recipe's meta-training (its critics were scored by ``beyond-maps`` / ``beyond-tables``)."""
-    return data.get("group") == "metatrain" and str(data.get("stage", "")).startswith("beyond-")
-
-
-def _copy_stage(src: Path, dst_parent: Path, slim: bool, pack: bool) -> None:
+def _copy_stage(src: Path, dst_parent: Path, slim: CarryRules | None, pack: bool) -> None:
     """``src`` -> ``dst_parent/src.name`` through a temporary sibling renamed into place; ``slim``:
-    checkpoints and metrics cut to what is read (a meta-training stage), ``pack``: JSON stored
+    checkpoints and metrics cut to what is read, by these rules (a stage of their slimmed group);
+    ``pack``: JSON stored
     compressed (into an archive); else a packed file is unpacked (out of one)."""
     from warp_critic.running.rundir import atomic_write_bytes
 
@@ -152,12 +155,12 @@ def _copy_stage(src: Path, dst_parent: Path, slim: bool, pack: bool) -> None:
             target = tmp / rel
             target.parent.mkdir(parents=True, exist_ok=True)
             if slim and path.name == "checkpoint.pt":
-                _slim_checkpoint(path, target)
+                _slim_checkpoint(path, target, slim.training_only)
                 continue
             if slim and path.name == "config.json":
                 data = _portable_config(path)
             elif slim and path.name == METRICS:
-                thin = thin_metrics(path.read_text())
+                thin = thin_metrics(path.read_text(), slim)
                 if thin is None:
                     continue
                 data = thin.encode()
@@ -177,14 +180,21 @@ def _copy_stage(src: Path, dst_parent: Path, slim: bool, pack: bool) -> None:
 
 
 def _carry(
-    src: Path, dst: Path, *, slim: bool, pack: bool, started: str, only: set[str] | None = None
+    src: Path,
+    dst: Path,
+    rules: CarryRules,
+    *,
+    slim: bool,
+    pack: bool,
+    started: str,
+    only: set[str] | None = None,
 ) -> list[str]:
     """Copy the complete stages of ``src`` (those named in ``only``, where given) that ``dst``
     lacks; an identical stage there is skipped, a different or unfinished one refused (``started``
     says what an unfinished one is)."""
-    have = complete_stages(dst)
+    have = complete_stages(dst, rules.check)
     copied = []
-    for name, data in complete_stages(src).items():
+    for name, data in complete_stages(src, rules.check).items():
         if only is not None and name not in only:
             continue
         if name in have:
@@ -196,36 +206,38 @@ def _carry(
             continue
         if (dst / name).exists():
             raise UserError(f"{dst / name}: {started}")
-        _copy_stage(src / name, dst, slim=slim and data["group"] == "metatrain", pack=pack)
+        slimmed = rules if slim and data["group"] == rules.slim_group else None
+        _copy_stage(src / name, dst, slim=slimmed, pack=pack)
         copied.append(name)
     return copied
 
 
-def save(out: Path, archive: Path) -> list[str]:
+def save(out: Path, archive: Path, rules: CarryRules) -> list[str]:
     """Copy the complete stages of ``out`` into ``archive``; returns the names copied."""
     out, archive = Path(out), Path(archive)
     if not (out / MARKER).is_file():
         raise UserError(f"{out}: not a reproduce output (no {MARKER})")
-    complete_stages(out)  # an edited stage.json is refused before anything is written
+    complete_stages(out, rules.check)  # an edited stage.json is refused before anything is written
     try:
         archive.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise UserError(f"{archive}: cannot create ({e.strerror or e})") from None
-    return _carry(out, archive, slim=True, pack=True, started=ARCHIVE_STARTED)
+    return _carry(out, archive, rules, slim=True, pack=True, started=ARCHIVE_STARTED)
 
 
-def restore(archive: Path, out: Path) -> list[str]:
+def restore(archive: Path, out: Path, rules: CarryRules) -> list[str]:
     """Copy the archived stages that ``out`` lacks into ``out``; returns the names copied."""
     archive = Path(archive)
     if not archive.is_dir():
         raise UserError(f"{archive}: no such directory")
-    if not complete_stages(archive):
+    if not complete_stages(archive, rules.check):
         raise UserError(f"{archive}: holds no complete reproduce stage")
     out, lock = claim_out(Path(out))
     try:
         return _carry(
             archive,
             out,
+            rules,
             slim=False,
             pack=False,
             started="this stage was started here and is not complete; remove it to take the "
@@ -248,13 +260,13 @@ def _published_record(d: Path) -> bool:
 ARCHIVE = "stages"
 
 
-def publish(out: Path, dest: Path) -> tuple[list[str], list[str]]:
+def publish(out: Path, dest: Path, rules: CarryRules) -> tuple[list[str], list[str]]:
     """Copy the report of ``out`` into ``dest``, for committing: ``REPORT.md``, ``results.json``,
     ``ledger.jsonl`` (where there is one) and ``figures/*.png``; and save each stage the report
     read (``results.json``'s ``stages``) into the archive ``dest/stages`` as :func:`save` does, so
     every number in the report traces to a record there (``tables-*/errors.json`` named in the
     report is ``dest/stages/tables-*/errors.json.xz``). A recipe's meta-training is archived as its
-    record alone (:func:`record_only`; also one an earlier call archived whole).
+    record alone (``rules.record_only``; also one an earlier call archived whole).
 
     ``dest``'s figures that this report did not draw are removed, and so are the stage records an
     earlier version of this function wrote beside the report; anything else in ``dest`` (a README,
@@ -276,13 +288,13 @@ def publish(out: Path, dest: Path) -> tuple[list[str], list[str]]:
     for name in stages:
         if Path(name).name != name or not (out / name / STAGE_FILE).is_file():
             raise UserError(f"{out / 'results.json'}: names stage {name!r}, which {out} lacks")
-    complete_stages(out)  # an edited stage.json is refused before anything is written
+    complete_stages(out, rules.check)  # an edited stage.json is refused before anything is written
     try:
         (dest / ARCHIVE).mkdir(parents=True, exist_ok=True)
         archive = dest / ARCHIVE
-        _carry(out, archive, slim=True, pack=True, started=ARCHIVE_STARTED, only=set(stages))
-        for name, data in complete_stages(archive).items():  # now or by an earlier publish
-            if name in stages and record_only(data):
+        _carry(out, archive, rules, slim=True, pack=True, started=ARCHIVE_STARTED, only=set(stages))
+        for name, data in complete_stages(archive, rules.check).items():  # now or earlier
+            if name in stages and rules.record_only(data):
                 for extra in sorted((archive / name).iterdir()):
                     if extra.name not in (STAGE_FILE, STAGE_FILE + PACKED):
                         shutil.rmtree(extra) if extra.is_dir() else extra.unlink()
@@ -306,13 +318,13 @@ def publish(out: Path, dest: Path) -> tuple[list[str], list[str]]:
     return stages, pruned
 
 
-def summary(archive: Path) -> str:
+def summary(archive: Path, check: Check) -> str:
     """One line per archived stage: name, group, seconds (for the tool's listing)."""
     rows = [
         f"{name}: {data['group']}, {float(data.get('seconds', 0.0)):.0f} s"
-        for name, data in complete_stages(Path(archive)).items()
+        for name, data in complete_stages(Path(archive), check).items()
     ]
     return "\n".join(rows) if rows else f"{archive}: no complete stage"
 
 
-__all__ = ["TRAINING_ONLY", "complete_stages", "save", "restore", "publish", "summary"]
+__all__ = ["CarryRules", "complete_stages", "save", "restore", "publish", "summary"]

@@ -6,7 +6,7 @@ Definitions (stated in the report):
 
 * **steps to a level**: the first iteration after which the running mean of the training error
   ``||q_T - g||^2`` (rad^2, summed over the joints; the curve of Figure 3) over
-  :data:`~.rules.WINDOW` iterations stays at or below the level (:mod:`.rules`), as environment steps
+  :data:`~warp_critic.reproduce.report.rules.WINDOW` iterations stays at or below the level (:mod:`~warp_critic.reproduce.report.rules`), as environment steps
   ``(iteration + 1) x steps per iteration`` and as wall time (the sum of the iteration times up to
   it); mean and min-max over the seeds that reach it, and the count that never does.
 * **solved the training task** (the paper: "for our baselines, we selected seeds that solved the
@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from warp_critic.methods import method
-from warp_critic.reproduce.report_plots import diverged_cmap, log_limits
-from warp_critic.reproduce.rules import WINDOW, sample_efficiency, settled_index
-from warp_critic.reproduce.settings import ALL_METHODS, METHOD_LABELS, METHODS, present
+from warp_critic.reproduce.experiments.settings import ALL_METHODS, METHOD_LABELS, METHODS, present
+from warp_critic.reproduce.report.plots import diverged_cmap, log_limits
+from warp_critic.reproduce.report.rules import WINDOW, sample_efficiency, settled_index
 
 LEVELS = (0.3, 0.1, 0.03)
 #: rad^2 (summed over the joints): a baseline seed "solved the training task" at or below this final
@@ -72,7 +72,7 @@ def steps_to_levels(
     res: dict, budget: float | None = None, window: int = WINDOW
 ) -> dict[float, dict]:
     """level -> {steps: [per reaching seed], seconds: [...], never: int, seeds: int}: a seed reaches
-    a level at :func:`~.rules.settled_index` (the running mean over ``window`` iterations stays at
+    a level at :func:`~warp_critic.reproduce.report.rules.settled_index` (the running mean over ``window`` iterations stays at
     or below it to the end of the curve, the curve cut at ``budget`` env steps when given)."""
     curves = seed_curves(res)
     out = {}
@@ -129,7 +129,7 @@ def steps_table(got: dict) -> tuple[list[str], dict]:
 
 def sample_efficiency_verdict(data: dict, within: dict | None = None) -> tuple[str, str]:
     """(verdict, measurement) for 'ours reaches the training error levels in fewer steps', under
-    :data:`~.rules.STEPS_RULE`: ``data`` from the whole curves, ``within`` from the curves cut at
+    :data:`~warp_critic.reproduce.report.rules.STEPS_RULE`: ``data`` from the whole curves, ``within`` from the curves cut at
     the common budget (the same when the budgets are equal)."""
     return sample_efficiency(data, data if within is None else within)
 
@@ -151,6 +151,15 @@ def solved_cell(cell: dict, solved: list[bool]) -> tuple[float, float] | None:
     return mean, float(np.sqrt(max(var, 0.0)))
 
 
+#: the start of the label of a row of this run's numbers (beside the paper's own rows)
+THIS_RUN = "this run: "
+
+
+def shown(label: str) -> str:
+    """A row's label as a sentence names it: without :data:`THIS_RUN`."""
+    return label.removeprefix(THIS_RUN)
+
+
 def method_rows(
     cells_of, n_cols: int, solved: dict[str, list[bool]], fmt_cell, shown=METHODS
 ) -> list[tuple]:
@@ -160,7 +169,7 @@ def method_rows(
     for m in shown:
         rows.append(
             (
-                f"this run: {METHOD_LABELS[m]}" + (", all seeds" if m != "ours" else ""),
+                f"{THIS_RUN}{METHOD_LABELS[m]}" + (", all seeds" if m != "ours" else ""),
                 m,
                 [(c["mse_mean"], c["mse_std"]) for c in (cells_of(ci, m) for ci in range(n_cols))],
             )
@@ -168,7 +177,7 @@ def method_rows(
         if m in ALL_BASELINES:
             ok = solved.get(m, [])
             label = (
-                f"this run: {METHOD_LABELS[m]}, seeds that solved training ({sum(ok)} of {len(ok)})"
+                f"{THIS_RUN}{METHOD_LABELS[m]}, seeds that solved training ({sum(ok)} of {len(ok)})"
             )
             rows.append((label, m, [solved_cell(cells_of(ci, m), ok) for ci in range(n_cols)]))
     return rows

@@ -131,9 +131,9 @@ def table_verdict(
 
 def sample_efficiency(full: dict, within: dict) -> tuple[str, str]:
     """(verdict, measurement) under :data:`STEPS_RULE`: ``full`` and ``within`` map method ->
-    level -> {steps, never, ...} (:func:`~.report_paper.steps_to_levels` on the whole curves and
+    level -> {steps, never, ...} (:func:`~warp_critic.reproduce.report.paper.steps_to_levels` on the whole curves and
     on the curves cut at the common budget)."""
-    from warp_critic.reproduce.settings import METHOD_LABELS
+    from warp_critic.reproduce.experiments.settings import METHOD_LABELS
 
     def mean(t: dict, level: float) -> float:
         return float(np.mean(t[level]["steps"])) if t[level]["never"] == 0 else np.inf

@@ -7,13 +7,14 @@ from __future__ import annotations
 from warp_critic.evaluation.paper import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE3
 from warp_critic.evaluation.seed_uses import seed_note
 from warp_critic.methods import methods
-from warp_critic.reproduce import report_paper as rp
-from warp_critic.reproduce.report_departures import departures_line
-from warp_critic.reproduce.report_draft import Draft
-from warp_critic.reproduce.report_paper import beats_baselines, method_rows
-from warp_critic.reproduce.rules import table_verdict
-from warp_critic.reproduce.settings import METHOD_LABELS, METHODS, present
-from warp_critic.reproduce.stages import STAGE_FILE
+from warp_critic.reproduce.engine.stages import STAGE_FILE
+from warp_critic.reproduce.experiments.naming import stage_name
+from warp_critic.reproduce.experiments.settings import METHOD_LABELS, METHODS, present
+from warp_critic.reproduce.report import paper as rp
+from warp_critic.reproduce.report.departures import departures_line
+from warp_critic.reproduce.report.draft import Draft
+from warp_critic.reproduce.report.paper import beats_baselines, method_rows
+from warp_critic.reproduce.report.rules import table_verdict
 
 MARK = "✓"
 #: on a baseline's rows: better than the paper's baseline, i.e. the paper's gap is not reproduced
@@ -207,7 +208,7 @@ def tables_section(d: Draft) -> None:
         ]
         md += [departures_line("kuka", recs), "", f"Goals: {seed_note(T_seed(r))}.", ""]
         table_blocks(d, r, sv, heldout=False)
-    h = recs.get("tables-heldout")
+    h = recs.get(stage_name("tables", heldout=True))
     md += ["## Tables 1-3 on a held-out goal seed", ""]
     if h is None:
         md += ["Not run (stage `tables-heldout`).", ""]

@@ -1,12 +1,12 @@
 """The executor ``warp-critic reproduce``'s flags ask for: in this process (none), ``--jobs N`` local
-processes, or ``--ray [ADDRESS]`` (:mod:`warp_critic.reproduce.executors`,
-:mod:`warp_critic.reproduce.on_ray`; Ray itself is imported only when asked for)."""
+processes, or ``--ray [ADDRESS]`` (:mod:`warp_critic.reproduce.engine.executors`,
+:mod:`warp_critic.reproduce.engine.on_ray`; Ray itself is imported only when asked for)."""
 
 from __future__ import annotations
 
 from warp_critic.core.errors import FieldError
-from warp_critic.reproduce.executors import InProcess, LocalProcesses
-from warp_critic.reproduce.on_ray import RayExecutor
+from warp_critic.reproduce.engine.executors import InProcess, LocalProcesses
+from warp_critic.reproduce.engine.on_ray import RayExecutor
 
 
 def make_executor(jobs: int | None, ray: str | None, device: str):

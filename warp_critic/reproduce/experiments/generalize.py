@@ -15,7 +15,7 @@ method, as ``mean_j (q_T,j - g_j)^2`` (MSE over the joints); ``mean(std)`` over 
 * Stress tables (this project's earlier, harsher variants): ``stress_mass`` ADDS a point mass at the
   tip (``Variant(ee_mass=m)``), ``stress_length`` SETS link 7's length by stretching the link
   (``Variant(link_length=L)``). Each column also gets the open-loop reachability floor
-  (:mod:`.reach`): the error the best open-loop torques with the same bounds and horizon reach.
+  (:mod:`~warp_critic.reproduce.experiments.reach`): the error the best open-loop torques with the same bounds and horizon reach.
 * Tables 2, 3 and the stress tables use one set of ``num_goals`` goals drawn as Table 1's at
   ``dynamics_goal_std``.
 
@@ -37,7 +37,13 @@ import torch
 from warp_critic.core.errors import UserError
 from warp_critic.physics.link_changes import parse_changes
 from warp_critic.physics.scene import Variant
-from warp_critic.reproduce.evaluate import Job, default_steps, evaluate, relpath
+from warp_critic.reproduce.experiments.evaluate import (
+    Job,
+    default_steps,
+    evaluate,
+    pool_errors,
+    relpath,
+)
 from warp_critic.running.task_inputs import inside_limits
 
 
@@ -60,20 +66,6 @@ def _sample(train_goals, lo, hi, num, std, around, noise, seed):
     return sample_goals(
         train_goals, int(num), float(std), list(around) if around else None, lo, hi, gen, noise
     )
-
-
-def _pool(errs: list[np.ndarray], dof: int) -> dict:
-    """Pool final squared errors (one (G, K) array per seed) into a cell: MSE over joints. A
-    diverged world (``inf``) makes the cell's mean ``inf``; ``diverged`` counts them."""
-    mse = np.concatenate([e.ravel() for e in errs]) / dof
-    return {
-        "mse_mean": float(mse.mean()),
-        "mse_std": float(mse.std()) if np.isfinite(mse).all() else float("nan"),
-        "diverged": int((~np.isfinite(mse)).sum()),
-        "mse_per_seed": [float(e.mean() / dof) for e in errs],
-        "mse_std_per_seed": [float((e / dof).std()) for e in errs],
-        "n": int(mse.size),
-    }
 
 
 def table_variant(table: str, v: float) -> Variant:
@@ -146,28 +138,7 @@ def run_tables_stage(
         s["goal_noise"],
         s["seed"],
     )
-    jobs, goals_used = [], {}
-    for table, values in columns.items():
-        for ci, v in enumerate(values):
-            if table == "table1":
-                goals = _sample(
-                    train_goals,
-                    lo,
-                    hi,
-                    s["num_goals"],
-                    v,
-                    s["around"],
-                    s["goal_noise"],
-                    int(s["seed"]) + ci,
-                )
-                variant = Variant()
-            else:
-                goals = dyn_goals
-                variant = table_variant(table, v)
-            goals_used[f"{table}/{ci}"] = goals.tolist()
-            for m in runs:
-                for si, rd in enumerate(runs[m]):
-                    jobs.append(Job((table, ci, m, si), str(rd), goals, variant))
+    jobs, goals_used = _table_jobs(s, columns, runs, (train_goals, lo, hi), dyn_goals)
     r = evaluate(
         jobs,
         inits=int(s["inits"]),
@@ -189,26 +160,10 @@ def run_tables_stage(
         for j, e, b in zip(jobs, r["errors"], r["before"])
     ]
     (d / "errors.json").write_text(json.dumps({"goals": goals_used, "jobs": raw}) + "\n")
-    cells = []
-    for table, values in columns.items():
-        for ci, v in enumerate(values):
-            for m in runs:
-                idx = [k for k, j in enumerate(jobs) if j.key[:3] == (table, ci, m)]
-                cell = _pool([r["errors"][k] for k in idx], r["dof"])
-                cell.update(
-                    table=table,
-                    column=ci,
-                    value=v,
-                    method=m,
-                    runs=[relpath(jobs[k].run_dir, d.parent) for k in idx],
-                    untrained_mse_mean=float(
-                        np.mean([r["before"][k].mean() for k in idx]) / r["dof"]
-                    ),
-                )
-                cells.append(cell)
+    cells = _table_cells(columns, runs, jobs, r, d.parent)
     floors = {}
     if int(s["reach_iterations"]) > 0:
-        from warp_critic.reproduce.reach import open_loop_floor
+        from warp_critic.reproduce.experiments.reach import open_loop_floor
 
         for table in ("stress_mass", "stress_length"):
             best = open_loop_floor(
@@ -235,6 +190,57 @@ def run_tables_stage(
         "raw_file": "errors.json",
         "dynamics_goals": dyn_goals.tolist(),
     }
+
+
+def _table_jobs(s: dict, columns: dict, runs: dict, train: tuple, dyn_goals) -> tuple[list, dict]:
+    """Every (table, column, method, seed) job of the tables, and the goals of each column
+    (``table/column`` -> goals). ``train``: the training goals and the joint limits (rad)."""
+    train_goals, lo, hi = train
+    jobs, goals_used = [], {}
+    for table, values in columns.items():
+        for ci, v in enumerate(values):
+            if table == "table1":
+                goals = _sample(
+                    train_goals,
+                    lo,
+                    hi,
+                    s["num_goals"],
+                    v,
+                    s["around"],
+                    s["goal_noise"],
+                    int(s["seed"]) + ci,
+                )
+                variant = Variant()
+            else:
+                goals = dyn_goals
+                variant = table_variant(table, v)
+            goals_used[f"{table}/{ci}"] = goals.tolist()
+            for m in runs:
+                for si, rd in enumerate(runs[m]):
+                    jobs.append(Job((table, ci, m, si), str(rd), goals, variant))
+    return jobs, goals_used
+
+
+def _table_cells(columns: dict, runs: dict, jobs: list, r: dict, base: Path) -> list[dict]:
+    """One cell per table, column and method: its errors pooled over seeds (``pool_errors``)."""
+    cells = []
+    for table, values in columns.items():
+        for ci, v in enumerate(values):
+            for m in runs:
+                idx = [k for k, j in enumerate(jobs) if j.key[:3] == (table, ci, m)]
+                cell = pool_errors([r["errors"][k] for k in idx], r["dof"])
+                cell.update(
+                    table=table,
+                    column=ci,
+                    value=v,
+                    method=m,
+                    runs=[relpath(jobs[k].run_dir, base) for k in idx],
+                    untrained_mse_mean=float(
+                        np.mean([r["before"][k].mean() for k in idx]) / r["dof"]
+                    ),
+                )
+                cells.append(cell)
+    return cells
 
 
 def goal_grid(
@@ -264,7 +270,7 @@ def run_maps_stage(
     ``only``: the rows evaluated (default: every one of ``runs``; ours' runs set the grids).
 
     ``floors_from``: a complete maps stage directory next to ``d`` that computed the reachability
-    floors of the same grids from the same nominal runs (:func:`~.units.paper_maps_floors`); its
+    floors of the same grids from the same nominal runs (:func:`~warp_critic.reproduce.experiments.units.paper_maps_floors`); its
     floors are taken instead of computed again (``reach_floor_from`` names it)."""
     import json
 
@@ -338,7 +344,7 @@ def run_maps_stage(
         "length": {},
     }
     if int(s["reach_iterations"]) > 0 and floors_from is not None:
-        from warp_critic.reproduce.stages import read_stage
+        from warp_critic.reproduce.engine.stages import read_stage
 
         done = (read_stage(d.parent / floors_from) or {}).get("result", {})
         keys = ("reach_floor", "reach_iterations", "reach_lrs")
@@ -348,18 +354,23 @@ def run_maps_stage(
     elif int(s["reach_iterations"]) > 0:
         out.update(_maps_floor(first, s, grid.view(n, n, 2), train_goals, pairs, variant, device))
     for m in runs:
-        errs = [r["errors"][k] for k, j in enumerate(jobs) if j.key[0] == "goals" and j.key[2] == m]
-        per_goal = (
-            np.stack([e.mean(1) for e in errs]).mean(0) / dof
-        )  # mean over seeds x inits, per goal
-        out["goals"][m] = {"mse": per_goal.reshape(n, n).tolist(), **_pool(errs, dof)}
-        for kind, values in pairs.items():
-            cells = []
-            for ci, v in enumerate(values):
-                errs = [r["errors"][k] for k, j in enumerate(jobs) if j.key[:3] == (kind, ci, m)]
-                cells.append({"value": list(v), **_pool(errs, dof)})
-            out[kind][m] = cells
+        _map_results(out, m, jobs, r["errors"], pairs, n, dof)
     return out
+
+
+def _map_results(out: dict, m: str, jobs: list, errors: list, pairs: dict, n: int, dof: int):
+    """Method ``m``'s goal map ``(n, n)`` MSE and its 2-D maps' cells into ``out``."""
+    errs = [errors[k] for k, j in enumerate(jobs) if j.key[0] == "goals" and j.key[2] == m]
+    per_goal = (
+        np.stack([e.mean(1) for e in errs]).mean(0) / dof
+    )  # mean over seeds x inits, per goal
+    out["goals"][m] = {"mse": per_goal.reshape(n, n).tolist(), **pool_errors(errs, dof)}
+    for kind, values in pairs.items():
+        cells = []
+        for ci, v in enumerate(values):
+            errs = [errors[k] for k, j in enumerate(jobs) if j.key[:3] == (kind, ci, m)]
+            cells.append({"value": list(v), **pool_errors(errs, dof)})
+        out[kind][m] = cells
 
 
 def _maps_floor(
@@ -368,8 +379,8 @@ def _maps_floor(
     """The open-loop reachability floor (MSE over the joints) of every goal of the goal grid ``(n, n,
     dof)`` and of every cell of the 2-D maps (mean over the training goals): what the best open-loop
     torques within the policy's bounds and horizon reach from home
-    (:func:`~.reach.best_open_loop_floor`)."""
-    from warp_critic.reproduce.reach import best_open_loop_floor
+    (:func:`~warp_critic.reproduce.experiments.reach.best_open_loop_floor`)."""
+    from warp_critic.reproduce.experiments.reach import best_open_loop_floor
 
     its, lrs = int(s["reach_iterations"]), [float(x) for x in s["reach_lrs"]]
 

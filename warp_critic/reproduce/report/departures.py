@@ -3,14 +3,15 @@ prints next to each table and figure of that robot (read from the stage records 
 
 from __future__ import annotations
 
-from warp_critic.reproduce.settings import METHOD_LABELS, TUNED
+from warp_critic.reproduce.experiments.naming import stage_name
+from warp_critic.reproduce.experiments.settings import METHOD_LABELS, TUNED
 
 
 def scene_gravity(scene: str) -> float | None:
     """The gravity the scene's runs use (m/s^2), ``None`` if the scene cannot be read."""
     try:
         from warp_critic.physics.load import load_scene
-        from warp_critic.reproduce.metatrain import scene_file
+        from warp_critic.reproduce.experiments.metatrain import scene_file
 
         g = load_scene(scene_file(scene)).defaults.get("gravity")
     except Exception:  # the report states what it can
@@ -47,7 +48,7 @@ def departures(scene: str, values: dict, gravity: float | None) -> list[str]:
 
 def departures_line(scene: str, recs: dict) -> str:
     """The report's sentence for ``scene`` (``recs``: the stage records by name)."""
-    rec = recs.get(f"metatrain-{scene}-ours")
+    rec = recs.get(stage_name("metatrain", scene, "ours"))
     values = rec.data.get("settings", {}).get("values", {}) if rec is not None else {}
     items = departures(scene, values, scene_gravity(scene))
     if not items:

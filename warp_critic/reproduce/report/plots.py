@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 
 from warp_critic.methods import methods
-from warp_critic.reproduce.settings import METHOD_LABELS, present
-from warp_critic.reproduce.stages import StageRecord
+from warp_critic.reproduce.engine.stages import StageRecord
+from warp_critic.reproduce.experiments.settings import METHOD_LABELS, present
 from warp_critic.running.rundir import save_figure
 
 COLORS = {m.name: m.colour for m in methods()}

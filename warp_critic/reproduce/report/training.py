@@ -5,60 +5,35 @@ from __future__ import annotations
 
 import numpy as np
 
-from warp_critic.reproduce import report_paper as rp
-from warp_critic.reproduce.report_departures import departures_line
-from warp_critic.reproduce.report_draft import Draft, fmt
-from warp_critic.reproduce.report_plots import plot_metatrain
-from warp_critic.reproduce.rules import SPREAD_RULE, STEPS_RULE, WINDOW
-from warp_critic.reproduce.settings import ALL_METHODS, METHOD_LABELS, METHODS, SCENES
-from warp_critic.reproduce.stages import STAGE_FILE
+from warp_critic.reproduce.engine.stages import STAGE_FILE
+from warp_critic.reproduce.experiments.naming import stage_name
+from warp_critic.reproduce.experiments.settings import ALL_METHODS, METHOD_LABELS, METHODS, SCENES
+from warp_critic.reproduce.report import paper as rp
+from warp_critic.reproduce.report.departures import departures_line
+from warp_critic.reproduce.report.draft import Draft, fmt
+from warp_critic.reproduce.report.plots import plot_metatrain
+from warp_critic.reproduce.report.rules import SPREAD_RULE, STEPS_RULE, WINDOW
 
 
 def metatrain_section(d: Draft) -> None:
     """Figure 3: meta-training of the three methods on both robots."""
-    figs, recs, md, results, figures, claims = d.figs, d.recs, d.md, d.results, d.figures, d.claims
-    md += ["## Figure 3: meta-training (reacher, KUKA)", ""]
+    d.md += ["## Figure 3: meta-training (reacher, KUKA)", ""]
     for scene in SCENES:
         got = {
-            m: rec for m in ALL_METHODS if (rec := recs.get(f"metatrain-{scene}-{m}")) is not None
+            m: rec
+            for m in ALL_METHODS
+            if (rec := d.recs.get(stage_name("metatrain", scene, m))) is not None
         }
         if not got:
-            md += [f"{scene}: not run (stage `metatrain`).", ""]
+            d.md += [f"{scene}: not run (stage `metatrain`).", ""]
             continue
-        png = figs / f"fig3_metatrain_{scene}.png"
+        png = d.figs / f"fig3_metatrain_{scene}.png"
         summary = plot_metatrain(png, scene, got)
-        md += [
-            f"### {scene}",
-            "",
-            departures_line(scene, recs),
-            "",
-            "| method | iterations | env steps | env steps counted | final ||q_T-g||^2 mean(std) over seeds | first iteration |",
-            "|---|---|---|---|---|---|",
-        ]
-        for m, s in summary.items():
-            res = got[m].data["result"]
-            md.append(
-                f"| {METHOD_LABELS[m]} | {s['iterations']} | {s['env_steps']} | {res['env_steps_counted']} | "
-                f"{fmt(s['final_mean'])}({fmt(s['final_std'])}) | {fmt(s['first_mean'])} |"
-            )
-            results["metatrain"][f"{scene}/{m}"] = {
-                **s,
-                "file": f"{got[m].dir.name}/{STAGE_FILE}",
-                "runs": [
-                    f"{got[m].dir.name}/{v['run_dir']}/metrics.jsonl" for v in res["seeds"].values()
-                ],
-            }
-        md.append("")
-        if "meta-critic" in got:
-            alive = aux_alive_of(got["meta-critic"])
-            bases = aux_alive_bases_of(got["meta-critic"])
-            results["metatrain"][f"{scene}/meta-critic"]["aux_alive"] = alive
-            results["metatrain"][f"{scene}/meta-critic"]["aux_alive_basis"] = bases
-            md += [aux_alive_sentence(alive, bases), ""]
+        _curves_table(d, scene, got, summary)
         lines, levels = rp.steps_table(got)
         budget = min(s["env_steps"] for s in summary.values())
         at_budget = {m: rp.error_at_budget(got[m].data["result"], budget) for m in got}
-        md += (
+        d.md += (
             [
                 f"Environment steps and wall time to reach each training-error level (rad^2, summed over "
                 f"the joints) and stay there: the first iteration after which the running mean over "
@@ -75,52 +50,90 @@ def metatrain_section(d: Draft) -> None:
             + lines
             + [""]
         )
-        results["metatrain"][f"{scene}/steps_to_levels"] = {
-            m: {str(k): v for k, v in d.items()} for m, d in levels.items()
+        d.results["metatrain"][f"{scene}/steps_to_levels"] = {
+            m: {str(k): v for k, v in lv.items()} for m, lv in levels.items()
         }
-        results["metatrain"][f"{scene}/error_at_budget"] = {"budget": budget, **at_budget}
-        # the paper's claims compare ours with the paper's baselines (an extra one is shown only)
-        claimed = [m for m in got if m in METHODS]
-        within = {m: rp.steps_to_levels(got[m].data["result"], budget) for m in claimed}
-        verdict, measured = rp.sample_efficiency_verdict(
-            {m: v for m, v in levels.items() if m in METHODS}, within
+        d.results["metatrain"][f"{scene}/error_at_budget"] = {"budget": budget, **at_budget}
+        _scene_claims(d, scene, got, summary, levels, at_budget, budget, png)
+
+
+def _curves_table(d: Draft, scene: str, got: dict, summary: dict) -> None:
+    """The robot's table of iterations, steps and final errors per method, into ``d``."""
+    md, results = d.md, d.results
+    md += [
+        f"### {scene}",
+        "",
+        departures_line(scene, d.recs),
+        "",
+        "| method | iterations | env steps | env steps counted | final ||q_T-g||^2 mean(std) over seeds | first iteration |",
+        "|---|---|---|---|---|---|",
+    ]
+    for m, s in summary.items():
+        res = got[m].data["result"]
+        md.append(
+            f"| {METHOD_LABELS[m]} | {s['iterations']} | {s['env_steps']} | {res['env_steps_counted']} | "
+            f"{fmt(s['final_mean'])}({fmt(s['final_std'])}) | {fmt(s['first_mean'])} |"
         )
-        claims.append(
+        results["metatrain"][f"{scene}/{m}"] = {
+            **s,
+            "file": f"{got[m].dir.name}/{STAGE_FILE}",
+            "runs": [
+                f"{got[m].dir.name}/{v['run_dir']}/metrics.jsonl" for v in res["seeds"].values()
+            ],
+        }
+    md.append("")
+    if "meta-critic" in got:
+        alive = aux_alive_of(got["meta-critic"])
+        bases = aux_alive_bases_of(got["meta-critic"])
+        results["metatrain"][f"{scene}/meta-critic"]["aux_alive"] = alive
+        results["metatrain"][f"{scene}/meta-critic"]["aux_alive_basis"] = bases
+        md += [aux_alive_sentence(alive, bases), ""]
+
+
+def _scene_claims(
+    d: Draft, scene: str, got: dict, summary: dict, levels: dict, at_budget: dict, budget, png
+) -> None:
+    """The robot's sample-efficiency and seed-sensitivity claims, and Figure 3's sentence."""
+    # the paper's claims compare ours with the paper's baselines (an extra one is shown only)
+    claimed = [m for m in got if m in METHODS]
+    within = {m: rp.steps_to_levels(got[m].data["result"], budget) for m in claimed}
+    verdict, measured = rp.sample_efficiency_verdict(
+        {m: v for m, v in levels.items() if m in METHODS}, within
+    )
+    d.claims.append(
+        {
+            "claim": f"Figure 3 ({scene}): ours is more sample efficient (fewer steps to solve training)",
+            "paper": "training curves over iterations; ours falls fastest",
+            "ours": measured + f" (within the common budget of {budget:.3g} env steps)",
+            "verdict": verdict,
+            "reason": budget_sentence(
+                {m: s["env_steps"] for m, s in summary.items() if m in METHODS}
+            )
+            + f" {STEPS_RULE}",
+        }
+    )
+    spread: dict[str, float] = {m: float(np.std(v)) for m, v in at_budget.items() if m in METHODS}
+    if "ours" in spread and len(spread) > 1:
+        least = min(spread, key=spread.__getitem__)
+        d.claims.append(
             {
-                "claim": f"Figure 3 ({scene}): ours is more sample efficient (fewer steps to solve training)",
-                "paper": "training curves over iterations; ours falls fastest",
-                "ours": measured + f" (within the common budget of {budget:.3g} env steps)",
-                "verdict": verdict,
-                "reason": budget_sentence(
-                    {m: s["env_steps"] for m, s in summary.items() if m in METHODS}
-                )
-                + f" {STEPS_RULE}",
+                "claim": f"Figure 3 ({scene}): ours is the least sensitive to the seed",
+                "paper": "narrowest band over seeds",
+                "ours": f"std over seeds of the training error at {budget:.3g} steps: "
+                + ", ".join(f"{METHOD_LABELS[m]} {fmt(v)}" for m, v in spread.items()),
+                "verdict": "met" if least == "ours" else "not met",
+                "reason": f"smallest spread: {METHOD_LABELS[least]}. {SPREAD_RULE}",
             }
         )
-        spread: dict[str, float] = {
-            m: float(np.std(v)) for m, v in at_budget.items() if m in METHODS
-        }
-        if "ours" in spread and len(spread) > 1:
-            least = min(spread, key=spread.__getitem__)
-            claims.append(
-                {
-                    "claim": f"Figure 3 ({scene}): ours is the least sensitive to the seed",
-                    "paper": "narrowest band over seeds",
-                    "ours": f"std over seeds of the training error at {budget:.3g} steps: "
-                    + ", ".join(f"{METHOD_LABELS[m]} {fmt(v)}" for m, v in spread.items()),
-                    "verdict": "met" if least == "ours" else "not met",
-                    "reason": f"smallest spread: {METHOD_LABELS[least]}. {SPREAD_RULE}",
-                }
-            )
-            sentence = (
-                f"Figure 3 ({scene}): training error vs iterations and environment steps. At the common "
-                f"budget of {budget:.3g} steps the lowest mean error is "
-                f"{METHOD_LABELS[min(at_budget, key=lambda m: np.mean(at_budget[m]))]}'s and the smallest "
-                f"spread over seeds {METHOD_LABELS[least]}'s; sample efficiency (steps to levels): {verdict}."
-            )
-        else:
-            sentence = f"Figure 3 ({scene}): training curves of the methods that ran."
-        figures.append((f"Figure 3: meta-training {scene}", png, sentence))
+        sentence = (
+            f"Figure 3 ({scene}): training error vs iterations and environment steps. At the common "
+            f"budget of {budget:.3g} steps the lowest mean error is "
+            f"{METHOD_LABELS[min(at_budget, key=lambda m: np.mean(at_budget[m]))]}'s and the smallest "
+            f"spread over seeds {METHOD_LABELS[least]}'s; sample efficiency (steps to levels): {verdict}."
+        )
+    else:
+        sentence = f"Figure 3 ({scene}): training curves of the methods that ran."
+    d.figures.append((f"Figure 3: meta-training {scene}", png, sentence))
 
 
 def budget_sentence(env_steps: dict[str, int]) -> str:

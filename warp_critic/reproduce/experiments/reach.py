@@ -37,7 +37,7 @@ def open_loop_floor(
     from warp_critic.learning.networks import Normalizer
     from warp_critic.learning.rollout import finite_worlds, rollout
     from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
-    from warp_critic.reproduce.evaluate import load_runs
+    from warp_critic.reproduce.experiments.evaluate import load_runs
     from warp_critic.running.scenefile import find_run_scene
     from warp_critic.running.task_inputs import max_torque_tensor
 

@@ -1,5 +1,5 @@
 """The report being written: its markdown lines, ``results.json`` dict, figures and claims,
-shared by the report's sections (:mod:`.report`, which renders them)."""
+shared by the report's sections (:mod:`~warp_critic.reproduce.report.write`, which renders them)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from warp_critic.reproduce.stages import StageRecord
+from warp_critic.reproduce.engine.stages import StageRecord
 
 
 @dataclass

@@ -1,4 +1,4 @@
-"""``--ray [ADDRESS]``: each reproduce unit as a Ray task (see :mod:`warp_critic.reproduce.executors`).
+"""``--ray [ADDRESS]``: each reproduce unit as a Ray task (see :mod:`warp_critic.reproduce.engine.executors`).
 
 No shared filesystem is assumed: a task gets the files of the stage directories it reads (and of its
 own unfinished stage directory, to resume) and returns the files of its stage directory, which the
@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
-from warp_critic.reproduce.executors import (
+from warp_critic.reproduce.engine.executors import (
     UNIT_FAULT_ENV,
     Done,
     Log,

@@ -16,12 +16,13 @@ import json
 import lzma
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from warp_critic.core.errors import FieldError, UserError
+from warp_critic.reproduce.engine.stage import dir_name
 from warp_critic.running.locks import LOCK, REPRODUCE_MARKER, FolderLock, check_not_owned
 from warp_critic.running.rundir import atomic_write_text, check_output_dir
 
@@ -86,7 +87,7 @@ def _check_ours(out: Path) -> None:
 
 def read_stage(d: Path) -> dict | None:
     """The ``stage.json`` of a complete stage directory, or ``None``; in a carried archive
-    (:mod:`~warp_critic.reproduce.carry`) the record is xz-compressed, ``stage.json.xz``."""
+    (:mod:`~warp_critic.reproduce.engine.carry`) the record is xz-compressed, ``stage.json.xz``."""
     try:
         packed = Path(d) / (STAGE_FILE + PACKED)
         text = (
@@ -100,11 +101,17 @@ def read_stage(d: Path) -> dict | None:
     return data if isinstance(data, dict) and data.get("kind") == STAGE_KIND else None
 
 
-def read_complete(d: Path, group: str) -> dict | None:
+#: what makes a complete stage's record unusable, told by the stages' owner: ``(group, stage.json)
+#: -> why, or None`` (the engine itself checks only what every record holds: seconds, a result)
+Check = Callable[[str, dict], str | None]
+
+
+def read_complete(d: Path, group: str, check: Check) -> dict | None:
     """The ``stage.json`` of a complete stage of ``group``, ``None`` when the stage is not complete;
-    a ``stage.json`` edited or damaged so that it cannot be used is a one-line :class:`UserError`."""
+    a ``stage.json`` edited or damaged so that it cannot be used (:func:`record_problem`, then
+    ``check``) is a one-line :class:`UserError`."""
     data = read_stage(d)
-    problem = None if data is None else stage_problem(group, data)
+    problem = None if data is None else record_problem(data) or check(group, data)
     if problem is not None:
         packed = Path(d) / (STAGE_FILE + PACKED)
         raise UserError(
@@ -114,39 +121,12 @@ def read_complete(d: Path, group: str) -> dict | None:
     return data
 
 
-#: what the report and the stages that read a stage take from its result: key -> JSON type
-RESULT_KEYS: dict[str, dict[str, type | tuple[type, ...]]] = {
-    "toy": {"closed_form": dict, "numerical": dict, "table_markdown": str, "files": dict},
-    "landscape": {"goals": list, "fractions": (list, dict), "files": dict, "generalising": dict},
-    "metatrain": {"seeds": dict, "iterations": int, "env_steps_per_iteration": int},
-    "maps": {"axis_q1": list, "axis_q2": list, "goals": dict, "mass": dict, "length": dict},
-    "tables": {"columns": dict, "cells": list, "dof": int},
-}
-
-
-def stage_problem(group: str, data: dict) -> str | None:
-    """What makes a complete stage's ``stage.json`` unusable (edited or damaged), or ``None``."""
+def record_problem(data: dict) -> str | None:
+    """What makes any complete stage's ``stage.json`` unusable: no seconds, no result."""
     if not isinstance(data.get("seconds"), (int, float)):
         return "no number of seconds"
-    result = data.get("result")
-    if not isinstance(result, dict):
+    if not isinstance(data.get("result"), dict):
         return "no result"
-    for key, kind in RESULT_KEYS.get(group, {}).items():
-        if not isinstance(result.get(key), kind):
-            return f"its result has no {key}"
-    if group == "metatrain":
-        if not result["seeds"]:
-            return "its result has no seeds"
-        for seed, v in result["seeds"].items():
-            ok = (
-                isinstance(v, dict)
-                and isinstance(v.get("run_dir"), str)
-                and isinstance(v.get("iteration"), list)
-                and isinstance(v.get("task_loss"), list)
-                and isinstance(v.get("seconds"), (int, float))
-            )
-            if not ok or not str(seed).lstrip("-").isdigit():
-                return f"its result for seed {seed} is incomplete"
     return None
 
 
@@ -172,6 +152,7 @@ class Runner:
     """Records the stages of one call in ``out``; ``log`` gets one line per stage (stderr by default)."""
 
     out: Path
+    check: Check  # what makes a complete record unusable (:func:`read_complete`)
     total: int = 0  # stages to run in this call (set once the complete ones are known)
     log: Callable[[str], None] = field(default=_to_stderr)
     records: dict[str, StageRecord] = field(default_factory=dict)
@@ -179,12 +160,12 @@ class Runner:
     done: int = 0  # stages that ran to completion in this call
 
     def stage_dir(self, name: str, h: str) -> Path:
-        return self.out / f"{name}-{h}"
+        return self.out / dir_name(name, h)
 
     def complete(self, group: str, name: str, h: str) -> StageRecord | None:
         """The record of a stage already complete in ``out`` (skipped), or ``None``."""
         d = self.stage_dir(name, h)
-        data = read_complete(d, group)
+        data = read_complete(d, group, self.check)
         if data is None:
             return None
         self.log(f"reproduce: {name}: complete, skipped ({d.name})")
@@ -200,7 +181,7 @@ class Runner:
         settings: Any,
         result: dict,
         seconds: float,
-        depends: dict[str, str] | None = None,
+        depends: Mapping[str, str] | None = None,
     ) -> StageRecord:
         """Record a stage that ran: ``stage.json`` is written last, atomically (then it is complete)."""
         d = self.stage_dir(name, h)
@@ -210,7 +191,7 @@ class Runner:
             "group": group,
             "hash": h,
             "settings": settings,
-            "depends": depends or {},
+            "depends": dict(depends or {}),
             "seconds": seconds,
             "finished": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
             "result": result,

@@ -16,11 +16,12 @@ from __future__ import annotations
 import numpy as np
 
 from warp_critic.evaluation.paper import PAPER_TABLE1
-from warp_critic.reproduce import report_paper as rp
-from warp_critic.reproduce.recipes import RECIPES
-from warp_critic.reproduce.report_draft import Draft, fmt
-from warp_critic.reproduce.report_maps import elbow_bent, floor_shares
-from warp_critic.reproduce.settings import BEYOND, SCENES
+from warp_critic.reproduce.experiments.naming import BEYOND, is_beyond, stage_name
+from warp_critic.reproduce.experiments.recipes import RECIPES
+from warp_critic.reproduce.experiments.settings import SCENES
+from warp_critic.reproduce.report import paper as rp
+from warp_critic.reproduce.report.draft import Draft, fmt
+from warp_critic.reproduce.report.maps import elbow_bent, floor_shares
 
 GOALS_TARGET, MAPS_TARGET, LEVEL = 0.9, 0.8, 0.05
 
@@ -37,10 +38,9 @@ def _training_rows(d: Draft) -> tuple[list[str], dict]:
     ]
     out: dict = {}
     for scene in SCENES:
-        names = {"ours": f"metatrain-{scene}-ours"} | {
-            n.removeprefix(f"{BEYOND}-metatrain-{scene}-"): n
-            for n in d.recs
-            if n.startswith(f"{BEYOND}-metatrain-{scene}-") and d.recs[n] is not None
+        recipes = {r: stage_name("metatrain", scene, recipe=r) for r in RECIPES[scene]}
+        names = {"ours": stage_name("metatrain", scene, "ours")} | {
+            r: n for r, n in recipes.items() if d.recs.get(n) is not None
         }
         nominal = d.recs.get(names["ours"])
         for label, name in names.items():
@@ -203,7 +203,7 @@ def _tables(res: dict, targets: list, out: dict) -> list[str]:
 
 def beyond_section(d: Draft) -> None:
     """The "Beyond the paper" section, when any of its stages is complete."""
-    if not any(n.startswith(f"{BEYOND}-") and r is not None for n, r in d.recs.items()):
+    if not any(is_beyond(n) and r is not None for n, r in d.recs.items()):
         return
     d.md += [
         "## Beyond the paper",
@@ -220,7 +220,7 @@ def beyond_section(d: Draft) -> None:
     d.md += rows + [""]
     targets: list[tuple[str, str, bool]] = []
     result: dict = {"training": cost, "maps": {}, "tables": {}}
-    maps = d.recs.get(f"{BEYOND}-maps")
+    maps = d.recs.get(stage_name("maps", by=BEYOND))
     if maps is not None:
         d.md += ["### Reacher: goal grid and 2-D maps (fraction below 0.05 MSE)", ""]
         d.md += _maps(maps.data["result"], targets, result["maps"]) + [""]
@@ -231,7 +231,7 @@ def beyond_section(d: Draft) -> None:
             "shows such an inertia, under any masses or lengths.",
             "",
         ]
-    tables = d.recs.get(f"{BEYOND}-tables")
+    tables = d.recs.get(stage_name("tables", by=BEYOND))
     if tables is not None:
         d.md += ["### KUKA: Table 1 and the stress tables (MSE)", ""]
         d.md += _tables(tables.data["result"], targets, result["tables"])

@@ -1,5 +1,5 @@
 """The recipes beyond the paper (``warp-critic reproduce --beyond``), as data: each is ours' preset
-with a few settings changed. :mod:`warp_critic.reproduce.settings` turns them into stage settings
+with a few settings changed. :mod:`warp_critic.reproduce.experiments.settings` turns them into stage settings
 (``beyond.ROBOT.RECIPE``); the report's "Beyond the paper" section reads their stages."""
 
 from __future__ import annotations

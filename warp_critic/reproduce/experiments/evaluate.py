@@ -136,6 +136,20 @@ def load_runs(run_dirs) -> dict[str, _Run]:
     return runs
 
 
+def pool_errors(errs: list[np.ndarray], dof: int) -> dict:
+    """Pool final squared errors (one (G, K) array per seed) into a cell: MSE over joints. A
+    diverged world (``inf``) makes the cell's mean ``inf``; ``diverged`` counts them."""
+    mse = np.concatenate([e.ravel() for e in errs]) / dof
+    return {
+        "mse_mean": float(mse.mean()),
+        "mse_std": float(mse.std()) if np.isfinite(mse).all() else float("nan"),
+        "diverged": int((~np.isfinite(mse)).sum()),
+        "mse_per_seed": [float(e.mean() / dof) for e in errs],
+        "mse_std_per_seed": [float((e / dof).std()) for e in errs],
+        "n": int(mse.size),
+    }
+
+
 def default_steps(run_dir: str) -> int:
     """The number of policy updates the run's own meta-test would take (ours: inner steps x lifetime)."""
     runs = load_runs([run_dir])
@@ -176,15 +190,9 @@ def evaluate(
     """Meta-test every job; returns ``{"errors": [(G, inits) final ||q_T-g||^2 per job], "before": [...],
     "dof", "horizon", "steps", "alphas": {run_dir: alpha}, "worlds", "batches", "diverged"}``
     (``inf`` errors for diverged worlds, module docstring; ``"diverged"``: their count)."""
-    from warp_critic.evaluation.metatest import build_test_critic
-    from warp_critic.learning.inner import inner_update, policy_fn
-    from warp_critic.learning.losses import final_error
-    from warp_critic.learning.networks import MLPPolicy, Normalizer
-    from warp_critic.learning.rollout import finite_worlds, rollout
-    from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
+    from warp_critic.physics.simulator import STANDARD_GRAVITY
     from warp_critic.running.loop import progress_bar
     from warp_critic.running.scenefile import find_run_scene
-    from warp_critic.running.task_inputs import max_torque_tensor
 
     if not jobs:
         raise UserError("nothing to evaluate")
@@ -206,80 +214,14 @@ def evaluate(
     bar = progress_bar(len(groups), enabled=progress, desc="meta-test batches")
     try:
         for group in groups:
-            variants = [jobs[i].variant for i in group for _ in range(jobs[i].G * inits)]
-            sim = Simulator(
-                scene,
-                variants,
-                dt=cfg0.dt,
-                substeps=cfg0.substeps,
-                device=device,
-                differentiable=False,
-                gravity=gravity,
+            sim, policy = _batch_model(
+                scene, [jobs[i] for i in group], inits, cfg0, gravity, device
             )
-            dev = sim.torch_device
-            norm = Normalizer.from_limits(
-                sim.q_lower,
-                sim.q_upper,
-                max_torque_tensor(cfg0.max_torque, scene, dev),
-                cfg0.qd_scale,
-                NominalInertia(scene, device),
-                sim.dynamics_size,
+            critic, rate, goal, p = _batch_inputs(
+                [jobs[i] for i in group], runs, policy, inits, seed, inits_cache, sim.torch_device
             )
-            policy = MLPPolicy(norm)
-            segments, rates, goals, params = [], [], [], []
-            start = 0
-            for i in group:
-                job, run = jobs[i], runs[str(jobs[i].run_dir)]
-                if run.critic is None or next(run.critic.parameters()).device != dev:
-                    critic, defaults = build_test_critic(run.ckpt, norm)
-                    run.critic = critic.to(dev).requires_grad_(False)
-                    alpha = defaults.get("alpha")
-                    if not (isinstance(alpha, (int, float)) and alpha > 0):
-                        raise UserError(
-                            f"{job.run_dir}: the run stores no usable policy learning rate"
-                        )
-                    run.alpha = float(alpha)
-                assert run.alpha is not None  # set with the critic above
-                n = job.G * inits
-                segments.append((run.critic, start, start + n))
-                rates.append(torch.full((n,), run.alpha))
-                goals.append(job.goals.to(torch.float32).repeat_interleave(inits, dim=0))
-                if job.G not in inits_cache:
-                    gen = torch.Generator().manual_seed(int(seed))
-                    inits_cache[job.G] = policy.init(n, generator=gen, device="cpu")
-                params.append(inits_cache[job.G])
-                start += n
-            goal = torch.cat(goals).to(dev)
-            p = {
-                k: torch.cat([x[k] for x in params]).to(dev).requires_grad_(True) for k in params[0]
-            }
-            q0, qd0 = sim.zeros(), sim.zeros()
-            critic = MultiCritic(segments)
-            untrained = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
-            err0 = final_error(untrained.q[-1], goal).detach().cpu().numpy()
-            p, trajs = inner_update(
-                critic,
-                policy,
-                p,
-                sim,
-                q0,
-                qd0,
-                goal,
-                horizon=horizon,
-                alpha=PerWorldRate(torch.cat(rates).to(dev)),
-                steps=steps,
-                create_graph=False,
-                check=False,
-            )
-            after = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
-            err = final_error(after.q[-1], goal).detach().cpu().numpy()
-            ok0 = finite_worlds(untrained)
-            ok = ok0 & finite_worlds(after)
-            for t in trajs:
-                ok &= finite_worlds(t)
-            err0 = np.where(ok0.cpu().numpy(), err0, np.inf)
-            err = np.where(ok.cpu().numpy(), err, np.inf)
-            diverged += int((~ok).sum())
+            err0, err, bad = _meta_test(sim, policy, critic, rate, goal, p, horizon, steps)
+            diverged += bad
             start = 0
             for i in group:
                 n = jobs[i].G * inits
@@ -301,6 +243,102 @@ def evaluate(
         "batches": len(groups),
         "diverged": diverged,
     }
+
+
+def _batch_model(scene, group: list[Job], inits: int, cfg0, gravity: float, device: str):
+    """One simulator for a batch of jobs (each job's variant in ``G * inits`` worlds) and the
+    policy network over its limits: ``(Simulator, MLPPolicy)``."""
+    from warp_critic.learning.networks import MLPPolicy, Normalizer
+    from warp_critic.physics.simulator import Simulator
+    from warp_critic.running.task_inputs import max_torque_tensor
+
+    variants = [job.variant for job in group for _ in range(job.G * inits)]
+    sim = Simulator(
+        scene,
+        variants,
+        dt=cfg0.dt,
+        substeps=cfg0.substeps,
+        device=device,
+        differentiable=False,
+        gravity=gravity,
+    )
+    dev = sim.torch_device
+    norm = Normalizer.from_limits(
+        sim.q_lower,
+        sim.q_upper,
+        max_torque_tensor(cfg0.max_torque, scene, dev),
+        cfg0.qd_scale,
+        NominalInertia(scene, device),
+        sim.dynamics_size,
+    )
+    return sim, MLPPolicy(norm)
+
+
+def _batch_inputs(group: list[Job], runs: dict, policy, inits: int, seed: int, inits_cache, dev):
+    """The batch's critics (each run's, over its worlds), per-world step sizes ``(W,)``, goals
+    ``(W, dof)`` rad and initial policy parameters (the same for every job of ``G`` goals, from
+    ``seed``): ``(MultiCritic, rates, goals, params)``."""
+    from warp_critic.evaluation.metatest import build_test_critic
+
+    segments, rates, goals, params = [], [], [], []
+    start = 0
+    for job in group:
+        run = runs[str(job.run_dir)]
+        if run.critic is None or next(run.critic.parameters()).device != dev:
+            critic, defaults = build_test_critic(run.ckpt, policy.norm)
+            run.critic = critic.to(dev).requires_grad_(False)
+            alpha = defaults.get("alpha")
+            if not (isinstance(alpha, (int, float)) and alpha > 0):
+                raise UserError(f"{job.run_dir}: the run stores no usable policy learning rate")
+            run.alpha = float(alpha)
+        assert run.alpha is not None  # set with the critic above
+        n = job.G * inits
+        segments.append((run.critic, start, start + n))
+        rates.append(torch.full((n,), run.alpha))
+        goals.append(job.goals.to(torch.float32).repeat_interleave(inits, dim=0))
+        if job.G not in inits_cache:
+            gen = torch.Generator().manual_seed(int(seed))
+            inits_cache[job.G] = policy.init(n, generator=gen, device="cpu")
+        params.append(inits_cache[job.G])
+        start += n
+    goal = torch.cat(goals).to(dev)
+    p = {k: torch.cat([x[k] for x in params]).to(dev).requires_grad_(True) for k in params[0]}
+    return MultiCritic(segments), torch.cat(rates).to(dev), goal, p
+
+
+def _meta_test(sim, policy, critic, rate, goal, p, horizon: int, steps: int):
+    """``steps`` policy updates with the critics from home; returns the final errors before and
+    after ``(W,)`` rad^2 (``inf`` where a world diverged) and the number of diverged worlds."""
+    from warp_critic.learning.inner import inner_update, policy_fn
+    from warp_critic.learning.losses import final_error
+    from warp_critic.learning.rollout import finite_worlds, rollout
+
+    q0, qd0 = sim.zeros(), sim.zeros()
+    untrained = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
+    err0 = final_error(untrained.q[-1], goal).detach().cpu().numpy()
+    p, trajs = inner_update(
+        critic,
+        policy,
+        p,
+        sim,
+        q0,
+        qd0,
+        goal,
+        horizon=horizon,
+        alpha=PerWorldRate(rate),
+        steps=steps,
+        create_graph=False,
+        check=False,
+    )
+    after = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
+    err = final_error(after.q[-1], goal).detach().cpu().numpy()
+    ok0 = finite_worlds(untrained)
+    ok = ok0 & finite_worlds(after)
+    for t in trajs:
+        ok &= finite_worlds(t)
+    err0 = np.where(ok0.cpu().numpy(), err0, np.inf)
+    err = np.where(ok.cpu().numpy(), err, np.inf)
+    return err0, err, int((~ok).sum())
 
 
 def relpath(p, base: Path) -> str:

@@ -3,8 +3,8 @@
 Every number comes from a stage's ``stage.json`` (or a file it names); nothing is typed in. The
 paper's values come from :data:`warp_critic.evaluation.paper.PAPER_TABLES`. The report covers
 every stage of the current settings that is complete, whether it ran in this call or earlier. The
-sections live in :mod:`.report_analyses`, :mod:`.report_training`, :mod:`.report_maps` and
-:mod:`.report_tables`; they share one :class:`~.report_draft.Draft`.
+sections live in :mod:`~warp_critic.reproduce.report.analyses`, :mod:`~warp_critic.reproduce.report.training`, :mod:`~warp_critic.reproduce.report.maps` and
+:mod:`~warp_critic.reproduce.report.tables`; they share one :class:`~warp_critic.reproduce.report.draft.Draft`.
 """
 
 from __future__ import annotations
@@ -16,17 +16,19 @@ from pathlib import Path
 
 import numpy as np
 
-from warp_critic.reproduce import ledger
-from warp_critic.reproduce import report_paper as rp
-from warp_critic.reproduce.extra_baselines import merge_rows
-from warp_critic.reproduce.report_analyses import landscape_section, toy_section
-from warp_critic.reproduce.report_beyond import beyond_section
-from warp_critic.reproduce.report_draft import Draft, rel
-from warp_critic.reproduce.report_maps import maps_section
-from warp_critic.reproduce.report_tables import tables_section
-from warp_critic.reproduce.report_training import metatrain_section
-from warp_critic.reproduce.settings import SCENES, STAGES
-from warp_critic.reproduce.stages import STAGE_FILE, StageRecord, read_stage
+from warp_critic.reproduce.engine import ledger
+from warp_critic.reproduce.engine.stage import Stage
+from warp_critic.reproduce.engine.stages import STAGE_FILE, StageRecord, read_stage
+from warp_critic.reproduce.experiments.extra_baselines import merge_rows
+from warp_critic.reproduce.experiments.naming import stage_name
+from warp_critic.reproduce.experiments.settings import SCENES, STAGES
+from warp_critic.reproduce.report import paper as rp
+from warp_critic.reproduce.report.analyses import landscape_section, toy_section
+from warp_critic.reproduce.report.beyond import beyond_section
+from warp_critic.reproduce.report.draft import Draft, rel
+from warp_critic.reproduce.report.maps import maps_section
+from warp_critic.reproduce.report.tables import tables_section
+from warp_critic.reproduce.report.training import metatrain_section
 from warp_critic.running.rundir import atomic_write_text
 
 #: The sections after the stage table, in the report's order (each appends to the :class:`Draft`).
@@ -45,15 +47,15 @@ SECTIONS = (
 # ------------------------------------------------------------------------------------------------
 
 
-def collect(out: Path, plan: dict, records: dict) -> dict[str, StageRecord | None]:
+def collect(out: Path, plan: dict[str, Stage], records: dict) -> dict[str, StageRecord | None]:
     got: dict[str, StageRecord | None] = {}
     for name, st in plan.items():
         if name in records:
             got[name] = records[name]
             continue
-        d = out / f"{name}-{st['hash']}"
+        d = out / st.dir_name
         data = read_stage(d)
-        got[name] = StageRecord(st["group"], name, d, data, ran=False) if data is not None else None
+        got[name] = StageRecord(st.kind, name, d, data, ran=False) if data is not None else None
     return got
 
 
@@ -73,7 +75,7 @@ def versions() -> dict[str, str]:
 
 def write_report(
     out: Path,
-    plan: dict,
+    plan: dict[str, Stage],
     records: dict,
     *,
     config,
@@ -82,7 +84,7 @@ def write_report(
     call: str | None = None,
 ) -> Path:
     """Write the report of ``out``'s complete stages of ``plan``; ``call`` is this call's id in
-    the folder's ledger (:mod:`.ledger`), whose total wall time the header gives."""
+    the folder's ledger (:mod:`~warp_critic.reproduce.engine.ledger`), whose total wall time the header gives."""
     out = Path(out)
     recs = merge_rows(
         collect(out, plan, records), plan
@@ -91,7 +93,6 @@ def write_report(
     stage_seconds = {r.dir.name: float(r.data["seconds"]) for r in recs.values() if r is not None}
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
-    md: list[str] = []
     results: dict = {
         "kind": "warp-critic/reproduce-results-v1",
         "tables": [],
@@ -104,73 +105,22 @@ def write_report(
     figures: list[tuple[str, Path, str]] = []  # (title, png, sentence)
     ver = versions()
     seeds = seeds_trained(plan)
-
-    md += [
-        "# Reproduction: Model Based Meta Learning of Critics for Policy Gradients (ICML 2022)",
-        "",
-        f"- command: `{config.command}`",
-        f"- device: {device}; seeds: {len(seeds)} ({', '.join(map(str, seeds))}); "
-        f"{'QUICK settings (plumbing check, not the paper setting)' if config.quick else 'paper settings, except where a section states the settings that differ from the paper text'}",
-        f"- versions: python {ver['python']}, warp {ver['warp']}, newton {ver['newton']}, torch {ver['torch']} "
-        f"({ver['platform']})",
-        f"- written {time.strftime('%Y-%m-%d %H:%M:%S')}; this call took {wall:.1f} s",
-        ledger.header_line(book, stage_seconds),
-        "",
-    ]
+    md = _header(config, device, seeds, ver, wall, ledger.header_line(book, stage_seconds))
     claims_at = len(md)
     claims: list[dict] = []  # filled by the sections below, rendered here
     solved: dict[str, dict[str, list[bool]]] = {}  # robot -> baseline -> per seed
     for scene in SCENES:
         solved[scene] = {}
         for m in rp.ALL_BASELINES:
-            rec = recs.get(f"metatrain-{scene}-{m}")
+            rec = recs.get(stage_name("metatrain", scene, m))
             if rec is not None:
                 solved[scene][m] = rp.solved_seeds(rec.data["result"], scene)
-    md += [
-        "## Stages",
-        "",
-        "Wall time: of the call that completed the stage (a stage resumed over several calls counts only the "
-        "last). Training time: the sum of the stage's iteration times over all calls (the seeds of a "
-        "meta-training run batched, so it is the whole stage's).",
-        "",
-        "| stage | directory | this call | wall time (s) | training time, all calls (s) |",
-        "|---|---|---|---|---|",
-    ]
-    for name, st in plan.items():
-        r = recs.get(name)
-        if r is None:
-            md.append(f"| {name} | `{name}-{st['hash']}` | not run | — | — |")
-            continue
-        status = "ran" if r.ran else "complete, skipped"
-        per_seed = r.data["result"].get("seeds") if r.group == "metatrain" else None
-        train = f"{next(iter(per_seed.values()))['seconds']:.1f}" if per_seed else "—"
-        md.append(f"| {name} | `{r.dir.name}` | {status} | {r.data['seconds']:.1f} | {train} |")
-        results["stages"][name] = {
-            "dir": r.dir.name,
-            "file": f"{r.dir.name}/{STAGE_FILE}",
-            "seconds": r.data["seconds"],
-            "ran_this_call": r.ran,
-        }
-    md.append("")
-
+    md += _stage_table(plan, recs, results)
     d = Draft(out, figs, recs, config, solved, md, results, figures, claims)
     for section in SECTIONS:
         section(d)
-
-    head = [
-        "## The paper's claims: verdicts computed from the numbers below",
-        "",
-        "| claim | the paper's evidence | this run's measurement | verdict | why |",
-        "|---|---|---|---|---|",
-    ] + [
-        f"| {c['claim']} | {c['paper']} | {c['ours']} | **{c['verdict']}** | {c['reason']} |"
-        for c in claims
-    ]
-    if not claims:
-        head.append("| (no stage ran) | — | — | not comparable | nothing measured |")
-    md[claims_at:claims_at] = head + [""]
+    md[claims_at:claims_at] = _claims_table(claims) + [""]
     results["claims"] = claims
-
     md += ["## Figures", ""]
     for title, png, sentence in figures:
         md += [f"### {title}", "", f"![{title}]({rel(png, out)})", "", sentence, ""]
@@ -198,9 +148,73 @@ def write_report(
     return out / "REPORT.md"
 
 
-def seeds_trained(plan: dict) -> list[int]:
+def _header(config, device: str, seeds: list[int], ver: dict, wall: float, book: str) -> list[str]:
+    """The report's title and header lines: command, device, seeds, versions, time, ledger."""
+    return [
+        "# Reproduction: Model Based Meta Learning of Critics for Policy Gradients (ICML 2022)",
+        "",
+        f"- command: `{config.command}`",
+        f"- device: {device}; seeds: {len(seeds)} ({', '.join(map(str, seeds))}); "
+        f"{'QUICK settings (plumbing check, not the paper setting)' if config.quick else 'paper settings, except where a section states the settings that differ from the paper text'}",
+        f"- versions: python {ver['python']}, warp {ver['warp']}, newton {ver['newton']}, torch {ver['torch']} "
+        f"({ver['platform']})",
+        f"- written {time.strftime('%Y-%m-%d %H:%M:%S')}; this call took {wall:.1f} s",
+        book,
+        "",
+    ]
+
+
+def _stage_table(plan: dict[str, Stage], recs: dict, results: dict) -> list[str]:
+    """The "Stages" section's lines: each stage of the plan, run, skipped or not run; fills
+    ``results["stages"]``."""
+    md = [
+        "## Stages",
+        "",
+        "Wall time: of the call that completed the stage (a stage resumed over several calls counts only the "
+        "last). Training time: the sum of the stage's iteration times over all calls (the seeds of a "
+        "meta-training run batched, so it is the whole stage's).",
+        "",
+        "| stage | directory | this call | wall time (s) | training time, all calls (s) |",
+        "|---|---|---|---|---|",
+    ]
+    for name, st in plan.items():
+        r = recs.get(name)
+        if r is None:
+            md.append(f"| {name} | `{st.dir_name}` | not run | — | — |")
+            continue
+        status = "ran" if r.ran else "complete, skipped"
+        per_seed = r.data["result"].get("seeds") if r.group == "metatrain" else None
+        train = f"{next(iter(per_seed.values()))['seconds']:.1f}" if per_seed else "—"
+        md.append(f"| {name} | `{r.dir.name}` | {status} | {r.data['seconds']:.1f} | {train} |")
+        results["stages"][name] = {
+            "dir": r.dir.name,
+            "file": f"{r.dir.name}/{STAGE_FILE}",
+            "seconds": r.data["seconds"],
+            "ran_this_call": r.ran,
+        }
+    md.append("")
+    return md
+
+
+def _claims_table(claims: list[dict]) -> list[str]:
+    """The claims table, at the report's top: one row per claim the sections computed."""
+    head = [
+        "## The paper's claims: verdicts computed from the numbers below",
+        "",
+        "| claim | the paper's evidence | this run's measurement | verdict | why |",
+        "|---|---|---|---|---|",
+    ] + [
+        f"| {c['claim']} | {c['paper']} | {c['ours']} | **{c['verdict']}** | {c['reason']} |"
+        for c in claims
+    ]
+    if not claims:
+        head.append("| (no stage ran) | — | — | not comparable | nothing measured |")
+    return head
+
+
+def seeds_trained(plan: dict[str, Stage]) -> list[int]:
     """The meta-training seeds of a plan (``metatrain.seeds``, which ``--set`` may have changed)."""
-    return next(list(st["settings"]["seeds"]) for st in plan.values() if st["group"] == "metatrain")
+    return next(list(st.settings["seeds"]) for st in plan.values() if st.kind == "metatrain")
 
 
 def write_recording(path: Path, text: str, figures: list[tuple[str, Path, str]]) -> None:

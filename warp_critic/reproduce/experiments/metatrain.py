@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 from warp_critic.core.errors import UserError
 from warp_critic.methods import method as method_of
 from warp_critic.methods import methods
-from warp_critic.reproduce.settings import METHODS
+from warp_critic.reproduce.experiments.settings import METHODS
 
 if TYPE_CHECKING:
     from warp_critic.running.loop import TrainResult

@@ -1,0 +1,38 @@
+"""One stage of a plan: its name, kind, settings, inputs, hash and what it produces (a frozen record).
+
+The engine reads ``name``, ``kind``, ``settings``, ``depends`` and ``hash``: the stage's directory is
+``<name>-<hash>`` (:func:`dir_name`), complete once its ``stage.json`` is written, and a stage starts
+once every stage it ``depends`` on is complete. ``outputs`` is the plan's own description of what
+the stage produces (for the experiments that run it and the report that reads it); the engine
+passes it along unread.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+
+def dir_name(name: str, h: str) -> str:
+    """The directory of the stage ``name`` whose settings hash to ``h``."""
+    return f"{name}-{h}"
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One stage (sub-stage) of a plan."""
+
+    name: str  # unique in the plan, e.g. metatrain-kuka-ours
+    kind: str  # the function that runs it and the keys of its result (its ``stage.json`` group)
+    settings: Any  # plain JSON: what the stage computes depends on these and on ``depends`` only
+    depends: Mapping[str, str]  # the stages it reads: name -> directory name (in the hash)
+    hash: str  # of the settings and the inputs' directories: names the directory
+    outputs: Any = None  # what the stage produces, as the plan describes it (read by its owner)
+
+    @property
+    def dir_name(self) -> str:
+        return dir_name(self.name, self.hash)
+
+
+__all__ = ["Stage", "dir_name"]

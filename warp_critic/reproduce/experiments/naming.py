@@ -1,0 +1,67 @@
+"""The paper's stages by name (:func:`stage_name`, the one place a stage name is built) and what each
+produces (:class:`Outputs`, the ``outputs`` of its :class:`~warp_critic.reproduce.engine.stage.Stage`).
+
+Names: ``toy``, ``landscape``, ``maps``, ``tables``, ``tables-heldout``; one meta-training per robot
+and method, ``metatrain-<robot>-<method>``; an extra baseline's evaluations ``<method>-maps`` /
+``<method>-tables``; beyond the paper, one meta-training per robot and recipe,
+``beyond-metatrain-<robot>-<recipe>``, and ``beyond-maps`` / ``beyond-tables``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+#: the recipes beyond the paper (``--beyond``): kept apart, never part of the paper's stages
+BEYOND = "beyond"
+#: the goal seed that chose nothing: Tables 1-3 again (``tables-heldout``)
+HELDOUT = "heldout"
+
+
+def stage_name(
+    kind: str,
+    scene: str | None = None,
+    method: str | None = None,
+    *,
+    recipe: str | None = None,
+    by: str | None = None,
+    heldout: bool = False,
+) -> str:
+    """The name of a stage of ``kind`` (toy, landscape, metatrain, maps, tables).
+
+    ``metatrain`` names one robot (``scene``) and either a ``method`` or a ``recipe`` beyond the
+    paper; an evaluation (maps, tables) is the paper's, or ``by`` an extra baseline or
+    :data:`BEYOND`; ``heldout``: Tables 1-3 on the held-out goal seed.
+    """
+    if kind == "metatrain":
+        if scene is None or (method is None) == (recipe is None):
+            raise ValueError("a meta-training stage names a robot and a method or a recipe")
+        if recipe is not None:
+            return "-".join((BEYOND, kind, scene, recipe))
+        return "-".join((kind, scene, str(method)))
+    parts = ([by] if by else []) + [kind] + ([HELDOUT] if heldout else [])
+    return "-".join(parts)
+
+
+def is_beyond(name: str) -> bool:
+    """Whether ``name`` is the group ``beyond`` or one of its stages."""
+    return name == BEYOND or name.startswith(BEYOND + "-")
+
+
+@dataclass(frozen=True)
+class Outputs:
+    """What a paper stage produces. A meta-training: the runs of ``method`` on ``scene`` (with
+    ``recipe``: ours under a recipe beyond the paper). An evaluation (maps, tables) on ``scene``:
+    rows for the runs of each stage it depends on, labelled by its method, or by ``labels``
+    (dependency -> row, the recipes beyond the paper); ``rows``: only these methods' (an extra
+    baseline's, ours' runs the reference), which the report adds to the paper stage ``adds_to``."""
+
+    scene: str | None = None
+    method: str | None = None
+    recipe: str | None = None
+    rows: tuple[str, ...] | None = None
+    adds_to: str | None = None
+    labels: Mapping[str, str] | None = None
+
+
+__all__ = ["BEYOND", "HELDOUT", "Outputs", "is_beyond", "stage_name"]
