@@ -234,13 +234,15 @@ def main(argv: list[str] | None = None) -> int:
         code, said = _run(argv, in_process=argv is not None)
         if code == 0 and not signals.noted():  # a signal while the interpreter shuts down
             signals.note("after the command had finished: what it wrote is whole")
-        return code
     finally:
         if previous is not None:
             if argv is not None:
                 signals.restore(previous)
             else:  # the console script: a signal while the interpreter shuts down is one line too
                 signals.exiting(said)
+    if previous is not None and argv is None:
+        signals.finish(code)  # the exit handlers under our handler, then no teardown to interrupt
+    return code
 
 
 def _run(argv: list[str] | None, in_process: bool) -> tuple[int, bool]:

@@ -19,6 +19,8 @@ from __future__ import annotations
 import atexit
 import os
 import signal
+import sys
+import typing
 
 from warp_critic.core import interrupts
 
@@ -27,7 +29,6 @@ SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 _phase = "off"
 _said = False  # the command already wrote its line about the interruption
-_registered: list[bool] = []  # _last_word is an exit handler
 _note = ""  # what is true if a signal stops the command from now on (said in its line)
 
 
@@ -73,9 +74,6 @@ def install() -> dict:
         return {}
     _phase, _said = "starting", False
     note("")
-    if not _registered:
-        atexit.register(_last_word)  # first: runs after the exit handlers registered later
-        _registered.append(True)
     interrupts.clear()
     return {s: signal.signal(s, _handler) for s in SIGNALS}
 
@@ -93,14 +91,21 @@ def exiting(said: bool) -> None:
     _phase, _said = "exiting", _said or said
 
 
-def _last_word() -> None:
-    """The last exit handler (registered first). Python then puts the default handler back for every
-    signal it handles, so a signal while it tears the interpreter down would end the process without
-    a line (exit 143): from here on the signals are ignored (Python leaves an ignored one so), and
-    the command ends as it finished."""
-    if _phase == "exiting":
-        for s in SIGNALS:
-            signal.signal(s, signal.SIG_IGN)
+def finish(code: int) -> typing.NoReturn:
+    """End the console script with ``code`` once the command is over (:func:`exiting`): the exit
+    handlers run now, while a signal still ends the process with its one line; then the process
+    leaves without Python's teardown, which puts the default handlers back first, so a signal during
+    it would kill the process without a line (exit 143). What the command wrote is closed already
+    (every result is written atomically); the console streams are flushed here."""
+    atexit._run_exitfuncs()
+    for s in SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
 
 
 def restore(previous: dict) -> None:
@@ -118,6 +123,7 @@ __all__ = [
     "install",
     "running",
     "exiting",
+    "finish",
     "restore",
     "stop_now",
     "note",
