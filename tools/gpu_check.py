@@ -34,6 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PROG = "gpu_check"
 FULL_WORLDS = (1, 16, 256, 1024, 4096, 16384)
 TINY_WORLDS = (1, 4)
+KIND = "warp-critic/gpu-check-v1"  # the "kind" of the JSON written; an earlier one may be replaced
 
 
 def _tool(name: str):
@@ -209,6 +210,18 @@ def main(argv: list[str] | None = None) -> int:
     if out.is_dir() or not out.parent.is_dir():
         print(f"{PROG}: error: --out {out}: not a file in an existing folder", file=sys.stderr)
         return 2
+    from warp_critic.cli.flags import user_message
+    from warp_critic.core.errors import UserError
+    from warp_critic.running.locks import check_not_owned
+    from warp_critic.running.rundir import atomic_write_text, check_output_file, check_replaceable
+
+    try:  # the one rule of every writer: replace only an earlier GPU check's file
+        check_output_file(out, "--out")
+        check_not_owned(out, "--out")
+        check_replaceable(out, "out", KIND, lambda old: None)
+    except UserError as e:
+        print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
+        return 2
     t0 = time.perf_counter()
     budget = Budget(args.budget)
     device = args.device
@@ -223,6 +236,7 @@ def main(argv: list[str] | None = None) -> int:
     worlds = TINY_WORLDS if args.tiny else FULL_WORLDS
     print(f"{PROG}: device {device}; tests/test_cuda.py ...", flush=True)
     result: dict = {
+        "kind": KIND,
         "machine": f"{platform.node()} ({platform.machine()}, {platform.system()})",
         "device": device,
         "devices": devices,
@@ -240,7 +254,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{PROG}: meta-training iterations ({robot[0]}) ...", flush=True)
     result["iterations"] = bench_iterations(devices, 3 if args.tiny else 6, budget, robot)
     result["seconds"] = time.perf_counter() - t0
-    out.write_text(json.dumps(result, indent=1) + "\n")
+    atomic_write_text(out, json.dumps(result, indent=1) + "\n")
     print(table(result))
     print(f"\n{PROG}: wrote {out}")
     return 0

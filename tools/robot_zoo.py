@@ -29,6 +29,7 @@ The import pass takes a few minutes on a 2-core CPU.
 from __future__ import annotations
 
 import contextlib
+import difflib
 import io
 import json
 import sys
@@ -201,6 +202,8 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--train: must be >= 0 (got {args.train})")
     if args.floor_iterations < 1:
         p.error(f"--floor-iterations: must be >= 1 (got {args.floor_iterations})")
+    if args.runs_dir.exists() and not args.runs_dir.is_dir():
+        p.error(f"--runs-dir {args.runs_dir}: not a folder")
 
     from warp_critic.core import runtime
     from warp_critic.core.errors import UserError
@@ -212,9 +215,19 @@ def main(argv: list[str] | None = None) -> int:
         except UserError as e:
             print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
             return 2
+    files = robot_files()
+    unknown = [n for n in args.only or () if n not in {path.stem for _, path in files}]
+    if unknown:  # a table of nothing would look like a zoo that imports nothing
+        stems = sorted({path.stem for _, path in files})
+        near = difflib.get_close_matches(unknown[0], stems, n=1)
+        print(f"{PROG}: error: --only: no robot file named {', '.join(unknown)}"
+              + (f" (did you mean {near[0]}?)" if near else
+                 f"; of the {len(stems)} found{': ' if stems else ''}{', '.join(stems)}"),
+              file=sys.stderr)  # fmt: skip
+        return 2
     rows = []
     print(f"{'package':27s} {'file':45s} {'DoF':>3s} {'dt x sub-steps':>15s} {'s':>5s}  verdict")
-    for package, path in robot_files():
+    for package, path in files:
         if args.only is not None and path.stem not in args.only:
             continue
         row = import_one(path) | {"package": package}

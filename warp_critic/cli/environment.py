@@ -51,6 +51,16 @@ def utf8_mode() -> None:
         os.execv(sys.executable, [sys.executable, "-X", "utf8", *sys.orig_argv[1:]])
 
 
+def console_never_fails() -> None:
+    """A console that cannot show every character (``PYTHONIOENCODING=ascii``, an ASCII locale)
+    shows the others as ``\\xNN`` escapes: a file name printed after the work is done (the result's
+    path) must not end the command in a ``UnicodeEncodeError``."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        if reconfigure is not None and getattr(stream, "errors", None) == "strict":
+            reconfigure(errors="backslashreplace")
+
+
 def cwd_gone() -> str | None:
     """The one-line problem when the working directory no longer exists (deleted under the shell),
     else ``None``."""
@@ -62,4 +72,4 @@ def cwd_gone() -> str | None:
     return None
 
 
-__all__ = ["check_utf8", "utf8_mode", "cwd_gone"]
+__all__ = ["check_utf8", "console_never_fails", "utf8_mode", "cwd_gone"]

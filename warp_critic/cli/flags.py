@@ -12,15 +12,27 @@ import argparse
 import dataclasses
 import json
 import math
+import re
 import typing
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
 
+_NUMBER = r"-?(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?"
+#: A negative number, or a list of numbers (``,``/``;``-separated) whose first is negative.
+NEGATIVE_VALUE = re.compile(rf"^-(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?(?:\s*[,;]\s*{_NUMBER})*$")
+
 
 class Parser(argparse.ArgumentParser):
     """argparse, but errors are a single line ``warp-critic: error: [COMMAND: ]...`` and exit code 2
-    (the same start as every other user error, whichever subcommand's parser found it)."""
+    (the same start as every other user error, whichever subcommand's parser found it).
+
+    A value that starts with a negative number (``--max-torque -1,1``, ``--tip-offset -0.1,0,0``) is
+    a value, not an unknown flag: argparse takes only a lone ``-1`` or ``-.5`` for a number."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE_VALUE
 
     def error(self, message: str) -> typing.NoReturn:  # noqa: D401
         root, *command = self.prog.split()

@@ -80,10 +80,11 @@ def run_from_args(args: argparse.Namespace) -> int:
             device=args.device,
             progress=progress,
         )
-    except FieldError as e:
-        if e.field != "train_variants":  # the run's setting that --variants replaces
+    except FieldError as e:  # a field of the run's or the meta-test's config: identify's flag
+        own = {"train_variants": "variants", "num_goals": "goals"}.get(e.field)
+        if own is None:
             raise
-        raise FieldError("variants", e.problem) from None
+        raise FieldError(own, e.problem) from None
     except KeyboardInterrupt:  # the interruption line says what is on disk
         from warp_critic.cli import signals
         from warp_critic.methods.identify import identified

@@ -22,7 +22,7 @@ from pathlib import Path  # noqa: E402
 
 from warp_critic import __version__
 from warp_critic.cli import import_robot
-from warp_critic.cli.environment import check_utf8, cwd_gone, utf8_mode
+from warp_critic.cli.environment import check_utf8, console_never_fails, cwd_gone, utf8_mode
 from warp_critic.cli.flags import (
     Parser,
     add_dataclass_arguments,
@@ -113,6 +113,7 @@ def build_parser() -> argparse.ArgumentParser:
     from warp_critic.analysis.toy import command as toy
     from warp_critic.evaluation.metatest import MetaTestConfig
     from warp_critic.methods import methods
+    from warp_critic.methods.baseline_config import META_CRITIC_FIELDS
     from warp_critic.methods.ours import TrainConfig
 
     p = Parser(
@@ -177,6 +178,10 @@ def build_parser() -> argparse.ArgumentParser:
             help="USD scene, e.g. scenes/reacher.usda, or a robot file (.urdf, .xml, .usd)",
         )
         add_dataclass_arguments(one, entry.config, skip=("scene", "method"))
+        if entry.name != "meta-critic":  # not offered; given anyway, the config names the method
+            for action in one._actions:
+                if action.dest in META_CRITIC_FIELDS:
+                    action.help = argparse.SUPPRESS
         one.set_defaults(func=cmd_baseline)
 
     import_robot.add_parser(sub)
@@ -220,6 +225,7 @@ def main(argv: list[str] | None = None) -> int:
 
     if argv is None:
         utf8_mode()
+        console_never_fails()
     gone = cwd_gone()  # before torch: its libraries abort the process without a working directory
     if gone:
         sys.stderr.write(f"warp-critic: error: {gone}\n")
@@ -230,13 +236,15 @@ def main(argv: list[str] | None = None) -> int:
         code, said = _run(argv, in_process=argv is not None)
         if code == 0 and not signals.noted():  # a signal while the interpreter shuts down
             signals.note("after the command had finished: what it wrote is whole")
-        return code
     finally:
         if previous is not None:
             if argv is not None:
                 signals.restore(previous)
             else:  # the console script: a signal while the interpreter shuts down is one line too
                 signals.exiting(said)
+    if previous is not None and argv is None:
+        signals.finish(code)  # the exit handlers under our handler, then no teardown to interrupt
+    return code
 
 
 def _run(argv: list[str] | None, in_process: bool) -> tuple[int, bool]:

@@ -12,7 +12,6 @@ is ``mean(std)`` over the pooled errors: ``MSE`` (mean over the joints, the pape
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 from warp_critic.cli.flags import comma_list, user_message
@@ -69,6 +68,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run_from_args(args: argparse.Namespace) -> int:
     """Run the protocol and print the table; a user mistake raises ``UserError``."""
     from warp_critic.evaluation.protocol import ProtocolConfig, format_table, run_protocol
+    from warp_critic.running.locks import check_not_owned
+    from warp_critic.running.rundir import write_result
 
     pc = ProtocolConfig(
         run_dirs=args.run_dirs,
@@ -81,15 +82,43 @@ def run_from_args(args: argparse.Namespace) -> int:
         device=args.device,
     )
     try:
-        result = run_protocol(pc)
+        pc.validate()  # the runs (one method, each once) before anything is written
     except UserError as e:  # a field of the protocol: the flag or RUN_DIR
+        raise UserError(user_message(e, rename={"run_dirs": "RUN_DIR"})) from None
+    out = _check_out(args.out, pc.run_dirs) if args.out else None
+    for run in pc.run_dirs:  # each run's table-*.json goes into its folder
+        check_not_owned(Path(run) / "table.json", "RUN_DIR")
+    try:
+        result = run_protocol(pc)
+    except UserError as e:
         raise UserError(user_message(e, rename={"run_dirs": "RUN_DIR"})) from None
     print(
         f"{len(pc.run_dirs)} run(s) x {pc.num_goals} goals x {pc.inits} inits per cell, "
         f"around training goals {result.around or 'all'}; {result.seconds:.0f} s"
     )
     print("\n".join(format_table(result)))
-    if args.out:
-        Path(args.out).write_text(json.dumps(result.to_dict(), indent=2))
-        print(f"written: {args.out}")
+    if out is not None:
+        write_result(out, result.to_dict())
+        print(f"written: {out}")
     return 0
+
+
+def _check_out(path: str, run_dirs: list[str]) -> Path:
+    """``--out``: a ``.json`` outside any folder another command owns, replacing at most a score of
+    the same runs (:func:`~warp_critic.running.rundir.check_replaceable`)."""
+    from warp_critic.evaluation.protocol import RESULT_KIND
+    from warp_critic.running.locks import check_not_owned
+    from warp_critic.running.rundir import check_output_file, check_replaceable
+
+    out = check_output_file(path, "--out")
+    check_not_owned(out, "--out")
+    runs = sorted(str(Path(r).resolve()) for r in run_dirs)
+
+    def same(old: dict) -> str | None:
+        theirs = old.get("runs")
+        if isinstance(theirs, list) and sorted(str(Path(str(r)).resolve()) for r in theirs) == runs:
+            return None
+        return f"of the runs {', '.join(map(str, theirs)) if isinstance(theirs, list) else '?'}"
+
+    check_replaceable(out, "out", RESULT_KIND, same)
+    return out

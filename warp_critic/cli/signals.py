@@ -16,8 +16,11 @@ This module imports only the standard library (and the stdlib-only ``core.interr
 
 from __future__ import annotations
 
+import atexit
 import os
 import signal
+import sys
+import typing
 
 from warp_critic.core import interrupts
 
@@ -82,9 +85,27 @@ def running() -> None:
 
 
 def exiting(said: bool) -> None:
-    """The command is over (``said``: it wrote its line about an interruption)."""
+    """The command is over (``said``: it wrote its line about an interruption): a signal while the
+    exit handlers run still ends the process with one line (:func:`stop_now`)."""
     global _phase, _said
     _phase, _said = "exiting", _said or said
+
+
+def finish(code: int) -> typing.NoReturn:
+    """End the console script with ``code`` once the command is over (:func:`exiting`): the exit
+    handlers run now, while a signal still ends the process with its one line; then the process
+    leaves without Python's teardown, which puts the default handlers back first, so a signal during
+    it would kill the process without a line (exit 143). What the command wrote is closed already
+    (every result is written atomically); the console streams are flushed here."""
+    atexit._run_exitfuncs()
+    for s in SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
 
 
 def restore(previous: dict) -> None:
@@ -102,6 +123,7 @@ __all__ = [
     "install",
     "running",
     "exiting",
+    "finish",
     "restore",
     "stop_now",
     "note",

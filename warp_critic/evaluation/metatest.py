@@ -25,7 +25,6 @@ from pathlib import Path
 import numpy as np
 
 import warp_critic.methods  # noqa: F401  (registers every method's critic loader)
-from warp_critic.core.errors import FieldError
 from warp_critic.learning.inner import policy_fn
 from warp_critic.learning.losses import final_error
 from warp_critic.learning.rollout import rollout
@@ -36,7 +35,13 @@ from warp_critic.running.metatest_setup import (  # noqa: F401  (meta-test's nam
     build_test_critic,
     setup_meta_test,
 )
-from warp_critic.running.rundir import check_output_file, write_result
+from warp_critic.running.rundir import (
+    DiskFullError,
+    check_output_file,
+    check_recording_replaceable,
+    check_replaceable,
+    write_result,
+)
 
 RESULT_KIND = "warp-critic/metatest-v1"
 
@@ -56,7 +61,9 @@ def meta_test(
 
         rrd = metatest_recording_path(out)
     m = setup_meta_test(tc)
-    _not_anothers(out, tc, m.ckpt.get("run_id"))
+    ours = _not_anothers(out, tc, m.ckpt.get("run_id"))
+    if record:  # beside the result, it replaces only that result's own recording
+        check_recording_replaceable(rrd, "out", ours)
     ckpt, scene, goals, goal, sim, policy = m.ckpt, m.scene, m.goals, m.goal, m.sim, m.policy
     params, q0, qd0, steps, horizon, alpha = m.params, m.q0, m.qd0, m.steps, m.horizon, m.alpha
     G, K = goals.shape[0], m.inits
@@ -125,31 +132,24 @@ def meta_test(
         from warp_critic.running.recording_metatest import record_meta_test
 
         rollouts = [before, *trajs[1:], after]  # the policies at every step
-        result["recording"] = str(
-            record_meta_test(rrd, sim, goals, goal, K, rollouts, result["method"])
-        )
+        try:
+            result["recording"] = str(
+                record_meta_test(rrd, sim, goals, goal, K, rollouts, result["method"])
+            )
+        except DiskFullError as e:  # the results are on disk: say so in the one line
+            raise DiskFullError(f"{e}; the results {out} were written whole") from None
     return result
 
 
-def _not_anothers(out: Path, tc: MetaTestConfig, run_id: str | None) -> None:
+def _not_anothers(out: Path, tc: MetaTestConfig, run_id: str | None) -> bool:
     """An existing ``out`` is replaced only if it is a meta-test result of this run (the same run id,
-    or, for a result without one, the same run directory): never another run's or command's."""
-    import json
+    or, for a result without one, the same run directory): never another run's or command's
+    (:func:`~warp_critic.running.rundir.check_replaceable`). Returns whether one is there."""
 
-    try:
-        old = json.loads(out.read_text()) if out.is_file() else None
-    except (OSError, ValueError, UnicodeDecodeError):
-        old = {}
-    if old is None:
-        return
-    old = old if isinstance(old, dict) else {}
-    if old.get("kind") == RESULT_KIND:
+    def same(old: dict) -> str | None:
         same_dir = Path(str(old.get("run_dir"))).resolve() == Path(tc.run_dir).resolve()
         if (old.get("run_id") == run_id) if old.get("run_id") and run_id else same_dir:
-            return
-        whose = f"of the run {old.get('run_dir')}"
-    else:
-        whose = f"of kind {old.get('kind')!r}"
-    raise FieldError(
-        "out", f"{out}: holds a result {whose}; not replacing it (choose another file)"
-    )
+            return None
+        return f"of the run {old.get('run_dir')}"
+
+    return check_replaceable(out, "out", RESULT_KIND, same)

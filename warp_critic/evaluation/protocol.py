@@ -36,7 +36,10 @@ from typing import Any
 from warp_critic.core.errors import FieldError, UserError
 from warp_critic.evaluation.paper import GOAL_NOISE, PAPER_TABLE1, TABLE1_STDS
 from warp_critic.methods import method
+from warp_critic.running.rundir import RunDir
 
+#: The kind of the JSON that ``warp-critic score --out`` writes (:meth:`ProtocolResult.to_dict`).
+RESULT_KIND = "warp-critic/score-v1"
 # ------------------------------------------------------------------------------------------------
 # settings and results
 # ------------------------------------------------------------------------------------------------
@@ -103,11 +106,12 @@ class ProtocolResult:
         raise KeyError((reading, std))
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        return {"kind": RESULT_KIND, **asdict(self)}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ProtocolResult:
         d = dict(d)
+        d.pop("kind", None)
         d["cells"] = [Cell(**c) for c in d.get("cells", [])]
         return cls(**d)
 
@@ -161,6 +165,8 @@ def validate(pc: ProtocolConfig) -> list[dict | None]:
         )
 
     runs = []
+    seen: dict[str, str] = {}  # a run's identity (its run id, else its folder) -> the name given
+    methods: dict[str, str] = {}  # method -> the first run of it
     for run in pc.run_dirs:
         path = Path(run)
         if not path.is_dir():
@@ -168,6 +174,25 @@ def validate(pc: ProtocolConfig) -> list[dict | None]:
         if not (path / "checkpoint.pt").is_file():
             raise UserError(f"{run}: no checkpoint.pt in this run directory")
         config = _read_config(path)
+        marker = RunDir(path).marker()
+        for key in (str(path.resolve()), str(marker.get("run_id") or "")):
+            if key and key in seen:
+                raise FieldError(
+                    "run_dirs",
+                    f"{run} is the run {seen[key]} again (the same folder or a copy of it): "
+                    "each run is one seed and is pooled once",
+                )
+        seen.update({str(path.resolve()): str(run), str(marker.get("run_id") or ""): str(run)})
+        seen.pop("", None)
+        name = str(marker.get("method") or (config or {}).get("method") or "ours")
+        methods.setdefault(name, str(run))
+        if len(methods) > 1:
+            (a, first), (b, _) = list(methods.items())[:2]
+            raise FieldError(
+                "run_dirs",
+                f"{first} is a run of {a} and {run} of {b}: the runs pooled are seeds of one "
+                "method's critic (score each method on its own)",
+            )
         n_train = len(config["goals"]) if config and config.get("goals") else None
         for i in pc.around or []:
             if n_train is not None and i >= n_train:

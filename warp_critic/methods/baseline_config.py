@@ -6,11 +6,23 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from warp_critic.core.errors import FieldError
+from warp_critic.core.memory import check_fits
 from warp_critic.methods.q_networks import AUX_INPUTS
 from warp_critic.methods.replay import NOISE_KINDS, REWARD_KINDS
 from warp_critic.physics import schema
 from warp_critic.running.config import filled, spec
 from warp_critic.running.task import TaskConfig
+
+#: The settings only Meta-Critic uses (another method refuses them rather than ignore them).
+META_CRITIC_FIELDS = (
+    "aux_lr",
+    "aux_weight_decay",
+    "aux_hidden",
+    "aux_input",
+    "aux_weight",
+    "virtual_lr",
+)
 
 
 @dataclass
@@ -113,6 +125,36 @@ class BaselineConfig(TaskConfig):
     )
 
     scene_fields = TaskConfig.scene_fields + ("inner_steps",)
+
+    def check(self, scene=None) -> None:
+        """:meth:`TaskConfig.check`, and: Meta-Critic's settings only for Meta-Critic (another
+        method would record and ignore them), a minibatch no larger than the replay buffer, and,
+        with ``scene``, the replay buffers' memory (``S`` seeds x the transitions they can hold x
+        ``7 dof + 2`` float32 each) before any is allocated."""
+        super().check(scene)
+        if self.method != "meta-critic":
+            for name in META_CRITIC_FIELDS:
+                value = getattr(self, name)
+                if value != self.__dataclass_fields__[name].default:
+                    raise FieldError(
+                        name,
+                        f"is a Meta-Critic setting; {self.method} does not use it (got {value!r})",
+                    )
+        if self.batch_size > self.buffer_size:
+            raise FieldError(
+                "batch_size",
+                f"{self.batch_size} is more than the replay buffer holds (--buffer-size "
+                f"{self.buffer_size}): a minibatch is drawn from the buffer",
+            )
+        if scene is not None and isinstance(self.horizon, int):
+            seeds = len(self.seeds) if self.seeds else 1
+            worlds = (len(self.goals) if self.goals else 1) * self.worlds_per_goal
+            held = min(self.buffer_size, self.iterations * worlds * self.horizon)
+            check_fits(
+                "buffer_size" if held == self.buffer_size else "iterations",
+                f"{seeds} replay buffer(s) of {held:,} transitions ({scene.dof} dof)",
+                seeds * held * (7 * scene.dof + 2) * 4,
+            )
 
     @classmethod
     def from_dict(cls, d: dict):

@@ -86,6 +86,15 @@ class LinkChange:
             or not all(_finite(x) for x in self.point)
         ):
             raise bad("@POINT is x,y,z in metres, and only for point-mass")
+        if self.point is not None:  # the bound import puts on a tip: farther is a typing mistake
+            from warp_critic.physics.robot_checks import TIP_OFFSET_MAX
+
+            distance = math.sqrt(sum(float(x) ** 2 for x in self.point))
+            if distance > TIP_OFFSET_MAX:
+                raise bad(
+                    f"@POINT is {distance:g} m from the link; a point is at most "
+                    f"{TIP_OFFSET_MAX:g} m from it"
+                )
         value = float(self.value)
         if self.what == "point-mass" and (self.op != "+=" or value < 0):
             raise bad("a point mass is added: point-mass+=KG with KG >= 0")

@@ -100,10 +100,10 @@ def is_robot_file(path: str | Path) -> bool:
     suffix = path.suffix.lower()
     if suffix in ROBOT_SUFFIXES or suffix == ".xacro":
         return True
-    if suffix not in USD_SUFFIXES or not path.is_file():
+    if not path.is_file():
         return False
-    try:
-        return file_format(path) == "usd"
+    try:  # the format is read from the content: a URDF saved as .txt is a URDF
+        return file_format(path) in (("usd",) if suffix in USD_SUFFIXES else ("urdf", "mjcf"))
     except SceneError:  # an unreadable file: load_scene says why
         return False
 
@@ -152,7 +152,9 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     # options' flags (robot_checks); --lock-mimic welds followers, which then leave the trained set
     o = options
     chosen = sorted(names[j] for j in trained)
-    repairs = check_robot(path, builder, fmt, chosen, o.lock_mimic, o.repair_inertia)
+    repairs = check_robot(
+        path, builder, fmt, chosen, o.lock_mimic, o.repair_inertia, home=dict(o.home or ())
+    )
     jointed = [j for j, t in enumerate(builder.joint_type) if int(t) != fixed]
     trained = {j for j in trained if j in jointed}
     for line in [*notes, note] if note else notes:  # said once the file passed its checks: a

@@ -10,7 +10,8 @@ is refused here, in one :class:`SceneError` line naming the body or joint and th
   trained; repair on request: ``lock_mimic`` welds the coupled joint at the position the coupling
   gives at the home pose;
 * a body's mass that is not a finite number in 1e-6..1e6 kg (a frame link welded to its parent may
-  be lighter: it is merged); a mass of 0 with an inertia; an inertia with a non-finite entry, a
+  be lighter: it is merged); a mass of 0 with an inertia; an inertia entry that is not a finite
+  number (named as the file writes it; never repaired: no nearest valid tensor exists); a
   negative diagonal entry, a negative principal moment (a large off-diagonal entry), principal
   moments that violate the triangle inequality, or (on a body its own joint moves) a smallest
   principal moment below newton's floor (1e-6 of the largest); repair on request:
@@ -40,7 +41,14 @@ from warp_critic.physics import derive
 from warp_critic.physics.importers import lock
 from warp_critic.physics.inertia_checks import _fail, _g, _short, check_inertias
 
-__all__ = ["IMPORT_RULES", "TIP_OFFSET_MAX", "check_robot", "check_tip_offset", "given_home"]
+__all__ = [
+    "IMPORT_RULES",
+    "TIP_OFFSET_MAX",
+    "check_model",
+    "check_robot",
+    "check_tip_offset",
+    "given_home",
+]
 
 TIP_OFFSET_MAX = 10.0  # m
 LOCK_MIMIC = "import with --lock-mimic to lock it where the coupling puts it at the home pose"
@@ -50,10 +58,11 @@ IMPORT_RULES = """\
 refused, in one line naming the body or joint and the value (nothing is written):
   a joint coupled to another (URDF <mimic>, MJCF <equality><joint>): --lock-mimic welds it where
     the coupling puts it at the home pose;
-  a mass that is not a finite number in 1e-6..1e6 kg; mass 0 with an inertia; an inertia that is
-    not finite, has a negative diagonal entry, is not positive definite, violates the triangle
-    inequality or (on a moving link) is degenerate: --repair-inertia projects it to the nearest
-    valid inertia;
+  a mass that is not a finite number in 1e-6..1e6 kg; mass 0 with an inertia; an inertia entry
+    that is not a finite number (no repair: give the number); an inertia with a negative diagonal
+    entry, not positive definite, violating the triangle inequality or (on a moving link)
+    degenerate: --repair-inertia projects it to the nearest valid inertia;
+  a joint axis that is zero or not finite;
   joint limits lower > upper, or lower = upper on a trained joint; a URDF effort < 0 or not a
     number; effort="0" (no actuator) on a trained joint (leave it out of --joints to lock it);
   a link, body or joint defined twice; a --tip-offset over 10 m.
@@ -75,6 +84,15 @@ def check_tip_offset(tip: Sequence[float]) -> None:
         )
 
 
+def check_model(path: Path, builder) -> None:
+    """The checks of :func:`check_robot` that a scene file gets too (no repairs: a scene is loaded
+    as it is): masses and inertias, joint limits and axes of every joint (a scene trains each)."""
+    check_inertias(path, builder, repair=False)
+    movable = _movable(builder)
+    _limits(path, builder, movable, {_short(builder.joint_label[j]) for j in movable})
+    _axes(path, builder, movable)
+
+
 def check_robot(
     path: Path,
     builder,
@@ -82,17 +100,20 @@ def check_robot(
     trained: Sequence[str] | None = None,
     lock_mimic: bool = False,
     repair_inertia: bool = False,
+    home: dict[str, float] | None = None,
 ) -> tuple[str, ...]:
     """Refuse what the module docstring lists (a :class:`SceneError`), or repair it on request.
 
     ``builder``: newton's ``ModelBuilder`` straight from the importer (fixed joints not merged);
-    ``fmt``: ``urdf``/``mjcf``/``usd``; ``trained``: the joints to train (None: every movable one).
+    ``fmt``: ``urdf``/``mjcf``/``usd``; ``trained``: the joints to train (None: every movable one);
+    ``home``: joint name -> the home the user gave (``--home``; a locked follower follows it).
     Returns the repairs made, one line each (changed in ``builder``)."""
     root = _xml_root(path) if fmt in ("urdf", "mjcf") else None
     if root is not None:
         _check_names(path, root, fmt)
+        _finite_in_file(path, root, fmt)
     repairs: list[str] = []
-    repairs += _couplings(path, builder, root, fmt, lock_mimic, trained)
+    repairs += _couplings(path, builder, root, fmt, lock_mimic, trained, home or {})
     repairs += check_inertias(path, builder, repair_inertia)
     movable = _movable(builder)
     trained_set = (
@@ -144,8 +165,64 @@ def _check_names(path: Path, root, fmt: str) -> None:
             seen.add(name)
 
 
+#: The inertia entries as a URDF ``<inertia>`` and an MJCF ``fullinertia`` / ``diaginertia`` list them.
+_INERTIA = ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")
+
+
+def _attr(element, name: str) -> str | None:
+    return None if element is None else element.get(name)
+
+
+def _finite_in_file(path: Path, root, fmt: str) -> None:
+    """A non-finite inertia entry or joint axis, named as the file writes it: the importer spreads
+    a NaN over the whole tensor (every entry then reads ``nan``) and normalises a NaN axis to zero."""
+
+    def numbers(text: str | None) -> list[float]:
+        try:
+            return [float(x) for x in (text or "").split()]
+        except ValueError:
+            return []
+
+    def bad(values) -> bool:
+        return any(not math.isfinite(v) for v in values)
+
+    if fmt == "urdf":
+        inertias = [(e.get("name", "?"), e.find("inertial/inertia")) for e in root.findall("link")]
+        for name, el in inertias:
+            if el is None:
+                continue
+            for key in _INERTIA:
+                v = numbers(el.get(key))
+                if bad(v):
+                    raise _fail(path, f"body {name!r}: inertia {key}={v[0]:g} is not a finite "
+                                "number (give its value; --repair-inertia cannot project it)")  # fmt: skip
+        axes = [(j.get("name", "?"), numbers(_attr(j.find("axis"), "xyz"))) for j in root.findall("joint")]  # fmt: skip
+    else:
+        for body in root.iter("body"):
+            el = body.find("inertial")
+            if el is None:
+                continue
+            for attr in ("fullinertia", "diaginertia"):
+                v = numbers(el.get(attr))
+                i = next((k for k, x in enumerate(v) if not math.isfinite(x)), None)
+                if i is not None and i < len(_INERTIA):
+                    raise _fail(path, f"body {body.get('name', '?')!r}: inertia {_INERTIA[i]}={v[i]:g} "
+                                "is not a finite number (give its value; --repair-inertia cannot project it)")  # fmt: skip
+        axes = [(j.get("name", "?"), numbers(j.get("axis"))) for j in root.iter("joint")]
+    for name, axis in axes:
+        if bad(axis):
+            raise _fail(path, f"joint {name!r} has a joint axis ({', '.join(f'{x:g}' for x in axis)}) "
+                        "that is not finite: it moves nothing")  # fmt: skip
+
+
 def _couplings(
-    path: Path, builder, root, fmt: str, lock_mimic: bool, trained: Sequence[str] | None
+    path: Path,
+    builder,
+    root,
+    fmt: str,
+    lock_mimic: bool,
+    trained: Sequence[str] | None,
+    home: dict[str, float],
 ) -> list[str]:
     """``(follower, leader or None, polynomial coefficients)`` per coupling: locked or refused."""
     found: list[tuple[str, str | None, list[float]]] = []
@@ -186,7 +263,7 @@ def _couplings(
             f"would vanish from the scene and the goals would ask for poses it forbids "
             f"({LOCK_MIMIC})",
         )
-    return [_lock_follower(path, builder, *c) for c in found]
+    return [_lock_follower(path, builder, *c, home) for c in found]
 
 
 def _poly_text(poly: list[float], leader: str | None) -> str:
@@ -196,7 +273,9 @@ def _poly_text(poly: list[float], leader: str | None) -> str:
     return " + ".join(terms)
 
 
-def _lock_follower(path: Path, builder, follower: str, leader: str | None, poly) -> str:
+def _lock_follower(
+    path: Path, builder, follower: str, leader: str | None, poly, given: dict[str, float]
+) -> str:
 
     labels = [_short(lb) for lb in builder.joint_label]
     if follower not in labels or (leader is not None and leader not in labels):
@@ -209,7 +288,10 @@ def _lock_follower(path: Path, builder, follower: str, leader: str | None, poly)
         q = float(builder.joint_q[builder.joint_q_start[j]])
         return derive.home_value(lo, hi, q, 1e9)
 
-    x = home(labels.index(leader)) if leader is not None else 0.0
+    if leader is None:
+        x = 0.0
+    else:  # the leader's home: the one given (--home), else the one derived from the file
+        x = given[leader] if leader in given else home(labels.index(leader))
     value = float(sum(c * x**i for i, c in enumerate(poly)))
     dof = builder.joint_qd_start[jf]
     lo, hi = float(builder.joint_limit_lower[dof]), float(builder.joint_limit_upper[dof])

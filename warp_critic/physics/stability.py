@@ -135,12 +135,15 @@ def _round_toward(x: float, good: float) -> float:
 def _holds_from(
     scene: Scene, base: Variant, r: ChangeRange, bad: float, good: float, probe: Probe
 ) -> float | None:
+    """The value from which every probed model up to ``good`` holds (two digits, toward ``good``),
+    or ``None``: the first holding value alone would be advice that a narrower range then contradicts
+    where a failing value lies between it and ``good``."""
     values = _grid(bad, good)
     counts = failing(scene, [with_draws(base, (r,), [v]) for v in values], probe)
-    for v, n in zip(values, counts):
-        if n == 0:
-            return _round_toward(v, good)
-    return None
+    last_bad = max((k for k, n in enumerate(counts) if n), default=-1)
+    if last_bad + 1 >= len(values):
+        return None
+    return _round_toward(values[last_bad + 1], good)
 
 
 def check_ranges(
@@ -160,7 +163,17 @@ def check_ranges(
             for end in ("lo", "hi"):
                 values = [getattr(r, end) if r.group == g else np.nan for r in ranges]
                 cases.append((None, end, values))
-    counts = failing(scene, [with_draws(base, ranges, v) for _, _, v in cases], probe)
+    inside = []  # (range, value) inside each range: a model in the middle may fail where the ends hold
+    for i, r in enumerate(ranges):
+        if r.lo != r.hi:
+            inside += [(i, v) for v in _grid(r.lo, r.hi)[:-1]]
+    counts = failing(
+        scene,
+        [with_draws(base, ranges, v) for _, _, v in cases]
+        + [with_draws(base, (ranges[i],), [v]) for i, v in inside],
+        probe,
+    )
+    counts, inside_counts = counts[: len(cases)], counts[len(cases) :]
     alone = {(i, end): n for (i, end, _), n in zip(cases, counts) if i is not None}
     for (index, end, values), n in zip(cases, counts):
         if n == 0:
@@ -188,6 +201,22 @@ def check_ranges(
         return (
             f"{scene.name}'s step ({probe.describe()}) does not hold {r.at(bad).text()} ({held}); "
             f"{where}: {REMEDY}"
+        )
+    for k, ((i, v), n) in enumerate(zip(inside, inside_counts)):
+        if n == 0:
+            continue
+        r = ranges[i]
+        held_up_to = [u for (j, u), m in zip(inside[:k], inside_counts[:k]) if j == i and m == 0]
+        where = (
+            f"it holds from {r.at(r.lo).text()} up to about "
+            f"{r.at(_round_toward(held_up_to[-1], r.lo)).text()} (probed)"
+            if held_up_to
+            else f"only values next to {r.at(r.lo).text()} may hold"
+        )
+        return (
+            f"{scene.name}'s step ({probe.describe()}) holds the ends of {r.text()} but not "
+            f"{r.at(v).text()} inside it ({n} of {ROLLOUTS} probe rollouts under saturated "
+            f"torques diverged); {where}: {REMEDY}"
         )
     return None
 

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from warp_critic.core.errors import SceneError
+from warp_critic.core.errors import FieldError, SceneError
 from warp_critic.physics import schema
 from warp_critic.physics.scene import Scene
 from warp_critic.physics.scene_hash import content_hash
@@ -80,6 +80,7 @@ def _check_stage(path: Path, stage) -> tuple[object, dict[str, float]]:
         raise _fail(path, "the articulation has no joints")
     if not bodies:
         raise _fail(path, "no rigid bodies (UsdPhysics.RigidBodyAPI)")
+    _known_attributes(path, stage)
 
     effort: dict[str, float] = {}
     for prim in joints:
@@ -113,6 +114,35 @@ def _check_stage(path: Path, stage) -> tuple[object, dict[str, float]]:
         if sum(inertia) <= 0.0:
             raise _fail(path, f"link {prim.GetPath()} has zero inertia")
     return roots[0], effort
+
+
+#: Every ``warp_critic:*`` attribute a scene may author (the loader reads each of them).
+KNOWN_ATTRIBUTES = (
+    EE_ATTR,
+    TIP_ATTR,
+    EFFORT_ATTR,
+    "warp_critic:importRepairs",  # the repairs an import made (physics/export.py)
+    *(a.usd for a in schema.ATTRIBUTES),
+)
+
+
+def _known_attributes(path: Path, stage) -> None:
+    """A ``warp_critic:*`` attribute the loader does not read is a typing mistake that would
+    otherwise change nothing: named, with the nearest real one."""
+    import difflib
+
+    for prim in stage.Traverse():
+        for prop in prim.GetProperties():
+            name = prop.GetName()
+            if name.startswith("warp_critic:") and name not in KNOWN_ATTRIBUTES:
+                near = difflib.get_close_matches(name, KNOWN_ATTRIBUTES, n=1)
+                hint = (
+                    f"did you mean {near[0]}?"
+                    if near
+                    else "warp-critic reads "
+                    + ", ".join(a.split(":", 1)[1] for a in KNOWN_ATTRIBUTES)
+                )
+                raise _fail(path, f"{prim.GetPath()}: unknown attribute {name} ({hint})")
 
 
 def _read_root(path: Path, root) -> tuple[str, np.ndarray]:
@@ -217,6 +247,16 @@ def read_usd_scene(path: Path) -> Scene:
     except KeyError as exc:
         raise _fail(path, f"imported joint {exc} not found in the file") from None
     builder.joint_effort_limit = [float(v) for v in effort_limit]
+
+    from warp_critic.physics.robot_checks import check_model, check_tip_offset
+
+    # what an imported robot file must satisfy (masses in range, valid inertias, limits, axes,
+    # the tip), checked the same way on a scene file (a copy of a scene edited by hand)
+    check_model(path, builder)
+    try:
+        check_tip_offset(tip.tolist())
+    except FieldError as e:
+        raise _fail(path, f"{TIP_ATTR} {e.problem}") from None
 
     joint_names = [label.rsplit("/", 1)[-1] for label in builder.joint_label]
     try:

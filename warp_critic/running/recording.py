@@ -42,6 +42,10 @@ class Recorder:
         blueprint: optional layout sent with the recording.
         flush_seconds: how long logged data may wait to be batched into larger chunks (smaller
             files; :meth:`flush` writes it at once); ``None``: rerun's default (a few ms).
+        whole: keep the recording in memory and write it at :meth:`close`, atomically (a full
+            disk is one :class:`~warp_critic.running.rundir.DiskFullError` and leaves no part of a
+            file; rerun's own file writer fails in a thread, with a traceback and log lines). For
+            recordings that fit in memory (a meta-test's).
     """
 
     def __init__(
@@ -51,6 +55,7 @@ class Recorder:
         blueprint=None,
         recording_id: str | None = None,
         flush_seconds: float | None = None,
+        whole: bool = False,
     ):
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -64,7 +69,13 @@ class Recorder:
         self.stream = rr.RecordingStream(
             application_id, recording_id=recording_id, batcher_config=batcher
         )
-        self.stream.save(str(self.path), default_blueprint=blueprint)
+        self._memory = None
+        if whole:
+            self._memory = self.stream.memory_recording()
+            if blueprint is not None:
+                self.stream.send_blueprint(blueprint, make_active=True, make_default=True)
+        else:
+            self.stream.save(str(self.path), default_blueprint=blueprint)
         self._closed = False
 
     # -- time ---------------------------------------------------------------------------------
@@ -167,8 +178,15 @@ class Recorder:
         """Flush and close so the file gets its footer. Idempotent."""
         if not self._closed:
             self.stream.flush()
-            self.stream.disconnect()
             self._closed = True
+            if self._memory is not None:
+                from warp_critic.running.rundir import atomic_write_bytes
+
+                data = self._memory.drain_as_bytes()
+                self.stream.disconnect()
+                atomic_write_bytes(self.path, data)
+            else:
+                self.stream.disconnect()
 
     def __enter__(self) -> Recorder:
         return self

@@ -62,6 +62,7 @@ def record_meta_test(
         path,
         application_id=f"warp-critic meta-test {method} {sim.scene.name}",
         blueprint=metatest_blueprint(stage.camera),
+        whole=True,
     ) as rec:
         stage.log_static(rec.stream)
         worlds = [g * inits for g in range(shown)]

@@ -31,14 +31,15 @@ import errno
 import io
 import json
 import os
+import stat
 import tempfile
 import uuid
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 
 import torch
 
-from warp_critic.core.errors import UserError, warn
+from warp_critic.core.errors import FieldError, UserError, warn
 from warp_critic.running.locks import FolderLock
 
 MARKER = ".warp-critic-run"
@@ -150,24 +151,115 @@ def check_output_dir(path: str | Path, what: str = "output") -> Path:
 
 
 def check_output_file(path: str | Path, what: str = "output") -> Path:
-    """Check, before any work, that a result file can be written to ``path`` without overwriting
-    anything that is not an earlier result of the same kind (a ``.json`` written by us)."""
+    """Check, before any work, that ``path`` is a place for a result file: a ``.json`` other than a
+    run's own files, not a folder, in a folder we can write. Whether what is there may be replaced is
+    :func:`check_replaceable`'s question (it needs the run being written for)."""
     path = Path(path)
     if path.name in RUN_FILES or path.suffix != ".json":
         raise UserError(f"{what} {path}: must be a .json file other than a run's own files")
     if path.is_dir():
         raise UserError(f"{what} {path}: is a directory")
-    if path.exists():
-        try:
-            old = json.loads(path.read_text())
-        except (OSError, ValueError, UnicodeDecodeError):
-            old = None
-        if not (isinstance(old, dict) and old.get("kind", "").startswith("warp-critic/")):
-            raise UserError(
-                f"{what} {path}: exists and is not a warp-critic result; not overwriting it"
-            )
     _writable_dir(path.parent, what)
     return path
+
+
+#: A file read back to decide whether it may be replaced is at most this big (bytes): every result
+#: this package writes is far smaller, and a device such as ``/dev/zero`` never ends.
+MAX_RESULT_BYTES = 64 * 2**20
+
+
+def read_bounded(path: str | Path, cap: int = MAX_RESULT_BYTES) -> bytes:
+    """The bytes of the user-named regular file ``path``, at most ``cap`` of them; a device, a FIFO,
+    a socket or a larger file is one :class:`UserError` line (nothing is read from it)."""
+    path = Path(path)
+    try:
+        st = os.stat(path)  # through a symbolic link: what the link names is what would be read
+    except OSError as e:
+        raise UserError(f"{path}: cannot be read ({e.strerror or e})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = next((name for test, name in _NOT_REGULAR if test(st.st_mode)), "not a regular file")
+        raise UserError(f"{path}: is {kind}, not a regular file")
+    if st.st_size > cap:
+        raise UserError(f"{path}: {st.st_size:,} bytes, more than the {cap:,} a result file can be")
+    try:
+        with open(path, "rb") as f:
+            data = f.read(cap + 1)
+    except OSError as e:
+        raise UserError(f"{path}: cannot be read ({e.strerror or e})") from None
+    if len(data) > cap:  # grew since the stat
+        raise UserError(f"{path}: more than the {cap:,} bytes a result file can be")
+    return data
+
+
+_NOT_REGULAR = (
+    (stat.S_ISDIR, "a directory"),
+    (stat.S_ISCHR, "a character device"),
+    (stat.S_ISBLK, "a block device"),
+    (stat.S_ISFIFO, "a FIFO (named pipe)"),
+    (stat.S_ISSOCK, "a socket"),
+)
+
+
+def check_replaceable(
+    path: str | Path, field: str, kind: str, same: Callable[[dict], str | None]
+) -> bool:
+    """The one rule of every writer: ``path`` may be written when nothing is there, or when what is
+    there is a result of the same purpose (``kind``) written for the same run(s): ``same(old)``
+    returns ``None`` for such an ``old`` result, else the words naming whose it is ("of the run X").
+    Anything else (a user's file, another command's result, another run's) is one
+    :class:`FieldError` naming ``field`` (the flag that chose ``path``); nothing beyond
+    :data:`MAX_RESULT_BYTES` is read. Returns whether an earlier result of this run is there (and
+    will be replaced)."""
+    path = Path(path)
+    if not path.exists() and not path.is_symlink():
+        return False
+    try:
+        data = read_bounded(path)
+    except UserError as e:
+        raise FieldError(field, str(e)) from None
+    try:
+        old = json.loads(data)
+    except (ValueError, UnicodeDecodeError, RecursionError):
+        old = None
+    if not (isinstance(old, dict) and str(old.get("kind", "")).startswith("warp-critic/")):
+        raise FieldError(
+            field, f"{path}: exists and is not a warp-critic result; not overwriting it"
+        )
+    whose = f"of kind {old.get('kind')!r}" if old.get("kind") != kind else same(old)
+    if whose is not None:
+        raise FieldError(
+            field, f"{path}: holds a result {whose}; not replacing it (choose another file)"
+        )
+    return True
+
+
+#: The first bytes of a rerun recording (``.rrd``).
+RRD_MAGIC = b"RRF2"
+
+
+def check_recording_replaceable(path: str | Path, field: str, result_is_ours: bool) -> None:
+    """A recording written beside a result file (``X.json`` -> ``X.rrd``) may replace only the
+    recording of the result it replaces: an existing ``path`` is refused unless the result beside it
+    is this run's earlier result (``result_is_ours``, from :func:`check_replaceable`) and ``path`` is
+    a rerun recording."""
+    path = Path(path)
+    if not path.exists() and not path.is_symlink():
+        return
+    if path.is_dir():
+        raise FieldError(field, f"{path}: the recording's place is a directory")
+    ours = False
+    if result_is_ours and path.is_file() and not path.is_symlink():
+        try:
+            with open(path, "rb") as f:
+                ours = f.read(len(RRD_MAGIC)) == RRD_MAGIC
+        except OSError:
+            ours = False
+    if not ours:
+        raise FieldError(
+            field,
+            f"{path}: exists and is not the recording of the result it would sit beside; "
+            "not replacing it (choose another file, or give --no-recording)",
+        )
 
 
 def write_result(path: Path, result: dict) -> None:

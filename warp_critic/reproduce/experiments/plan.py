@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
+from warp_critic.core.runtime import MAX_SEEDS
 from warp_critic.reproduce.engine.stage import Stage
 from warp_critic.reproduce.experiments.extra_baselines import (
     EVALUATIONS,
@@ -55,8 +56,10 @@ class ReproduceConfig:
         """Check everything before any work; returns the settings. Raises a one-line :class:`UserError`."""
         if isinstance(self.seeds, bool) or not isinstance(self.seeds, int) or self.seeds < 1:
             raise FieldError("seeds", f"must be an integer >= 1 (got {self.seeds!r})")
-        if self.seeds > 1000:
-            raise FieldError("seeds", f"must be <= 1000 (got {self.seeds})")
+        if self.seeds > MAX_SEEDS:  # one process trains them all (the stages' seeds= setting)
+            raise FieldError(
+                "seeds", f"{self.seeds} seeds: at most {MAX_SEEDS} train in one process"
+            )
         extra = self.extra
         subs = metatrain_names(extra) + list(BEYOND_EVALS)
         for s in self.only or []:
@@ -86,7 +89,9 @@ class ReproduceConfig:
     def selected(self) -> list[str]:
         """The selected stage groups, and single meta-trainings (``metatrain-<robot>-<method>``,
         ``beyond-metatrain-<robot>-<recipe>``)."""
-        extra = [BEYOND] if self.beyond or BEYOND in (self.only or []) else []
+        # --beyond adds the group to a whole call; with --only the call runs what its names need
+        only = self.only or []
+        extra = [BEYOND] if BEYOND in only or (self.beyond and self.only is None) else []
         if self.only is None:
             return list(STAGES) + selected_extra(list(STAGES), self.extra) + extra
         singles = [s for s in metatrain_names(self.extra) if s in self.only]
