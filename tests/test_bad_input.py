@@ -463,9 +463,9 @@ def disk_full_on(name_part: str):
     def patch(monkeypatch, w):
         import errno
 
-        from warp_critic.running import rundir
+        from warp_critic.running import files
 
-        real = rundir._write_bytes
+        real = files._write_bytes
 
         def write(path, data):
             if name_part in Path(path).name:
@@ -473,7 +473,7 @@ def disk_full_on(name_part: str):
                 raise OSError(errno.ENOSPC, "No space left on device")
             real(path, data)
 
-        monkeypatch.setattr(rundir, "_write_bytes", write)
+        monkeypatch.setattr(files, "_write_bytes", write)
 
     return patch
 
@@ -1983,7 +1983,7 @@ def test_meta_train_numbers_property(name, text):
 def test_meta_test_numbers_property(name, text, base):
     from warp_critic.evaluation import metatest
     from warp_critic.running.config import check_fields
-    from warp_critic.running.rundir import check_output_file
+    from warp_critic.running.files import check_output_file
 
     def checks_only(tc, **kw):  # meta-test's checks before it loads the run
         out = check_output_file(Path(tc.out), "out")

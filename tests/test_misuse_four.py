@@ -5,7 +5,7 @@ nothing lost).
 
 * results lost: ``score --out`` on a run's own file or on a meta-test result, ``meta-test --out X.json``
   over someone's ``X.rrd``, ``gpu_check --out`` over a result (one rule for every writer:
-  :func:`warp_critic.running.rundir.check_replaceable`);
+  :func:`warp_critic.running.files.check_replaceable`);
 * unbounded or crashing: a result path that is a FIFO or a device, the recording on a full disk, a
   replay buffer that cannot fit, a console that cannot encode the result's path;
 * accepted and silently wrong: ``score`` pooling a run twice or two methods, or writing into a run
@@ -256,7 +256,7 @@ def test_result_files_are_read_bounded(tmp_path):
     """A result path that is a link to ``/dev/full`` (an endless read), or a file over the cap, is
     refused without reading it (it grew the process to 24 GB)."""
     from warp_critic.core.errors import UserError
-    from warp_critic.running.rundir import check_replaceable, read_bounded
+    from warp_critic.running.files import check_replaceable, read_bounded
 
     link = tmp_path / "X.json"
     link.symlink_to("/dev/full")

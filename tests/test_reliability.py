@@ -287,8 +287,8 @@ def test_a_full_disk_while_warp_builds_its_kernels_is_one_line(tmp_path):
 
 
 def test_a_full_disk_while_saving_a_checkpoint_leaves_the_old_one(tmp_path, monkeypatch):
-    from warp_critic.running import rundir
-    from warp_critic.running.rundir import DiskFullError, atomic_torch_save
+    from warp_critic.running import files
+    from warp_critic.running.files import DiskFullError, atomic_torch_save
 
     path = tmp_path / "checkpoint.pt"
     atomic_torch_save({"iteration": 1}, path)
@@ -298,7 +298,7 @@ def test_a_full_disk_while_saving_a_checkpoint_leaves_the_old_one(tmp_path, monk
         Path(target).write_bytes(data[:7])
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(rundir, "_write_bytes", full)
+    monkeypatch.setattr(files, "_write_bytes", full)
     with pytest.raises(DiskFullError, match="space"):
         atomic_torch_save({"iteration": 2}, path)
     assert path.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == [path.name]

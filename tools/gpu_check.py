@@ -212,8 +212,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     from warp_critic.cli.flags import user_message
     from warp_critic.core.errors import UserError
+    from warp_critic.running.files import atomic_write_text, check_output_file, check_replaceable
     from warp_critic.running.locks import check_not_owned
-    from warp_critic.running.rundir import atomic_write_text, check_output_file, check_replaceable
 
     try:  # the one rule of every writer: replace only an earlier GPU check's file
         check_output_file(out, "--out")

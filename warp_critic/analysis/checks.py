@@ -60,7 +60,7 @@ def integer(field: str, value, lo: int, hi: int | None = None) -> int:
 def out_dir(field: str, path) -> Path:
     """An output folder that is a folder (or can be made one) we can write into."""
     from warp_critic.core.errors import UserError
-    from warp_critic.running.rundir import check_output_dir
+    from warp_critic.running.files import check_output_dir
 
     try:
         return check_output_dir(path)

@@ -259,8 +259,9 @@ def _run(argv: list[str] | None, in_process: bool) -> tuple[int, bool]:
         parser.print_help()
         return EXIT_USER_ERROR, False
     from warp_critic.core.runtime import init
+    from warp_critic.running.files import DiskFullError
     from warp_critic.running.loop import Interrupted
-    from warp_critic.running.rundir import DiskFullError, RunExistsError
+    from warp_critic.running.rundir import RunExistsError
     from warp_critic.running.seedrun import ResumeMismatch
 
     try:

@@ -68,8 +68,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run_from_args(args: argparse.Namespace) -> int:
     """Run the protocol and print the table; a user mistake raises ``UserError``."""
     from warp_critic.evaluation.protocol import ProtocolConfig, format_table, run_protocol
+    from warp_critic.running.files import write_result
     from warp_critic.running.locks import check_not_owned
-    from warp_critic.running.rundir import write_result
 
     pc = ProtocolConfig(
         run_dirs=args.run_dirs,
@@ -105,10 +105,10 @@ def run_from_args(args: argparse.Namespace) -> int:
 
 def _check_out(path: str, run_dirs: list[str]) -> Path:
     """``--out``: a ``.json`` outside any folder another command owns, replacing at most a score of
-    the same runs (:func:`~warp_critic.running.rundir.check_replaceable`)."""
+    the same runs (:func:`~warp_critic.running.files.check_replaceable`)."""
     from warp_critic.evaluation.protocol import RESULT_KIND
+    from warp_critic.running.files import check_output_file, check_replaceable
     from warp_critic.running.locks import check_not_owned
-    from warp_critic.running.rundir import check_output_file, check_replaceable
 
     out = check_output_file(path, "--out")
     check_not_owned(out, "--out")

@@ -28,19 +28,19 @@ import warp_critic.methods  # noqa: F401  (registers every method's critic loade
 from warp_critic.learning.inner import policy_fn
 from warp_critic.learning.losses import final_error
 from warp_critic.learning.rollout import rollout
+from warp_critic.running.files import (
+    DiskFullError,
+    check_output_file,
+    check_recording_replaceable,
+    check_replaceable,
+    write_result,
+)
 from warp_critic.running.goals import sample_goals  # noqa: F401  (metatest.sample_goals, as before)
 from warp_critic.running.metatest_setup import (  # noqa: F401  (meta-test's names, as before)
     MetaTestConfig,
     MetaTestSetup,
     build_test_critic,
     setup_meta_test,
-)
-from warp_critic.running.rundir import (
-    DiskFullError,
-    check_output_file,
-    check_recording_replaceable,
-    check_replaceable,
-    write_result,
 )
 
 RESULT_KIND = "warp-critic/metatest-v1"
@@ -144,7 +144,7 @@ def meta_test(
 def _not_anothers(out: Path, tc: MetaTestConfig, run_id: str | None) -> bool:
     """An existing ``out`` is replaced only if it is a meta-test result of this run (the same run id,
     or, for a result without one, the same run directory): never another run's or command's
-    (:func:`~warp_critic.running.rundir.check_replaceable`). Returns whether one is there."""
+    (:func:`~warp_critic.running.files.check_replaceable`). Returns whether one is there."""
 
     def same(old: dict) -> str | None:
         same_dir = Path(str(old.get("run_dir"))).resolve() == Path(tc.run_dir).resolve()

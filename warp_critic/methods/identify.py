@@ -67,7 +67,7 @@ def train_identifier(
     run and settings continues from it, to exactly the identifier an uninterrupted call trains;
     it is removed once ``out`` is complete."""
     from warp_critic.learning.identify import Identifier, trajectory_inputs
-    from warp_critic.running.rundir import atomic_torch_save, atomic_write_text
+    from warp_critic.running.files import atomic_torch_save, atomic_write_text
 
     t0 = time.perf_counter()
     dst = Path(out)
@@ -213,7 +213,7 @@ def _sampler(m, ranges, seed: int, gen: torch.Generator):
 def _write_run(run_dir: str, dst: Path, ckpt: dict, ident, info: dict, rows: list[dict]) -> None:
     """``dst``: a copy of the told run, its checkpoint ``ckpt`` with the identifier's state and
     settings ``info``, and the regression's losses ``rows``."""
-    from warp_critic.running.rundir import atomic_torch_save, atomic_write_text
+    from warp_critic.running.files import atomic_torch_save, atomic_write_text
 
     shutil.copytree(
         run_dir,

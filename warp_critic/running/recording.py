@@ -43,7 +43,7 @@ class Recorder:
         flush_seconds: how long logged data may wait to be batched into larger chunks (smaller
             files; :meth:`flush` writes it at once); ``None``: rerun's default (a few ms).
         whole: keep the recording in memory and write it at :meth:`close`, atomically (a full
-            disk is one :class:`~warp_critic.running.rundir.DiskFullError` and leaves no part of a
+            disk is one :class:`~warp_critic.running.files.DiskFullError` and leaves no part of a
             file; rerun's own file writer fails in a thread, with a traceback and log lines). For
             recordings that fit in memory (a meta-test's).
     """
@@ -180,7 +180,7 @@ class Recorder:
             self.stream.flush()
             self._closed = True
             if self._memory is not None:
-                from warp_critic.running.rundir import atomic_write_bytes
+                from warp_critic.running.files import atomic_write_bytes
 
                 data = self._memory.drain_as_bytes()
                 self.stream.disconnect()

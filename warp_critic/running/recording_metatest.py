@@ -19,6 +19,7 @@ import rerun as rr
 
 from warp_critic.core.errors import FieldError
 from warp_critic.learning.losses import final_error
+from warp_critic.running.files import RUN_FILES
 from warp_critic.running.recording import Recorder
 from warp_critic.running.recording_view import (
     MAX_GOALS_DRAWN,
@@ -27,7 +28,6 @@ from warp_critic.running.recording_view import (
     goal_color,
     metatest_blueprint,
 )
-from warp_critic.running.rundir import RUN_FILES
 
 
 def metatest_recording_path(out: str | Path) -> Path:

@@ -17,8 +17,9 @@ import torch
 from warp_critic.core.errors import FieldError, UserError, warn
 from warp_critic.core.runtime import MAX_SEEDS
 from warp_critic.running.config import check_fields
+from warp_critic.running.files import MARKER
 from warp_critic.running.locks import holder
-from warp_critic.running.rundir import MARKER, RECORDING, RUN_KIND, SEGMENT, RunDir
+from warp_critic.running.rundir import RECORDING, RUN_KIND, SEGMENT, RunDir
 from warp_critic.running.task import RUNTIME_FIELDS, TaskConfig
 
 if TYPE_CHECKING:

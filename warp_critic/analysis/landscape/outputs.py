@@ -8,7 +8,7 @@ import numpy as np
 
 from warp_critic.analysis.landscape.fields import METHODS
 from warp_critic.analysis.landscape.problem import analytic_optimum
-from warp_critic.running.rundir import save_figure
+from warp_critic.running.files import save_figure
 
 
 def _colormap(values: np.ndarray) -> np.ndarray:

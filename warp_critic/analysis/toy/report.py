@@ -15,7 +15,7 @@ from warp_critic.analysis.toy.curves import BYTES_PER_POINT, CURVE_KEYS, curves,
 from warp_critic.analysis.toy.loops import init_sweep, run_meta_critic, run_ours, run_supervised
 from warp_critic.analysis.toy.problem import ALPHA, GAMMA, METHODS, T
 from warp_critic.analysis.toy.roots import stationary_points
-from warp_critic.running.rundir import save_figure
+from warp_critic.running.files import save_figure
 
 MAX_ABS = 1e6
 """Largest ``|s0|``, ``|g|``, ``|theta0|``: the fits use ``s^8`` (TD curvature squared), which stays far from

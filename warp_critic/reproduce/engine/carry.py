@@ -102,7 +102,8 @@ def _portable(record: dict) -> dict:
 
 
 def _slim_checkpoint(src: Path, dst: Path, training_only: tuple[str, ...]) -> None:
-    from warp_critic.running.rundir import atomic_torch_save, load_checkpoint_file
+    from warp_critic.running.files import atomic_torch_save
+    from warp_critic.running.rundir import load_checkpoint_file
 
     ckpt = load_checkpoint_file(src)
     slim = _portable({k: v for k, v in ckpt.items() if k not in training_only})
@@ -141,7 +142,7 @@ def _copy_stage(src: Path, dst_parent: Path, slim: CarryRules | None, pack: bool
     checkpoints and metrics cut to what is read, by these rules (a stage of their slimmed group);
     ``pack``: JSON stored
     compressed (into an archive); else a packed file is unpacked (out of one)."""
-    from warp_critic.running.rundir import atomic_write_bytes
+    from warp_critic.running.files import atomic_write_bytes
 
     final = dst_parent / src.name
     tmp = dst_parent / f".carrying-{src.name}"
@@ -272,7 +273,7 @@ def publish(out: Path, dest: Path, rules: CarryRules) -> tuple[list[str], list[s
     earlier version of this function wrote beside the report; anything else in ``dest`` (a README,
     the archive's other stages, search rows) is left alone. Returns (the stages the report read,
     the stage directories removed)."""
-    from warp_critic.running.rundir import atomic_write_bytes
+    from warp_critic.running.files import atomic_write_bytes
 
     out, dest = Path(out), Path(dest)
     if not (out / MARKER).is_file():

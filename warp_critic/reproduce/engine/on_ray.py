@@ -39,7 +39,7 @@ def _read_tree(folder: Path) -> dict[str, bytes]:
 
 
 def _write_tree(root: Path, files: dict[str, bytes]) -> None:
-    from warp_critic.running.rundir import atomic_write_bytes
+    from warp_critic.running.files import atomic_write_bytes
 
     for rel, data in files.items():
         path = root / rel

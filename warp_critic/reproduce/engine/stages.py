@@ -23,8 +23,8 @@ from typing import Any
 
 from warp_critic.core.errors import FieldError, UserError
 from warp_critic.reproduce.engine.stage import dir_name
+from warp_critic.running.files import atomic_write_text, check_output_dir
 from warp_critic.running.locks import LOCK, REPRODUCE_MARKER, FolderLock, check_not_owned
-from warp_critic.running.rundir import atomic_write_text, check_output_dir
 
 MARKER = REPRODUCE_MARKER
 STAGE_FILE = "stage.json"

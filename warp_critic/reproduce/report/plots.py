@@ -10,7 +10,7 @@ from warp_critic.methods import methods
 from warp_critic.reproduce.engine.stages import StageRecord
 from warp_critic.reproduce.experiments.settings import METHOD_LABELS, present
 from warp_critic.reproduce.report.rules import final_training_error
-from warp_critic.running.rundir import save_figure
+from warp_critic.running.files import save_figure
 
 COLORS = {m.name: m.colour for m in methods()}
 

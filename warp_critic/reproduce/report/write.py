@@ -29,7 +29,7 @@ from warp_critic.reproduce.report.draft import Draft, rel
 from warp_critic.reproduce.report.maps import maps_section
 from warp_critic.reproduce.report.tables import tables_section
 from warp_critic.reproduce.report.training import metatrain_section
-from warp_critic.running.rundir import atomic_write_text
+from warp_critic.running.files import atomic_write_text
 
 #: The sections after the stage table, in the report's order (each appends to the :class:`Draft`).
 SECTIONS = (
