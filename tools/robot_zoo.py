@@ -50,16 +50,54 @@ PACKAGES = {
     "gymnasium": (PURELIB / "gymnasium/envs/mujoco/assets", "*.xml"),
     "dm_control": (PURELIB / "dm_control", "suite/*.xml", "third_party/kinova/*.xml"),
 }
+# MuJoCo Menagerie's fixed-base arm and hand files (``--menagerie DIR``: a checkout of the
+# repository or of a fork such as kevinzakka/mujoco_menagerie), relative to its root: each robot's
+# own files, and the scene files that add props beside the robot
+MENAGERIE = (
+    "agilex_piper/piper.xml", "aloha/aloha.xml", "arx_l5/arx_l5.xml",
+    "dynamixel_2r/dynamixel_2r.xml", "flexiv_rizon4/flexiv_rizon4.xml",
+    "franka_emika_panda/panda.xml", "franka_emika_panda/panda_nohand.xml",
+    "franka_emika_panda/hand.xml", "franka_emika_panda/mjx_panda.xml",
+    "franka_emika_panda/scene.xml", "franka_fr3/fr3.xml", "franka_fr3_v2/fr3v2.xml",
+    "i2rt_yam/yam.xml", "kinova_gen3/gen3.xml", "kuka_iiwa_14/iiwa14.xml",
+    "leap_hand/left_hand.xml", "leap_hand/right_hand.xml",
+    "low_cost_robot_arm/low_cost_robot_arm.xml", "rethink_robotics_sawyer/sawyer.xml",
+    "robotiq_2f85/2f85.xml", "robotiq_2f85/scene.xml", "robotiq_2f85_v4/2f85.xml",
+    "robotstudio_so101/so101.xml", "shadow_dexee/shadow_dexee.xml",
+    "shadow_hand/left_hand.xml", "shadow_hand/right_hand.xml", "shadow_hand/scene_right.xml",
+    "tetheria_aero_hand_open/left_hand.xml", "tetheria_aero_hand_open/right_hand.xml",
+    "trossen_vx300s/vx300s.xml", "trossen_wx250s/wx250s.xml",
+    "trossen_wxai/trossen_ai_bimanual.xml", "trs_so_arm100/so_arm100.xml",
+    "ufactory_lite6/lite6.xml", "ufactory_lite6/lite6_gripper_narrow.xml",
+    "ufactory_lite6/lite6_gripper_wide.xml", "ufactory_xarm7/xarm7.xml",
+    "ufactory_xarm7/xarm7_nohand.xml", "ufactory_xarm7/hand.xml", "umi_gripper/umi_gripper.xml",
+    "unitree_z1/z1.xml", "unitree_z1/z1_gripper.xml", "universal_robots_ur10e/ur10e.xml",
+    "universal_robots_ur5e/ur5e.xml", "wonik_allegro/left_hand.xml", "wonik_allegro/right_hand.xml",
+)  # fmt: skip
 FLOOR_LRS = (0.1, 0.03)  # Adam step sizes of the open-loop search (reach.best_open_loop_floor)
 
 
-def robot_files() -> list[tuple[str, Path]]:
-    """(package, file) for every robot file found, sorted within each package."""
+def robot_files(menagerie: Path | None = None) -> list[tuple[str, Path]]:
+    """(package, file) for every robot file found, sorted within each package; with
+    ``menagerie`` (a MuJoCo Menagerie checkout) its :data:`MENAGERIE` files instead."""
+    from warp_critic.core.errors import UserError
+
+    if menagerie is not None:
+        files = [menagerie / name for name in MENAGERIE]
+        if not any(f.is_file() for f in files):
+            raise UserError(f"--menagerie: {menagerie}: none of Menagerie's arm and hand files")
+        return [("menagerie", f) for f in files if f.is_file()]
     found = []
     for package, (base, *patterns) in PACKAGES.items():
         if base.is_dir():
             found += [(package, p) for pattern in patterns for p in sorted(base.glob(pattern))]
     return found
+
+
+def stem_of(package: str, path: Path) -> str:
+    """A file's name for ``--only`` and its runs: its stem, or ``DIR.STEM`` for Menagerie (whose
+    robots share stems such as ``scene`` and ``left_hand``)."""
+    return f"{path.parent.name}.{path.stem}" if package == "menagerie" else path.stem
 
 
 def short_reason(text: str, path: Path) -> str:
@@ -193,6 +231,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--goals", type=int, default=4, help="meta-test goals (std 0.1)")
     p.add_argument("--inits", type=int, default=2, help="fresh policies per meta-test goal")
     p.add_argument("--runs-dir", type=Path, default=ROOT / "runs" / "zoo")
+    p.add_argument("--menagerie", type=Path, default=None, metavar="DIR", help="a MuJoCo "
+                   "Menagerie checkout: its fixed-base arm and hand files instead of the packages'")  # fmt: skip
     p.add_argument("--floor", action="store_true", help="add the open-loop floor (without --train: "
                    "of the newest runs in --runs-dir)")  # fmt: skip
     p.add_argument("--floor-iterations", type=int, default=100, help="Adam steps per step size")
@@ -214,10 +254,17 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     rows = []
     print(f"{'package':27s} {'file':45s} {'DoF':>3s} {'dt x sub-steps':>15s} {'s':>5s}  verdict")
-    for package, path in robot_files():
-        if args.only is not None and path.stem not in args.only:
+    try:
+        files = robot_files(args.menagerie)
+    except UserError as e:
+        print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
+        return 2
+    for package, path in files:
+        if args.only is not None and stem_of(package, path) not in args.only:
             continue
-        row = import_one(path) | {"package": package}
+        row = import_one(path) | {"package": package, "stem": stem_of(package, path)}
+        if package == "menagerie":
+            row["file"] = f"{path.parent.name}/{path.name}"
         rows.append(row)
         step = f"{row['dt'] * 1e3:.2f} ms x {row['substeps']}" if row["dof"] else "-"
         print(
@@ -230,11 +277,11 @@ def main(argv: list[str] | None = None) -> int:
         r["dt"] >= 1e-3 - 1e-12 for r in ok) else "some import below dt 1 ms")  # fmt: skip
     if not args.train:
         return 0
-    chosen = [r for r in ok if args.only is None or r["path"].stem in args.only]
-    stems = [r["path"].stem for r in chosen]
+    chosen = [r for r in ok if args.only is None or r["stem"] in args.only]
+    stems = [r["stem"] for r in chosen]
     for r in chosen:  # two packages' reacher.xml: their runs and rows named by package
-        twin = stems.count(r["path"].stem) > 1
-        r["run"] = f"{r['package']}.{r['path'].stem}" if twin else r["path"].stem
+        twin = stems.count(r["stem"]) > 1
+        r["run"] = f"{r['package']}.{r['stem']}" if twin else r["stem"]
         r["name"] = f"{r['package']}/{r['file']}" if twin else r["file"]
     try:
         args.runs_dir.mkdir(parents=True, exist_ok=True)

@@ -82,13 +82,16 @@ def check_robot(
     trained: Sequence[str] | None = None,
     lock_mimic: bool = False,
     repair_inertia: bool = False,
+    root=None,
 ) -> tuple[str, ...]:
     """Refuse what the module docstring lists (a :class:`SceneError`), or repair it on request.
 
     ``builder``: newton's ``ModelBuilder`` straight from the importer (fixed joints not merged);
     ``fmt``: ``urdf``/``mjcf``/``usd``; ``trained``: the joints to train (None: every movable one).
+    ``root``: the file's parsed tree where the caller has it (an MJCF's, includes expanded).
     Returns the repairs made, one line each (changed in ``builder``)."""
-    root = _xml_root(path) if fmt in ("urdf", "mjcf") else None
+    if root is None:
+        root = _xml_root(path) if fmt in ("urdf", "mjcf") else None
     if root is not None:
         _check_names(path, root, fmt)
     repairs: list[str] = []
