@@ -134,9 +134,27 @@ def import_one(path: Path) -> dict:
     return row
 
 
+def finished_run(runs_dir: Path, run: str, iterations: int) -> Path | None:
+    """The newest run ``RUN-STAMP`` in ``runs_dir`` that was trained for ``iterations`` and
+    meta-tested (a rerun of the same command resumes after it), if any."""
+    for out in sorted(runs_dir.glob(f"{run}-*/metatest-zoo.json"), reverse=True):
+        try:
+            config = json.loads((out.parent / "config.json").read_text())
+        except (OSError, ValueError):
+            continue
+        if out.parent.name.rsplit("-", 2)[0] == run and config.get("iterations") == iterations:
+            return out.parent
+    return None
+
+
 def train_one(scene: str, out: Path, iterations: int, goals: int, inits: int) -> dict:
-    """Meta-train ``scene`` for ``iterations`` and meta-test it at goal std 0.1."""
+    """Meta-train ``scene`` for ``iterations`` and meta-test it at goal std 0.1; a run of it that
+    finished with as many iterations in ``out``'s folder is read instead (resumable chunks)."""
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
+
+    done = finished_run(out.parent, out.name.rsplit("-", 2)[0], iterations)
+    if done is not None:
+        return read_run(done) | {"out": done}
     from warp_critic.methods.ours import TrainConfig, meta_train
 
     cfg = TrainConfig(scene=scene, iterations=iterations, device="cpu", out=str(out))
@@ -147,7 +165,7 @@ def train_one(scene: str, out: Path, iterations: int, goals: int, inits: int) ->
         out=str(out / "metatest-zoo.json"),
     )  # fmt: skip
     meta_test(tc)
-    return read_run(out)
+    return read_run(out) | {"out": out}
 
 
 def read_run(out: Path) -> dict:
@@ -292,12 +310,12 @@ def main(argv: list[str] | None = None) -> int:
         )
         print(f"\nmeta-train {args.train} iterations (CPU), meta-test at goal std 0.1:")
         print_header(args)
-        print_row("kuka.usda (scenes/)", out, kuka, kuka, args)
+        print_row("kuka.usda (scenes/)", kuka["out"], kuka, kuka, args)
         for r in chosen:
             out = args.runs_dir / f"{r['run']}-{stamp}"
             with contextlib.redirect_stderr(io.StringIO()):
                 t = train_one(str(r["path"]), out, args.train, args.goals, args.inits)
-            print_row(r["name"], out, t, kuka, args)
+            print_row(r["name"], t["out"], t, kuka, args)
     except UserError as e:
         print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
         return 2

@@ -59,6 +59,7 @@ from warp_critic.physics.importers import (
     moved_bodies,
     short,
 )
+from warp_critic.physics.inertia_checks import TOLERATED
 from warp_critic.physics.mjcf_file import GRIPPER_NAME
 from warp_critic.physics.robot_checks import check_robot, given_home
 from warp_critic.physics.robot_meshes import link_frames
@@ -159,6 +160,7 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     )
     jointed = [j for j, t in enumerate(builder.joint_type) if int(t) != fixed]
     trained = {j for j in trained if j in jointed}
+    notes += [f"{path}: {r}" for r in repairs if TOLERATED in r]  # rounding-size repairs
     for line in [*notes, note] if note else notes:  # said once the file passed its checks: a
         warn(line)  # refused file gets its one line only
     home = _home(path, builder, names, jointed, trained, actuation, options)
@@ -485,4 +487,26 @@ def _derive(scene: RobotScene, gravity: float) -> dict[str, Any]:
     note = upright_note(scene, gravity)
     if note:
         warn(note)
-    return derive.derive_defaults(scene, gravity)
+    values = derive.derive_defaults(scene, gravity)
+    note = derived_bound_note(scene, values["max_torque"], gravity)
+    if note:
+        warn(note)
+    return values
+
+
+def derived_bound_note(scene, max_torque, gravity: float) -> str | None:
+    """One line naming the joints whose torque bound the file does not give (no effort limit, no
+    actuator force range): their bound is derived, not a motor's limit. None where the file bounds
+    every joint."""
+    unbounded = np.flatnonzero(scene.effort_limit >= derive.NO_EFFORT_LIMIT)
+    if not len(unbounded):
+        return None
+    values = ", ".join(
+        f"{scene.joint_names[i]} {float(max_torque[i]):.3g}" for i in unbounded[:6]
+    ) + (", .." if len(unbounded) > 6 else "")
+    return (
+        f"{scene.path}: the file gives no torque bound for {len(unbounded)} of {scene.dof} joints: "
+        f"their max_torque ({values} N m or N) is derived from the robot under gravity "
+        f"{gravity:g} m/s^2 (--help: max_torque), not a motor's limit; set the motors' own with "
+        "--max-torque"
+    )

@@ -10,9 +10,10 @@ is refused here, in one :class:`SceneError` line naming the body or joint and th
   trained; repair on request: ``lock_mimic`` welds the coupled joint at the position the coupling
   gives at the home pose;
 * a body's mass that is not a finite number in 1e-6..1e6 kg (a frame link welded to its parent may
-  be lighter: it is merged); a mass of 0 with an inertia; an inertia with a non-finite entry, a
-  negative diagonal entry, a negative principal moment (a large off-diagonal entry), principal
-  moments that violate the triangle inequality, or (on a body its own joint moves) a smallest
+  be lighter: it is merged); a mass of 0 with an inertia on a moving body (a welded frame's is
+  dropped with a note); an inertia with a non-finite entry, a negative diagonal entry, a negative
+  principal moment (a large off-diagonal entry), principal moments that violate the triangle
+  inequality by more than 5% of the largest (a smaller miss is repaired with a note), or (on a body its own joint moves) a smallest
   principal moment below newton's floor (1e-6 of the largest); repair on request:
   ``repair_inertia`` projects the tensor to the nearest valid one (Frobenius norm, the same
   principal axes; a massless body's inertia is dropped). Links welded to the world are not
@@ -50,10 +51,12 @@ IMPORT_RULES = """\
 refused, in one line naming the body or joint and the value (nothing is written):
   a joint coupled to another (URDF <mimic>, MJCF <equality><joint>): --lock-mimic welds it where
     the coupling puts it at the home pose;
-  a mass that is not a finite number in 1e-6..1e6 kg; mass 0 with an inertia; an inertia that is
-    not finite, has a negative diagonal entry, is not positive definite, violates the triangle
-    inequality or (on a moving link) is degenerate: --repair-inertia projects it to the nearest
-    valid inertia;
+  a mass that is not a finite number in 1e-6..1e6 kg; mass 0 with an inertia on a moving link;
+    an inertia that is not finite, has a negative diagonal entry, is not positive definite,
+    violates the triangle inequality by more than 5% of its largest principal moment or (on a
+    moving link) is degenerate: --repair-inertia projects it to the nearest valid inertia (a
+    smaller triangle miss is repaired, and a massless welded frame's inertia dropped, each with
+    a one-line note);
   joint limits lower > upper, or lower = upper on a trained joint; a URDF effort < 0 or not a
     number; effort="0" (no actuator) on a trained joint (leave it out of --joints to lock it);
   a link, body or joint defined twice; a --tip-offset over 10 m.
