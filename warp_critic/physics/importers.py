@@ -17,6 +17,7 @@ from typing import Any
 from warp_critic.core.errors import SceneError
 from warp_critic.physics.actuation import Actuation, mjcf_resolver, read_mjcf, read_urdf
 from warp_critic.physics.mjcf_file import (
+    check_one_joint_per_body,
     expand,
     flatten_names,
     keyframe_home,
@@ -141,6 +142,7 @@ def _read_mjcf(path: Path) -> tuple[Actuation, list[str]]:
     flatten_names(root)
     home = keyframe_home(root)  # before the props go: the key's qpos counts their joints
     actuation = read_mjcf(root)
+    check_one_joint_per_body(path, root)  # the robot's bodies: the props are gone
     notes, drawn = strip_meshes(path, root)
     one_articulation(root)
     actuation.home, actuation.drawn, actuation.loops = home, drawn, loops(root)

@@ -303,6 +303,22 @@ def flatten_names(root: ET.Element) -> None:
                 element.set(key, value.replace("/", "_"))
 
 
+def check_one_joint_per_body(path: Path, root: ET.Element) -> None:
+    """Refuse a body that several hinge/slide joints move (newton merges them into one D6 joint,
+    named after all of them, which warp-critic cannot train or lock)."""
+    for body, _ in _bodies(root):
+        joints = [j.get("name", "(unnamed)") for j in body.findall("joint")]
+        if len(joints) > 1:
+            shown = ", ".join(joints[:3]) + (f", .., {joints[-1]}" if len(joints) > 3 else "")
+            who = f"body {body.get('name')!r}" if body.get("name") else "an unnamed body"
+            raise _fail(
+                path,
+                f"{who} moves on {len(joints)} joints ({shown}), "
+                "which newton merges into one D6 joint: warp-critic trains revolute and prismatic "
+                "joints, one per body",
+            )
+
+
 def one_articulation(root: ET.Element) -> None:
     """Put the top-level bodies of ``<worldbody>`` (in ``root``) under one jointless, massless
     body: newton makes one articulation of each top-level body, and warp-critic steps one
