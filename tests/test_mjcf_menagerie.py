@@ -327,3 +327,26 @@ def test_rounding_size_inertia_errors_are_repaired_with_a_note(tmp_path, capfd):
     code, _, err = _run(["import", str(write(tmp_path, "g.urdf", _urdf(gross))),
                          "--out", str(tmp_path / "s.usda")], capfd)  # fmt: skip
     assert code == 2 and "triangle inequality" in err and "--repair-inertia" in err
+
+
+def test_robot_zoo_surveys_a_menagerie_checkout_folder(tmp_path, capsys):
+    """tools/robot_zoo.py --menagerie DIR: a row per Menagerie file found there (named DIR/FILE),
+    a folder with none of them refused in one line."""
+    from tests.test_tools import load_tool
+
+    zoo = load_tool("robot_zoo")
+    checkout = tmp_path / "menagerie"
+    (checkout / "dynamixel_2r").mkdir(parents=True)
+    (checkout / "aloha").mkdir()
+    (checkout / "dynamixel_2r" / "dynamixel_2r.xml").write_text(arm(name="two_r"))
+    undriven = arm(name="al").replace('<motor joint="a2" ctrlrange="-5 5"/>', "")
+    (checkout / "aloha" / "aloha.xml").write_text(undriven)
+    assert zoo.main(["--menagerie", str(checkout)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    rows = {line.split()[1]: line for line in out[1:3]}
+    assert set(rows) == {"dynamixel_2r/dynamixel_2r.xml", "aloha/aloha.xml"}, out
+    assert "2.50 ms x 4" in rows["dynamixel_2r/dynamixel_2r.xml"]
+    assert "refused: underactuated: joint 'a2'" in rows["aloha/aloha.xml"]
+    assert out[-1] == "1 of 2 files imported, all at dt >= 1 ms"
+    assert zoo.main(["--menagerie", str(tmp_path / "aloha_only_not_a_checkout")]) == 2
+    assert "--menagerie" in capsys.readouterr().err

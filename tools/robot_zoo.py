@@ -4,7 +4,9 @@
 The files: example-robot-data's URDFs (``robots/*/urdf/*.urdf``), differentiable-robot-model's data
 (``diff_robot_data/**/*.urdf``), gymnasium's MuJoCo assets (``envs/mujoco/assets/*.xml``) and, where
 dm_control is installed (not by the test extra), its control suite's and Kinova arm's MJCF files
-(``suite/*.xml``, ``third_party/kinova/*.xml``). Each is
+(``suite/*.xml``, ``third_party/kinova/*.xml``); with ``--menagerie DIR`` instead, the 46
+fixed-base arm and hand files of a MuJoCo Menagerie checkout (:data:`MENAGERIE`; ``--only`` names
+them ``DIR.STEM``, e.g. ``franka_fr3.fr3``). Each is
 imported as ``warp-critic import`` would (``load_robot`` and its derived defaults); the table gives the
 file, the trained DoF, ``dt x substeps`` and the verdict: ``ok`` (with the import's notes: props
 dropped, an arm chain chosen) or the one-line reason it was refused.
@@ -17,11 +19,14 @@ meta-test goals: the MSE of open-loop torques optimised through the model within
 bounds and horizon (``--floor-iterations`` Adam steps at each of two step sizes, the better per goal:
 ``warp_critic/reproduce/reach.py``), an upper bound of the best any controller reaches. Without
 ``--train``, ``--floor`` reads the newest run of each robot (and of the KUKA) in ``--runs-dir``, as a
-``--train`` pass left it, and prints the table with its floor.
+``--train`` pass left it, and prints the table with its floor. A ``--train`` pass is resumable: a
+robot (or the KUKA) with a meta-tested run of as many iterations in ``--runs-dir`` is read, not
+trained again, so an interrupted pass continues where it stopped when run again.
 
     python tools/robot_zoo.py                                   # the import table
     python tools/robot_zoo.py --train 50 --only xarm7,z1,reacher --runs-dir runs/zoo
     python tools/robot_zoo.py --floor --only xarm7,z1,reacher --runs-dir runs/zoo   # floors afterwards
+    python tools/robot_zoo.py --menagerie ../mujoco_menagerie   # Menagerie's arms and hands
 
 The import pass takes a few minutes on a 2-core CPU.
 """
