@@ -274,6 +274,16 @@ def test_meshes_are_drawn_not_simulated(tmp_path, capfd):
     meshes = link_meshes(scene)
     assert len(meshes) == 1 and meshes[0][0] == scene.body_names.index("l2")
     assert meshes[0][2].shape == (4, 3) and meshes[0][3].shape == (4, 3)
+    # written into the imported scene for drawing: a visual mesh, no mass, no collision
+    from warp_critic.physics.export import write_scene
+    from warp_critic.physics.load import load_scene
+
+    written = load_scene(write_scene(scene, tmp_path / "drawn.usda"))
+    model = written.build_model([Variant()])
+    assert model.shape_count == 1 and np.asarray(model.shape_source[0].indices).size == 12
+    np.testing.assert_allclose(
+        model.body_mass.numpy(), scene.build_model([Variant()]).body_mass.numpy()
+    )
     # its body's inertia comes from the mesh: simulated (4 vertices: the tetrahedron's mass)
     needs = load_robot(write(tmp_path, "needs_drawn.xml", _mesh_arm("tet.stl", False)))
     assert needs.build_model([Variant()]).shape_count == 1

@@ -4,7 +4,8 @@ The written file is an ordinary scene (:mod:`warp_critic.physics.scene`): one ar
 with ``warp_critic:endEffectorBody``/``tipOffset`` and every training default the robot file did not
 say (:mod:`warp_critic.physics.derive`) as ``warp_critic:*`` attributes, so that a user can read and
 edit them; from then on the scene is the truth. It holds the dynamics newton imported -- fixed
-joints merged, locked joints welded at the home pose -- and no meshes:
+joints merged, locked joints welded at the home pose -- and the robot file's link meshes, for
+drawing only (``UsdGeom.Mesh`` children of the bodies: no collision, no mass):
 
 * one Xform per body with ``RigidBodyAPI`` + ``MassAPI`` (mass, centre of mass, the inertia tensor
   diagonalised as ``diagonalInertia`` + ``principalAxes``), posed at q = 0;
@@ -200,9 +201,31 @@ def _write_model(stage, scene, name: str, body_names: list[str]) -> None:
         api.CreateCenterOfMassAttr(_vec3(com[b]))
         api.CreateDiagonalInertiaAttr(_vec3(np.maximum(diag, 0.0)))
         api.CreatePrincipalAxesAttr(_gf_quat(_matrix_to_quat(vecs)))
+    _write_meshes(stage, scene, paths)
     UsdGeom.Scope.Define(stage, f"/{name}/joints")
     for j, jname in enumerate(prim_names(scene.joint_names)):
         _write_joint(stage, scene, model, j, f"/{name}/joints/{jname}", paths)
+
+
+def _write_meshes(stage, scene, paths: list[str]) -> None:
+    """The robot file's link meshes (:func:`warp_critic.physics.robot_meshes.link_meshes`) as
+    ``UsdGeom.Mesh`` children of their bodies: visual only (newton loads them without density or
+    collision), so that recordings of the imported scene draw the robot as it looks. A mesh on a
+    link welded to the world is left out (the scene has no world body to hang it on)."""
+    from pxr import UsdGeom, Vt
+
+    from warp_critic.physics.robot_meshes import link_meshes
+
+    for k, (body, local, vertices, triangles) in enumerate(link_meshes(scene)):
+        if body < 0:
+            continue
+        mesh = UsdGeom.Mesh.Define(stage, f"{paths[body]}/mesh_{k}")
+        mesh.AddTranslateOp().Set(_vec3(local[:3]))
+        mesh.AddOrientOp().Set(_gf_quat(local[3:]))
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(vertices, np.float32)))
+        mesh.CreateFaceVertexCountsAttr(Vt.IntArray([3] * len(triangles)))
+        mesh.CreateFaceVertexIndicesAttr(Vt.IntArray([int(i) for i in triangles.reshape(-1)]))
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
 
 
 def _write_joint(stage, scene, model, j: int, path: str, paths: list[str]) -> None:
