@@ -53,6 +53,8 @@ class Actuation:
             (:class:`warp_critic.physics.mjcf_file.DrawnMesh`).
         loops: the MJCF ``connect``/``weld`` equalities ``(kind, body1, body2)``.
         root: the MJCF file's expanded tree, as newton read it (None: a URDF).
+        spatial: the MJCF spatial tendons an actuator pulls (routed through sites: the joints
+            they move are not named; not modelled).
     """
 
     actuated: dict[str, float | None] | None = None
@@ -64,6 +66,7 @@ class Actuation:
     drawn: list = field(default_factory=list)
     loops: list[tuple[str, str, str]] = field(default_factory=list)
     root: ET.Element | None = None
+    spatial: list[str] = field(default_factory=list)
 
 
 def _number(text: str | None, default: float = math.nan) -> float:
@@ -150,7 +153,8 @@ def read_mjcf(root: ET.Element) -> Actuation:
         if tendon.get("name") in driven_tendons
         for j in tendon.findall("joint")
     }
-    if not actuated and not tendons:
+    spatial = [str(t.get("name")) for t in root.iter("spatial") if t.get("name") in driven_tendons]
+    if not actuated and not tendons and not spatial:
         return Actuation(root=root)
     props: list[str] = []
     for worldbody in root.findall("worldbody"):
@@ -159,7 +163,14 @@ def read_mjcf(root: ET.Element) -> Actuation:
             if joints and not joints & (set(actuated) | set(tendons)):  # unjointed: welded
                 worldbody.remove(body)
                 props.append(body.get("name") or "(unnamed body)")
-    return Actuation(actuated=actuated, props=props, source="actuators", tendons=tendons, root=root)
+    return Actuation(
+        actuated=actuated,
+        props=props,
+        source="actuators",
+        tendons=tendons,
+        root=root,
+        spatial=spatial,
+    )
 
 
 def mjcf_resolver(path: Path):

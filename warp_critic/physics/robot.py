@@ -423,6 +423,12 @@ def _check_actuated(path: Path, names: list[str], trained: list[int], actuation)
         why = f"an <actuator> drives it only through tendon {tendon!r}, not modelled"
     elif coupled:
         why = f"it follows joint {coupled!r} through an <equality> coupling"
+    elif actuation.spatial:
+        pulled = ", ".join(actuation.spatial[:2]) + (", .." if len(actuation.spatial) > 2 else "")
+        why = (
+            "no <actuator> drives it directly; the file's actuators pull spatial tendons "
+            f"({pulled}), not modelled"
+        )
     else:
         why = f"no {what.get(actuation.source, 'actuator')} drives it"
     raise fail(
