@@ -300,6 +300,19 @@ def test_a_derived_torque_bound_says_so_and_follows_gravity(tmp_path, capfd):
     at_0 = scene.defaults_at(0.0)["max_torque"]
     assert at_0[1] < at_981[1]  # a2 holds the link against gravity at 9.81 only
     assert at_0[0] == pytest.approx(at_981[0]) and at_0[0] <= 20.0  # a1: capped by the file's
+    # warp-critic import --gravity 0 writes the bounds derived under it, and its gravity
+    from warp_critic.physics.load import load_scene
+
+    out = tmp_path / "g0.usda"
+    code, _, err = _run(["import", str(tmp_path / "free.xml"), "--out", str(out),
+                         "--gravity", "0"], capfd)  # fmt: skip
+    assert code == 0, err
+    written = load_scene(out).defaults
+    assert written["gravity"] == 0.0
+    np.testing.assert_allclose(written["max_torque"], at_0, rtol=1e-5)
+    code, _, err = _run(["import", str(tmp_path / "free.xml"), "--out", str(tmp_path / "n.usda"),
+                         "--gravity", "-1"], capfd)  # fmt: skip
+    assert code == 2 and "--gravity" in err and len(err.strip().splitlines()) == 1
 
 
 TRIANGLE_ROUNDING = 'ixx="0.00306" iyy="0.02364" izz="0.0269" ixy="0" ixz="0" iyz="0"'
