@@ -373,3 +373,29 @@ def test_robot_zoo_surveys_a_menagerie_checkout_folder(tmp_path, capsys):
     assert out[-1] == "1 of 2 files imported, all at dt >= 1 ms"
     assert zoo.main(["--menagerie", str(tmp_path / "aloha_only_not_a_checkout")]) == 2
     assert "--menagerie" in capsys.readouterr().err
+
+
+def test_robot_zoo_training_resumes_after_the_runs_it_finished(tmp_path):
+    """A meta-tested run of the same robot and iteration count is read, not trained again; one of
+    another count, or not meta-tested, or of another robot whose name it begins is not."""
+    import json
+
+    from tests.test_tools import load_tool
+
+    zoo = load_tool("robot_zoo")
+
+    def run(name: str, iterations: int, tested: bool = True):
+        out = tmp_path / name
+        out.mkdir()
+        (out / "config.json").write_text(json.dumps({"iterations": iterations}))
+        if tested:
+            (out / "metatest-zoo.json").write_text("{}")
+        return out
+
+    run("ur5e-20261206-100000", 200)
+    newest = run("ur5e-20261206-110000", 200)
+    run("ur5e-20261206-120000", 50)
+    run("ur5e-20261206-130000", 200, tested=False)
+    run("ur5e_long-20261206-140000", 200)
+    assert zoo.finished_run(tmp_path, "ur5e", 200) == newest
+    assert zoo.finished_run(tmp_path, "ur5e", 1000) is None
