@@ -399,3 +399,22 @@ def test_robot_zoo_training_resumes_after_the_runs_it_finished(tmp_path):
     run("ur5e_long-20261206-140000", 200)
     assert zoo.finished_run(tmp_path, "ur5e", 200) == newest
     assert zoo.finished_run(tmp_path, "ur5e", 1000) is None
+
+
+def test_a_joint_pulled_by_a_spatial_tendon_is_refused_naming_it(tmp_path, capfd):
+    """Tetheria's hand: its actuators pull spatial tendons routed through sites, which name no
+    joint; the refusal says so instead of 'no actuator drives it'."""
+    sites = '<site name="s1" pos="0.1 0 0"/>'
+    text = arm().replace(
+        '<motor joint="a2" ctrlrange="-5 5"/>', '<position tendon="pull" kp="10"/>'
+    )
+    text = text.replace('<joint name="a1"', sites + '<joint name="a1"', 1)
+    text = text.replace('<joint name="a2"', '<site name="s2" pos="0.1 0 0"/><joint name="a2"', 1)
+    text = text.replace(
+        "<actuator>",
+        '<tendon><spatial name="pull"><site site="s1"/><site site="s2"/></spatial></tendon><actuator>',
+    )
+    code, _, err = _run(["import", str(write(tmp_path, "spatial.xml", text)),
+                         "--out", str(tmp_path / "s.usda")], capfd)  # fmt: skip
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert "joint 'a2'" in err and "spatial tendons (pull)" in err
