@@ -210,16 +210,17 @@ def _write_model(stage, scene, name: str, body_names: list[str]) -> None:
 def _write_meshes(stage, scene, paths: list[str]) -> None:
     """The robot file's link meshes (:func:`warp_critic.physics.robot_meshes.link_meshes`) as
     ``UsdGeom.Mesh`` children of their bodies: visual only (newton loads them without density or
-    collision), so that recordings of the imported scene draw the robot as it looks. A mesh on a
-    link welded to the world is left out (the scene has no world body to hang it on)."""
+    collision), so that recordings of the imported scene draw the robot as it looks. A link
+    welded to the world hangs its meshes on a static ``world_meshes`` Xform (no rigid body)."""
     from pxr import UsdGeom, Vt
 
     from warp_critic.physics.robot_meshes import link_meshes
 
+    world = paths[0].rsplit("/", 1)[0] + "/world_meshes"
     for k, (body, local, vertices, triangles) in enumerate(link_meshes(scene)):
-        if body < 0:
-            continue
-        mesh = UsdGeom.Mesh.Define(stage, f"{paths[body]}/mesh_{k}")
+        if body < 0 and not stage.GetPrimAtPath(world):
+            UsdGeom.Xform.Define(stage, world)
+        mesh = UsdGeom.Mesh.Define(stage, f"{paths[body] if body >= 0 else world}/mesh_{k}")
         mesh.AddTranslateOp().Set(_vec3(local[:3]))
         mesh.AddOrientOp().Set(_gf_quat(local[3:]))
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(vertices, np.float32)))
