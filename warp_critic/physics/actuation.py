@@ -44,7 +44,6 @@ class Actuation:
         actuated: joint name -> the file's torque bound [N m or N] (None: the file gives none), or
             None when the file names no actuators at all (every movable joint is driven).
         props: names of the top-level MJCF bodies dropped (no actuated joint in their subtree).
-        text: the MJCF text without the props (None: read the file as it is).
         source: what decided ``actuated`` (``"actuators"``, ``"transmissions"``, ``"effort"``).
         tendons: joint name -> the MJCF tendon through which an actuator drives it (not modelled:
             the joint counts as unactuated, and its refusal names the tendon).
@@ -59,7 +58,6 @@ class Actuation:
 
     actuated: dict[str, float | None] | None = None
     props: list[str] = field(default_factory=list)
-    text: str | None = None
     source: str = ""
     tendons: dict[str, str] = field(default_factory=dict)
     home: dict[str, float] = field(default_factory=dict)
@@ -163,14 +161,9 @@ def read_mjcf(root: ET.Element) -> Actuation:
             if joints and not joints & (set(actuated) | set(tendons)):  # unjointed: welded
                 worldbody.remove(body)
                 props.append(body.get("name") or "(unnamed body)")
-    return Actuation(
-        actuated=actuated,
-        props=props,
-        source="actuators",
-        tendons=tendons,
-        root=root,
-        spatial=spatial,
-    )
+    found = Actuation(actuated=actuated, props=props, source="actuators", tendons=tendons)
+    found.root, found.spatial = root, spatial
+    return found
 
 
 def mjcf_resolver(path: Path):
