@@ -34,8 +34,6 @@ def test_reacher_and_finger_import_at_the_kukas_step_the_spinner_dropped(capfd):
     "name, reason",
     [
         ("acrobot", "underactuated: joint 'shoulder' has no actuator (no <actuator> drives it)"),
-        ("manipulator", "joint 'thumb' has no actuator (an <actuator> drives it only through "
-         "tendon 'grasp', not modelled)"),
     ],
 )  # fmt: skip
 def test_unactuated_joints_are_refused_in_one_line_naming_why(name, reason, tmp_path, capfd):
@@ -45,7 +43,11 @@ def test_unactuated_joints_are_refused_in_one_line_naming_why(name, reason, tmp_
     assert not (tmp_path / "s.usda").exists()
 
 
-def test_the_manipulators_arm_imports_with_its_hand_locked():
+def test_the_manipulators_arm_imports_with_its_hand_locked(capfd):
+    """Its hand's thumb is driven through tendon 'grasp': the gripper is locked at home with a
+    note, without --joints."""
+    assert list(load_robot(SUITE / "manipulator.xml").joint_names) == ARM
+    assert "an arm with a hand" in capfd.readouterr().err
     scene = load_robot(SUITE / "manipulator.xml", RobotOptions(joints=tuple(ARM)))
     assert list(scene.joint_names) == ARM
     # the file's motors: gear 12, 8, 4, 2 x ctrlrange 1

@@ -4,7 +4,9 @@
 The files: example-robot-data's URDFs (``robots/*/urdf/*.urdf``), differentiable-robot-model's data
 (``diff_robot_data/**/*.urdf``), gymnasium's MuJoCo assets (``envs/mujoco/assets/*.xml``) and, where
 dm_control is installed (not by the test extra), its control suite's and Kinova arm's MJCF files
-(``suite/*.xml``, ``third_party/kinova/*.xml``). Each is
+(``suite/*.xml``, ``third_party/kinova/*.xml``); with ``--menagerie DIR`` instead, the 46
+fixed-base arm and hand files of a MuJoCo Menagerie checkout (:data:`MENAGERIE`; ``--only`` names
+them ``DIR.STEM``, e.g. ``franka_fr3.fr3``). Each is
 imported as ``warp-critic import`` would (``load_robot`` and its derived defaults); the table gives the
 file, the trained DoF, ``dt x substeps`` and the verdict: ``ok`` (with the import's notes: props
 dropped, an arm chain chosen) or the one-line reason it was refused.
@@ -17,11 +19,14 @@ meta-test goals: the MSE of open-loop torques optimised through the model within
 bounds and horizon (``--floor-iterations`` Adam steps at each of two step sizes, the better per goal:
 ``warp_critic/reproduce/experiments/reach.py``), an upper bound of the best any controller reaches. Without
 ``--train``, ``--floor`` reads the newest run of each robot (and of the KUKA) in ``--runs-dir``, as a
-``--train`` pass left it, and prints the table with its floor.
+``--train`` pass left it, and prints the table with its floor. A ``--train`` pass is resumable: a
+robot (or the KUKA) with a meta-tested run of as many iterations in ``--runs-dir`` is read, not
+trained again, so an interrupted pass continues where it stopped when run again.
 
     python tools/robot_zoo.py                                   # the import table
     python tools/robot_zoo.py --train 50 --only xarm7,z1,reacher --runs-dir runs/zoo
     python tools/robot_zoo.py --floor --only xarm7,z1,reacher --runs-dir runs/zoo   # floors afterwards
+    python tools/robot_zoo.py --menagerie ../mujoco_menagerie   # Menagerie's arms and hands
 
 The import pass takes a few minutes on a 2-core CPU.
 """
@@ -51,16 +56,54 @@ PACKAGES = {
     "gymnasium": (PURELIB / "gymnasium/envs/mujoco/assets", "*.xml"),
     "dm_control": (PURELIB / "dm_control", "suite/*.xml", "third_party/kinova/*.xml"),
 }
+# MuJoCo Menagerie's fixed-base arm and hand files (``--menagerie DIR``: a checkout of the
+# repository or of a fork such as kevinzakka/mujoco_menagerie), relative to its root: each robot's
+# own files, and the scene files that add props beside the robot
+MENAGERIE = (
+    "agilex_piper/piper.xml", "aloha/aloha.xml", "arx_l5/arx_l5.xml",
+    "dynamixel_2r/dynamixel_2r.xml", "flexiv_rizon4/flexiv_rizon4.xml",
+    "franka_emika_panda/panda.xml", "franka_emika_panda/panda_nohand.xml",
+    "franka_emika_panda/hand.xml", "franka_emika_panda/mjx_panda.xml",
+    "franka_emika_panda/scene.xml", "franka_fr3/fr3.xml", "franka_fr3_v2/fr3v2.xml",
+    "i2rt_yam/yam.xml", "kinova_gen3/gen3.xml", "kuka_iiwa_14/iiwa14.xml",
+    "leap_hand/left_hand.xml", "leap_hand/right_hand.xml",
+    "low_cost_robot_arm/low_cost_robot_arm.xml", "rethink_robotics_sawyer/sawyer.xml",
+    "robotiq_2f85/2f85.xml", "robotiq_2f85/scene.xml", "robotiq_2f85_v4/2f85.xml",
+    "robotstudio_so101/so101.xml", "shadow_dexee/shadow_dexee.xml",
+    "shadow_hand/left_hand.xml", "shadow_hand/right_hand.xml", "shadow_hand/scene_right.xml",
+    "tetheria_aero_hand_open/left_hand.xml", "tetheria_aero_hand_open/right_hand.xml",
+    "trossen_vx300s/vx300s.xml", "trossen_wx250s/wx250s.xml",
+    "trossen_wxai/trossen_ai_bimanual.xml", "trs_so_arm100/so_arm100.xml",
+    "ufactory_lite6/lite6.xml", "ufactory_lite6/lite6_gripper_narrow.xml",
+    "ufactory_lite6/lite6_gripper_wide.xml", "ufactory_xarm7/xarm7.xml",
+    "ufactory_xarm7/xarm7_nohand.xml", "ufactory_xarm7/hand.xml", "umi_gripper/umi_gripper.xml",
+    "unitree_z1/z1.xml", "unitree_z1/z1_gripper.xml", "universal_robots_ur10e/ur10e.xml",
+    "universal_robots_ur5e/ur5e.xml", "wonik_allegro/left_hand.xml", "wonik_allegro/right_hand.xml",
+)  # fmt: skip
 FLOOR_LRS = (0.1, 0.03)  # Adam step sizes of the open-loop search (reach.best_open_loop_floor)
 
 
-def robot_files() -> list[tuple[str, Path]]:
-    """(package, file) for every robot file found, sorted within each package."""
+def robot_files(menagerie: Path | None = None) -> list[tuple[str, Path]]:
+    """(package, file) for every robot file found, sorted within each package; with
+    ``menagerie`` (a MuJoCo Menagerie checkout) its :data:`MENAGERIE` files instead."""
+    from warp_critic.core.errors import UserError
+
+    if menagerie is not None:
+        files = [menagerie / name for name in MENAGERIE]
+        if not any(f.is_file() for f in files):
+            raise UserError(f"--menagerie: {menagerie}: none of Menagerie's arm and hand files")
+        return [("menagerie", f) for f in files if f.is_file()]
     found = []
     for package, (base, *patterns) in PACKAGES.items():
         if base.is_dir():
             found += [(package, p) for pattern in patterns for p in sorted(base.glob(pattern))]
     return found
+
+
+def stem_of(package: str, path: Path) -> str:
+    """A file's name for ``--only`` and its runs: its stem, or ``DIR.STEM`` for Menagerie (whose
+    robots share stems such as ``scene`` and ``left_hand``)."""
+    return f"{path.parent.name}.{path.stem}" if package == "menagerie" else path.stem
 
 
 def short_reason(text: str, path: Path) -> str:
@@ -97,9 +140,27 @@ def import_one(path: Path) -> dict:
     return row
 
 
+def finished_run(runs_dir: Path, run: str, iterations: int) -> Path | None:
+    """The newest run ``RUN-STAMP`` in ``runs_dir`` that was trained for ``iterations`` and
+    meta-tested (a rerun of the same command resumes after it), if any."""
+    for out in sorted(runs_dir.glob(f"{run}-*/metatest-zoo.json"), reverse=True):
+        try:
+            config = json.loads((out.parent / "config.json").read_text())
+        except (OSError, ValueError):
+            continue
+        if out.parent.name.rsplit("-", 2)[0] == run and config.get("iterations") == iterations:
+            return out.parent
+    return None
+
+
 def train_one(scene: str, out: Path, iterations: int, goals: int, inits: int) -> dict:
-    """Meta-train ``scene`` for ``iterations`` and meta-test it at goal std 0.1."""
+    """Meta-train ``scene`` for ``iterations`` and meta-test it at goal std 0.1; a run of it that
+    finished with as many iterations in ``out``'s folder is read instead (resumable chunks)."""
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
+
+    done = finished_run(out.parent, out.name.rsplit("-", 2)[0], iterations)
+    if done is not None:
+        return read_run(done) | {"out": done}
     from warp_critic.methods.ours import TrainConfig, meta_train
 
     cfg = TrainConfig(scene=scene, iterations=iterations, device="cpu", out=str(out))
@@ -110,7 +171,7 @@ def train_one(scene: str, out: Path, iterations: int, goals: int, inits: int) ->
         out=str(out / "metatest-zoo.json"),
     )  # fmt: skip
     meta_test(tc)
-    return read_run(out)
+    return read_run(out) | {"out": out}
 
 
 def read_run(out: Path) -> dict:
@@ -194,6 +255,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--goals", type=int, default=4, help="meta-test goals (std 0.1)")
     p.add_argument("--inits", type=int, default=2, help="fresh policies per meta-test goal")
     p.add_argument("--runs-dir", type=Path, default=ROOT / "runs" / "zoo")
+    p.add_argument("--menagerie", type=Path, default=None, metavar="DIR", help="a MuJoCo "
+                   "Menagerie checkout: its fixed-base arm and hand files instead of the packages'")  # fmt: skip
     p.add_argument("--floor", action="store_true", help="add the open-loop floor (without --train: "
                    "of the newest runs in --runs-dir)")  # fmt: skip
     p.add_argument("--floor-iterations", type=int, default=100, help="Adam steps per step size")
@@ -227,10 +290,17 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     rows = []
     print(f"{'package':27s} {'file':45s} {'DoF':>3s} {'dt x sub-steps':>15s} {'s':>5s}  verdict")
+    try:
+        files = robot_files(args.menagerie)
+    except UserError as e:
+        print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
+        return 2
     for package, path in files:
-        if args.only is not None and path.stem not in args.only:
+        if args.only is not None and stem_of(package, path) not in args.only:
             continue
-        row = import_one(path) | {"package": package}
+        row = import_one(path) | {"package": package, "stem": stem_of(package, path)}
+        if package == "menagerie":
+            row["file"] = f"{path.parent.name}/{path.name}"
         rows.append(row)
         step = f"{row['dt'] * 1e3:.2f} ms x {row['substeps']}" if row["dof"] else "-"
         print(
@@ -243,11 +313,11 @@ def main(argv: list[str] | None = None) -> int:
         r["dt"] >= 1e-3 - 1e-12 for r in ok) else "some import below dt 1 ms")  # fmt: skip
     if not args.train:
         return 0
-    chosen = [r for r in ok if args.only is None or r["path"].stem in args.only]
-    stems = [r["path"].stem for r in chosen]
+    chosen = [r for r in ok if args.only is None or r["stem"] in args.only]
+    stems = [r["stem"] for r in chosen]
     for r in chosen:  # two packages' reacher.xml: their runs and rows named by package
-        twin = stems.count(r["path"].stem) > 1
-        r["run"] = f"{r['package']}.{r['path'].stem}" if twin else r["path"].stem
+        twin = stems.count(r["stem"]) > 1
+        r["run"] = f"{r['package']}.{r['stem']}" if twin else r["stem"]
         r["name"] = f"{r['package']}/{r['file']}" if twin else r["file"]
     try:
         args.runs_dir.mkdir(parents=True, exist_ok=True)
@@ -258,12 +328,12 @@ def main(argv: list[str] | None = None) -> int:
         )
         print(f"\nmeta-train {args.train} iterations (CPU), meta-test at goal std 0.1:")
         print_header(args)
-        print_row("kuka.usda (scenes/)", out, kuka, kuka, args)
+        print_row("kuka.usda (scenes/)", kuka["out"], kuka, kuka, args)
         for r in chosen:
             out = args.runs_dir / f"{r['run']}-{stamp}"
             with contextlib.redirect_stderr(io.StringIO()):
                 t = train_one(str(r["path"]), out, args.train, args.goals, args.inits)
-            print_row(r["name"], out, t, kuka, args)
+            print_row(r["name"], t["out"], t, kuka, args)
     except UserError as e:
         print(f"{PROG}: error: {user_message(e)}", file=sys.stderr)
         return 2

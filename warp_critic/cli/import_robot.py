@@ -41,7 +41,10 @@ def cmd_import(args: argparse.Namespace) -> int:
         repair_inertia=args.repair_inertia,
         home=args.home,
     )
-    out = write_scene(scene, args.out)
+    gravity = args.gravity
+    if gravity is not None and not (math.isfinite(gravity) and gravity >= 0):
+        raise UserError(f"--gravity: must be a finite number >= 0 m/s^2 (got {gravity:g})")
+    out = write_scene(scene, args.out, gravity=gravity)
     for repair in getattr(scene, "import_repairs", ()):
         print(f"repaired: {repair}")
     from warp_critic.cli import signals
@@ -79,10 +82,13 @@ def add_parser(sub) -> None:
         "warp_critic:* attributes hold the defaults derived from the robot; edit them there. "
         "Trained are the joints the file actuates: an MJCF's <actuator> joints (gear x ctrlrange, "
         "capped by forcerange, caps the torque), a URDF's <transmission> joints and joints with a "
-        "non-zero effort limit. An MJCF's bodies outside the actuated robot (targets, objects) are "
-        "dropped with a note; an unactuated joint of the robot is refused (--joints locks it); an "
-        "arm with a hand trains the arm chain up to the hand (--joints picks others); a hand on a "
-        "fixed palm trains every finger. A URDF root without a joint to the world is fixed; a "
+        "non-zero effort limit. An MJCF's <include>s are followed and its props (jointed bodies "
+        "outside the actuated robot: targets, objects) dropped with a note; its 'home' keyframe is "
+        "the home; an unactuated trained joint is refused (--joints locks it); an arm with a hand "
+        "or gripper (tendon-driven, coupled or a linkage) trains the arm chain up to the hand, the "
+        "gripper locked at home, and a single chain's last joints named as a gripper's (gripper, "
+        "jaw, finger, claw) are locked (--joints picks others); two arms are refused (--joints "
+        "picks one); a hand on a fixed palm trains every finger. A URDF root without a joint to the world is fixed; a "
         "free or floating joint is refused.",
         epilog=IMPORT_RULES + "\n" + derived_rules_epilog(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -132,6 +138,14 @@ def add_parser(sub) -> None:
         action="store_true",
         help="project each invalid inertia to the nearest valid one (same principal axes), "
         "instead of refusing the file",
+    )
+    im.add_argument(
+        "--gravity",
+        default=None,
+        type=float,
+        metavar="M/S2",
+        help="derive the torque bounds and dt under this gravity (0: a torque-mode, gravity-"
+        "compensated arm; default 9.81); written as the scene's gravity",
     )
     im.set_defaults(func=cmd_import)
 

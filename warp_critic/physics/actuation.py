@@ -3,12 +3,13 @@
 * MJCF: the joints named by ``<actuator>`` elements (``motor``, ``general``, ``position``, ...;
   default classes included). A motor's bound is ``gear x max |ctrlrange|`` (when the control is
   limited), capped by ``forcerange``; other actuator types give ``forcerange`` only. Bodies at the
-  top of ``<worldbody>`` whose subtree holds no actuated joint (targets, objects: slide-, free- or
-  un-jointed props) are dropped before newton reads the file. A file with no ``<actuator>`` drives
-  every movable joint.
+  top of ``<worldbody>`` whose subtree holds joints, none of them driven by an actuator (directly
+  or through a tendon: targets, objects, slide- or free-jointed props) are dropped before newton
+  reads the file; a body without joints is welded to the world and kept. A file with no
+  ``<actuator>`` drives every movable joint.
 * URDF: the joints of ``<transmission>`` elements, and the revolute, continuous and prismatic
   joints whose ``<limit effort>`` is not zero.
-* :func:`arm_chain`: an arm with a hand (the driven joints branch below a driven joint) trains the
+* :func:`arm_chains`: an arm with a hand (the driven joints branch below a driven joint) trains the
   chain up to the branching body; a hand (chains that branch on a body no driven joint moves)
   trains every chain.
 """
@@ -31,6 +32,7 @@ _ACTUATORS = (
     "damper",
     "cylinder",
     "muscle",
+    "plugin",  # an engine plugin's actuator (mujoco.pid, ...): its forcerange bounds the joint
 )
 
 
@@ -42,17 +44,27 @@ class Actuation:
         actuated: joint name -> the file's torque bound [N m or N] (None: the file gives none), or
             None when the file names no actuators at all (every movable joint is driven).
         props: names of the top-level MJCF bodies dropped (no actuated joint in their subtree).
-        text: the MJCF text without the props (None: read the file as it is).
         source: what decided ``actuated`` (``"actuators"``, ``"transmissions"``, ``"effort"``).
         tendons: joint name -> the MJCF tendon through which an actuator drives it (not modelled:
             the joint counts as unactuated, and its refusal names the tendon).
+        home: MJCF joint name -> its position in the file's ``home`` keyframe [rad or m].
+        drawn: the MJCF mesh geoms removed before import, for drawing
+            (:class:`warp_critic.physics.mjcf_file.DrawnMesh`).
+        loops: the MJCF ``connect``/``weld`` equalities ``(kind, body1, body2)``.
+        root: the MJCF file's expanded tree, as newton read it (None: a URDF).
+        spatial: the MJCF spatial tendons an actuator pulls (routed through sites: the joints
+            they move are not named; not modelled).
     """
 
     actuated: dict[str, float | None] | None = None
     props: list[str] = field(default_factory=list)
-    text: str | None = None
     source: str = ""
     tendons: dict[str, str] = field(default_factory=dict)
+    home: dict[str, float] = field(default_factory=dict)
+    drawn: list = field(default_factory=list)
+    loops: list[tuple[str, str, str]] = field(default_factory=list)
+    root: ET.Element | None = None
+    spatial: list[str] = field(default_factory=list)
 
 
 def _number(text: str | None, default: float = math.nan) -> float:
@@ -113,12 +125,10 @@ def _actuator_bound(tag: str, attrs: dict[str, str]) -> float | None:
     return min(bounds) if bounds else None
 
 
-def read_mjcf(path: Path) -> Actuation:
-    """The actuation of an MJCF file (an unreadable file: newton's importer says why)."""
-    try:
-        root = ET.parse(path).getroot()
-    except (ET.ParseError, OSError):
-        return Actuation()
+def read_mjcf(root: ET.Element) -> Actuation:
+    """The actuation of an MJCF file (its root element, includes expanded); its props are removed
+    from ``root``: top-level bodies whose subtree holds no joint an actuator drives, directly or
+    through a tendon."""
     classes = _default_classes(root)
     actuated: dict[str, float | None] = {}
     driven_tendons: set[str] = set()
@@ -135,24 +145,25 @@ def read_mjcf(path: Path) -> Actuation:
             bound = _actuator_bound(element.tag, attrs)
             old = actuated.get(joint)
             actuated[joint] = bound if old is None else (old if bound is None else old + bound)
-    if not actuated:
-        return Actuation()
-    props: list[str] = []
-    worldbody = root.find("worldbody")
-    if worldbody is not None:
-        for body in list(worldbody.findall("body")):
-            joints = {j.get("name") for j in body.iter("joint")}
-            if not joints & set(actuated):
-                worldbody.remove(body)
-                props.append(body.get("name") or "(unnamed body)")
-    text = ET.tostring(root, encoding="unicode") if props else None
     tendons = {
         j.get("joint", ""): tendon.get("name", "")
         for tendon in root.iter("fixed")
         if tendon.get("name") in driven_tendons
         for j in tendon.findall("joint")
     }
-    return Actuation(actuated=actuated, props=props, text=text, source="actuators", tendons=tendons)
+    spatial = [str(t.get("name")) for t in root.iter("spatial") if t.get("name") in driven_tendons]
+    if not actuated and not tendons and not spatial:
+        return Actuation(root=root)
+    props: list[str] = []
+    for worldbody in root.findall("worldbody"):
+        for body in list(worldbody.findall("body")):
+            joints = {j.get("name") for j in body.iter() if j.tag in ("joint", "freejoint")}
+            if joints and not joints & (set(actuated) | set(tendons)):  # unjointed: welded
+                worldbody.remove(body)
+                props.append(body.get("name") or "(unnamed body)")
+    found = Actuation(actuated=actuated, props=props, source="actuators", tendons=tendons)
+    found.root, found.spatial = root, spatial
+    return found
 
 
 def mjcf_resolver(path: Path):
@@ -187,10 +198,11 @@ def read_urdf(robot: ET.Element) -> Actuation:
     return Actuation(actuated=actuated, source="effort")
 
 
-def arm_chain(builder, trained: set[int]) -> tuple[list[int], int] | None:
-    """An arm with a hand: the trained joints branch below a trained joint. Returns the trained
-    joints on the path from the world to the first such branching body, and that body; None for
-    a single chain or a hand (its chains branch on a body that no trained joint moves)."""
+def arm_chains(builder, trained: set[int]) -> list[tuple[list[int], int]]:
+    """Arms with a hand: the trained joints branch below a trained joint. Returns, per arm, the
+    trained joints on the path from the world to its first such branching body, and that body;
+    none for a single chain or a hand (its chains branch on a body that no trained joint moves);
+    two for a bimanual robot (two arms whose hands branch apart)."""
     joint_of = {c: j for j, c in enumerate(builder.joint_child)}
 
     def path(body: int) -> list[int]:  # joints from the world down to ``body``
@@ -211,7 +223,8 @@ def arm_chain(builder, trained: set[int]) -> tuple[list[int], int] | None:
         for b, kids in below.items()
         if b >= 0 and len(kids) >= 2 and any(k in trained for k in path(b))
     ]
-    if not branching:
-        return None
-    body = min(branching, key=lambda b: len(path(b)))
-    return [k for k in path(body) if k in trained], body
+    # the first branching body of each arm: no other branching body above it
+    firsts = [
+        b for b in branching if not any(o != b and joint_of.get(o) in path(b) for o in branching)
+    ]
+    return [([k for k in path(b) if k in trained], b) for b in sorted(firsts)]

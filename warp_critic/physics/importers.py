@@ -16,6 +16,15 @@ from typing import Any
 
 from warp_critic.core.errors import SceneError
 from warp_critic.physics.actuation import Actuation, mjcf_resolver, read_mjcf, read_urdf
+from warp_critic.physics.mjcf_file import (
+    check_one_joint_per_body,
+    expand,
+    flatten_names,
+    keyframe_home,
+    loops,
+    one_articulation,
+    strip_meshes,
+)
 from warp_critic.physics.robot_meshes import mesh_path
 
 
@@ -87,11 +96,22 @@ def import_builder(path: Path, fmt: str) -> tuple[Any, Actuation, list[str]]:
                 actuation = read_urdf(root)
                 builder.add_urdf(text, joint_ordering="dfs")
             elif fmt == "mjcf":
-                actuation = read_mjcf(path)
-                if actuation.text is None:
-                    builder.add_mjcf(str(path))
-                else:
-                    builder.add_mjcf(actuation.text, path_resolver=mjcf_resolver(path))
+                actuation, mesh_notes = _read_mjcf(path)
+                # equalities are checked against the trained joints (robot._check_loops, the
+                # couplings of robot_checks): one inside a locked gripper is no concern
+                assert actuation.root is not None  # read_mjcf keeps the tree newton is to read
+                builder.add_mjcf(
+                    ET.tostring(actuation.root, encoding="unicode"),
+                    path_resolver=mjcf_resolver(path),
+                    skip_equality_constraints=True,
+                )
+                # a <position>/<velocity> actuator's kp/kv become newton's joint drive gains, which
+                # the Featherstone step applies as a spring-damper to a zero target on top of the
+                # policy's torques (explicitly: the FR3's kv 200 on a 0.08 kg m^2 wrist diverges
+                # at any dt >= 1 ms). warp-critic drives the joints with torques only (its bound is
+                # the actuator's force range): the servo's gains are the controller's, not the robot's
+                builder.joint_target_ke = [0.0] * len(builder.joint_target_ke)
+                builder.joint_target_kd = [0.0] * len(builder.joint_target_kd)
             else:
                 builder.add_usd(str(path), load_sites=False)
         except SceneError:
@@ -103,7 +123,7 @@ def import_builder(path: Path, fmt: str) -> tuple[Any, Actuation, list[str]]:
         text = str(w.message)
         if missing is None and "does not exist" in text and "Asset file" in text:
             missing = text.split("Asset file", 1)[1].split("does not exist")[0].strip()
-    notes = []
+    notes = list(mesh_notes) if fmt == "mjcf" else []
     if missing:
         notes.append(f"{path}: mesh file {missing} is missing (meshes are not needed for dynamics)")
     if actuation.props:
@@ -112,6 +132,21 @@ def import_builder(path: Path, fmt: str) -> tuple[Any, Actuation, list[str]]:
             f"(no actuated joint): {', '.join(actuation.props)}"
         )
     return builder, actuation, notes
+
+
+def _read_mjcf(path: Path) -> tuple[Actuation, list[str]]:
+    """An MJCF file's tree as newton is to read it (:mod:`warp_critic.physics.mjcf_file`: includes
+    expanded, props dropped, the meshes no inertia needs removed) in its :class:`Actuation`, with
+    its ``home`` keyframe, its drawn meshes and its loops; and the notes of its meshes."""
+    root = expand(path)
+    flatten_names(root)
+    home = keyframe_home(root)  # before the props go: the key's qpos counts their joints
+    actuation = read_mjcf(root)
+    check_one_joint_per_body(path, root)  # the robot's bodies: the props are gone
+    notes, drawn = strip_meshes(path, root)
+    one_articulation(root)
+    actuation.home, actuation.drawn, actuation.loops = home, drawn, loops(root)
+    return actuation, notes
 
 
 def check_topology(path: Path, builder) -> None:
@@ -186,3 +221,17 @@ def depths(builder) -> tuple[list[int], list[int]]:
             x, d = parent_of.get(x, -1), d + 1
         depth.append(d)
     return depth, list(parent_of)
+
+
+def moved_bodies(builder, joints: set[int]) -> list[int]:
+    """The bodies that one of ``joints`` moves (their subtrees), in body order."""
+    parent_joint = {c: j for j, c in enumerate(builder.joint_child)}
+    out = []
+    for b in range(builder.body_count):
+        x, steps = b, 0
+        while x >= 0 and x in parent_joint and steps <= builder.body_count:
+            if parent_joint[x] in joints:
+                out.append(b)
+                break
+            x, steps = builder.joint_parent[parent_joint[x]], steps + 1
+    return out

@@ -4,7 +4,11 @@ Newton's ``ModelBuilder.finalize`` "corrects" a body's mass and inertia (``verif
 a non-finite value zeroed, a negative mass set to 0, the smallest principal moment raised to 1e-6 of
 the largest, principal moments shifted until they satisfy the triangle inequality) with one warning
 that names no body. :func:`check_inertias` refuses such a body in one line naming it and the value,
-or (``repair``) replaces its tensor by :func:`nearest_valid`. Rules: :mod:`warp_critic.physics.robot_checks`.
+or (``repair``) replaces its tensor by :func:`nearest_valid`. Two rounding-size errors are repaired
+without being asked, each with a one-line note naming the body and the size of the change: a
+triangle-inequality miss of at most :data:`TRIANGLE_TOLERANCE` of the largest principal moment
+(moved to the nearest valid inertia), and an inertia on a massless frame welded to its parent
+(dropped: the frame is merged into its parent). Rules: :mod:`warp_critic.physics.robot_checks`.
 """
 
 from __future__ import annotations
@@ -17,13 +21,17 @@ import numpy as np
 
 from warp_critic.core.errors import SceneError
 
-__all__ = ["MASS_RANGE", "check_inertias", "inertia_problem", "nearest_valid"]
+__all__ = ["MASS_RANGE", "TOLERATED", "check_inertias", "inertia_problem", "nearest_valid"]
 
 MASS_RANGE = (1e-6, 1e6)  # kg: a robot link's mass outside it is a unit or typing mistake
 # newton's inertia check (newton/_src/geometry/inertia.py): the floor below which it inflates the
 # smallest principal moment, and the triangle inequality's tolerance
 REL_FLOOR, ABS_FLOOR, F32_EPS = 1e-6, 1e-10, float(np.finfo(np.float32).eps)
 REPAIR_INERTIA = "import with --repair-inertia to project it to the nearest valid inertia"
+# a triangle-inequality miss up to this fraction of the largest principal moment is rounding in
+# the file (a well-known URDF: 0.00306 + 0.02364 < 0.02690, 0.7%): repaired with a note, not refused
+TRIANGLE_TOLERANCE = 0.05
+TOLERATED = "repaired without --repair-inertia"
 
 
 def _fail(path: Path, problem: str) -> SceneError:
@@ -85,6 +93,17 @@ def inertia_problem(T: np.ndarray, moved: bool) -> str | None:
             "is below 1e-6 of the largest, newton would inflate it)"
         )
     return None
+
+
+def _triangle_miss(T: np.ndarray) -> float | None:
+    """How far the principal moments miss the triangle inequality, as a fraction of the largest
+    (<= 0: they satisfy it); None for a tensor that is not finite and positive."""
+    if not np.all(np.isfinite(T)):
+        return None
+    w = np.linalg.eigvalsh(0.5 * (T + T.T))
+    if not w[0] > 0:
+        return None
+    return float((w[2] - w[0] - w[1]) / w[2])
 
 
 def nearest_valid(T: np.ndarray) -> np.ndarray:
@@ -152,6 +171,13 @@ def check_inertias(path: Path, builder, repair: bool) -> list[str]:
         if not math.isfinite(m) or m < 0:
             raise _fail(path, f"body {name!r} has mass {_g(m)} kg: a mass is a finite number > 0")
         if m == 0.0:
+            if np.any(T != 0) and b not in moved:  # a frame welded to its parent: merged into it
+                builder.body_inertia[b] = wp.mat33(*([0.0] * 9))
+                repairs.append(
+                    f"body {name}: inertia {_inertia_text(T)} dropped: the frame has no mass and "
+                    f"is welded to its parent ({TOLERATED})"
+                )
+                continue
             if np.any(T != 0) and not repair:
                 raise _fail(
                     path,
@@ -169,6 +195,17 @@ def check_inertias(path: Path, builder, repair: bool) -> list[str]:
             )
         problem = inertia_problem(T, b in moved)
         if problem is None:
+            continue
+        miss = _triangle_miss(T)
+        if miss is not None and 0.0 < miss <= TRIANGLE_TOLERANCE and "triangle" in problem:
+            J = nearest_valid(T)
+            builder.body_inertia[b] = wp.mat33(*(float(v) for v in J.reshape(-1)))
+            change = float(np.abs(np.linalg.eigvalsh(J) - np.linalg.eigvalsh(T)).max())
+            repairs.append(
+                f"body {name}: its principal moments miss the triangle inequality by "
+                f"{100 * miss:.2g}% of the largest (rounding): moved to the nearest valid inertia, "
+                f"no moment changed by more than {_g(change)} kg m^2 ({TOLERATED})"
+            )
             continue
         if not repair or not np.all(np.isfinite(T)):
             fix = f" ({REPAIR_INERTIA})" if np.all(np.isfinite(T)) else ""

@@ -46,7 +46,7 @@ import numpy as np
 
 from warp_critic.core.errors import SceneError, warn
 from warp_critic.physics import derive
-from warp_critic.physics.actuation import arm_chain
+from warp_critic.physics.actuation import arm_chains
 from warp_critic.physics.balance import upright_note
 from warp_critic.physics.file_format import USD_SUFFIXES, file_format
 from warp_critic.physics.importers import (
@@ -56,8 +56,11 @@ from warp_critic.physics.importers import (
     fail,
     import_builder,
     lock,
+    moved_bodies,
     short,
 )
+from warp_critic.physics.inertia_checks import TOLERATED
+from warp_critic.physics.mjcf_file import GRIPPER_NAME
 from warp_critic.physics.robot_checks import check_robot, given_home
 from warp_critic.physics.robot_meshes import link_frames
 from warp_critic.physics.scene import Scene
@@ -141,24 +144,46 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     check_topology(path, builder)
 
     names = [short(label) for label in builder.joint_label]
-    movable = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
     fixed = int(newton.JointType.FIXED)
     jointed = [j for j, t in enumerate(builder.joint_type) if int(t) != fixed]
     if not jointed:
         raise fail(path, "no movable joint (every joint is fixed): nothing to train")
     trained, branch, note = _trained(path, builder, names, jointed, actuation, options)
+    _check_loops(path, builder, actuation.loops, trained)
     # the file's validity on the joints chosen for training (a coupling between two locked joints,
     # such as an arm's gripper fingers, is no concern): refused in one line, or repaired on the
     # options' flags (robot_checks); --lock-mimic welds followers, which then leave the trained set
     o = options
     chosen = sorted(names[j] for j in trained)
     repairs = check_robot(
-        path, builder, fmt, chosen, o.lock_mimic, o.repair_inertia, home=dict(o.home or ())
+        path,
+        builder,
+        fmt,
+        chosen,
+        o.lock_mimic,
+        o.repair_inertia,
+        home=dict(o.home or ()),
+        root=actuation.root,
     )
     jointed = [j for j, t in enumerate(builder.joint_type) if int(t) != fixed]
     trained = {j for j in trained if j in jointed}
+    notes += [f"{path}: {r}" for r in repairs if TOLERATED in r]  # rounding-size repairs
     for line in [*notes, note] if note else notes:  # said once the file passed its checks: a
         warn(line)  # refused file gets its one line only
+    home = _home(path, builder, names, jointed, trained, actuation, options)
+    ee_label = _end_effector(path, builder, trained, branch, options)
+    return _finish(path, builder, fmt, options, ee_label, home, repairs, actuation)
+
+
+def _home(
+    path: Path, builder, names: list[str], jointed: list[int], trained: set[int], actuation, o
+) -> dict[int, float]:
+    """Each movable joint's home (``--home``, else the file's ``home`` keyframe, else
+    derive.home_value); the joints not trained locked there, the trained ones given the MJCF
+    actuators' bounds as effort limits."""
+    import newton
+
+    movable = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
     for j in jointed:  # after --joints: a joint that is neither trained nor lockable is refused
         if int(builder.joint_type[j]) not in movable:
             kind = newton.JointType(int(builder.joint_type[j])).name.lower()
@@ -175,6 +200,9 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     home = {
         j: derive.home_value(lower[j], upper[j], file_home[j], CONTINUOUS_LIMIT) for j in jointed
     }
+    for j in jointed:  # the file's home keyframe, inside the limits
+        if names[j] in actuation.home:
+            home[j] = min(max(actuation.home[names[j]], lower[j]), upper[j])
     home.update(given_home(path, o.home or (), names, jointed, lower, upper, CONTINUOUS_LIMIT))
     lock(builder, [j for j in jointed if j not in trained], home)
     for j in trained:  # an MJCF actuator's bound caps the joint's effort limit
@@ -182,8 +210,13 @@ def _load(path: Path, options: RobotOptions) -> Scene:
         if bound is not None:
             old = float(builder.joint_effort_limit[dof_of[j]])
             builder.joint_effort_limit[dof_of[j]] = min(old, bound) if old > 0 else bound
+    return home
 
-    # the end-effector body, chosen on the file's tree (fixed links included)
+
+def _end_effector(path: Path, builder, trained: set[int], branch: int | None, options) -> str:
+    """The end-effector body's label, chosen on the file's tree (fixed links included):
+    ``--ee-body``, else the hand of an arm with a hand, else the first deepest body that a trained
+    joint moves."""
     labels = list(builder.body_label)
     if options.ee_body is not None:
         matches = [i for i, lb in enumerate(labels) if lb == options.ee_body]
@@ -194,21 +227,32 @@ def _load(path: Path, options: RobotOptions) -> Scene:
                 f"ee_body {options.ee_body!r} names {len(matches)} of the bodies "
                 f"{[short(lb) for lb in labels]}",
             )
-        ee = matches[0]
-    elif branch is not None:
-        ee = branch  # an arm with a hand: the hand
-    else:
-        depth, _ = depths(builder)
-        ee = int(np.argmax(depth))  # first body of greatest depth
-    ee_label = labels[ee]
+        return labels[matches[0]]
+    if branch is not None:
+        return labels[branch]  # an arm with a hand: the hand
+    depth, _ = depths(builder)
+    moved = moved_bodies(builder, trained)
+    return labels[max(moved, key=lambda b: (depth[b], -b))]
 
+
+def _finish(
+    path: Path, builder, fmt: str, options, ee_label: str, home: dict, repairs, actuation
+) -> Scene:
+    """Fixed joints merged, the checks on the merged model, and the model a file does not say
+    (armature, damping, limit gains: derive's rules) -> the scene."""
+    names = [short(label) for label in builder.joint_label]
+    labels = list(builder.body_label)
+    ee = labels.index(ee_label)
     info = collapse(builder)
     frames = link_frames(labels, info)  # where each file link ended up: to draw its meshes
     tip = np.array(options.tip_offset or (0.0, 0.0, 0.0), dtype=np.float64)
     if ee in info["body_merged_parent"]:
         parent = info["body_merged_parent"][ee]
         if parent < 0:
-            raise fail(path, f"ee_body {short(ee_label)!r} is welded to the world")
+            who = "--ee-body " if options.ee_body is not None else "the end-effector body "
+            raise fail(
+                path, f"{who}{short(ee_label)!r} is welded to the world: no trained joint moves it"
+            )
         xf = info["body_merged_transform"][ee]
         import warp as wp
 
@@ -230,24 +274,16 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     builder.joint_effort_limit = [float(v) for v in effort]
     kept = [names.index(short(label)) for label in builder.joint_label]
     home_q = np.array([home[j] for j in kept], dtype=np.float64)
-    # the file and the options shape the model; the derived defaults do not enter (a run resolves
-    # them into its own config, as the training-default attributes of a scene file)
-    digest = hashlib.sha256(
-        path.read_bytes()
-        + json.dumps(
-            {
-                "options": [options.ee_body, options.tip_offset, options.joints]
-                + [name for name in ("lock_mimic", "repair_inertia") if getattr(options, name)],
-                "rules": derive.MODEL_RULES,
-            },
-            sort_keys=True,
-        ).encode()
-    ).hexdigest()
+    digest = _content_hash(path, options)
 
     def make() -> RobotScene:  # the scene copies the builder's arrays: made again after each rule
         scene = RobotScene(path, builder, ee, tip, effort, home=home_q, content_hash=digest)
         scene.import_repairs = repairs
         scene.link_frames = frames
+        scene.drawn_meshes = list(actuation.drawn)
+        scene.bound_sources = {
+            str(n): "file" for n, v in (actuation.actuated or {}).items() if v is not None
+        }
         return scene
 
     # armature and damping where the file gives none (import_builder marks them UNSET), then the
@@ -266,12 +302,56 @@ def _load(path: Path, options: RobotOptions) -> Scene:
     return make()
 
 
+def _content_hash(path: Path, options: RobotOptions) -> str:
+    """The file and the options shape the model; the derived defaults do not enter (a run resolves
+    them into its own config, as the training-default attributes of a scene file)."""
+    return hashlib.sha256(
+        path.read_bytes()
+        + json.dumps(
+            {
+                "options": [options.ee_body, options.tip_offset, options.joints]
+                + [name for name in ("lock_mimic", "repair_inertia") if getattr(options, name)],
+                "rules": derive.MODEL_RULES,
+            },
+            sort_keys=True,
+        ).encode()
+    ).hexdigest()
+
+
+def _check_loops(path: Path, builder, loops, trained: set[int]) -> None:
+    """Refuse an MJCF ``connect``/``weld`` equality that closes a loop through a trained joint (one
+    whose bodies a locked gripper holds rigid is no concern)."""
+    by_name = {short(label): b for b, label in enumerate(builder.body_label)}
+    joint_of = {c: j for j, c in enumerate(builder.joint_child)}
+
+    def up(body: int) -> list[int]:
+        out: list[int] = []
+        while body >= 0 and body in joint_of and len(out) <= len(joint_of):
+            out.append(joint_of[body])
+            body = builder.joint_parent[joint_of[body]]
+        return out
+
+    for kind, b1, b2 in loops:
+        a = up(by_name.get(b1, -1))
+        b = up(by_name.get(b2, -1))
+        through = [j for j in set(a) ^ set(b) if j in trained]
+        if through:
+            raise fail(
+                path,
+                f"closed kinematic loop: an <equality><{kind}> joins bodies {b1 or 'world'!r} and "
+                f"{b2 or 'world'!r} across the trained joint {short(builder.joint_label[through[0]])!r}; "
+                "warp-critic trains open-chain (tree) robots (--joints NAME,.. trains others and "
+                "locks the rest at home)",
+            )
+
+
 def _trained(
     path: Path, builder, names: list[str], jointed: list[int], actuation, options: RobotOptions
 ) -> tuple[set[int], int | None, str | None]:
-    """The joints to train (the others are locked at home) and, for an arm with a hand, the hand
-    body (the default end effector) and the note that says so: ``--joints``, else what the file
-    actuates."""
+    """The joints to train (the others are locked at home) and, for an arm with a hand or a jaw,
+    the body that holds it (the default end effector) and the note that says so: ``--joints``,
+    else the arm chain of an arm with a hand, else a single chain less its jaw, else every joint;
+    each trained joint then needs an actuator (:func:`_check_actuated`)."""
     if options.joints is not None:
         by_name = {names[j]: j for j in jointed}
         unknown = [n for n in options.joints if n not in by_name]
@@ -282,32 +362,99 @@ def _trained(
                 f"robot (movable: {', '.join(names[j] for j in jointed)})",
             )
         return {by_name[n] for n in options.joints}, None, None
-    if actuation.actuated is not None:
-        idle = [j for j in jointed if names[j] not in actuation.actuated]
-        if idle and len(idle) < len(jointed):  # none actuated: the file says nothing, train all
-            what = {"actuators": "<actuator>", "effort": "<transmission> or non-zero effort"}
-            tendon = actuation.tendons.get(names[idle[0]])
-            raise fail(
-                path,
-                f"underactuated: joint {names[idle[0]]!r} has no actuator ("
-                + (
-                    f"an <actuator> drives it only through tendon {tendon!r}, not modelled"
-                    if tendon
-                    else f"no {what.get(actuation.source, 'actuator')} drives it"
-                )
-                + "); --joints NAME,.. trains the joints named and locks the others at home",
-            )
-    chain = arm_chain(builder, set(jointed))
-    if chain is None:
-        return set(jointed), None, None
-    arm, body = chain
+    arms = arm_chains(builder, set(jointed))
+    if len(arms) > 1:
+        which = " and ".join(f"{names[a[0]]}..{names[a[-1]]}" for a, _ in arms)
+        raise fail(
+            path,
+            f"{len(arms)} arms ({which}): warp-critic trains one end effector; --joints NAME,.. "
+            "trains the joints of one arm and locks the others at home",
+        )
+    trained, body, kind = set(jointed), None, ""
+    if arms:
+        trained, body, kind = set(arms[0][0]), arms[0][1], "an arm with a hand"
+    elif jaw := _jaw(builder, names, jointed):
+        trained, body, kind = trained - set(jaw), builder.joint_parent[jaw[0]], "an arm with a jaw"
+    _check_actuated(path, names, sorted(trained), actuation)
+    if body is None:
+        return trained, None, None
+    locked = [names[j] for j in jointed if j not in trained]
+    arm = sorted(trained)
     note = (
-        f"{path}: an arm with a hand: training the {len(arm)} joints of the arm chain "
+        f"{path}: {kind}: training the {len(arm)} joints of the arm chain "
         f"{names[arm[0]]}..{names[arm[-1]]} (end effector {short(builder.body_label[body])}); "
-        f"the {len(jointed) - len(arm)} joints beyond it are locked at home (--joints NAME,.. "
-        "picks others)"
+        f"the {len(locked)} joints beyond it ({', '.join(locked[:4])}{', ..' * (len(locked) > 4)}) "
+        "are locked at home (--joints NAME,.. picks others)"
     )
-    return set(arm), body, note
+    return trained, body, note
+
+
+def _jaw(builder, names: list[str], jointed: list[int]) -> list[int]:
+    """A single chain's last joints named as a gripper's (:data:`mjcf_file.GRIPPER_NAME`), first
+    to last; none where the joints do not form one chain or no other joint would be left."""
+    joint_of = {c: j for j, c in enumerate(builder.joint_child)}
+    movable = set(jointed)
+    chains = []
+    for j in jointed:  # each joint's movable joints from the world down to it
+        out: list[int] = []
+        body = builder.joint_child[j]
+        while body >= 0 and body in joint_of and len(out) <= len(joint_of):
+            k = joint_of[body]
+            out += [k] if k in movable else []
+            body = builder.joint_parent[k]
+        chains.append(out[::-1])
+    longest = max(chains, key=len)
+    if len(longest) != len(jointed):
+        return []  # not one chain
+    tail: list[int] = []
+    for j in reversed(longest):
+        if not GRIPPER_NAME.search(names[j]):
+            break
+        tail.insert(0, j)
+    return tail if len(tail) < len(longest) else []
+
+
+def _check_actuated(path: Path, names: list[str], trained: list[int], actuation) -> None:
+    """Refuse a trained joint that the file's actuators do not drive (a file that names no
+    actuator drives every joint)."""
+    if actuation.actuated is None or not (actuation.actuated or actuation.tendons):
+        return  # the file says nothing drives any joint: every one is driven
+    idle = [j for j in trained if names[j] not in actuation.actuated]
+    if not idle:
+        return
+    name = names[idle[0]]
+    what = {"actuators": "<actuator>", "effort": "<transmission> or non-zero effort"}
+    tendon = actuation.tendons.get(name)
+    coupled = _coupled_to(actuation.root, name)
+    if tendon:
+        why = f"an <actuator> drives it only through tendon {tendon!r}, not modelled"
+    elif coupled:
+        why = f"it follows joint {coupled!r} through an <equality> coupling"
+    elif actuation.spatial:
+        pulled = ", ".join(actuation.spatial[:2]) + (", .." if len(actuation.spatial) > 2 else "")
+        why = (
+            "no <actuator> drives it directly; the file's actuators pull spatial tendons "
+            f"({pulled}), not modelled"
+        )
+    else:
+        why = f"no {what.get(actuation.source, 'actuator')} drives it"
+    raise fail(
+        path,
+        f"underactuated: joint {name!r} has no actuator ({why}); --joints NAME,.. trains the "
+        "joints named and locks the others at home",
+    )
+
+
+def _coupled_to(root, joint: str) -> str | None:
+    """The joint an MJCF ``<equality><joint>`` couples ``joint`` to, if any."""
+    if root is None:
+        return None
+    for eq in root.iter("equality"):
+        for e in eq.findall("joint"):
+            pair = (e.get("joint1"), e.get("joint2"))
+            if joint in pair and None not in pair:
+                return str(pair[1] if pair[0] == joint else pair[0])
+    return None
 
 
 class RobotScene(Scene):
@@ -317,6 +464,8 @@ class RobotScene(Scene):
     derived = True
     import_repairs: tuple[str, ...] = ()  # what robot_checks repaired on request, one line each
     link_frames: dict[str, tuple[int, tuple[float, ...]]]  # robot_meshes.link_frames
+    drawn_meshes: list = []  # an MJCF's mesh geoms, for drawing (mjcf_file.DrawnMesh)
+    bound_sources: dict[str, str] = {}  # joint -> "file" where the file gives its torque bound
     _derived_values: dict[str, Any] | None  # None until first use (set by the setter below)
     _derive_lock: threading.Lock
 
@@ -351,4 +500,26 @@ def _derive(scene: RobotScene, gravity: float) -> dict[str, Any]:
     note = upright_note(scene, gravity)
     if note:
         warn(note)
-    return derive.derive_defaults(scene, gravity)
+    values = derive.derive_defaults(scene, gravity)
+    note = derived_bound_note(scene, values["max_torque"], gravity)
+    if note:
+        warn(note)
+    return values
+
+
+def derived_bound_note(scene, max_torque, gravity: float) -> str | None:
+    """One line naming the joints whose torque bound the file does not give (no effort limit, no
+    actuator force range): their bound is derived, not a motor's limit. None where the file bounds
+    every joint."""
+    unbounded = np.flatnonzero(scene.effort_limit >= derive.NO_EFFORT_LIMIT)
+    if not len(unbounded):
+        return None
+    values = ", ".join(
+        f"{scene.joint_names[i]} {float(max_torque[i]):.3g}" for i in unbounded[:6]
+    ) + (", .." if len(unbounded) > 6 else "")
+    return (
+        f"{scene.path}: the file gives no torque bound for {len(unbounded)} of {scene.dof} joints: "
+        f"their max_torque ({values} N m or N) is derived from the robot under gravity "
+        f"{gravity:g} m/s^2 (--help: max_torque), not a motor's limit; set the motors' own with "
+        "--max-torque"
+    )

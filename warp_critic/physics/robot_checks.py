@@ -10,10 +10,12 @@ is refused here, in one :class:`SceneError` line naming the body or joint and th
   trained; repair on request: ``lock_mimic`` welds the coupled joint at the position the coupling
   gives at the home pose;
 * a body's mass that is not a finite number in 1e-6..1e6 kg (a frame link welded to its parent may
-  be lighter: it is merged); a mass of 0 with an inertia; an inertia entry that is not a finite
-  number (named as the file writes it; never repaired: no nearest valid tensor exists); a
-  negative diagonal entry, a negative principal moment (a large off-diagonal entry), principal
-  moments that violate the triangle inequality, or (on a body its own joint moves) a smallest
+  be lighter: it is merged); a mass of 0 with an inertia on a moving body (a welded frame's is
+  dropped with a note); an inertia entry that is not a finite number (named as the file writes
+  it; never repaired: no nearest valid tensor exists); a negative diagonal entry, a negative
+  principal moment (a large off-diagonal entry), principal moments that violate the triangle
+  inequality by more than 5% of the largest (a smaller miss is repaired with a note), or (on a
+  body its own joint moves) a smallest
   principal moment below newton's floor (1e-6 of the largest); repair on request:
   ``repair_inertia`` projects the tensor to the nearest valid one (Frobenius norm, the same
   principal axes; a massless body's inertia is dropped). Links welded to the world are not
@@ -58,10 +60,12 @@ IMPORT_RULES = """\
 refused, in one line naming the body or joint and the value (nothing is written):
   a joint coupled to another (URDF <mimic>, MJCF <equality><joint>): --lock-mimic welds it where
     the coupling puts it at the home pose;
-  a mass that is not a finite number in 1e-6..1e6 kg; mass 0 with an inertia; an inertia entry
-    that is not a finite number (no repair: give the number); an inertia with a negative diagonal
-    entry, not positive definite, violating the triangle inequality or (on a moving link)
-    degenerate: --repair-inertia projects it to the nearest valid inertia;
+  a mass that is not a finite number in 1e-6..1e6 kg; mass 0 with an inertia on a moving link;
+    an inertia entry that is not a finite number (no repair: give the number); an inertia with a
+    negative diagonal entry, not positive definite, violating the triangle inequality by more
+    than 5% of its largest principal moment or (on a moving link) degenerate: --repair-inertia
+    projects it to the nearest valid inertia (a smaller triangle miss is repaired, and a massless
+    welded frame's inertia dropped, each with a one-line note);
   a joint axis that is zero or not finite;
   joint limits lower > upper, or lower = upper on a trained joint; a URDF effort < 0 or not a
     number; effort="0" (no actuator) on a trained joint (leave it out of --joints to lock it);
@@ -101,14 +105,18 @@ def check_robot(
     lock_mimic: bool = False,
     repair_inertia: bool = False,
     home: dict[str, float] | None = None,
+    root=None,
 ) -> tuple[str, ...]:
     """Refuse what the module docstring lists (a :class:`SceneError`), or repair it on request.
 
     ``builder``: newton's ``ModelBuilder`` straight from the importer (fixed joints not merged);
     ``fmt``: ``urdf``/``mjcf``/``usd``; ``trained``: the joints to train (None: every movable one);
     ``home``: joint name -> the home the user gave (``--home``; a locked follower follows it).
+    ``fmt``: ``urdf``/``mjcf``/``usd``; ``trained``: the joints to train (None: every movable one).
+    ``root``: the file's parsed tree where the caller has it (an MJCF's, includes expanded).
     Returns the repairs made, one line each (changed in ``builder``)."""
-    root = _xml_root(path) if fmt in ("urdf", "mjcf") else None
+    if root is None:
+        root = _xml_root(path) if fmt in ("urdf", "mjcf") else None
     if root is not None:
         _check_names(path, root, fmt)
         _finite_in_file(path, root, fmt)

@@ -1,11 +1,13 @@
-"""A URDF robot's link meshes, for drawing only (the recordings' 3-D view), never for dynamics.
+"""A URDF or MJCF robot's link meshes, for drawing only (the recordings' 3-D view), never for dynamics.
 
 A URDF is imported without its meshes (:mod:`warp_critic.physics.importers`), and its links welded
 by fixed joints are merged into the moving bodies. :func:`link_frames` keeps, at import, where each
 of the file's links ended up (the model body it is part of and its frame there); :func:`link_meshes`
 reads each link's meshes from the file (its ``<visual>`` meshes, else its ``<collision>`` ones; STL
 files, binary or ASCII, as newton needs no other package for them; other formats are skipped) and
-places them on those bodies (body -1: a link welded to the world, in the world's frame).
+places them on those bodies (body -1: a link welded to the world, in the world's frame). An
+MJCF's mesh geoms are those :mod:`warp_critic.physics.mjcf_file` removed before import (STL, or
+OBJ read with trimesh).
 """
 
 from __future__ import annotations
@@ -78,6 +80,8 @@ def link_meshes(scene) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
 
     frames = getattr(scene, "link_frames", None)
     path = Path(getattr(scene, "path", "") or "")
+    if frames and getattr(scene, "drawn_meshes", None):
+        return mjcf_meshes(scene.drawn_meshes, frames)
     if not frames or not path.is_file() or file_format(path) != "urdf":
         return []
     try:
@@ -121,4 +125,44 @@ def link_meshes(scene) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
     return out
 
 
-__all__ = ["link_frames", "link_meshes", "mesh_path", "read_stl"]
+def read_mesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices ``(V, 3)`` float32 and triangles ``(F, 3)`` uint32 of an STL or OBJ file (OBJ read
+    with trimesh, all its parts as one mesh). Raises OSError or ValueError where it cannot."""
+    if path.suffix.lower() == ".stl":
+        return read_stl(path)
+    import trimesh
+
+    mesh = trimesh.load(str(path), force="mesh", process=False)
+    vertices = np.asarray(getattr(mesh, "vertices", ()), np.float32).reshape(-1, 3)
+    faces = np.asarray(getattr(mesh, "faces", ()), np.uint32).reshape(-1, 3)
+    if not len(faces):
+        raise ValueError(f"{path}: no triangles")
+    return vertices, faces
+
+
+def mjcf_meshes(drawn, frames) -> list[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
+    """``link_meshes``' tuples for an MJCF robot's mesh geoms (``mjcf_file.DrawnMesh``): each
+    body's visual geoms, else its colliders; a mesh that cannot be read is left out."""
+    import warp as wp
+
+    out = []
+    for name in dict.fromkeys(d.body for d in drawn):
+        if name not in frames:
+            continue
+        mine = [d for d in drawn if d.body == name]
+        mine = [d for d in mine if d.visual] or mine
+        body, frame = frames[name]
+        for d in mine:
+            try:  # drawing only: a mesh that cannot be read is left out
+                vertices, triangles = read_mesh(Path(d.file))
+            except (OSError, ValueError, IndexError):
+                continue
+            pose = wp.transform(wp.vec3(*frame[:3]), wp.quat(*frame[3:])) * wp.transform(
+                wp.vec3(*d.pose[:3]), wp.quat(*d.pose[3:])
+            )
+            scaled = vertices * np.asarray(d.scale, np.float32)
+            out.append((body, np.array(pose, np.float64), scaled, triangles))
+    return out
+
+
+__all__ = ["link_frames", "link_meshes", "mesh_path", "mjcf_meshes", "read_mesh", "read_stl"]

@@ -261,6 +261,15 @@ def write_robot(name: str, robot: Robot, path: Path) -> None:
     assert robot.ee in {link.name for link in robot.links}, (
         f"{name}: end-effector {robot.ee!r} is not a link"
     )
+    _write_links(stage, name, robot)
+    UsdGeom.Scope.Define(stage, f"/{name}/joints")
+    for joint in robot.joints:
+        _write_joint(stage, name, robot, joint)
+    stage.GetRootLayer().Save()
+
+
+def _write_links(stage, name: str, robot: Robot) -> None:
+    """One rigid body per link, posed at q = 0, with its mass properties and drawn capsules."""
     # World pose of every link at q = 0 (URDF: the child link frame is the joint frame).
     world_rot: dict[str | None, np.ndarray] = {None: np.eye(3)}
     world_pos: dict[str | None, np.ndarray] = {None: np.zeros(3)}
@@ -311,41 +320,38 @@ def write_robot(name: str, robot: Robot, path: Path) -> None:
                 color,
             )
 
-    UsdGeom.Scope.Define(stage, f"/{name}/joints")
-    for joint in robot.joints:
-        jpath = f"/{name}/joints/{joint.name}"
-        revolute = joint.kind == "revolute"
-        if revolute:
-            uj = UsdPhysics.RevoluteJoint.Define(stage, jpath)
-            lower, upper, gain_scale = joint.lower / DEG, joint.upper / DEG, DEG
-        elif joint.kind == "prismatic":
-            uj = UsdPhysics.PrismaticJoint.Define(stage, jpath)
-            lower, upper, gain_scale = joint.lower, joint.upper, 1.0
-        else:
-            raise ValueError(f"{name}/{joint.name}: unsupported joint kind {joint.kind!r}")
-        uj.CreateAxisAttr(joint.axis)
-        uj.CreateLowerLimitAttr(float(lower))
-        uj.CreateUpperLimitAttr(float(upper))
-        if joint.parent is not None:
-            uj.CreateBody0Rel().SetTargets([Sdf.Path(f"/{name}/{joint.parent}")])
-        uj.CreateBody1Rel().SetTargets([Sdf.Path(f"/{name}/{joint.child}")])
-        uj.CreateLocalPos0Attr(Gf.Vec3f(*map(float, joint.xyz)))
-        uj.CreateLocalRot0Attr(gf_quat(matrix_to_quat(rpy_to_matrix(joint.rpy))))
-        uj.CreateLocalPos1Attr(Gf.Vec3f(0.0, 0.0, 0.0))
-        uj.CreateLocalRot1Attr(Gf.Quatf(1.0))
-        prim = uj.GetPrim()
-        # newton reads these per degree for revolute joints (value * 180/pi), per metre otherwise
-        prim.CreateAttribute("newton:damping", Sdf.ValueTypeNames.Float).Set(
-            joint.damping * gain_scale
-        )
-        prim.CreateAttribute("newton:limitStiffness", Sdf.ValueTypeNames.Float).Set(
-            robot.limit_ke * gain_scale
-        )
-        prim.CreateAttribute("newton:limitDamping", Sdf.ValueTypeNames.Float).Set(
-            robot.limit_kd * gain_scale
-        )
-        prim.CreateAttribute(schema.EFFORT_ATTR, Sdf.ValueTypeNames.Float, custom=True).Set(
-            joint.effort
-        )
 
-    stage.GetRootLayer().Save()
+def _write_joint(stage, name: str, robot: Robot, joint: Joint) -> None:
+    """One revolute or prismatic joint with its limits, newton's gains and the effort limit."""
+    jpath = f"/{name}/joints/{joint.name}"
+    revolute = joint.kind == "revolute"
+    if revolute:
+        uj = UsdPhysics.RevoluteJoint.Define(stage, jpath)
+        lower, upper, gain_scale = joint.lower / DEG, joint.upper / DEG, DEG
+    elif joint.kind == "prismatic":
+        uj = UsdPhysics.PrismaticJoint.Define(stage, jpath)
+        lower, upper, gain_scale = joint.lower, joint.upper, 1.0
+    else:
+        raise ValueError(f"{name}/{joint.name}: unsupported joint kind {joint.kind!r}")
+    uj.CreateAxisAttr(joint.axis)
+    uj.CreateLowerLimitAttr(float(lower))
+    uj.CreateUpperLimitAttr(float(upper))
+    if joint.parent is not None:
+        uj.CreateBody0Rel().SetTargets([Sdf.Path(f"/{name}/{joint.parent}")])
+    uj.CreateBody1Rel().SetTargets([Sdf.Path(f"/{name}/{joint.child}")])
+    uj.CreateLocalPos0Attr(Gf.Vec3f(*map(float, joint.xyz)))
+    uj.CreateLocalRot0Attr(gf_quat(matrix_to_quat(rpy_to_matrix(joint.rpy))))
+    uj.CreateLocalPos1Attr(Gf.Vec3f(0.0, 0.0, 0.0))
+    uj.CreateLocalRot1Attr(Gf.Quatf(1.0))
+    prim = uj.GetPrim()
+    # newton reads these per degree for revolute joints (value * 180/pi), per metre otherwise
+    prim.CreateAttribute("newton:damping", Sdf.ValueTypeNames.Float).Set(joint.damping * gain_scale)
+    prim.CreateAttribute("newton:limitStiffness", Sdf.ValueTypeNames.Float).Set(
+        robot.limit_ke * gain_scale
+    )
+    prim.CreateAttribute("newton:limitDamping", Sdf.ValueTypeNames.Float).Set(
+        robot.limit_kd * gain_scale
+    )
+    prim.CreateAttribute(schema.EFFORT_ATTR, Sdf.ValueTypeNames.Float, custom=True).Set(
+        joint.effort
+    )
