@@ -44,9 +44,6 @@ KNOWN_LONG_FUNCTIONS: dict[str, int] = {
     "run.run_landscape": 139,
     "report.run_toy": 105,
     "main.build_parser": 102,
-    "export.write_scene": 135,
-    "robot._load": 131,
-    "scene_writer.write_robot": 121,
     "metatest_setup.setup_meta_test": 105,
 }
 #: packages that are no layer: shipped with the package, first used by this layer

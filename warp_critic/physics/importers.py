@@ -97,7 +97,7 @@ def import_builder(path: Path, fmt: str) -> tuple[Any, Actuation, list[str]]:
                 builder.add_urdf(text, joint_ordering="dfs")
             elif fmt == "mjcf":
                 actuation, mesh_notes = _read_mjcf(path)
-                # equalities are checked against the trained joints (robot._check_loops, the
+                # equalities are checked against the trained joints (joint_choice.check_loops, the
                 # couplings of robot_checks): one inside a locked gripper is no concern
                 assert actuation.root is not None  # read_mjcf keeps the tree newton is to read
                 builder.add_mjcf(

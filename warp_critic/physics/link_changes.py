@@ -87,7 +87,7 @@ class LinkChange:
         ):
             raise bad("@POINT is x,y,z in metres, and only for point-mass")
         if self.point is not None:  # the bound import puts on a tip: farther is a typing mistake
-            from warp_critic.physics.robot_checks import TIP_OFFSET_MAX
+            from warp_critic.physics.model_checks import TIP_OFFSET_MAX
 
             distance = math.sqrt(sum(float(x) ** 2 for x in self.point))
             if distance > TIP_OFFSET_MAX:

@@ -13,8 +13,8 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from warp_critic.core.errors import SceneError
+from warp_critic.physics.model_checks import check_tip_offset
 from warp_critic.physics.robot import RobotOptions, is_robot_file, load_robot
-from warp_critic.physics.robot_checks import check_tip_offset
 from warp_critic.physics.scene import Scene
 from warp_critic.physics.scene_cache import FileCache
 from warp_critic.physics.usd_scene import read_usd_scene

@@ -42,17 +42,18 @@ from warp_critic.core.errors import FieldError
 from warp_critic.physics import derive
 from warp_critic.physics.importers import lock
 from warp_critic.physics.inertia_checks import _fail, _g, _short, check_inertias
+from warp_critic.physics.model_checks import (
+    _axes,
+    _limits,
+    _movable,
+)
 
 __all__ = [
     "IMPORT_RULES",
-    "TIP_OFFSET_MAX",
-    "check_model",
     "check_robot",
-    "check_tip_offset",
     "given_home",
 ]
 
-TIP_OFFSET_MAX = 10.0  # m
 LOCK_MIMIC = "import with --lock-mimic to lock it where the coupling puts it at the home pose"
 
 
@@ -75,26 +76,6 @@ refused, in one line naming the body or joint and the value (nothing is written)
   .xacro file is to be expanded first. A repair is printed and recorded in the scene's
   warp_critic:importRepairs.
 """
-
-
-def check_tip_offset(tip: Sequence[float]) -> None:
-    """A tip farther than :data:`TIP_OFFSET_MAX` from its body is a mistake (a FieldError)."""
-    norm = math.sqrt(sum(float(v) ** 2 for v in tip))
-    if not norm <= TIP_OFFSET_MAX:
-        raise FieldError(
-            "tip_offset",
-            f"{','.join(_g(float(v)) for v in tip)} is {_g(norm)} m from the end-effector body; "
-            f"a tip is at most {TIP_OFFSET_MAX:g} m from it",
-        )
-
-
-def check_model(path: Path, builder) -> None:
-    """The checks of :func:`check_robot` that a scene file gets too (no repairs: a scene is loaded
-    as it is): masses and inertias, joint limits and axes of every joint (a scene trains each)."""
-    check_inertias(path, builder, repair=False)
-    movable = _movable(builder)
-    _limits(path, builder, movable, {_short(builder.joint_label[j]) for j in movable})
-    _axes(path, builder, movable)
 
 
 def check_robot(
@@ -324,43 +305,6 @@ def _drop_mimic(builder, joint: int) -> None:
 # ------------------------------------------------------------------------------------------------
 # limits and efforts
 # ------------------------------------------------------------------------------------------------
-
-
-def _movable(builder) -> list[int]:
-    import newton
-
-    kinds = {int(newton.JointType.REVOLUTE), int(newton.JointType.PRISMATIC)}
-    return [j for j, t in enumerate(builder.joint_type) if int(t) in kinds]
-
-
-def _limits(path: Path, builder, movable: list[int], trained: set[str]) -> None:
-    for j in movable:
-        dof = builder.joint_qd_start[j]
-        lo, hi = float(builder.joint_limit_lower[dof]), float(builder.joint_limit_upper[dof])
-        name = _short(builder.joint_label[j])
-        if not (math.isfinite(lo) or lo == -math.inf) or not (math.isfinite(hi) or hi == math.inf):
-            raise _fail(path, f"joint {name!r} has limits {_g(lo)}..{_g(hi)}: not numbers")
-        if lo > hi:
-            raise _fail(path, f"joint {name!r} has lower limit {_g(lo)} > upper limit {_g(hi)}")
-        if lo == hi and name in trained:
-            raise _fail(
-                path,
-                f"joint {name!r} cannot move: lower limit = upper limit = {_g(lo)} (make it a fixed "
-                "joint, or leave it out of the trained joints, --joints, to lock it)",
-            )
-
-
-def _axes(path: Path, builder, movable: list[int]) -> None:
-    """A revolute or prismatic joint needs an axis: a zero one moves nothing (its mass matrix row
-    is zero, so the model cannot be stepped)."""
-    for j in movable:
-        axis = [float(x) for x in builder.joint_axis[builder.joint_qd_start[j]]]
-        if not math.fsum(x * x for x in axis) > 1e-18:
-            raise _fail(
-                path,
-                f"joint {_short(builder.joint_label[j])} has a zero joint axis "
-                f"({', '.join(_g(x) for x in axis)}): it moves nothing",
-            )
 
 
 def _efforts(path: Path, builder, movable: list[int], trained: set[str]) -> None:

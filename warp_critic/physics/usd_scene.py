@@ -17,6 +17,7 @@ import numpy as np
 
 from warp_critic.core.errors import FieldError, SceneError
 from warp_critic.physics import schema
+from warp_critic.physics.model_checks import check_model, check_tip_offset
 from warp_critic.physics.scene import Scene
 from warp_critic.physics.scene_hash import content_hash
 from warp_critic.physics.schema import EE_ATTR, EFFORT_ATTR, TIP_ATTR
@@ -247,8 +248,6 @@ def read_usd_scene(path: Path) -> Scene:
     except KeyError as exc:
         raise _fail(path, f"imported joint {exc} not found in the file") from None
     builder.joint_effort_limit = [float(v) for v in effort_limit]
-
-    from warp_critic.physics.robot_checks import check_model, check_tip_offset
 
     # what an imported robot file must satisfy (masses in range, valid inertias, limits, axes,
     # the tip), checked the same way on a scene file (a copy of a scene edited by hand)
