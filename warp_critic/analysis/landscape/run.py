@@ -246,7 +246,7 @@ def _landscapes(cfg: LandscapeConfig, scene, trained: dict) -> dict:
 def _write_outputs(out: Path, cfg: LandscapeConfig, trained: dict, fields: dict) -> None:
     """``landscape.rrd``, ``landscape.png``, ``exploration.png`` and ``landscape.npz`` in ``out``."""
     f, t = fields, trained
-    grids = [f[k] for k in GRIDS]
+    grids = (f["axis"], f["values"], f["grads"], f["goals"], f["optima"])  # in GRIDS' order
     write_recording(
         out / "landscape.rrd",
         cfg,
