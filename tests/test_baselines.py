@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import pytest
 import torch
 from conftest import REACHER
+from helpers import TINY_BASELINE as TINY
+from helpers import tiny_baseline_cfg as tiny_cfg
 
 from warp_critic.cli.main import main
 from warp_critic.core.errors import UserError
@@ -27,48 +28,6 @@ from warp_critic.running.rundir import CHECKPOINT_KIND
 from warp_critic.running.task import TaskConfig
 
 TRAIN = {"ddpg": train_ddpg, "meta-critic": train_meta_critic}
-# tiny settings for the CLI / resume tests (no learning expected)
-TINY = [
-    "--goals",
-    "0.5,0.3",
-    "--worlds-per-goal",
-    "2",
-    "--horizon",
-    "5",
-    "--device",
-    "cpu",
-    "--critic-hidden",
-    "32",
-    "--updates-per-iteration",
-    "3",
-    "--batch-size",
-    "8",
-    "--warmup-iterations",
-    "1",
-]
-
-
-def tiny_cfg(out: Path, method: str, **kw) -> BaselineConfig:
-    cfg = BaselineConfig(
-        scene=REACHER,
-        method=method,
-        goals=[[0.5, 0.3]],
-        worlds_per_goal=2,
-        horizon=5,
-        iterations=3,
-        device="cpu",
-        out=str(out),
-        critic_hidden=32,
-        updates_per_iteration=3,
-        batch_size=8,
-        warmup_iterations=1,
-        checkpoint_every=1,
-    )
-    for k, v in kw.items():
-        setattr(cfg, k, v)
-    return cfg
-
-
 # ------------------------------------------------------------------------------------------------
 # learning + meta-test
 # ------------------------------------------------------------------------------------------------

@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import functools
 from contextlib import nullcontext
-from pathlib import Path
 
 import pytest
 import torch
 from conftest import ROOT
+from helpers import drm_robot, drm_step
 
 from warp_critic.core.errors import DivergenceError
 from warp_critic.learning.networks import Normalizer, init_policy, policy_action
@@ -20,28 +20,6 @@ from warp_critic.learning.rollout import rollout
 from warp_critic.physics.load import load_scene
 from warp_critic.physics.scene import Variant
 from warp_critic.physics.simulator import Simulator
-
-
-def drm_robot(name: str):
-    import differentiable_robot_model as pkg
-    from differentiable_robot_model.robot_model import DifferentiableRobotModel
-
-    data = Path(pkg.__file__).resolve().parents[1] / "diff_robot_data"
-    urdf = {
-        "kuka": data / "kuka_iiwa" / "urdf" / "iiwa7.urdf",
-        "reacher": data / "2link_robot.urdf",
-    }[name]
-    return DifferentiableRobotModel(str(urdf), name, device="cpu")
-
-
-def drm_step(robot, q, qd, tau, dt, substeps):
-    for _ in range(substeps):
-        qdd = robot.compute_forward_dynamics(
-            q.float(), qd.float(), tau * 1.0, include_gravity=True, use_damping=True
-        ).double()
-        qd = qd + dt * qdd
-        q = q + dt * qd
-    return q, qd
 
 
 @pytest.fixture(scope="module")

@@ -158,7 +158,7 @@ def test_inertial_meta_gradient_matches_finite_differences(reacher):
 
 
 def test_inertial_critic_run_meta_tests_from_its_checkpoint(tmp_path):
-    from test_train import tiny_cfg
+    from helpers import tiny_cfg
 
     out = tmp_path / "inertial"
     train.meta_train(tiny_cfg(out, iterations=2, critic_input="inertial"), progress=False)

@@ -19,12 +19,12 @@ Reads source files only; imports nothing of the package.
 from __future__ import annotations
 
 import ast
-import importlib.util
 import re
 from pathlib import Path
 
 import pytest
 from conftest import ROOT
+from helpers import load_tool
 
 PACKAGE = ROOT / "warp_critic"
 MAX_LINES = 400
@@ -38,17 +38,7 @@ RESOURCES = {"kernels": "physics", "scenes": "physics"}
 _MODULE_PATH = re.compile(r"^warp_critic(?:\.[A-Za-z_]\w*)+(?::[A-Za-z_][\w.]*)?$")
 
 
-def _tool():
-    spec = importlib.util.spec_from_file_location(
-        "design_table", ROOT / "tools" / "design_table.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-TOOL = _tool()
+TOOL = load_tool("design_table")
 LAYERS: tuple[str, ...] = TOOL.LAYERS
 
 

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 from conftest import ROOT
-from test_bridge import drm_robot, drm_step
+from helpers import drm_robot, drm_step
 
 from warp_critic.core.errors import FieldError
 from warp_critic.physics.link_changes import parse_changes
@@ -176,6 +176,7 @@ def test_bad_link_change_against_the_scene(text, message):
     assert message in str(err.value)
 
 
+@pytest.mark.subprocess
 @pytest.mark.parametrize(
     "argv, words",
     [

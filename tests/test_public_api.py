@@ -41,6 +41,7 @@ def test_the_top_level_api_is_the_layers_objects():
     assert warp_critic.meta_test is meta_test and warp_critic.TrainConfig is TrainConfig
 
 
+@pytest.mark.subprocess
 def test_importing_the_packages_imports_neither_torch_nor_warp():
     code = (
         "import sys, warp_critic, warp_critic.core, warp_critic.learning, warp_critic.evaluation, "

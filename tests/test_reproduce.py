@@ -13,9 +13,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from helpers import load_tool
 
 from warp_critic.cli.main import main as cli_main
 from warp_critic.reproduce.report_maps import elbow_bent
+
+# one worker runs this module: the quick reproduce output, made once
+pytestmark = pytest.mark.xdist_group("test_reproduce")
 
 
 def reproduce_main(argv):
@@ -63,6 +67,7 @@ def quick(tmp_path_factory):
     return out, rc, time.perf_counter() - t
 
 
+@pytest.mark.subprocess
 def test_quick_end_to_end(quick):
     out, rc, _ = quick
     assert rc == 0
@@ -345,16 +350,6 @@ def test_interrupted_metatrain_resumes(tmp_path, capsys):
     assert (stray / "checkpoint.pt").is_file()
 
 
-def _tool(name: str):
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[1] / "tools" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     """save -> restore without the maps and tables: reproduce reruns only those two, from the slim
     meta-training checkpoints, to the same cells; the archive holds no optimiser or buffer state."""
@@ -364,7 +359,7 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
 
     out, rc, _ = quick
     assert rc == 0
-    carry = _tool("carry_stages")
+    carry = load_tool("carry_stages")
     archive = tmp_path / "archive"
     assert carry.main(["save", str(out), str(archive)]) == 0
     names = {p.name for p in archive.iterdir()}
@@ -436,7 +431,7 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
     report's records and figures go, the folder's other contents stay; bad input is one line."""
     out, rc, _ = quick
     assert rc == 0
-    carry = _tool("carry_stages")
+    carry = load_tool("carry_stages")
     dest = tmp_path / "docs"
     (dest / "stages" / "toy-0000000000").mkdir(parents=True)  # a carried stage: never touched
     (dest / "stages" / "toy-0000000000" / "stage.json").write_text("{}")

@@ -15,6 +15,7 @@ import newton.examples
 import numpy as np
 import pytest
 import torch
+from helpers import C1, C2, E1, E2, HI, I1, I2, L1, LO, M1, M2, TWO_LINK
 
 from warp_critic.cli.main import main
 from warp_critic.core.errors import SceneError
@@ -33,27 +34,6 @@ needs_robot_data = pytest.mark.skipif(
 )
 PANDA_ARM = ",".join(f"panda_joint{i}" for i in range(1, 8))
 
-# a planar two-link arm turning about +y (gravity along -z acts on it)
-M1, C1, I1, L1 = 2.0, 0.25, 0.05, 0.5  # kg, m (com from joint 1), kg m^2 (about y), m
-M2, C2, I2 = 1.0, 0.2, 0.02
-E1, E2 = 50.0, 3.0  # effort limits, N m
-LO, HI = np.array([-1.0, -0.5]), np.array([1.0, 1.5])
-TWO_LINK = f"""<robot name="twolink">
-  <link name="base"/>
-  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
-    <axis xyz="0 1 0"/><limit lower="{LO[0]}" upper="{HI[0]}" effort="{E1}" velocity="10"/></joint>
-  <link name="l1"><inertial><origin xyz="{C1} 0 0"/><mass value="{M1}"/>
-    <inertia ixx="0.01" iyy="{I1}" izz="{I1}" ixy="0" ixz="0" iyz="0"/></inertial>
-    <visual><geometry><mesh filename="meshes/l1.stl"/></geometry></visual></link>
-  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="{L1} 0 0"/>
-    <axis xyz="0 1 0"/><limit lower="{LO[1]}" upper="{HI[1]}" effort="{E2}" velocity="10"/></joint>
-  <link name="l2"><inertial><origin xyz="{C2} 0 0"/><mass value="{M2}"/>
-    <inertia ixx="0.005" iyy="{I2}" izz="{I2}" ixy="0" ixz="0" iyz="0"/></inertial>
-    <visual><geometry><mesh filename="meshes/l2.stl"/></geometry></visual></link>
-  <joint name="tool" type="fixed"><parent link="l2"/><child link="tcp"/><origin xyz="0.4 0 0"/></joint>
-  <link name="tcp"/>
-</robot>
-"""
 TWO_LINK_MJCF = """<mujoco model="arm2"><worldbody>
   <body name="l1"><joint name="j1" type="hinge" axis="0 1 0" range="-60 60" limited="true"/>
     <geom type="capsule" fromto="0 0 0 0.5 0 0" size="0.05"/>

@@ -1,9 +1,8 @@
-"""The scripts under tools/ and the package code they are thin over (protocol, presets)."""
+"""The scripts under tools/ and bench/ and the package code they are thin over (protocol, presets)."""
 
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import json
 import re
 from pathlib import Path
@@ -11,37 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import REACHER, ROOT
+from helpers import load_tool, tiny_cfg
 
 from warp_critic.core.errors import FieldError, UserError
 
 # the paper's LaTeX source: ``shared/paper/`` next to the repository (as CI and a clean clone have it)
 PAPER = ROOT.parent / "shared" / "paper" / "model_based_meta_learning_of_critics.tex"
-
-
-def load_tool(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
-    return tool
-
-
-def tiny_cfg(out: Path, **kw):
-    from warp_critic.methods.ours import TrainConfig
-
-    cfg = TrainConfig(
-        scene=REACHER,
-        goals=[[0.5, 0.3], [-0.4, 0.2]],
-        worlds_per_goal=2,
-        horizon=6,
-        iterations=3,
-        device="cpu",
-        out=str(out),
-        checkpoint_every=1,
-        record_every=2,
-    )
-    for k, v in kw.items():
-        setattr(cfg, k, v)
-    return cfg
 
 
 def meta_train(cfg):
@@ -277,7 +251,7 @@ def test_score_command_pools_seeds_and_reports_the_mean_over_joints(tmp_path, ca
 
 
 def test_benchmark_quick_version_trains_two_seeds_and_prints_the_pooled_table(tmp_path, capsys):
-    tool = load_tool("bench_metatrain")
+    tool = load_tool("bench_metatrain", "bench")
     assert (
         tool.main(
             [
@@ -319,7 +293,7 @@ def test_benchmark_quick_version_trains_two_seeds_and_prints_the_pooled_table(tm
 def test_tools_print_one_line_errors_with_exit_code_2(tmp_path, capsys):
     from warp_critic.cli.main import main
 
-    bench = load_tool("bench_metatrain")
+    bench = load_tool("bench_metatrain", "bench")
     # a bad value is refused by the library under its field name; the command names its flag
     assert main(["score", str(tmp_path), "--goal-noise", "sphere"]) == 2
     err = capsys.readouterr().err
@@ -344,7 +318,7 @@ def test_tools_print_one_line_errors_with_exit_code_2(tmp_path, capsys):
 
 
 def test_no_tool_deletes_run_directories_or_edits_sys_path():
-    for path in sorted((ROOT / "tools").glob("*.py")):
+    for path in sorted([*(ROOT / "tools").glob("*.py"), *(ROOT / "bench").glob("*.py")]):
         src = path.read_text()
         assert "rmtree" not in src and "os.remove" not in src, path.name
         assert "sys.path" not in src, path.name
@@ -357,7 +331,7 @@ def test_no_tool_deletes_run_directories_or_edits_sys_path():
 
 
 def test_bench_baselines_refuses_existing_directories_that_are_not_its_runs(tmp_path, capsys):
-    tool = load_tool("bench_baselines")
+    tool = load_tool("bench_baselines", "bench")
     # a directory with someone's files: refused in one line, nothing touched
     (tmp_path / "reacher-ddpg").mkdir()
     (tmp_path / "reacher-ddpg" / "notes.txt").write_text("mine")
@@ -408,7 +382,7 @@ def test_bench_baselines_refuses_existing_directories_that_are_not_its_runs(tmp_
 
 
 def test_bench_baselines_trains_then_only_meta_tests_a_complete_run(tmp_path, capsys):
-    tool = load_tool("bench_baselines")
+    tool = load_tool("bench_baselines", "bench")
     argv = [
         "--scenes",
         "reacher",
@@ -682,22 +656,7 @@ def test_unknown_preset_lists_the_known_ones():
         assert e.value.field == "preset" and all(name in e.value.problem for name in PRESETS)
 
 
-def test_cpu_thread_probe_splits_the_worlds_into_two_shards_bitwise(capsys):
-    probe = load_tool("probe_cpu_threads")
-    # in this process: both shards, one after the other and in two threads, equal one simulator
-    r = probe.run_case(tile=False, worlds=3, steps=2, repeats=1)
-    assert r["serial_bitwise"] and r["threads_bitwise"], r
-    assert min(r["one"], r["serial"], r["threads"]) > 0
-    # the tool's table, each case in its own process
-    assert probe.main(["--paths", "dense", "--worlds", "2", "--steps", "1", "--repeats", "1"]) == 0
-    rows = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("dense")]
-    assert len(rows) == 1 and rows[0].count("(bitwise)") == 2, rows
-    with pytest.raises(SystemExit) as e:
-        probe.main(["--paths", "gemm"])
-    assert e.value.code == 2 and "--paths" in capsys.readouterr().err
-
-
-# string literals that name a tools/ file and are no message to a user: the comment written into
+# string literals that name a tools/ or bench/ file and are no message to a user: the comment written into
 # every generated scene (a developer regenerates scenes/ with that script), and the report's text
 # on how its reachability filter was found (a diagnostic for readers of the report)
 NOT_MESSAGES = {
@@ -707,7 +666,8 @@ NOT_MESSAGES = {
 
 
 def tools_in_strings(source: str) -> list[str]:
-    """The string literals of ``source`` (docstrings aside) that name a file under ``tools/``."""
+    """The string literals of ``source`` (docstrings aside) that name a file under ``tools/`` or
+    ``bench/``."""
     import ast
 
     tree = ast.parse(source)
@@ -722,12 +682,12 @@ def tools_in_strings(source: str) -> list[str]:
         if isinstance(node, ast.Constant)
         and isinstance(node.value, str)
         and id(node) not in docstrings
-        and re.search(r"tools/\w+\.py", node.value)
+        and re.search(r"(?:tools|bench)/\w+\.py", node.value)
     ]
 
 
 def test_no_message_in_the_package_names_a_tools_file():
-    """pip installs the package, not tools/: a message that sends a user to a script there sends
+    """pip installs the package, not tools/ or bench/: a message that sends a user to a script there sends
     them nowhere (the commands are ``warp-critic identify``, ``warp-critic score``, ...)."""
     assert tools_in_strings('raise UserError(f"{run}: see tools/identify.py")') == [
         ": see tools/identify.py"

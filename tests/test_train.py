@@ -3,50 +3,22 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 from conftest import KUKA, REACHER
+from helpers import TINY_TRAIN as TINY
+from helpers import tiny_cfg
 
 from warp_critic.cli.main import main
 from warp_critic.core.errors import UserError
 from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
 from warp_critic.methods import ours as train
-from warp_critic.methods.ours import TrainConfig
 from warp_critic.physics import bridge
 from warp_critic.physics.load import load_scene
 from warp_critic.running.recording import read_entity_paths, read_times
 from warp_critic.running.rundir import load_checkpoint
-
-TINY = [
-    "--goals",
-    "0.5,0.3;-0.4,0.2",
-    "--worlds-per-goal",
-    "2",
-    "--horizon",
-    "6",
-    "--device",
-    "cpu",
-]
-
-
-def tiny_cfg(out: Path, **kw) -> TrainConfig:
-    cfg = TrainConfig(
-        scene=REACHER,
-        goals=[[0.5, 0.3], [-0.4, 0.2]],
-        worlds_per_goal=2,
-        horizon=6,
-        iterations=3,
-        device="cpu",
-        out=str(out),
-        checkpoint_every=1,
-        record_every=2,
-    )
-    for k, v in kw.items():
-        setattr(cfg, k, v)
-    return cfg
 
 
 def test_meta_train_cli_writes_run_directory_and_resumes(tmp_path, capsys):
