@@ -87,7 +87,7 @@ def graphs_from_env() -> bool:
     """``$WARP_CRITIC_GRAPHS`` (default ``1``): replay captured Warp graphs in the simulator.
 
     ``0`` issues every Warp launch from Python: the same numbers bit for bit, slower; for debugging
-    and for measuring the replay side by side (``tools/bench_speed.py``).
+    and for measuring the replay side by side (``bench/bench_speed.py``).
     """
     text = os.environ.get(GRAPHS_ENV, "1").strip()
     if text not in ("0", "1"):
