@@ -235,8 +235,50 @@ class Case:
     )
 
 
+# the cases that take seconds (they train, resume or start a pool): left out of the fast loop
+SLOW = frozenset(
+    {
+        "c01-no-goals-given-file",
+        "c01-no-goals-given-inline",
+        "c01-renamed-scene-ddpg",
+        "c01-renamed-scene-meta-train",
+        "c01-renamed-scene-resumes-run",
+        "c03-truncated-last-metrics-line",
+        "c04-reproduce-out-name-too-long",
+        "c05-resume-user-dir",
+        "c06-ddpg-dead-lock-taken-over",
+        "c06-dead-lock-taken-over",
+        "c06-stale-lock-pid-1-taken-over",
+        "c07-resume-missing-metrics",
+        "c12-meta-critic",
+        "c12-meta-train",
+        "c12-resume",
+        "c13-jobs-huge",
+        "c13-jobs-zero",
+        "c14-reproduce-inside-a-live-run",
+        "c15-asymmetric-limits-start-std",
+        "c15-resume-a-checkpoint-of-another-run",
+        "c16-ddpg-garbage-recording-resume",
+        "c16-garbage-recording-resume",
+        "c16-garbage-segment-of-a-killed-process",
+        "c17-disk-full-png",
+        "c17-stage-json-with-empty-result",
+        "c18-ray-address-of-a-plain-http-server",
+        "d48-resume-run-stopped-before-first-checkpoint",
+        "m48-resume-repairs-a-truncated-recording-and-says-what-it-kept",
+        "m48-resume-repairs-a-truncated-segment-and-says-what-it-kept",
+        "s47-train-variants-heavy-link-trains",
+        "s47-train-variants-light-link-with-drop-trains",
+        "t47-train-variants-blank",
+    }
+)
+
+
 def C(cls: str, name: str, argv: list[str], *, marks=(), **kw):
-    return pytest.param(Case(argv=argv, **kw), id=f"{cls}-{name}", marks=marks)
+    case_id = f"{cls}-{name}"
+    slow = (pytest.mark.slow,) if case_id in SLOW else ()
+    given = (marks,) if isinstance(marks, pytest.MarkDecorator) else tuple(marks)
+    return pytest.param(Case(argv=argv, **kw), id=case_id, marks=(*given, *slow))
 
 
 def check_case(case: Case, world, capfd, monkeypatch) -> None:

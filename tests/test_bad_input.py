@@ -1693,6 +1693,7 @@ TEST_NUMBERS = [
 ]
 
 
+@pytest.mark.slow
 @settings(
     max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow]
 )
@@ -1717,6 +1718,7 @@ def test_meta_train_numbers_property(name, text):
         assert not out.exists()
 
 
+@pytest.mark.slow
 @settings(
     max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow]
 )

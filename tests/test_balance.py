@@ -71,6 +71,7 @@ def test_a_bent_home_or_no_gravity_is_not_balanced(arms):
     assert upright_joints(upright, 0.0) == ([], 1.0)
 
 
+@pytest.mark.slow
 def test_import_home_bends_the_arm_out_of_balance_and_bad_homes_are_one_line(
     arms, tmp_path, capsys
 ):

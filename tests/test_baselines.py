@@ -33,6 +33,7 @@ TRAIN = {"ddpg": train_ddpg, "meta-critic": train_meta_critic}
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["ddpg", "meta-critic"])
 def test_baseline_learns_and_its_q_runs_through_meta_test(tmp_path, method):
     # the reacher's four default goals, 4 worlds each, a shortened horizon; published DDPG settings
@@ -128,6 +129,7 @@ def test_replay_buffer_ring_and_state_dict():
     assert batch["q"].shape == (16, 1) and batch["reward"].shape == (16,)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["ddpg", "meta-critic"])
 def test_resume_is_exact_on_cpu(tmp_path, method):
     straight = TRAIN[method](
@@ -153,6 +155,7 @@ def test_actor_features_are_its_last_hidden_layer_and_forward_is_their_final_lay
     assert torch.equal(actor.head(feats), actor(q, qd, g))
 
 
+@pytest.mark.slow
 def test_meta_critic_features_input_sees_the_actors_features_and_the_stored_action(tmp_path):
     from warp_critic.methods.meta_critic import MetaCriticAgent
 
@@ -196,6 +199,7 @@ def test_aux_grad_ratio_and_aux_alive_by_hand():
     assert aux_alive(warmup) is None
 
 
+@pytest.mark.slow
 def test_meta_critic_logs_the_aux_ratio_and_warns_when_h_omega_no_longer_moves_the_actor(
     tmp_path, capsys
 ):
@@ -217,6 +221,7 @@ def test_meta_critic_logs_the_aux_ratio_and_warns_when_h_omega_no_longer_moves_t
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_baseline_cli_writes_run_directory_and_resumes(tmp_path, capsys):
     out = tmp_path / "run"
     assert (
@@ -271,6 +276,7 @@ def test_default_out_directory():
     )  # a new config: cfg as it was
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "argv, fragment",
     [
@@ -310,6 +316,7 @@ def test_test_critic_rejects_broken_checkpoints():
         baseline_networks.test_critic_from_checkpoint({"method": "ddpg", "dof": 2}, norm)
 
 
+@pytest.mark.slow
 def test_baseline_seeds_batched_equal_single_seed_runs(tmp_path):
     # seeds' episodes share one simulator; each seed's agent, buffer and noise draw from its own seed
     kw = dict(iterations=3, start_std=0.2, home_starts=1)

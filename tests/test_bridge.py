@@ -28,6 +28,7 @@ def kuka_sim():
     return Simulator(scene, [Variant()] * 2, dt=0.0025, substeps=4, device="cpu")
 
 
+@pytest.mark.slow
 def test_open_loop_gradient_matches_paper_model_on_long_rollout(kuka_sim):
     """60 physics steps, ~1 rad of motion: d loss / d (torques, q0, qd0) vs autograd through DRM."""
     sim, H = kuka_sim, 15
@@ -60,6 +61,7 @@ def test_open_loop_gradient_matches_paper_model_on_long_rollout(kuka_sim):
         assert rel < 1e-3, f"gradient w.r.t. {name} off by {rel:.2e}"
 
 
+@pytest.mark.slow
 def test_policy_parameter_gradient_matches_paper_model():
     """Closed loop: gradient of the final error w.r.t. per-world policy parameters (reacher)."""
     scene = load_scene(ROOT / "scenes" / "reacher.usda")
@@ -209,6 +211,7 @@ def test_gravity_setting_is_per_simulator():
     assert moved[0.0] < 1e-6 and moved[9.81] > 1e-2
 
 
+@pytest.mark.slow
 def test_graph_replay_is_bitwise_the_direct_path():
     """Captured-graph replay (forward, taped forward, backward, zeroing) equals issuing every launch.
 
@@ -254,6 +257,7 @@ def test_graph_replay_is_bitwise_the_direct_path():
         assert torch.equal(a, b)
 
 
+@pytest.mark.slow
 def test_policy_rollout_replay_is_bitwise_the_direct_path():
     """A 50-step closed-loop KUKA rollout (the paper's policy MLP): values, and gradients w.r.t. the
     policy parameters and the start state, equal with graph replay and with direct launches.

@@ -232,6 +232,7 @@ def exit_code(argv: list[str]) -> int:
         return int(e.code or 0)
 
 
+@pytest.mark.slow
 def test_identify_command_writes_a_run_that_meta_tests_without_the_model(tmp_path, capsys):
     """warp-critic identify on a told run: a new run whose critic is the identified one (meta-test
     loads it and tests a new model), the regression's losses written; misuse is one line, exit 2."""
@@ -355,6 +356,7 @@ def test_identified_critic_feeds_each_seed_its_own_identifier():
         critic.estimate(q[:, :5], qd[:T, :5], history[:, :5])
 
 
+@pytest.mark.slow
 def test_resuming_an_identified_run_trains_its_critic_on_the_estimates(tmp_path):
     """``meta-train --resume`` on ``warp-critic identify``'s output: the critic keeps training, fed its
     identifier's estimates as at meta-test (the iterations say so, and they differ from resuming

@@ -63,6 +63,7 @@ def on_ray(tmp_path_factory) -> tuple[Path, Path, subprocess.CompletedProcess]:
     return out, marker, p
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_ray_reproduce_gives_the_in_process_numbers(in_process, on_ray):
     out, _, p = on_ray
@@ -90,6 +91,7 @@ def test_a_killed_ray_worker_costs_only_its_unit(in_process, on_ray):
     }
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_local_processes_rerun_a_unit_whose_process_died(tmp_path, in_process):
     out, marker = tmp_path / "out", tmp_path / "killed"
@@ -113,6 +115,7 @@ def test_local_processes_rerun_a_unit_whose_process_died(tmp_path, in_process):
     assert toy == ref
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "argv, words",
     [
@@ -134,6 +137,7 @@ def test_bad_executor_flags_are_one_line_and_start_nothing(tmp_path, capsys, arg
     assert not out.exists()
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_stopping_a_jobs_driver_stops_its_workers_cleanly(tmp_path, in_process):
     """SIGTERM to ``reproduce --jobs 2`` mid-meta-training: one line, exit 130, every worker's run closed
@@ -184,6 +188,7 @@ def test_stopping_a_jobs_driver_stops_its_workers_cleanly(tmp_path, in_process):
         assert v.returncode == 0, v.stderr
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_a_failing_unit_under_jobs_stops_the_driver(tmp_path):
     """One unit diverges while another trains in the other worker: the driver reports the error and
@@ -219,6 +224,7 @@ def test_unit_progress_reads_the_runs_metrics(tmp_path):
     assert unit_progress(other, tmp_path) == "reproduce: maps: iteration 25 (2 run(s))"
 
 
+@pytest.mark.slow
 def test_jobs_driver_logs_the_progress_of_its_running_units(tmp_path):
     """Under --jobs the workers draw no progress bars: the driver logs each running unit's
     iteration every ``progress_every`` seconds."""
@@ -257,6 +263,7 @@ def test_an_in_process_call_on_several_cores_names_jobs(monkeypatch):
     assert ex.jobs_hint(ex.InProcess(), [6, 3]) is None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_a_stage_starts_as_soon_as_its_inputs_are_complete(tmp_path, jobs):
     """The driver hands an executor the units that its finished stages made ready (``more``): under

@@ -57,6 +57,7 @@ def straight(tmp_path_factory) -> Path:
     return run
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_sigkill_at_several_points_resumes_to_the_same_metrics_and_a_complete_recording(
     tmp_path, straight
@@ -135,6 +136,7 @@ def start_long_run(run: Path, until: str) -> subprocess.Popen:
     return p
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_sigterm_stops_like_ctrl_c_and_closes_the_recording(tmp_path):
     run = tmp_path / "run"
@@ -153,6 +155,7 @@ def test_sigterm_stops_like_ctrl_c_and_closes_the_recording(tmp_path):
     assert not (run / ".lock").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_a_second_run_into_a_locked_directory_is_refused_at_once(tmp_path):
     run = tmp_path / "run"
@@ -178,6 +181,7 @@ def test_a_second_run_into_a_locked_directory_is_refused_at_once(tmp_path):
     assert json.loads((run / "config.json").read_text())["iterations"] == 100000
 
 
+@pytest.mark.slow
 def test_a_signal_whose_interrupt_a_callback_swallows_still_stops_the_run(tmp_path):
     """SIGTERM raises KeyboardInterrupt wherever the main thread is; a callback that swallows it (a
     finaliser, a C extension's callback) must not leave the run going with the handler already in its
@@ -233,6 +237,7 @@ class _Payload:
         return (os.system, (f"touch {self.marker}",))
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 @pytest.mark.parametrize("command", ["meta-test", "resume"])
 def test_a_crafted_checkpoint_does_not_run_its_payload(tmp_path, straight, command):

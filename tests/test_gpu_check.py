@@ -20,6 +20,7 @@ def test_auto_device_is_the_cpu_until_cuda_is_measured_faster():
     assert resolve_device("auto") == "cpu"
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_gpu_check_tiny_on_cpu(tmp_path):
     out = tmp_path / "check.json"
@@ -51,6 +52,7 @@ def test_gpu_check_tiny_on_cpu(tmp_path):
     assert "| worlds | cpu |" in proc.stdout and "s/iteration" in proc.stdout
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_gpu_check_refuses_cuda_without_a_gpu_and_bad_flags(tmp_path):
     def run(*args):

@@ -52,6 +52,7 @@ def test_analytic_gain_semi_implicit_euler():
     )
 
 
+@pytest.mark.slow
 def test_shapes_and_finite(result):
     n, G = 9, 3
     assert result["values"].shape == (G, 3, n, n)
@@ -141,6 +142,7 @@ def test_huge_grid_is_refused_with_its_memory_estimate(capsys, tmp_path):
     assert "--grid" in err and "needs about" in err and "available" in err
 
 
+@pytest.mark.slow
 def test_default_scene_is_found_from_any_directory(tmp_path, monkeypatch, capsys):
     from warp_critic.cli.main import main
 
@@ -216,6 +218,7 @@ def test_sample_tasks_draws_goals_and_starts_per_world():
     assert abs(float(g.mean()) - 1.0) < 0.05 and abs(float(g.std()) - 1.0) < 0.05
 
 
+@pytest.mark.slow
 def test_task_distribution_flags_run(tmp_path, capsys):
     from warp_critic.cli.main import main
 

@@ -139,6 +139,7 @@ def test_the_scanner_sees_every_form_of_import(tmp_path):
         upward_imports(pkg)
 
 
+@pytest.mark.slow
 def test_no_module_imports_a_later_layer():
     found = upward_imports()
     new = {k: v for k, v in found.items() if k not in KNOWN_UPWARD}
@@ -201,6 +202,7 @@ def circles(graph: dict[str, set[str]]) -> list[list[str]]:
     return found
 
 
+@pytest.mark.slow
 def test_no_import_circle():
     assert circles(import_graph()) == [], (
         "modules that import each other (move the shared piece down)"

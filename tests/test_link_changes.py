@@ -62,6 +62,7 @@ KUKA_STEPS = dict(H=15, dt=0.0025, substeps=4, scale=torch.tensor([40, 40, 20, 2
 REACHER_STEPS = dict(H=40, dt=0.01, substeps=2, scale=torch.tensor([3.0, 3.0]))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "scene_name, changes, drm_changes, steps",
     [
@@ -176,6 +177,7 @@ def test_bad_link_change_against_the_scene(text, message):
     assert message in str(err.value)
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 @pytest.mark.parametrize(
     "argv, words",

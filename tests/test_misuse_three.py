@@ -299,6 +299,7 @@ def test_misuse_three(case, world, capfd, monkeypatch):  # noqa: F811 (the fixtu
     check_case(case, world, capfd, monkeypatch)
 
 
+@pytest.mark.slow
 def test_interrupt_after_import_wrote_the_scene_says_it_is_whole(tmp_path, capfd, monkeypatch):
     """A signal that lands after ``import`` wrote its scene: exit 130 with one line saying the scene
     was written whole (it said only "interrupted")."""
@@ -330,6 +331,7 @@ def _cli_ascii_locale(*args: bytes, cwd) -> subprocess.CompletedProcess:
     return subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, timeout=300)
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_utf8_paths_under_an_ascii_locale(tmp_path):
     """``LC_ALL=C PYTHONUTF8=0``: valid UTF-8 names are taken (they were refused as "not valid
@@ -352,6 +354,7 @@ def test_utf8_paths_under_an_ascii_locale(tmp_path):
     assert sorted(x.name for x in tmp_path.iterdir()) == ["réa"]
 
 
+@pytest.mark.slow
 def test_a_stopped_identification_continues_where_it_stopped(tmp_path):
     """reproduce's identification step (``train_identifier`` with a ``resume_file``) saves its state
     every ``checkpoint_every`` steps; stopped, it continues from there (it started at iteration 0)

@@ -127,6 +127,7 @@ def test_probe_finds_the_reachers_light_links_unstable_at_its_dt_and_stable_at_h
     assert bad == 0 and fastest < 1e3
 
 
+@pytest.mark.slow
 def test_reacher_map_shifts_keep_the_offsets_and_the_response_is_reciprocal(finished_run, capsys):
     """``diagnose_reacher_map --shifts`` on a tiny run: the unshifted row repeats the grid's own
     share, a shift moves start and goal together (same ``q0 - g``), and the measured one-step

@@ -98,6 +98,7 @@ def test_another_commands_check_of_a_folder_is_no_owner(tmp_path):
         other.release()
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_a_second_reproduce_driver_on_one_out_is_refused_and_the_first_untouched(tmp_path, capfd):
     out = tmp_path / "paper"
@@ -151,6 +152,7 @@ START_UP = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_at_any_moment_of_start_up_is_one_line_and_exit_130(tmp_path, signum):
@@ -180,6 +182,7 @@ def test_a_signal_at_any_moment_of_start_up_is_one_line_and_exit_130(tmp_path, s
         assert len(lines) == 1 and lines[0].startswith("warp-critic: "), (moment, lines)
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_during_shutdown_is_one_line_and_exit_130(tmp_path, signum):
@@ -203,6 +206,7 @@ def test_a_signal_during_shutdown_is_one_line_and_exit_130(tmp_path, signum):
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_workers_exit_when_their_driver_is_killed(tmp_path):
     out = tmp_path / "paper"
@@ -314,6 +318,7 @@ def test_meta_test_of_an_asymmetric_run_does_not_blame_goals(tmp_path, capfd):
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_a_full_disk_while_warp_builds_its_kernels_is_one_line(tmp_path):
     script = textwrap.dedent(f"""
@@ -407,6 +412,7 @@ def _serve(sock: socket.socket, reply: bytes) -> None:
     threading.Thread(target=loop, daemon=True).start()
 
 
+@pytest.mark.slow
 def test_ray_address_must_speak_grpc():
     from warp_critic.core.errors import FieldError
     from warp_critic.reproduce.on_ray import check_ray_address

@@ -67,6 +67,7 @@ def quick(tmp_path_factory):
     return out, rc, time.perf_counter() - t
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_quick_end_to_end(quick):
     out, rc, _ = quick
@@ -130,6 +131,7 @@ def test_quick_end_to_end(quick):
     assert verify.returncode == 0, verify.stderr
 
 
+@pytest.mark.slow
 def test_second_call_skips_every_stage(quick, capsys):
     out, rc, _ = quick
     assert rc == 0
@@ -146,6 +148,7 @@ def test_second_call_skips_every_stage(quick, capsys):
     assert "| complete, skipped |" in (out / "REPORT.md").read_text()
 
 
+@pytest.mark.slow
 def test_only_toy_and_changed_setting(tmp_path, capsys):
     out = tmp_path / "r"
     assert reproduce_main(["--quick", "--only", "toy", "--out", str(out), "--device", "cpu"]) == 0
@@ -315,6 +318,7 @@ def test_grid_figure_shows_a_diverged_cell_in_black(tmp_path):
     assert rp.diverged_line(3).startswith("3 evaluated world(s) went non-finite")
 
 
+@pytest.mark.slow
 def test_interrupted_metatrain_resumes(tmp_path, capsys):
     """A sub-stage without stage.json (killed mid-training) resumes its run directories to the end;
     seed directories without a checkpoint (killed before the first one) are started afresh."""
@@ -350,6 +354,7 @@ def test_interrupted_metatrain_resumes(tmp_path, capsys):
     assert (stray / "checkpoint.pt").is_file()
 
 
+@pytest.mark.slow
 def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     """save -> restore without the maps and tables: reproduce reruns only those two, from the slim
     meta-training checkpoints, to the same cells; the archive holds no optimiser or buffer state."""
@@ -426,6 +431,7 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     assert "edited or damaged" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, capsys):
     """publish: REPORT.md, results.json, figures and each read stage's records, no runs; an earlier
     report's records and figures go, the folder's other contents stay; bad input is one line."""
@@ -540,6 +546,7 @@ def test_elbow_bent_marks_the_goals_past_a_right_angle_row_major():
     assert bent.tolist() == [True, False, False, True] * 3
 
 
+@pytest.mark.slow
 def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     """--only beyond on a copy of the quick output: the paper's stages are found complete (their
     hashes do not depend on the recipes), the recipes train and are evaluated next to the nominal
@@ -659,6 +666,7 @@ def test_beyond_maps_takes_floors_only_from_a_maps_stage_of_the_same_inputs(tmp_
     assert paper_maps_floors(tmp_path, st) == "maps-4"
 
 
+@pytest.mark.slow
 def test_ledger_records_every_call_and_a_refused_call_writes_nothing(tmp_path, capsys):
     from warp_critic.reproduce import ledger
 

@@ -7,10 +7,12 @@ import json
 import shutil
 
 import numpy as np
+import pytest
 import torch
 from helpers import load_tool
 
 
+@pytest.mark.slow
 def test_floor_reads_the_newest_runs_and_optimises_on_their_meta_test_goals(
     finished_run, tmp_path, capsys
 ):

@@ -202,6 +202,7 @@ def test_coupled_pushes_are_capped_by_hand(two_link, monkeypatch):
     assert derive.torque_bounds(scene, goals)[0] < 50.0 * _hand_mass_diag(home[1])[0] + hold[0]
 
 
+@pytest.mark.slow
 def test_derived_torques_follow_the_runs_gravity_by_hand(two_link, tmp_path):
     """--gravity 0 (a torque-mode arm): the bounds lose the holding share, min(effort, push), and a
     run under it trains with those bounds; the defaults at 9.81 stay as they were."""
@@ -351,6 +352,7 @@ def _first_iteration(scene: str, out: Path, *extra: str) -> dict:
     return json.loads((out / "metrics.jsonl").read_text().splitlines()[0])
 
 
+@pytest.mark.slow
 def test_import_round_trip_trains_to_the_same_first_iteration(two_link, tmp_path, capfd):
     out = tmp_path / "twolink.usda"
     code, err = _run(["import", str(two_link), "--out", str(out)], capfd)
@@ -371,6 +373,7 @@ def test_import_round_trip_trains_to_the_same_first_iteration(two_link, tmp_path
     assert a["task_loss"] != a["task_loss_before"]
 
 
+@pytest.mark.slow
 def test_run_config_states_each_derived_default_with_its_rule(two_link, tmp_path, capfd):
     import json
 
@@ -432,6 +435,7 @@ def test_real_robot_takes_one_meta_train_iteration(urdf, extra, dof, tmp_path):
     assert len(config["goals"][0]) == dof and len(config["max_torque"]) == dof
 
 
+@pytest.mark.slow
 def test_panda_rollout_and_gradients_match_the_paper_model(tmp_path):
     """60 physics steps on the Panda (differentiable-robot-model's own URDF, imported by newton):
     states and d loss / d (torques, q0, qd0) vs autograd through differentiable-robot-model."""

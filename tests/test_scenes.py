@@ -93,6 +93,7 @@ def assert_qdd_close(ours: np.ndarray, ref: np.ndarray, rtol: float = 1e-3) -> t
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["reacher", "kuka"])
 def test_forward_dynamics_match_drm(name):
     scene = load_scene(SCENES / f"{name}.usda")
@@ -209,6 +210,7 @@ def test_scene_metadata():
         point.build_model([Variant(link_scale=2.0)])
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_generator_reproduces_committed_scenes(tmp_path):
     subprocess.run(
@@ -842,6 +844,7 @@ def _run_json(script: str, *args) -> list[str]:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_instanced_scene_hashes_the_same_in_every_process(tmp_path):
     """USD numbers instance prototypes in a new order per stage; the hash must not see it."""
@@ -855,6 +858,7 @@ def test_instanced_scene_hashes_the_same_in_every_process(tmp_path):
     assert hashes[0] == load_scene(source).content_hash != plain
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_newton_instanced_asset_hashes_the_same_in_every_process():
     asset = Path(newton.__file__).parent / "examples" / "assets" / "cartpole_single_pendulum.usda"

@@ -27,6 +27,7 @@ def test_bench_speed_refuses_bad_arguments_in_one_line(argv, capsys):
     assert err.count("\n") == 1 and err.startswith("bench_speed: error: "), err
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_bench_speed_against_leaves_no_worktree_behind():
     tool = load_tool("bench_speed", "bench")

@@ -125,6 +125,7 @@ def test_the_actor_and_targets_move_only_every_policy_delay_critic_updates():
     assert a.updates == 4 and a.state_dict()["updates"] == 4
 
 
+@pytest.mark.slow
 def test_td3_trains_resumes_exactly_and_meta_tests_through_the_cli(tmp_path, capsys):
     straight, part = tmp_path / "straight", tmp_path / "part"
     argv = ["baseline", "td3", REACHER, *TINY]

@@ -33,6 +33,7 @@ def saved_config(run_dir: Path) -> dict:
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_diagnose_tool_runs_on_a_run_directory(tmp_path, capsys):
     tool = load_tool("diagnose_metatest")
     out = tmp_path / "run"
@@ -75,6 +76,7 @@ def test_diagnose_tool_runs_on_a_run_directory(tmp_path, capsys):
     assert "--around" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_maps_tool_prints_the_three_shares_per_run_set(tmp_path, capsys):
     tool = load_tool("maps_of_runs")
     a, b = tmp_path / "a", tmp_path / "b"
@@ -108,6 +110,7 @@ def test_maps_tool_prints_the_three_shares_per_run_set(tmp_path, capsys):
         assert err.startswith("maps_of_runs: error: ") and err.count("\n") == 1, err
 
 
+@pytest.mark.slow
 def test_tables_of_runs_prints_the_stress_tables_and_their_rule(tmp_path, capsys):
     """Every column of Table 1 and the two stress tables per set, and with --floors (a stage of the
     same settings) the count of columns that meet issue 25's rule, computed from the printed MSEs."""
@@ -186,6 +189,7 @@ def test_goal_grid_tool_writes_the_maps_goals_as_a_goals_file(tmp_path, capsys):
         assert err.startswith("goal_grid: error: ") and err.count("\n") == 1, err
 
 
+@pytest.mark.slow
 def test_score_command_pools_seeds_and_reports_the_mean_over_joints(tmp_path, capsys):
     from warp_critic.cli.main import main
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
@@ -250,6 +254,7 @@ def test_score_command_pools_seeds_and_reports_the_mean_over_joints(tmp_path, ca
     assert again in text and "| paper (Table 1) | MSE | 0.02(0.02) | 0.05(0.04) |" in again
 
 
+@pytest.mark.slow
 def test_benchmark_quick_version_trains_two_seeds_and_prints_the_pooled_table(tmp_path, capsys):
     tool = load_tool("bench_metatrain", "bench")
     assert (
@@ -381,6 +386,7 @@ def test_bench_baselines_refuses_existing_directories_that_are_not_its_runs(tmp_
     assert "run directory not found" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_bench_baselines_trains_then_only_meta_tests_a_complete_run(tmp_path, capsys):
     tool = load_tool("bench_baselines", "bench")
     argv = [
@@ -480,6 +486,7 @@ def test_protocol_refuses_bad_run_directories_before_any_work(tmp_path):
         run_protocol(ProtocolConfig(run_dirs=[str(tmp_path / "empty")]))
 
 
+@pytest.mark.slow
 def test_protocol_pools_runs_and_checks_training_goal_indices(tmp_path):
     from warp_critic.evaluation.protocol import (
         ProtocolConfig,
@@ -686,6 +693,7 @@ def tools_in_strings(source: str) -> list[str]:
     ]
 
 
+@pytest.mark.slow
 def test_no_message_in_the_package_names_a_tools_file():
     """pip installs the package, not tools/ or bench/: a message that sends a user to a script there sends
     them nowhere (the commands are ``warp-critic identify``, ``warp-critic score``, ...)."""

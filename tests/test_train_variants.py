@@ -100,6 +100,7 @@ def test_groups_are_alternatives_one_per_world_in_turn():
     assert not np.isnan(draw(flat, 8, seed=2, iteration=0)).any()
 
 
+@pytest.mark.slow
 def test_grouped_draws_train_with_nulls_in_the_metrics(tmp_path):
     from warp_critic.cli.main import main
 
@@ -169,6 +170,7 @@ def _rows(run: Path) -> list[dict]:
     return [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines() if line]
 
 
+@pytest.mark.slow
 def test_draws_in_the_metrics_batched_seeds_and_resume(tmp_path):
     """Each row holds its worlds' draws; batched seeds draw what single-seed runs draw; a run
     stopped at iteration 2 and resumed to 4 draws and trains exactly as the uninterrupted one."""
@@ -196,6 +198,7 @@ def test_draws_in_the_metrics_batched_seeds_and_resume(tmp_path):
     assert config["train_variants"] == "arm1.mass=0.25..6; arm2.stretch=0.7..2"
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 @pytest.mark.parametrize(
     "value, words",
@@ -259,6 +262,7 @@ def test_history_features_and_the_history_critic():
     assert torch.allclose(critic_loss(critics[0], policy, params, traj, g[0]), expect)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("inputs, width", [("history", 5 * 2), ("pose-dynamics", 4 * 2 + 20)])
 def test_history_and_told_critics_train_resume_and_meta_test(tmp_path, inputs, width):
     """The critics that read more than the states (the last step's response; the world's model,
