@@ -73,6 +73,7 @@ def test_ray_reproduce_gives_the_in_process_numbers(in_process, on_ray):
     assert (out / "REPORT.md").read_text().count("|") > 50
 
 
+@pytest.mark.slow
 @pytest.mark.subprocess
 def test_a_killed_ray_worker_costs_only_its_unit(in_process, on_ray):
     out, marker, p = on_ray

@@ -60,6 +60,7 @@ def _step_acceleration(critic, q, qd, tau, goal):
     return torch.linalg.solve(critic.inertia(q), step.unsqueeze(-1)).squeeze(-1)
 
 
+@pytest.mark.slow
 def test_inertial_critic_moves_every_pose_by_the_same_acceleration(reacher):
     """Two arms at different elbow angles, the same offset from their goals, the same velocity and
     torques that accelerate them alike: the inertial critic scores them alike and its gradient

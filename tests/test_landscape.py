@@ -64,6 +64,7 @@ def test_shapes_and_finite(result):
     )
 
 
+@pytest.mark.slow
 def test_q_true_matches_newton_and_analytic_optimum(result):
     axis, values, grads, goals = result["axis"], result["values"], result["grads"], result["goals"]
     gain = analytic_gain(0.05, 20)
@@ -95,6 +96,7 @@ def test_descent_fraction_can_fail():
     assert descent_fraction(shifted, axis, opt, 0.5) == 0.0
 
 
+@pytest.mark.slow
 def test_outputs(result):
     out = result["out"]
     for name in ("landscape.rrd", "landscape.png", "exploration.png"):

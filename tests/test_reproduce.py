@@ -238,6 +238,7 @@ def test_bad_out(tmp_path, capsys):
     assert e.value.code == 2
 
 
+@pytest.mark.slow
 def test_batched_evaluator_matches_meta_test(quick, tmp_path):
     """One job of the batched evaluator (here next to other runs and variants) = meta-test on that run."""
     import torch
@@ -277,6 +278,7 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
         np.testing.assert_allclose(err, ref, rtol=1e-4, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
     """A variant whose worlds go non-finite (1/1000 of the reacher's masses and inertias at its dt)
     does not stop the evaluation: its errors are inf and counted, and the job beside it gets
