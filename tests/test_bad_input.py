@@ -21,21 +21,16 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import hashlib
 import io
 import json
 import math
 import os
-import random
 import shlex
 import shutil
-import signal
 import socket
 import subprocess
 import tempfile
-import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 from unittest import mock
@@ -45,167 +40,30 @@ import torch
 from conftest import REACHER
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
+from misuse_table import (  # noqa: F401 (base, world: the fixtures)
+    DDPG,
+    MC,
+    MT,
+    RESUME,
+    RESUME_DDPG,
+    TEST,
+    TINY,
+    C,
+    Case,
+    base,
+    check_case,
+    metrics_rows,
+    result_written,
+    run_written,
+    snapshot,
+    world,
+)
 
 from warp_critic.cli.main import main
 
 LONG = "a" * 300  # a file name the OS refuses (ENAMETOOLONG)
-TINY = ["--iterations", "1", "--horizon", "3", "--worlds-per-goal", "1", "--device", "cpu"]
-MT = ["meta-train", "{R}", *TINY]  # a new tiny meta-train run (add --out)
-DDPG = ["baseline", "ddpg", "{R}", *TINY]
-MC = ["baseline", "meta-critic", "{R}", *TINY]
-TEST = ["meta-test", "{run}", "--device", "cpu", "--num-goals", "1", "--inits", "1"]
-RESUME = ["meta-train", "{R}", "--resume", "--out", "{run}", "--device", "cpu", "--iterations", "3"]
-RESUME_DDPG = [
-    "baseline",
-    "ddpg",
-    "{R}",
-    "--resume",
-    "--out",
-    "{ddpg}",
-    "--device",
-    "cpu",
-    "--iterations",
-    "2",
-]
 IS_ROOT = hasattr(os, "geteuid") and os.geteuid() == 0
 HAS_CUDA = torch.cuda.is_available()
-
-
-# ------------------------------------------------------------------------------------------------
-# the finished runs (once per module) and each case's directory
-# ------------------------------------------------------------------------------------------------
-
-
-@pytest.fixture(scope="module")
-def base(tmp_path_factory):
-    from warp_critic.core.runtime import init
-    from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
-    from warp_critic.methods.baseline_config import BaselineConfig
-    from warp_critic.methods.ddpg import train_ddpg
-    from warp_critic.methods.ours import TrainConfig, meta_train
-
-    init()
-    d = tmp_path_factory.mktemp("base")
-    meta_train(
-        TrainConfig(
-            scene=REACHER,
-            iterations=2,
-            horizon=3,
-            worlds_per_goal=1,
-            device="cpu",
-            out=str(d / "run"),
-        ),
-        progress=False,
-    )
-    meta_test(
-        MetaTestConfig(run_dir=str(d / "run"), num_goals=1, inits=1, device="cpu"), progress=None
-    )
-    train_ddpg(
-        BaselineConfig(
-            scene=REACHER,
-            iterations=1,
-            horizon=3,
-            worlds_per_goal=1,
-            device="cpu",
-            out=str(d / "ddpg"),
-        ),
-        progress=False,
-    )
-    assert (d / "run" / "metatest.json").is_file() and (d / "ddpg" / "checkpoint.pt").is_file()
-    return d
-
-
-@pytest.fixture
-def world(tmp_path, base, monkeypatch):
-    t = tmp_path
-    shutil.copytree(base / "run", t / "run")
-    shutil.copytree(base / "ddpg", t / "ddpg")
-    user = t / "user"
-    user.mkdir()
-    (user / "config.json").write_text('{"learning_rate": 0.1, "mine": true}\n')
-    (user / "metrics.jsonl").write_text('{"step": 0, "loss": 1.0}\n{"step": 1, "loss": 0.5}\n')
-    (user / "recording.rrd").write_bytes(b"RRF2\x00someone else's recording")
-    (t / "user_file.json").write_text('{"results": [1, 2, 3]}\n')
-    (t / "notes.txt").write_text("my notes\n")
-    (t / "afile").write_text("a file, not a directory\n")
-    reacher = Path(REACHER).read_text()
-    (t / "myrobot.usda").write_text(reacher)
-    assert "warp_critic:goals" in reacher
-    (t / "nogoals.usda").write_text(
-        "".join(x for x in reacher.splitlines(keepends=True) if "warp_critic:goals" not in x)
-    )
-    assert "float physics:mass = 1\n" in reacher
-    (t / "changed").mkdir()
-    (t / "changed" / "reacher.usda").write_text(
-        reacher.replace("float physics:mass = 1\n", "float physics:mass = 1.5\n", 1)
-    )
-    goals = t / "goals"
-    goals.mkdir()
-    (goals / "good.txt").write_text("# two goals\n0.5 0.3\n-0.4, 0.2\n")
-    (goals / "nan.txt").write_text("0.5 0.3\n0.1 nan\n")
-    (goals / "nan.json").write_text("[[0.5, 0.3], [NaN, 0.1]]")
-    (goals / "inf.json").write_text("[[0.5, Infinity]]")
-    (goals / "huge.json").write_text("[[1" + "0" * 400 + ", 0]]")
-    (goals / "deep.json").write_text("[" * 100_000 + "]" * 100_000)
-    (goals / "ragged.txt").write_text("0.1 0.2\n0.3\n")
-    (goals / "empty.txt").write_text("# no goals here\n\n")
-    noise = random.Random(0).randbytes(512) + b"\xff\xfe\x00"
-    (goals / "binary.txt").write_bytes(noise)
-    (goals / "binary.json").write_bytes(noise)
-    (t / "binary.usda").write_bytes(noise)
-    (t / "empty.usda").write_bytes(b"")
-    monkeypatch.chdir(t)  # default output locations (runs/...) land here too
-    monkeypatch.delenv("WARP_CRITIC_TORCH_THREADS", raising=False)
-    monkeypatch.delenv("WARP_CRITIC_GRAPHS", raising=False)
-    w = SimpleNamespace(
-        t=t,
-        run=t / "run",
-        ddpg=t / "ddpg",
-        user=user,
-        new=t / "new_out",
-        goals=goals,
-        marker=t / "code-ran",
-        cleanups=[],
-    )
-    yield w
-    for cleanup in reversed(w.cleanups):
-        cleanup()
-
-
-def snapshot(root: Path) -> tuple[dict[str, str], set[str]]:
-    files, dirs = {}, set()
-    for p in sorted(root.rglob("*")):
-        rel = p.relative_to(root).as_posix()
-        if p.is_dir() and not p.is_symlink():
-            dirs.add(rel)
-        else:
-            files[rel] = hashlib.sha256(p.read_bytes()).hexdigest()
-    return files, dirs
-
-
-class _Deadline(KeyboardInterrupt):
-    pass
-
-
-def run_cli(argv: list[str], limit: float) -> tuple[int, float]:
-    """``main(argv)`` (argparse's exit taken as the code); a run still going after ``limit`` s is
-    interrupted (as Ctrl-C: exit 130), so an absurd size that is not refused fails fast."""
-
-    def expire(signum, frame):
-        raise _Deadline
-
-    old = signal.signal(signal.SIGALRM, expire)
-    signal.setitimer(signal.ITIMER_REAL, limit)
-    t0 = time.monotonic()
-    try:
-        try:
-            code = main(argv)
-        except SystemExit as e:
-            code = e.code
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
-    return code, time.monotonic() - t0
 
 
 # ------------------------------------------------------------------------------------------------
@@ -487,34 +345,6 @@ def live_run_kept(w):
 # ------------------------------------------------------------------------------------------------
 
 
-def metrics_rows(path: Path) -> list[dict]:
-    return [
-        json.loads(x) for x in path.read_text().splitlines()
-    ]  # every line must be complete JSON
-
-
-def run_written(rel: str, iterations: int, scene: str | None = None):
-    def check(w):
-        d = w.t / rel
-        assert (d / "checkpoint.pt").is_file() and (d / "recording.rrd").is_file()
-        assert [r["iteration"] for r in metrics_rows(d / "metrics.jsonl")] == list(
-            range(iterations)
-        )
-        assert not (d / ".lock").exists()
-        if scene is not None:
-            assert Path(json.loads((d / "config.json").read_text())["scene"]).name == scene
-
-    return check
-
-
-def result_written(rel: str, method: str = "ours"):
-    def check(w):
-        res = json.loads((w.t / rel).read_text())
-        assert res["kind"] == "warp-critic/metatest-v1" and res["method"] == method
-
-    return check
-
-
 def no_code_ran(w):
     assert not w.marker.exists(), "unpickling the checkpoint ran code"
 
@@ -526,29 +356,6 @@ def lock_released(w):
 # ------------------------------------------------------------------------------------------------
 # the table
 # ------------------------------------------------------------------------------------------------
-
-
-@dataclass
-class Case:
-    argv: list[str]
-    code: int = 2
-    says: tuple[str, ...] = ()  # in the one error line (or in every warning line, for exit 0)
-    setup: Callable | None = None
-    env: dict = field(default_factory=dict)
-    changes: tuple[str, ...] = ()  # exit 0: paths (prefixes) the command may rewrite
-    warns: int = 0  # exit 0: this many "warp-critic: warning:" lines
-    check: Callable | None = None
-    seconds: float = 30.0  # must finish within
-    not_says: tuple[
-        str, ...
-    ] = ()  # never in the error line (e.g. a flag the command does not have)
-    patch: Callable | None = (
-        None  # patch(monkeypatch, w): faults the file system cannot make on demand
-    )
-
-
-def C(cls: str, name: str, argv: list[str], *, marks=(), **kw):
-    return pytest.param(Case(argv=argv, **kw), id=f"{cls}-{name}", marks=marks)
 
 
 def NEW(*argv: str) -> list[str]:  # a command that must not create its --out (it does not exist)
@@ -1750,74 +1557,8 @@ CASES = [
 
 
 @pytest.mark.parametrize("case", CASES)
-def test_bad_input(case: Case, world, capfd, monkeypatch):
-    w = world
-    for key, value in case.env.items():
-        monkeypatch.setenv(key, value)
-    if case.setup is not None:
-        case.setup(w)
-    if case.patch is not None:
-        case.patch(monkeypatch, w)
-    names = dict(
-        R=REACHER,
-        t=w.t,
-        run=w.run,
-        ddpg=w.ddpg,
-        user=w.user,
-        new=w.new,
-        lock_pid=getattr(w, "lock_pid", None),
-        port=getattr(w, "port", None),
-    )
-    argv = [a.format(**names) for a in case.argv]
-    says = [s.format(**names) for s in case.says]
-    files, dirs = snapshot(w.t)
-    capfd.readouterr()
-
-    code, seconds = run_cli(argv, limit=case.seconds + 2)
-
-    out, err = capfd.readouterr()
-    lines = [
-        x for x in err.splitlines() if x.strip() and not x.startswith("[")
-    ]  # minus progress-bar lines
-    assert "Traceback" not in err, err
-    assert code == case.code, (code, err)
-    assert seconds < case.seconds, f"took {seconds:.1f} s"
-    after_files, after_dirs = snapshot(w.t)
-    assert not [p for p in after_files if p.endswith(".tmp")], after_files
-    if case.code == 2:
-        assert len(lines) == 1 and lines[0].startswith("warp-critic: error: "), lines
-        for s in says:
-            assert s in lines[0], (s, lines[0])
-        for s in case.not_says:
-            assert s not in lines[0], (s, lines[0])
-        # nothing written, nothing created (not even an empty directory), nothing removed
-        assert after_files == files and after_dirs == dirs, (
-            sorted(set(after_files) ^ set(files)),
-            sorted(after_dirs ^ dirs),
-            [p for p in files if after_files.get(p) != files[p]],
-        )
-    elif case.code == 1:  # a failure of the machine (a full disk): one line, only `changes` touched
-        assert len(lines) == 1 and lines[0].startswith("warp-critic: error: "), lines
-        for s in says:
-            assert s in lines[0], (s, lines[0])
-        kept = {p: h for p, h in files.items() if not p.startswith(case.changes)}
-        assert {p: after_files.get(p) for p in kept} == kept
-        assert not [p for p in after_files if p.endswith(".lock") and p not in files], after_files
-    else:
-        assert len(lines) == case.warns and all(
-            x.startswith("warp-critic: warning: ") for x in lines
-        ), lines
-        for s in says:
-            assert all(s in x for x in lines), (s, lines)
-        kept = {
-            p: h for p, h in files.items() if not p.startswith(case.changes) or not case.changes
-        }
-        assert {p: after_files.get(p) for p in kept} == kept, [
-            p for p in kept if after_files.get(p) != kept[p]
-        ]
-        assert not [p for p in after_files if p.endswith(".lock") and p not in files], after_files
-    if case.check is not None:
-        case.check(w)
+def test_bad_input(case: Case, world, capfd, monkeypatch):  # noqa: F811 (the fixture)
+    check_case(case, world, capfd, monkeypatch)
 
 
 def test_table_covers_every_class():
@@ -1952,6 +1693,7 @@ TEST_NUMBERS = [
 ]
 
 
+@pytest.mark.slow
 @settings(
     max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow]
 )
@@ -1976,11 +1718,12 @@ def test_meta_train_numbers_property(name, text):
         assert not out.exists()
 
 
+@pytest.mark.slow
 @settings(
     max_examples=40, deadline=None, database=None, suppress_health_check=[HealthCheck.too_slow]
 )
 @given(name=st.sampled_from(TEST_NUMBERS), text=NUMBER_TEXT)
-def test_meta_test_numbers_property(name, text, base):
+def test_meta_test_numbers_property(name, text, base):  # noqa: F811 (the fixture)
     from warp_critic.evaluation import metatest
     from warp_critic.running.config import check_fields
     from warp_critic.running.files import check_output_file

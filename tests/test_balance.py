@@ -17,6 +17,9 @@ from warp_critic.physics import derive
 from warp_critic.physics.balance import GROWTH, upright_joints, upright_note
 from warp_critic.physics.robot import load_robot
 
+# one worker runs this module: the imported arms, made once
+pytestmark = pytest.mark.xdist_group("test_balance")
+
 
 def _upright_arm(elbow: tuple[float, float]) -> str:
     link = '<inertial><origin xyz="0 0 0.25"/><mass value="{m}"/><inertia ixx="0.02" iyy="0.02" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial>'
@@ -68,6 +71,7 @@ def test_a_bent_home_or_no_gravity_is_not_balanced(arms):
     assert upright_joints(upright, 0.0) == ([], 1.0)
 
 
+@pytest.mark.slow
 def test_import_home_bends_the_arm_out_of_balance_and_bad_homes_are_one_line(
     arms, tmp_path, capsys
 ):

@@ -5,11 +5,12 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
 
 import pytest
 import torch
 from conftest import REACHER
+from helpers import TINY_BASELINE as TINY
+from helpers import tiny_baseline_cfg as tiny_cfg
 
 from warp_critic.cli.main import main
 from warp_critic.core.errors import UserError
@@ -27,53 +28,12 @@ from warp_critic.running.rundir import CHECKPOINT_KIND
 from warp_critic.running.task import TaskConfig
 
 TRAIN = {"ddpg": train_ddpg, "meta-critic": train_meta_critic}
-# tiny settings for the CLI / resume tests (no learning expected)
-TINY = [
-    "--goals",
-    "0.5,0.3",
-    "--worlds-per-goal",
-    "2",
-    "--horizon",
-    "5",
-    "--device",
-    "cpu",
-    "--critic-hidden",
-    "32",
-    "--updates-per-iteration",
-    "3",
-    "--batch-size",
-    "8",
-    "--warmup-iterations",
-    "1",
-]
-
-
-def tiny_cfg(out: Path, method: str, **kw) -> BaselineConfig:
-    cfg = BaselineConfig(
-        scene=REACHER,
-        method=method,
-        goals=[[0.5, 0.3]],
-        worlds_per_goal=2,
-        horizon=5,
-        iterations=3,
-        device="cpu",
-        out=str(out),
-        critic_hidden=32,
-        updates_per_iteration=3,
-        batch_size=8,
-        warmup_iterations=1,
-        checkpoint_every=1,
-    )
-    for k, v in kw.items():
-        setattr(cfg, k, v)
-    return cfg
-
-
 # ------------------------------------------------------------------------------------------------
 # learning + meta-test
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["ddpg", "meta-critic"])
 def test_baseline_learns_and_its_q_runs_through_meta_test(tmp_path, method):
     # the reacher's four default goals, 4 worlds each, a shortened horizon; published DDPG settings
@@ -169,6 +129,7 @@ def test_replay_buffer_ring_and_state_dict():
     assert batch["q"].shape == (16, 1) and batch["reward"].shape == (16,)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["ddpg", "meta-critic"])
 def test_resume_is_exact_on_cpu(tmp_path, method):
     straight = TRAIN[method](
@@ -194,6 +155,7 @@ def test_actor_features_are_its_last_hidden_layer_and_forward_is_their_final_lay
     assert torch.equal(actor.head(feats), actor(q, qd, g))
 
 
+@pytest.mark.slow
 def test_meta_critic_features_input_sees_the_actors_features_and_the_stored_action(tmp_path):
     from warp_critic.methods.meta_critic import MetaCriticAgent
 
@@ -237,6 +199,7 @@ def test_aux_grad_ratio_and_aux_alive_by_hand():
     assert aux_alive(warmup) is None
 
 
+@pytest.mark.slow
 def test_meta_critic_logs_the_aux_ratio_and_warns_when_h_omega_no_longer_moves_the_actor(
     tmp_path, capsys
 ):
@@ -258,6 +221,7 @@ def test_meta_critic_logs_the_aux_ratio_and_warns_when_h_omega_no_longer_moves_t
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_baseline_cli_writes_run_directory_and_resumes(tmp_path, capsys):
     out = tmp_path / "run"
     assert (
@@ -312,6 +276,7 @@ def test_default_out_directory():
     )  # a new config: cfg as it was
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "argv, fragment",
     [
@@ -351,6 +316,7 @@ def test_test_critic_rejects_broken_checkpoints():
         baseline_networks.test_critic_from_checkpoint({"method": "ddpg", "dof": 2}, norm)
 
 
+@pytest.mark.slow
 def test_baseline_seeds_batched_equal_single_seed_runs(tmp_path):
     # seeds' episodes share one simulator; each seed's agent, buffer and noise draw from its own seed
     kw = dict(iterations=3, start_std=0.2, home_starts=1)

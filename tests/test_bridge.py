@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import functools
 from contextlib import nullcontext
-from pathlib import Path
 
 import pytest
 import torch
 from conftest import ROOT
+from helpers import drm_robot, drm_step
 
 from warp_critic.core.errors import DivergenceError
 from warp_critic.learning.networks import Normalizer, init_policy, policy_action
@@ -22,34 +22,13 @@ from warp_critic.physics.scene import Variant
 from warp_critic.physics.simulator import Simulator
 
 
-def drm_robot(name: str):
-    import differentiable_robot_model as pkg
-    from differentiable_robot_model.robot_model import DifferentiableRobotModel
-
-    data = Path(pkg.__file__).resolve().parents[1] / "diff_robot_data"
-    urdf = {
-        "kuka": data / "kuka_iiwa" / "urdf" / "iiwa7.urdf",
-        "reacher": data / "2link_robot.urdf",
-    }[name]
-    return DifferentiableRobotModel(str(urdf), name, device="cpu")
-
-
-def drm_step(robot, q, qd, tau, dt, substeps):
-    for _ in range(substeps):
-        qdd = robot.compute_forward_dynamics(
-            q.float(), qd.float(), tau * 1.0, include_gravity=True, use_damping=True
-        ).double()
-        qd = qd + dt * qdd
-        q = q + dt * qd
-    return q, qd
-
-
 @pytest.fixture(scope="module")
 def kuka_sim():
     scene = load_scene(ROOT / "scenes" / "kuka.usda")
     return Simulator(scene, [Variant()] * 2, dt=0.0025, substeps=4, device="cpu")
 
 
+@pytest.mark.slow
 def test_open_loop_gradient_matches_paper_model_on_long_rollout(kuka_sim):
     """60 physics steps, ~1 rad of motion: d loss / d (torques, q0, qd0) vs autograd through DRM."""
     sim, H = kuka_sim, 15
@@ -82,6 +61,7 @@ def test_open_loop_gradient_matches_paper_model_on_long_rollout(kuka_sim):
         assert rel < 1e-3, f"gradient w.r.t. {name} off by {rel:.2e}"
 
 
+@pytest.mark.slow
 def test_policy_parameter_gradient_matches_paper_model():
     """Closed loop: gradient of the final error w.r.t. per-world policy parameters (reacher)."""
     scene = load_scene(ROOT / "scenes" / "reacher.usda")
@@ -231,6 +211,7 @@ def test_gravity_setting_is_per_simulator():
     assert moved[0.0] < 1e-6 and moved[9.81] > 1e-2
 
 
+@pytest.mark.slow
 def test_graph_replay_is_bitwise_the_direct_path():
     """Captured-graph replay (forward, taped forward, backward, zeroing) equals issuing every launch.
 
@@ -276,6 +257,7 @@ def test_graph_replay_is_bitwise_the_direct_path():
         assert torch.equal(a, b)
 
 
+@pytest.mark.slow
 def test_policy_rollout_replay_is_bitwise_the_direct_path():
     """A 50-step closed-loop KUKA rollout (the paper's policy MLP): values, and gradients w.r.t. the
     policy parameters and the start state, equal with graph replay and with direct launches.

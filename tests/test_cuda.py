@@ -26,7 +26,10 @@ def _has_cuda() -> bool:
         return False
 
 
-pytestmark = pytest.mark.skipif(not _has_cuda(), reason="no CUDA device (Warp and torch)")
+pytestmark = [
+    pytest.mark.gpu,
+    pytest.mark.skipif(not _has_cuda(), reason="no CUDA device (Warp and torch)"),
+]
 
 
 def _rel(a: torch.Tensor, b: torch.Tensor) -> float:

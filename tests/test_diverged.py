@@ -78,6 +78,7 @@ def test_guard_leaves_settled_rollouts_bitwise():
     assert settled_worlds(b.after).all()
 
 
+@pytest.mark.slow
 def test_cli_drop_counts_diverged_worlds(tmp_path, capsys):
     """Training over second links as light as 10 g, where saturated torques drive the integrator
     out of range: ``stop`` is refused up front (exit 2, naming the value the probe of

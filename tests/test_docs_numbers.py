@@ -285,7 +285,11 @@ QUOTES = [
 ]
 
 
-@pytest.mark.parametrize("name,template,values", QUOTES, ids=lambda x: str(x)[:40])
+# ids from the file and the quote only: a lambda's repr differs between processes, and pytest-xdist's
+# workers must collect the same ids
+@pytest.mark.parametrize(
+    "name,template,values", QUOTES, ids=[f"{n}-{t[:40]}" for n, t, _ in QUOTES]
+)
 def test_quoted_numbers_match_the_published_results(name, template, values):
     quote = template.format(*values(_results()))
     assert quote in _text(name), f"{name} does not quote: {quote}"

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import torch
 from conftest import REACHER
+from helpers import load_tool, variants_train_argv
 
 from warp_critic.physics.descriptor import PER_BODY, PER_JOINT, DynamicsDescriptor
 from warp_critic.physics.load import load_scene
@@ -231,19 +232,17 @@ def exit_code(argv: list[str]) -> int:
         return int(e.code or 0)
 
 
+@pytest.mark.slow
 def test_identify_command_writes_a_run_that_meta_tests_without_the_model(tmp_path, capsys):
     """warp-critic identify on a told run: a new run whose critic is the identified one (meta-test
     loads it and tests a new model), the regression's losses written; misuse is one line, exit 2."""
-    from test_tools import load_tool
-    from test_train_variants import _train
-
     from warp_critic.cli.main import main
     from warp_critic.evaluation.metatest import build_test_critic
     from warp_critic.learning.identify import IdentifiedCritic, Identifier
 
     told, plain = tmp_path / "told", tmp_path / "plain"
-    assert main(_train(told, "--critic-input", "pose-dynamics", iterations=1)) == 0
-    assert main(_train(plain, "--critic-input", "pose", iterations=1)) == 0
+    assert main(variants_train_argv(told, "--critic-input", "pose-dynamics", iterations=1)) == 0
+    assert main(variants_train_argv(plain, "--critic-input", "pose", iterations=1)) == 0
     out = tmp_path / "identified"
     argv = [str(told), "--out", str(out), "--iterations", "3", "--goals", "2", "--inits", "2"]
     assert main(["identify", *argv]) == 0
@@ -377,18 +376,17 @@ def test_identified_critic_feeds_each_seed_its_own_identifier():
         critic.estimate(q[:, :5], qd[:T, :5], history[:, :5])
 
 
+@pytest.mark.slow
 def test_resuming_an_identified_run_trains_its_critic_on_the_estimates(tmp_path):
     """``meta-train --resume`` on ``warp-critic identify``'s output: the critic keeps training, fed its
     identifier's estimates as at meta-test (the iterations say so, and they differ from resuming
     the told run from the same state), and the identifier stays in the checkpoint, unchanged."""
     import shutil
 
-    from test_train_variants import _train
-
     from warp_critic.cli.main import main
 
     told = tmp_path / "told"
-    assert main(_train(told, "--critic-input", "pose-dynamics", iterations=2)) == 0
+    assert main(variants_train_argv(told, "--critic-input", "pose-dynamics", iterations=2)) == 0
     out = tmp_path / "identified"
     argv = [str(told), "--out", str(out), "--iterations", "2", "--goals", "2", "--inits", "2"]
     assert main(["identify", *argv]) == 0

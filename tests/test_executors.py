@@ -10,8 +10,12 @@ import sys
 from pathlib import Path
 
 import pytest
+from helpers import run_cli, start_cli
 
 from warp_critic.cli.main import main
+
+# one worker runs this module: the in-process and the Ray reproduce outputs, made once
+pytestmark = pytest.mark.xdist_group("test_executors")
 
 VOLATILE = ("seconds", "wall", "finished", "written", "command", "seconds_this_call", "ledger")
 
@@ -29,16 +33,6 @@ def numbers(out: Path) -> dict:
     return strip(json.loads((out / "results.json").read_text()))
 
 
-def cli(*args: str, env: dict | None = None) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [sys.executable, "-m", "warp_critic.cli.main", *args],
-        capture_output=True,
-        text=True,
-        timeout=600,
-        env={**os.environ, **(env or {})},
-    )
-
-
 @pytest.fixture(scope="module")
 def in_process(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("inproc") / "out"
@@ -53,7 +47,7 @@ def on_ray(tmp_path_factory) -> tuple[Path, Path, subprocess.CompletedProcess]:
     pytest.importorskip("ray")
     tmp = tmp_path_factory.mktemp("ray")
     out, marker = tmp / "out", tmp / "killed"
-    p = cli(
+    p = run_cli(
         "reproduce",
         "--quick",
         "--out",
@@ -69,6 +63,8 @@ def on_ray(tmp_path_factory) -> tuple[Path, Path, subprocess.CompletedProcess]:
     return out, marker, p
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_ray_reproduce_gives_the_in_process_numbers(in_process, on_ray):
     out, _, p = on_ray
     assert p.returncode == 0, p.stderr[-3000:]
@@ -77,6 +73,8 @@ def test_ray_reproduce_gives_the_in_process_numbers(in_process, on_ray):
     assert (out / "REPORT.md").read_text().count("|") > 50
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_a_killed_ray_worker_costs_only_its_unit(in_process, on_ray):
     out, marker, p = on_ray
     assert p.returncode == 0, p.stderr[-3000:]
@@ -94,9 +92,11 @@ def test_a_killed_ray_worker_costs_only_its_unit(in_process, on_ray):
     }
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_local_processes_rerun_a_unit_whose_process_died(tmp_path, in_process):
     out, marker = tmp_path / "out", tmp_path / "killed"
-    p = cli(
+    p = run_cli(
         "reproduce",
         "--quick",
         "--only",
@@ -116,6 +116,7 @@ def test_local_processes_rerun_a_unit_whose_process_died(tmp_path, in_process):
     assert toy == ref
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "argv, words",
     [
@@ -137,6 +138,8 @@ def test_bad_executor_flags_are_one_line_and_start_nothing(tmp_path, capsys, arg
     assert not out.exists()
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_stopping_a_jobs_driver_stops_its_workers_cleanly(tmp_path, in_process):
     """SIGTERM to ``reproduce --jobs 2`` mid-meta-training: one line, exit 130, every worker's run closed
     (no lock left behind for the next call to take over, recordings that verify)."""
@@ -160,12 +163,7 @@ def test_stopping_a_jobs_driver_stops_its_workers_cleanly(tmp_path, in_process):
         "--set",
         "metatrain.reacher.ddpg.iterations=100000",
     ]
-    p = subprocess.Popen(
-        [sys.executable, "-m", "warp_critic.cli.main", *args],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
+    p = start_cli(*args)
     deadline = time.time() + 300
     # both long units are past their first checkpoint (quick: every 3 iterations)
     while (
@@ -191,6 +189,8 @@ def test_stopping_a_jobs_driver_stops_its_workers_cleanly(tmp_path, in_process):
         assert v.returncode == 0, v.stderr
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_a_failing_unit_under_jobs_stops_the_driver(tmp_path):
     """One unit diverges while another trains in the other worker: the driver reports the error and
     exits (it used to hang at exit: the stopped worker blocked handing back its result)."""
@@ -198,12 +198,7 @@ def test_a_failing_unit_under_jobs_stops_the_driver(tmp_path):
     argv = ["reproduce", "--quick", "--out", str(out), "--device", "cpu", "--jobs", "2"]
     argv += ["--only", "metatrain-reacher-ours,metatrain-kuka-ours"]
     argv += ["--set", "metatrain.reacher.ours.dt=0.5", "--set", "metatrain.kuka.ours.iterations=60"]
-    p = subprocess.run(
-        [sys.executable, "-m", "warp_critic.cli.main", *argv],
-        capture_output=True,
-        text=True,
-        timeout=240,
-    )
+    p = run_cli(*argv, timeout=240)
     assert p.returncode == 1, p.stderr[-2000:]
     assert "diverged: iteration 0" in p.stderr
     assert not list(out.glob("metatrain-kuka-ours-*/stage.json"))  # stopped, left to resume
@@ -230,6 +225,7 @@ def test_unit_progress_reads_the_runs_metrics(tmp_path):
     assert unit_progress(other, tmp_path) == "reproduce: maps: iteration 25 (2 run(s))"
 
 
+@pytest.mark.slow
 def test_jobs_driver_logs_the_progress_of_its_running_units(tmp_path):
     """Under --jobs the workers draw no progress bars: the driver logs each running unit's
     iteration every ``progress_every`` seconds."""
@@ -268,6 +264,7 @@ def test_an_in_process_call_on_several_cores_names_jobs(monkeypatch):
     assert ex.jobs_hint(ex.InProcess(), [6, 3]) is None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("jobs", [1, 2])
 def test_a_stage_starts_as_soon_as_its_inputs_are_complete(tmp_path, jobs):
     """The driver hands an executor the units that its finished stages made ready (``more``): under

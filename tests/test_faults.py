@@ -19,37 +19,21 @@ from pathlib import Path
 import pytest
 import torch
 from conftest import REACHER
+from helpers import TINY_TRAIN, run_cli, start_cli
 
 from warp_critic.running.recording import read_times
 
-TINY = [
-    "--goals",
-    "0.5,0.3;-0.4,0.2",
-    "--worlds-per-goal",
-    "2",
-    "--horizon",
-    "5",
-    "--device",
-    "cpu",
-    "--checkpoint-every",
-    "1",
-    "--record-every",
-    "1",
-]
+# one worker runs this module: the straight run, trained once
+pytestmark = pytest.mark.xdist_group("test_faults")
+
+TINY = [*TINY_TRAIN, "--checkpoint-every", "1", "--record-every", "1"]
 ITERATIONS = 6
 
 
-def cli(*args: str, fault: str | None = None, wait: bool = True, **kw):
-    """``warp-critic ARGS`` in a child process; with ``fault`` (``POINT:N``) killed at that point."""
-    env = {**os.environ, "WARP_CRITIC_TORCH_THREADS": "1"}
-    cmd = [sys.executable, "-m", "warp_critic.cli.main", *args]
-    if fault:
-        cmd = [sys.executable, str(Path(__file__).with_name("fault_injection.py")), fault, *args]
-    if not wait:
-        return subprocess.Popen(
-            cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw
-        )
-    return subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=300, **kw)
+def killed_at(point: str) -> list[str]:
+    """The command that runs ``warp-critic`` and kills it at ``point`` (``POINT:N``,
+    ``fault_injection.py``): for ``run_cli(..., command=...)``."""
+    return [sys.executable, str(Path(__file__).with_name("fault_injection.py")), point]
 
 
 def rows(run: Path) -> list[dict]:
@@ -68,17 +52,19 @@ def rerun_verify(path: Path) -> subprocess.CompletedProcess:
 @pytest.fixture(scope="module")
 def straight(tmp_path_factory) -> Path:
     run = tmp_path_factory.mktemp("straight") / "run"
-    p = cli("meta-train", REACHER, *TINY, "--iterations", str(ITERATIONS), "--out", str(run))
+    p = run_cli("meta-train", REACHER, *TINY, "--iterations", str(ITERATIONS), "--out", str(run))
     assert p.returncode == 0, p.stderr
     return run
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_sigkill_at_several_points_resumes_to_the_same_metrics_and_a_complete_recording(
     tmp_path, straight
 ):
     run = tmp_path / "run"
     # 1. killed while writing its 3rd checkpoint (written to a temporary file, not yet in place)
-    p = cli(
+    p = run_cli(
         "meta-train",
         REACHER,
         *TINY,
@@ -86,7 +72,7 @@ def test_sigkill_at_several_points_resumes_to_the_same_metrics_and_a_complete_re
         str(ITERATIONS),
         "--out",
         str(run),
-        fault="checkpoint.pt:3",
+        command=killed_at("checkpoint.pt:3"),
     )
     assert p.returncode == -signal.SIGKILL
     assert (
@@ -96,7 +82,7 @@ def test_sigkill_at_several_points_resumes_to_the_same_metrics_and_a_complete_re
         run.glob(".checkpoint.pt.*.tmp")
     )  # what a crash leaves
     # 2. resumed, killed right after the metrics row of its 2nd iteration (before that checkpoint)
-    p = cli(
+    p = run_cli(
         "meta-train",
         REACHER,
         "--iterations",
@@ -104,12 +90,12 @@ def test_sigkill_at_several_points_resumes_to_the_same_metrics_and_a_complete_re
         "--out",
         str(run),
         "--resume",
-        fault="metrics-row:2",
+        command=killed_at("metrics-row:2"),
     )
     assert p.returncode == -signal.SIGKILL
     assert "taking over the lock" in p.stderr
     # 3. resumed, killed while writing the recording merge of... no: while writing config.json at start
-    p = cli(
+    p = run_cli(
         "meta-train",
         REACHER,
         "--iterations",
@@ -117,11 +103,13 @@ def test_sigkill_at_several_points_resumes_to_the_same_metrics_and_a_complete_re
         "--out",
         str(run),
         "--resume",
-        fault="config.json:1",
+        command=killed_at("config.json:1"),
     )
     assert p.returncode == -signal.SIGKILL
     # 4. resumed to the end
-    p = cli("meta-train", REACHER, "--iterations", str(ITERATIONS), "--out", str(run), "--resume")
+    p = run_cli(
+        "meta-train", REACHER, "--iterations", str(ITERATIONS), "--out", str(run), "--resume"
+    )
     assert p.returncode == 0, p.stderr
     assert not list(run.glob(".*.tmp")) and not (run / ".lock").exists()
 
@@ -141,13 +129,15 @@ def test_sigkill_at_several_points_resumes_to_the_same_metrics_and_a_complete_re
 
 def start_long_run(run: Path, until: str) -> subprocess.Popen:
     """A meta-train that runs (almost) forever, once ``run/until`` exists."""
-    p = cli("meta-train", REACHER, *TINY, "--iterations", "100000", "--out", str(run), wait=False)
+    p = start_cli("meta-train", REACHER, *TINY, "--iterations", "100000", "--out", str(run))
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and not (run / until).exists():
         time.sleep(0.1)
     return p
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_sigterm_stops_like_ctrl_c_and_closes_the_recording(tmp_path):
     run = tmp_path / "run"
     p = start_long_run(run, "checkpoint.pt")
@@ -165,6 +155,8 @@ def test_sigterm_stops_like_ctrl_c_and_closes_the_recording(tmp_path):
     assert not (run / ".lock").exists()
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_a_second_run_into_a_locked_directory_is_refused_at_once(tmp_path):
     run = tmp_path / "run"
     first = start_long_run(run, "metrics.jsonl")
@@ -174,7 +166,7 @@ def test_a_second_run_into_a_locked_directory_is_refused_at_once(tmp_path):
         ["meta-train", REACHER, *TINY, "--iterations", "8", "--out", str(run)],
     ):
         t0 = time.monotonic()
-        second = cli(*argv)
+        second = run_cli(*argv)
         assert second.returncode == 2, second.stderr
         # refused before any simulation; the interpreter and torch import take most of this
         assert time.monotonic() - t0 < 30
@@ -189,11 +181,12 @@ def test_a_second_run_into_a_locked_directory_is_refused_at_once(tmp_path):
     assert json.loads((run / "config.json").read_text())["iterations"] == 100000
 
 
+@pytest.mark.slow
 def test_a_signal_whose_interrupt_a_callback_swallows_still_stops_the_run(tmp_path):
     """SIGTERM raises KeyboardInterrupt wherever the main thread is; a callback that swallows it (a
     finaliser, a C extension's callback) must not leave the run going with the handler already in its
     "stopping" phase (seen in CI: a SIGTERM'd run never exited)."""
-    from test_train import tiny_cfg
+    from helpers import tiny_cfg
 
     from warp_critic.cli import signals
     from warp_critic.methods.ours import meta_train
@@ -244,6 +237,8 @@ class _Payload:
         return (os.system, (f"touch {self.marker}",))
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 @pytest.mark.parametrize("command", ["meta-test", "resume"])
 def test_a_crafted_checkpoint_does_not_run_its_payload(tmp_path, straight, command):
     import shutil
@@ -257,9 +252,9 @@ def test_a_crafted_checkpoint_does_not_run_its_payload(tmp_path, straight, comma
     )
     before = (run / "checkpoint.pt").read_bytes()
     if command == "meta-test":
-        p = cli("meta-test", str(run), "--device", "cpu")
+        p = run_cli("meta-test", str(run), "--device", "cpu")
     else:
-        p = cli("meta-train", REACHER, "--iterations", "9", "--out", str(run), "--resume")
+        p = run_cli("meta-train", REACHER, "--iterations", "9", "--out", str(run), "--resume")
     assert p.returncode == 2, p.stderr
     err = p.stderr.strip().splitlines()
     assert len(err) == 1 and "refused" in err[0], err

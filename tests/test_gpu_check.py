@@ -8,6 +8,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from warp_critic.physics.simulator import AUTO_PICKS_CUDA, resolve_device
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -18,6 +20,8 @@ def test_auto_device_is_the_cpu_until_cuda_is_measured_faster():
     assert resolve_device("auto") == "cpu"
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_gpu_check_tiny_on_cpu(tmp_path):
     out = tmp_path / "check.json"
     proc = subprocess.run(
@@ -48,6 +52,8 @@ def test_gpu_check_tiny_on_cpu(tmp_path):
     assert "| worlds | cpu |" in proc.stdout and "s/iteration" in proc.stdout
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_gpu_check_refuses_cuda_without_a_gpu_and_bad_flags(tmp_path):
     def run(*args):
         return subprocess.run(

@@ -40,6 +40,7 @@ def reacher_mass_matrix(q2: torch.Tensor) -> torch.Tensor:
     )
 
 
+@pytest.mark.slow
 def test_nominal_inertia_is_the_reacher_mass_matrix(reacher):
     _, _, norm = reacher
     q = torch.rand(7, 3, 2) * 6 - 3  # (T, W, dof): any leading shape
@@ -59,6 +60,7 @@ def _step_acceleration(critic, q, qd, tau, goal):
     return torch.linalg.solve(critic.inertia(q), step.unsqueeze(-1)).squeeze(-1)
 
 
+@pytest.mark.slow
 def test_inertial_critic_moves_every_pose_by_the_same_acceleration(reacher):
     """Two arms at different elbow angles, the same offset from their goals, the same velocity and
     torques that accelerate them alike: the inertial critic scores them alike and its gradient
@@ -113,6 +115,7 @@ def test_inertial_critic_gradient_is_a_metric_step_on_the_same_loss(reacher):
     assert not all(torch.allclose(g, p) for g, p in zip(grads, plain))
 
 
+@pytest.mark.slow
 def test_inertial_meta_gradient_matches_finite_differences(reacher):
     """Two inner steps: the second step's metric and features depend on the first step's states,
     which are data; the outer gradient through both must still be the exact derivative."""
@@ -157,8 +160,9 @@ def test_inertial_meta_gradient_matches_finite_differences(reacher):
     assert float((g_w * direction).sum()) == pytest.approx(fd, rel=0.05, abs=1e-6)
 
 
+@pytest.mark.slow
 def test_inertial_critic_run_meta_tests_from_its_checkpoint(tmp_path):
-    from test_train import tiny_cfg
+    from helpers import tiny_cfg
 
     out = tmp_path / "inertial"
     train.meta_train(tiny_cfg(out, iterations=2, critic_input="inertial"), progress=False)

@@ -11,6 +11,9 @@ from warp_critic.analysis.landscape.problem import AXIS_MASS, analytic_gain, ana
 from warp_critic.analysis.landscape.run import LandscapeConfig, run_landscape
 from warp_critic.running.recording import read_entity_paths
 
+# one worker runs this module: the landscape result, computed once
+pytestmark = pytest.mark.xdist_group("test_landscape")
+
 GOAL, TEST_GOALS, INITS = (1.0, 1.0), ((-1.5, 0.5), (0.5, -1.5)), ((0.0, 0.0), (-0.5, 0.5))
 
 
@@ -49,6 +52,7 @@ def test_analytic_gain_semi_implicit_euler():
     )
 
 
+@pytest.mark.slow
 def test_shapes_and_finite(result):
     n, G = 9, 3
     assert result["values"].shape == (G, 3, n, n)
@@ -60,6 +64,7 @@ def test_shapes_and_finite(result):
     )
 
 
+@pytest.mark.slow
 def test_q_true_matches_newton_and_analytic_optimum(result):
     axis, values, grads, goals = result["axis"], result["values"], result["grads"], result["goals"]
     gain = analytic_gain(0.05, 20)
@@ -91,6 +96,7 @@ def test_descent_fraction_can_fail():
     assert descent_fraction(shifted, axis, opt, 0.5) == 0.0
 
 
+@pytest.mark.slow
 def test_outputs(result):
     out = result["out"]
     for name in ("landscape.rrd", "landscape.png", "exploration.png"):
@@ -138,6 +144,7 @@ def test_huge_grid_is_refused_with_its_memory_estimate(capsys, tmp_path):
     assert "--grid" in err and "needs about" in err and "available" in err
 
 
+@pytest.mark.slow
 def test_default_scene_is_found_from_any_directory(tmp_path, monkeypatch, capsys):
     from warp_critic.cli.main import main
 
@@ -213,6 +220,7 @@ def test_sample_tasks_draws_goals_and_starts_per_world():
     assert abs(float(g.mean()) - 1.0) < 0.05 and abs(float(g.std()) - 1.0) < 0.05
 
 
+@pytest.mark.slow
 def test_task_distribution_flags_run(tmp_path, capsys):
     from warp_critic.cli.main import main
 

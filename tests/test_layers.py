@@ -22,12 +22,12 @@ Reads source files only; imports nothing of the package.
 from __future__ import annotations
 
 import ast
-import importlib.util
 import re
 from pathlib import Path
 
 import pytest
 from conftest import ROOT
+from helpers import load_tool
 
 PACKAGE = ROOT / "warp_critic"
 MAX_LINES = 400
@@ -51,17 +51,7 @@ RESOURCES = {"kernels": "physics", "scenes": "physics"}
 _MODULE_PATH = re.compile(r"^warp_critic(?:\.[A-Za-z_]\w*)+(?::[A-Za-z_][\w.]*)?$")
 
 
-def _tool():
-    spec = importlib.util.spec_from_file_location(
-        "design_table", ROOT / "tools" / "design_table.py"
-    )
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-TOOL = _tool()
+TOOL = load_tool("design_table")
 LAYERS: tuple[str, ...] = TOOL.LAYERS
 
 
@@ -162,6 +152,7 @@ def test_the_scanner_sees_every_form_of_import(tmp_path):
         upward_imports(pkg)
 
 
+@pytest.mark.slow
 def test_no_module_imports_a_later_layer():
     found = upward_imports()
     new = {k: v for k, v in found.items() if k not in KNOWN_UPWARD}
@@ -291,6 +282,7 @@ def circles(graph: dict[str, set[str]]) -> list[list[str]]:
     return found
 
 
+@pytest.mark.slow
 def test_no_import_circle():
     assert circles(import_graph()) == [], (
         "modules that import each other (move the shared piece down)"

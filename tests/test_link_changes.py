@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 from conftest import ROOT
-from test_bridge import drm_robot, drm_step
+from helpers import drm_robot, drm_step
 
 from warp_critic.core.errors import FieldError
 from warp_critic.physics.link_changes import parse_changes
@@ -62,6 +62,7 @@ KUKA_STEPS = dict(H=15, dt=0.0025, substeps=4, scale=torch.tensor([40, 40, 20, 2
 REACHER_STEPS = dict(H=40, dt=0.01, substeps=2, scale=torch.tensor([3.0, 3.0]))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "scene_name, changes, drm_changes, steps",
     [
@@ -176,6 +177,8 @@ def test_bad_link_change_against_the_scene(text, message):
     assert message in str(err.value)
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 @pytest.mark.parametrize(
     "argv, words",
     [

@@ -66,6 +66,7 @@ def test_the_readers_follow_the_registry():
             assert PRESETS[m.name] == m.preset and DESCRIPTIONS[m.name] == m.preset_description
 
 
+@pytest.mark.slow
 def test_no_module_lists_the_baselines_by_name():
     """A baseline's name as a string literal only in its own module (and the few listed data)."""
     baselines = set(names(baseline=True))

@@ -1,5 +1,5 @@
 """Misuse, part three (issues 47 and 48): the cases the third held-out probe found, through the real
-command line, in the misuse table's form (``tests/test_bad_input.py``: its finished tiny runs, its
+command line, in the misuse table's form (``tests/misuse_table.py``: its finished tiny runs, its
 snapshot of every file, its rule -- one line naming the file or flag, exit 2, nothing written, nothing
 lost).
 
@@ -23,13 +23,24 @@ import time
 from pathlib import Path
 
 import pytest
-import test_bad_input as table
 import torch
-from test_bad_input import MT, TEST, C, base, run_written, world  # noqa: F401 (fixtures)
+from helpers import TWO_LINK, variants_train_argv
+from misuse_table import (  # noqa: F401 (base, world: the fixtures)
+    MT,
+    RESUME,
+    TEST,
+    TINY,
+    C,
+    base,
+    check_case,
+    result_written,
+    run_written,
+    world,
+)
 
 HORIZON = ["--horizon", "20"]
 TINY_ARGS = [
-    *table.TINY,
+    *TINY,
     "--out",
     "{new}",
 ]  # long enough for a model the step cannot hold to diverge
@@ -83,8 +94,6 @@ def truncated_segment(w):
 
 def zero_axis_urdf(w):
     import re
-
-    from test_robots import TWO_LINK
 
     text = re.sub(r"<visual>.*?</visual>", "", TWO_LINK)  # no missing-mesh warning
     (w.t / "zeroaxis.urdf").write_text(
@@ -206,13 +215,13 @@ CASES = [
         [*TEST, "--policy-steps", "2", "--out", "{t}/mt.json"],
         setup=lifetime(1_000_000),
         code=0,
-        check=table.result_written("mt.json"),
+        check=result_written("mt.json"),
     ),
     # 4. dead ends and lost results
     C(
         "d48",
         "resume-run-stopped-before-first-checkpoint",
-        table.RESUME,
+        RESUME,
         setup=no_checkpoint,
         code=0,
         warns=1,
@@ -230,7 +239,7 @@ CASES = [
     C(
         "d48",
         "resume-run-stopped-before-first-checkpoint-other-settings",
-        [*table.RESUME, "--horizon", "5"],
+        [*RESUME, "--horizon", "5"],
         setup=no_checkpoint,
         says=("horizon", "3 -> 5"),
     ),
@@ -263,7 +272,7 @@ CASES += [
     C(
         "m48",
         "resume-repairs-a-truncated-recording-and-says-what-it-kept",
-        table.RESUME,
+        RESUME,
         setup=truncated_recording,
         code=0,
         warns=1,
@@ -274,7 +283,7 @@ CASES += [
     C(
         "m48",
         "resume-repairs-a-truncated-segment-and-says-what-it-kept",
-        table.RESUME,
+        RESUME,
         setup=truncated_segment,
         code=0,
         warns=1,
@@ -287,14 +296,13 @@ CASES += [
 
 @pytest.mark.parametrize("case", CASES)
 def test_misuse_three(case, world, capfd, monkeypatch):  # noqa: F811 (the fixture)
-    table.test_bad_input(case, world, capfd, monkeypatch)
+    check_case(case, world, capfd, monkeypatch)
 
 
+@pytest.mark.slow
 def test_interrupt_after_import_wrote_the_scene_says_it_is_whole(tmp_path, capfd, monkeypatch):
     """A signal that lands after ``import`` wrote its scene: exit 130 with one line saying the scene
     was written whole (it said only "interrupted")."""
-    from test_robots import TWO_LINK
-
     import warp_critic.cli.import_robot as command
     import warp_critic.cli.main as cli
 
@@ -323,6 +331,8 @@ def _cli_ascii_locale(*args: bytes, cwd) -> subprocess.CompletedProcess:
     return subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, timeout=300)
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_utf8_paths_under_an_ascii_locale(tmp_path):
     """``LC_ALL=C PYTHONUTF8=0``: valid UTF-8 names are taken (they were refused as "not valid
     UTF-8"), a name with a stray byte is still refused naming its flag, nothing written."""
@@ -344,17 +354,16 @@ def test_utf8_paths_under_an_ascii_locale(tmp_path):
     assert sorted(x.name for x in tmp_path.iterdir()) == ["réa"]
 
 
+@pytest.mark.slow
 def test_a_stopped_identification_continues_where_it_stopped(tmp_path):
     """reproduce's identification step (``train_identifier`` with a ``resume_file``) saves its state
     every ``checkpoint_every`` steps; stopped, it continues from there (it started at iteration 0)
     to exactly the identifier an uninterrupted run trains, and removes the file."""
-    from test_train_variants import _train
-
     from warp_critic.cli.main import main
     from warp_critic.methods.identify import IDENTIFY_FILE, train_identifier
 
     told = tmp_path / "told"
-    assert main(_train(told, "--critic-input", "pose-dynamics", iterations=1)) == 0
+    assert main(variants_train_argv(told, "--critic-input", "pose-dynamics", iterations=1)) == 0
     kw = dict(iterations=4, goals=2, inits=2, hidden=16, seed=0, device="cpu")
     torch.manual_seed(0)  # the identifier's initial weights
     train_identifier(str(told), str(tmp_path / "a"), **kw)

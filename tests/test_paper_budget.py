@@ -26,6 +26,7 @@ def test_docs_paper_within_budget():
     assert mb <= BUDGET_MB, f"docs/paper is {mb:.1f} MB, over its {BUDGET_MB} MB budget"
 
 
+@pytest.mark.slow
 def test_every_stage_the_report_read_is_carried_complete():
     """Each stage named in ``results.json`` is complete in the archive ``stages/`` (its record
     compressed, ``stage.json.xz``), nothing else of a stage lies beside the report, and a

@@ -1,15 +1,15 @@
-"""tools/tune_baselines.py, tools/diagnose_reacher_map.py and tools/probe_variants.py: their draws,
+"""bench/tune_baselines.py, tools/diagnose_reacher_map.py and tools/probe_variants.py: their draws,
 the probe's verdicts and their bad input."""
 
 from __future__ import annotations
 
 import pytest
 from conftest import REACHER
-from test_tools import load_tool
+from helpers import load_tool
 
 
 def test_tune_draws_the_published_setting_first_without_repetition():
-    tool = load_tool("tune_baselines")
+    tool = load_tool("tune_baselines", "bench")
     drawn = tool.settings(6, seed=0)
     assert drawn[0] == tool.PUBLISHED and len(drawn) == 6
     assert len({tuple(sorted(s.items())) for s in drawn}) == 6
@@ -21,7 +21,7 @@ def test_tune_draws_the_published_setting_first_without_repetition():
 def test_tune_one_at_a_time_adds_meta_critics_virtual_step_and_one_rule_adopts_for_both():
     """One adoption rule for both baselines: better than the published setting by more than half
     its seed spread; whether Meta-Critic's h_omega was alive does not enter it."""
-    tool = load_tool("tune_baselines")
+    tool = load_tool("tune_baselines", "bench")
     ddpg, mc = tool.one_at_a_time("ddpg"), tool.one_at_a_time("meta-critic")
     assert len(ddpg) == 7 and ddpg[0] == tool.PUBLISHED and mc[:7] == ddpg
     assert [s.get("virtual_lr") for s in mc[7:]] == [1e-3, 1e-2]
@@ -49,7 +49,7 @@ def test_reproduce_adopts_exactly_what_the_committed_baseline_search_adopts():
 
     from warp_critic.reproduce.experiments.settings import TUNED
 
-    tool = load_tool("tune_baselines")
+    tool = load_tool("tune_baselines", "bench")
     expected: dict = {}
     for f in sorted((Path(__file__).parents[1] / "docs" / "paper" / "tuning").glob("*.json")):
         data = json.loads(f.read_text())
@@ -81,15 +81,19 @@ def test_reproduce_adopts_exactly_what_the_committed_baseline_search_adopts():
 @pytest.mark.parametrize(
     "name, argv, words",
     [
-        ("tune_baselines", ["--scenes", "pendulum"], "unknown scene"),
-        ("tune_baselines", ["--seeds", "0,100"], "other than the reported"),
-        ("tune_baselines", ["--methods", "ppo"], "unknown method"),
-        ("diagnose_reacher_map", ["/nonexistent/run"], "not a run directory"),
-        ("reference_runs", ["--compare", "/nonexistent/a", "/nonexistent/b"], "does not exist"),
-        ("diagnose_reacher_map", ["x", "--grid", "1"], "--grid >= 2"),
-        ("probe_variants", [REACHER, "--variants", "arm9.mass=1"], "unknown link 'arm9'"),
+        ("bench/tune_baselines", ["--scenes", "pendulum"], "unknown scene"),
+        ("bench/tune_baselines", ["--seeds", "0,100"], "other than the reported"),
+        ("bench/tune_baselines", ["--methods", "ppo"], "unknown method"),
+        ("tools/diagnose_reacher_map", ["/nonexistent/run"], "not a run directory"),
         (
-            "probe_variants",
+            "tools/reference_runs",
+            ["--compare", "/nonexistent/a", "/nonexistent/b"],
+            "does not exist",
+        ),
+        ("tools/diagnose_reacher_map", ["x", "--grid", "1"], "--grid >= 2"),
+        ("tools/probe_variants", [REACHER, "--variants", "arm9.mass=1"], "unknown link 'arm9'"),
+        (
+            "tools/probe_variants",
             [REACHER, "--variants", "nominal", "--hold", "0"],
             "--hold must be >= 1",
         ),
@@ -97,7 +101,8 @@ def test_reproduce_adopts_exactly_what_the_committed_baseline_search_adopts():
 )
 def test_tools_bad_input_is_one_line_exit_2(name, argv, words, capsys):
     with pytest.raises(SystemExit) as e:
-        load_tool(name).main(argv)
+        folder, _, script = name.partition("/")
+        load_tool(script, folder).main(argv)
     assert e.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and ": error: " in err and words in err, err
@@ -122,6 +127,7 @@ def test_probe_finds_the_reachers_light_links_unstable_at_its_dt_and_stable_at_h
     assert bad == 0 and fastest < 1e3
 
 
+@pytest.mark.slow
 def test_reacher_map_shifts_keep_the_offsets_and_the_response_is_reciprocal(finished_run, capsys):
     """``diagnose_reacher_map --shifts`` on a tiny run: the unshifted row repeats the grid's own
     share, a shift moves start and goal together (same ``q0 - g``), and the measured one-step

@@ -80,6 +80,7 @@ def test_type_checkers_see_every_lazy_export(name):
     assert {n for _, n in seen} == set(package.__all__) - {"__version__"}
 
 
+@pytest.mark.subprocess
 def test_importing_the_packages_imports_neither_torch_nor_warp():
     code = (
         "import sys, warp_critic, warp_critic.core, warp_critic.learning, warp_critic.evaluation, "

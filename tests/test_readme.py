@@ -9,7 +9,7 @@ import json
 import re
 
 from conftest import ROOT
-from test_tools import load_tool
+from helpers import load_tool
 
 NUMBER = re.compile(r"\d+(?:\.\d+)?%?")
 

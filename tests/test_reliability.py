@@ -8,7 +8,6 @@ import errno
 import json
 import os
 import pickle
-import shutil
 import signal
 import socket
 import subprocess
@@ -21,15 +20,11 @@ from pathlib import Path
 import pytest
 import torch
 from conftest import REACHER
+from helpers import TINY_ONE_WORLD, cli_command
 
 from warp_critic.cli.main import main
 
-TINY = ["--horizon", "3", "--worlds-per-goal", "1", "--device", "cpu"]
-
-
-def cli() -> list[str]:
-    exe = shutil.which("warp-critic", path=str(Path(sys.executable).parent))
-    return [exe] if exe else [sys.executable, "-m", "warp_critic.cli.main"]
+TINY = TINY_ONE_WORLD
 
 
 def error_lines(err: str) -> list[str]:
@@ -84,10 +79,31 @@ def alive(pid: int) -> bool:
 # ------------------------------------------------------------------------------------------------
 
 
+def test_another_commands_check_of_a_folder_is_no_owner(tmp_path):
+    """Two commands that check one folder at once (each takes its lock for an instant to see whether
+    anyone holds it) do not see each other as its owner; a lock held throughout is one."""
+    from filelock import FileLock
+
+    from warp_critic.running.locks import LOCK, PROBE_WAIT_S, holder
+
+    (tmp_path / LOCK).write_text('{"pid": 1, "host": "elsewhere"}')
+    other = FileLock(str(tmp_path / LOCK), timeout=0, thread_local=False)
+    other.acquire()  # the other command's check, let go while this one still looks
+    threading.Timer(PROBE_WAIT_S, other.release).start()
+    assert holder(tmp_path) is None
+    other.acquire()  # an owner
+    try:
+        assert holder(tmp_path) == {"pid": 1, "host": "elsewhere"}
+    finally:
+        other.release()
+
+
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_a_second_reproduce_driver_on_one_out_is_refused_and_the_first_untouched(tmp_path, capfd):
     out = tmp_path / "paper"
     first = subprocess.Popen(
-        [*cli(), "reproduce", "--quick", "--only", "toy,landscape", "--out", str(out)]
+        [*cli_command(), "reproduce", "--quick", "--only", "toy,landscape", "--out", str(out)]
         + ["--device", "cpu"],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
@@ -116,33 +132,58 @@ def test_a_second_reproduce_driver_on_one_out_is_refused_and_the_first_untouched
 # ------------------------------------------------------------------------------------------------
 
 
+def maps(pid: int, library: str) -> bool:
+    """Whether process ``pid`` has loaded the shared library ``library`` (``/proc/PID/maps``)."""
+    try:
+        return f"/{library}" in Path(f"/proc/{pid}/maps").read_text()
+    except OSError:
+        return False
+
+
+# the moments of a meta-train's start-up, in order, each as the condition that says it has come
+START_UP = {
+    "handlers installed": lambda pid, out: catches_sigterm(pid),
+    "torch loaded": lambda pid, out: maps(pid, "libtorch_cpu.so"),
+    "warp loaded": lambda pid, out: maps(pid, "warp.so"),
+    "run directory written": lambda pid, out: (out / "config.json").is_file(),
+    "training": lambda pid, out: (
+        (out / "metrics.jsonl").is_file() and (out / "metrics.jsonl").stat().st_size > 0
+    ),
+}
+
+
+@pytest.mark.slow
+@pytest.mark.subprocess
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_at_any_moment_of_start_up_is_one_line_and_exit_130(tmp_path, signum):
-    """One process per moment, one after the other. The interpreter's own start-up (before the first
-    line of any Python program runs: ~50 ms on an idle machine, more on a loaded one) cannot be
-    guarded by a program, so a signal is sent at the moment asked, or as soon as the process
-    catches SIGTERM if that is later."""
-    for i, delay in enumerate((0.1, 0.5, 1.0, 2.0, 3.0)):
+    """One process per moment of start-up (``START_UP``), one after the other, each signalled as
+    soon as its moment has come (polled, at most 120 s). The interpreter's own start-up (before the
+    first line of any Python program runs) cannot be guarded by a program, so the first moment is
+    the handlers' installation."""
+    for i, (moment, reached) in enumerate(START_UP.items()):
+        out = tmp_path / f"r{i}"
         argv = ["meta-train", REACHER, *TINY, "--iterations", "100000"]
         p = subprocess.Popen(
-            [*cli(), *argv, "--out", str(tmp_path / f"r{i}")],
+            [*cli_command(), *argv, "--out", str(out)],
             stdout=subprocess.PIPE,
             stderr=subprocess.PIPE,
             text=True,
         )
-        time.sleep(delay)
-        deadline = time.monotonic() + 10
-        while not catches_sigterm(p.pid) and time.monotonic() < deadline:
+        deadline = time.monotonic() + 120
+        while not reached(p.pid, out):
+            assert p.poll() is None and time.monotonic() < deadline, (moment, p.communicate())
             time.sleep(0.005)
-        assert p.poll() is None, p.communicate()
+        assert p.poll() is None, (moment, p.communicate())
         p.send_signal(signum)
         _, err = p.communicate(timeout=120)
         lines = error_lines(err)
-        assert p.returncode == 130, (delay, p.returncode, err)
-        assert "Traceback" not in err and "terminate" not in err, (delay, err)
-        assert len(lines) == 1 and lines[0].startswith("warp-critic: "), (delay, lines)
+        assert p.returncode == 130, (moment, p.returncode, err)
+        assert "Traceback" not in err and "terminate" not in err, (moment, err)
+        assert len(lines) == 1 and lines[0].startswith("warp-critic: "), (moment, lines)
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_a_signal_during_shutdown_is_one_line_and_exit_130(tmp_path, signum):
     """The signal arrives after the command finished, while the interpreter shuts down."""
@@ -165,10 +206,22 @@ def test_a_signal_during_shutdown_is_one_line_and_exit_130(tmp_path, signum):
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_workers_exit_when_their_driver_is_killed(tmp_path):
     out = tmp_path / "paper"
     driver = subprocess.Popen(
-        [*cli(), "reproduce", "--quick", "--jobs", "2", "--only", "metatrain", "--seeds", "1"]
+        [
+            *cli_command(),
+            "reproduce",
+            "--quick",
+            "--jobs",
+            "2",
+            "--only",
+            "metatrain",
+            "--seeds",
+            "1",
+        ]
         + ["--out", str(out), "--device", "cpu"],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
@@ -265,6 +318,8 @@ def test_meta_test_of_an_asymmetric_run_does_not_blame_goals(tmp_path, capfd):
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_a_full_disk_while_warp_builds_its_kernels_is_one_line(tmp_path):
     script = textwrap.dedent(f"""
         import errno, sys
@@ -357,6 +412,7 @@ def _serve(sock: socket.socket, reply: bytes) -> None:
     threading.Thread(target=loop, daemon=True).start()
 
 
+@pytest.mark.slow
 def test_ray_address_must_speak_grpc():
     from warp_critic.core.errors import FieldError
     from warp_critic.reproduce.engine.on_ray import check_ray_address

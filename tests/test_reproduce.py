@@ -13,10 +13,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from helpers import load_tool
 
 from warp_critic.cli.main import main as cli_main
 from warp_critic.core.errors import UserError
 from warp_critic.reproduce.report.maps import elbow_bent
+
+# one worker runs this module: the quick reproduce output, made once
+pytestmark = pytest.mark.xdist_group("test_reproduce")
 
 
 def reproduce_main(argv):
@@ -64,6 +68,8 @@ def quick(tmp_path_factory):
     return out, rc, time.perf_counter() - t
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_quick_end_to_end(quick):
     out, rc, _ = quick
     assert rc == 0
@@ -126,6 +132,7 @@ def test_quick_end_to_end(quick):
     assert verify.returncode == 0, verify.stderr
 
 
+@pytest.mark.slow
 def test_second_call_skips_every_stage(quick, capsys):
     out, rc, _ = quick
     assert rc == 0
@@ -142,6 +149,7 @@ def test_second_call_skips_every_stage(quick, capsys):
     assert "| complete, skipped |" in (out / "REPORT.md").read_text()
 
 
+@pytest.mark.slow
 def test_only_toy_and_changed_setting(tmp_path, capsys):
     out = tmp_path / "r"
     assert reproduce_main(["--quick", "--only", "toy", "--out", str(out), "--device", "cpu"]) == 0
@@ -231,6 +239,7 @@ def test_bad_out(tmp_path, capsys):
     assert e.value.code == 2
 
 
+@pytest.mark.slow
 def test_batched_evaluator_matches_meta_test(quick, tmp_path):
     """One job of the batched evaluator (here next to other runs and variants) = meta-test on that run."""
     import torch
@@ -270,6 +279,7 @@ def test_batched_evaluator_matches_meta_test(quick, tmp_path):
         np.testing.assert_allclose(err, ref, rtol=1e-4, atol=1e-6)
 
 
+@pytest.mark.slow
 def test_one_descent_read_at_several_budgets_equals_separate_descents(quick):
     """``evaluate(at=...)`` (the budget sweep's one descent) gives each budget's errors exactly as a
     separate evaluation of that many steps; ``alpha_scale`` scales the run's step size."""
@@ -293,6 +303,7 @@ def test_one_descent_read_at_several_budgets_equals_separate_descents(quick):
         evaluate(jobs, inits=2, steps=3, seed=5, device="cpu", progress=False, at=(4,))
 
 
+@pytest.mark.slow
 def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
     """A variant whose worlds go non-finite (1/1000 of the reacher's masses and inertias at its dt)
     does not stop the evaluation: its errors are inf and counted, and the job beside it gets
@@ -333,6 +344,7 @@ def test_grid_figure_shows_a_diverged_cell_in_black(tmp_path):
     assert rp.diverged_line(3).startswith("3 evaluated world(s) went non-finite")
 
 
+@pytest.mark.slow
 def test_interrupted_metatrain_resumes(tmp_path, capsys):
     """A sub-stage without stage.json (killed mid-training) resumes its run directories to the end;
     seed directories without a checkpoint (killed before the first one) are started afresh."""
@@ -368,16 +380,7 @@ def test_interrupted_metatrain_resumes(tmp_path, capsys):
     assert (stray / "checkpoint.pt").is_file()
 
 
-def _tool(name: str):
-    import importlib.util
-
-    path = Path(__file__).resolve().parents[1] / "tools" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
+@pytest.mark.slow
 def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     """save -> restore without the maps and tables: reproduce reruns only those two, from the slim
     meta-training checkpoints, to the same cells; the archive holds no optimiser or buffer state."""
@@ -387,7 +390,7 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
 
     out, rc, _ = quick
     assert rc == 0
-    carry = _tool("carry_stages")
+    carry = load_tool("carry_stages")
     archive = tmp_path / "archive"
     assert carry.main(["save", str(out), str(archive)]) == 0
     names = {p.name for p in archive.iterdir()}
@@ -454,12 +457,13 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     assert "edited or damaged" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, capsys):
     """publish: REPORT.md, results.json, figures and each read stage's records, no runs; an earlier
     report's records and figures go, the folder's other contents stay; bad input is one line."""
     out, rc, _ = quick
     assert rc == 0
-    carry = _tool("carry_stages")
+    carry = load_tool("carry_stages")
     dest = tmp_path / "docs"
     (dest / "stages" / "toy-0000000000").mkdir(parents=True)  # a carried stage: never touched
     (dest / "stages" / "toy-0000000000" / "stage.json").write_text("{}")
@@ -569,6 +573,7 @@ def test_elbow_bent_marks_the_goals_past_a_right_angle_row_major():
     assert bent.tolist() == [True, False, False, True] * 3
 
 
+@pytest.mark.slow
 def test_beyond_runs_apart_from_the_paper(quick, tmp_path, capsys):
     """--only beyond on a copy of the quick output: the paper's stages are found complete (their
     hashes do not depend on the recipes), the recipes train and are evaluated next to the nominal
@@ -690,6 +695,7 @@ def test_beyond_maps_takes_floors_only_from_a_maps_stage_of_the_same_inputs(tmp_
     assert paper_maps_floors(tmp_path, st) == "maps-4"
 
 
+@pytest.mark.slow
 def test_ledger_records_every_call_and_a_refused_call_writes_nothing(tmp_path, capsys):
     from warp_critic.reproduce.engine import ledger
 

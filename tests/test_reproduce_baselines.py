@@ -57,6 +57,7 @@ def test_bad_baselines_are_one_line(tmp_path, capsys, baselines, words):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_a_td3_stage_runs_and_the_report_shows_its_rows_only_when_selected(tmp_path, capsys):
     out = tmp_path / "paper"
     common = ["reproduce", "--quick", "--seeds", "1", "--only", "maps,tables", "--device", "cpu"]

@@ -210,13 +210,9 @@ def test_import_writes_the_model_and_its_help_states_the_rules(tmp_path, capfd):
 
 def test_robot_zoo_prints_a_row_per_file_with_its_verdict(capsys):
     """tools/robot_zoo.py --only: the table's rows (an import and a refusal), no training."""
-    import importlib.util
+    from helpers import load_tool
 
-    root = Path(__file__).resolve().parents[1]
-    spec = importlib.util.spec_from_file_location("robot_zoo", root / "tools" / "robot_zoo.py")
-    assert spec is not None and spec.loader is not None
-    zoo = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(zoo)
+    zoo = load_tool("robot_zoo")
     # files no other test loads (a loaded file is cached, and its notes said once)
     assert zoo.main(["--only", "pusher_v5,inverted_pendulum"]) == 0
     rows = {line.split()[1]: line for line in capsys.readouterr().out.splitlines()[1:3]}

@@ -208,6 +208,7 @@ def _argv(case: Case, robot: Path, tmp: Path) -> list[str]:
     return ["meta-train", str(robot), "--out", str(tmp / "run"), "--iterations", "1", *case.extra]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", REFUSED, ids=[c.id for c in REFUSED])
 def test_refused_in_one_line_naming_the_body_or_joint(case, tmp_path, capfd):
     robot = tmp_path / case.file
@@ -295,6 +296,7 @@ def test_lock_mimic_welds_the_coupled_joint_where_the_coupling_puts_it(tmp_path,
     assert joints == ["j1"]
 
 
+@pytest.mark.slow
 def test_urdf_saved_as_xml_imports_as_a_urdf_and_mjcf_ctrlrange_bounds_the_effort(tmp_path, capfd):
     stdout, _, repairs = _import(tmp_path, capfd, "arm.xml", urdf())
     assert "(2 joints, end effector l2)" in stdout and repairs == []
@@ -311,6 +313,7 @@ def test_urdf_saved_as_xml_imports_as_a_urdf_and_mjcf_ctrlrange_bounds_the_effor
     assert effort["j2"] >= 1e5  # a motor without ctrlrange or forcerange: no bound, as before
 
 
+@pytest.mark.slow
 def test_effort_zero_on_a_joint_left_out_of_training_is_locked(tmp_path, capfd):
     stdout, _, _ = _import(
         tmp_path, capfd, "r.urdf", urdf(limit=LIMIT.replace('"5"', '"0"')), "--joints", "j2"

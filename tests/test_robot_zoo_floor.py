@@ -3,25 +3,16 @@ the runs a ``--train`` pass left (here copies of the tiny reacher run)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import shutil
-from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
-
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _zoo():
-    spec = importlib.util.spec_from_file_location("robot_zoo", ROOT / "tools" / "robot_zoo.py")
-    assert spec is not None and spec.loader is not None
-    zoo = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(zoo)
-    return zoo
+from helpers import load_tool
 
 
+@pytest.mark.slow
 def test_floor_reads_the_newest_runs_and_optimises_on_their_meta_test_goals(
     finished_run, tmp_path, capsys
 ):
@@ -29,7 +20,7 @@ def test_floor_reads_the_newest_runs_and_optimises_on_their_meta_test_goals(
     from warp_critic.physics.scene import Variant
     from warp_critic.reproduce.experiments.reach import best_open_loop_floor
 
-    zoo = _zoo()
+    zoo = load_tool("robot_zoo")
     runs = tmp_path / "runs"
     for name in ("kuka-20261206-000000", "reacher-20261206-000000", "reacher-20261206-000001"):
         shutil.copytree(finished_run, runs / name)
@@ -52,7 +43,7 @@ def test_floor_reads_the_newest_runs_and_optimises_on_their_meta_test_goals(
 
 
 def test_floor_without_a_meta_tested_run_is_one_line(tmp_path, capsys):
-    assert _zoo().main(["--floor", "--runs-dir", str(tmp_path)]) == 2
+    assert load_tool("robot_zoo").main(["--floor", "--runs-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("robot_zoo: error: --runs-dir: ") and "\n" not in err
     assert "no meta-tested run of kuka" in err

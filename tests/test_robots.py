@@ -15,6 +15,7 @@ import newton.examples
 import numpy as np
 import pytest
 import torch
+from helpers import C1, C2, E1, E2, HI, I1, I2, L1, LO, M1, M2, TWO_LINK
 
 from warp_critic.cli.main import main
 from warp_critic.core.errors import SceneError
@@ -33,27 +34,6 @@ needs_robot_data = pytest.mark.skipif(
 )
 PANDA_ARM = ",".join(f"panda_joint{i}" for i in range(1, 8))
 
-# a planar two-link arm turning about +y (gravity along -z acts on it)
-M1, C1, I1, L1 = 2.0, 0.25, 0.05, 0.5  # kg, m (com from joint 1), kg m^2 (about y), m
-M2, C2, I2 = 1.0, 0.2, 0.02
-E1, E2 = 50.0, 3.0  # effort limits, N m
-LO, HI = np.array([-1.0, -0.5]), np.array([1.0, 1.5])
-TWO_LINK = f"""<robot name="twolink">
-  <link name="base"/>
-  <joint name="j1" type="revolute"><parent link="base"/><child link="l1"/>
-    <axis xyz="0 1 0"/><limit lower="{LO[0]}" upper="{HI[0]}" effort="{E1}" velocity="10"/></joint>
-  <link name="l1"><inertial><origin xyz="{C1} 0 0"/><mass value="{M1}"/>
-    <inertia ixx="0.01" iyy="{I1}" izz="{I1}" ixy="0" ixz="0" iyz="0"/></inertial>
-    <visual><geometry><mesh filename="meshes/l1.stl"/></geometry></visual></link>
-  <joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="{L1} 0 0"/>
-    <axis xyz="0 1 0"/><limit lower="{LO[1]}" upper="{HI[1]}" effort="{E2}" velocity="10"/></joint>
-  <link name="l2"><inertial><origin xyz="{C2} 0 0"/><mass value="{M2}"/>
-    <inertia ixx="0.005" iyy="{I2}" izz="{I2}" ixy="0" ixz="0" iyz="0"/></inertial>
-    <visual><geometry><mesh filename="meshes/l2.stl"/></geometry></visual></link>
-  <joint name="tool" type="fixed"><parent link="l2"/><child link="tcp"/><origin xyz="0.4 0 0"/></joint>
-  <link name="tcp"/>
-</robot>
-"""
 TWO_LINK_MJCF = """<mujoco model="arm2"><worldbody>
   <body name="l1"><joint name="j1" type="hinge" axis="0 1 0" range="-60 60" limited="true"/>
     <geom type="capsule" fromto="0 0 0 0.5 0 0" size="0.05"/>
@@ -222,6 +202,7 @@ def test_coupled_pushes_are_capped_by_hand(two_link, monkeypatch):
     assert derive.torque_bounds(scene, goals)[0] < 50.0 * _hand_mass_diag(home[1])[0] + hold[0]
 
 
+@pytest.mark.slow
 def test_derived_torques_follow_the_runs_gravity_by_hand(two_link, tmp_path):
     """--gravity 0 (a torque-mode arm): the bounds lose the holding share, min(effort, push), and a
     run under it trains with those bounds; the defaults at 9.81 stay as they were."""
@@ -371,6 +352,7 @@ def _first_iteration(scene: str, out: Path, *extra: str) -> dict:
     return json.loads((out / "metrics.jsonl").read_text().splitlines()[0])
 
 
+@pytest.mark.slow
 def test_import_round_trip_trains_to_the_same_first_iteration(two_link, tmp_path, capfd):
     out = tmp_path / "twolink.usda"
     code, err = _run(["import", str(two_link), "--out", str(out)], capfd)
@@ -391,6 +373,7 @@ def test_import_round_trip_trains_to_the_same_first_iteration(two_link, tmp_path
     assert a["task_loss"] != a["task_loss_before"]
 
 
+@pytest.mark.slow
 def test_run_config_states_each_derived_default_with_its_rule(two_link, tmp_path, capfd):
     import json
 
@@ -452,6 +435,7 @@ def test_real_robot_takes_one_meta_train_iteration(urdf, extra, dof, tmp_path):
     assert len(config["goals"][0]) == dof and len(config["max_torque"]) == dof
 
 
+@pytest.mark.slow
 def test_panda_rollout_and_gradients_match_the_paper_model(tmp_path):
     """60 physics steps on the Panda (differentiable-robot-model's own URDF, imported by newton):
     states and d loss / d (torques, q0, qd0) vs autograd through differentiable-robot-model."""

@@ -21,6 +21,7 @@ import pytest
 import torch
 import warp as wp
 from conftest import ROOT, SCENES
+from helpers import load_tool
 
 from warp_critic.core.errors import SceneError, UserError
 from warp_critic.physics import schema
@@ -92,6 +93,7 @@ def assert_qdd_close(ours: np.ndarray, ref: np.ndarray, rtol: float = 1e-3) -> t
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["reacher", "kuka"])
 def test_forward_dynamics_match_drm(name):
     scene = load_scene(SCENES / f"{name}.usda")
@@ -208,6 +210,8 @@ def test_scene_metadata():
         point.build_model([Variant(link_scale=2.0)])
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_generator_reproduces_committed_scenes(tmp_path):
     subprocess.run(
         [sys.executable, str(ROOT / "tools" / "make_scenes.py"), str(tmp_path)],
@@ -752,19 +756,9 @@ def test_one_torque_bound_for_all_joints_is_accepted(tmp_path):
 # ------------------------------------------------------------------------------------------------
 
 
-def _make_scenes_tool():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("make_scenes", ROOT / "tools" / "make_scenes.py")
-    tool = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = tool  # its dataclasses look their module up
-    spec.loader.exec_module(tool)
-    return tool
-
-
 def test_readme_attribute_table_is_the_schema():
     readme = (ROOT / "README.md").read_text()
-    assert _make_scenes_tool().readme_with_table(readme) == readme, (
+    assert load_tool("make_scenes").readme_with_table(readme) == readme, (
         "README.md's attribute table differs from warp_critic/physics/schema.py: "
         "run python tools/make_scenes.py --readme"
     )
@@ -786,7 +780,7 @@ def test_shipped_scenes_author_only_schema_attributes_with_its_types():
     # the writer takes its keys from the schema, and checks values with its rules
     from warp_critic.physics.scene_writer import write_defaults
 
-    robot = _make_scenes_tool().ROBOTS["reacher"]
+    robot = load_tool("make_scenes").ROBOTS["reacher"]
     bad = dataclasses.replace(robot, defaults={**robot.defaults, "horizn": 5})
     with pytest.raises(AssertionError, match="horizn"):
         write_defaults("reacher", bad, None)
@@ -850,6 +844,8 @@ def _run_json(script: str, *args) -> list[str]:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_instanced_scene_hashes_the_same_in_every_process(tmp_path):
     """USD numbers instance prototypes in a new order per stage; the hash must not see it."""
     source = _edited_reacher(tmp_path, _instanced, "instanced.usda")
@@ -862,6 +858,8 @@ def test_instanced_scene_hashes_the_same_in_every_process(tmp_path):
     assert hashes[0] == load_scene(source).content_hash != plain
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_newton_instanced_asset_hashes_the_same_in_every_process():
     asset = Path(newton.__file__).parent / "examples" / "assets" / "cartpole_single_pendulum.usda"
     assert "instanceable = true" in asset.read_text()

@@ -3,18 +3,11 @@
 
 from __future__ import annotations
 
-import importlib.util
 import subprocess
 
 import pytest
 from conftest import ROOT
-
-
-def load_tool(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
-    return tool
+from helpers import load_tool
 
 
 @pytest.mark.parametrize(
@@ -29,13 +22,15 @@ def load_tool(name: str):
     ],
 )
 def test_bench_speed_refuses_bad_arguments_in_one_line(argv, capsys):
-    assert load_tool("bench_speed").main(argv) == 2
+    assert load_tool("bench_speed", "bench").main(argv) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and err.startswith("bench_speed: error: "), err
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_bench_speed_against_leaves_no_worktree_behind():
-    tool = load_tool("bench_speed")
+    tool = load_tool("bench_speed", "bench")
     head = subprocess.run(
         ["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True, text=True
     ).stdout.strip()

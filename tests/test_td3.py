@@ -9,7 +9,7 @@ import math
 import pytest
 import torch
 from conftest import REACHER
-from test_baselines import TINY as BASELINE_TINY
+from helpers import TINY_BASELINE
 
 from warp_critic.cli.main import main
 from warp_critic.evaluation.metatest import build_test_critic
@@ -21,7 +21,7 @@ from warp_critic.running.methods import method
 from warp_critic.running.task import TaskConfig
 
 # the baselines' tiny CLI settings, with a smaller actor and a checkpoint every iteration
-TINY = [*BASELINE_TINY, "--actor-hidden", "16", "--checkpoint-every", "1"]
+TINY = [*TINY_BASELINE, "--actor-hidden", "16", "--checkpoint-every", "1"]
 MAX_TORQUE = torch.tensor([2.0, 0.5])
 
 
@@ -125,6 +125,7 @@ def test_the_actor_and_targets_move_only_every_policy_delay_critic_updates():
     assert a.updates == 4 and a.state_dict()["updates"] == 4
 
 
+@pytest.mark.slow
 def test_td3_trains_resumes_exactly_and_meta_tests_through_the_cli(tmp_path, capsys):
     straight, part = tmp_path / "straight", tmp_path / "part"
     argv = ["baseline", "td3", REACHER, *TINY]

@@ -1,9 +1,8 @@
-"""The scripts under tools/ and the package code they are thin over (protocol, presets)."""
+"""The scripts under tools/ and bench/ and the package code they are thin over (protocol, presets)."""
 
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import json
 import re
 from pathlib import Path
@@ -11,37 +10,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import REACHER, ROOT
+from helpers import load_tool, tiny_cfg
 
 from warp_critic.core.errors import FieldError, UserError
 
 # the paper's LaTeX source: ``shared/paper/`` next to the repository (as CI and a clean clone have it)
 PAPER = ROOT.parent / "shared" / "paper" / "model_based_meta_learning_of_critics.tex"
-
-
-def load_tool(name: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "tools" / f"{name}.py")
-    tool = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(tool)
-    return tool
-
-
-def tiny_cfg(out: Path, **kw):
-    from warp_critic.methods.ours import TrainConfig
-
-    cfg = TrainConfig(
-        scene=REACHER,
-        goals=[[0.5, 0.3], [-0.4, 0.2]],
-        worlds_per_goal=2,
-        horizon=6,
-        iterations=3,
-        device="cpu",
-        out=str(out),
-        checkpoint_every=1,
-        record_every=2,
-    )
-    for k, v in kw.items():
-        setattr(cfg, k, v)
-    return cfg
 
 
 def meta_train(cfg):
@@ -59,6 +33,7 @@ def saved_config(run_dir: Path) -> dict:
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_diagnose_tool_runs_on_a_run_directory(tmp_path, capsys):
     tool = load_tool("diagnose_metatest")
     out = tmp_path / "run"
@@ -101,6 +76,7 @@ def test_diagnose_tool_runs_on_a_run_directory(tmp_path, capsys):
     assert "--around" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_maps_tool_prints_the_three_shares_per_run_set(tmp_path, capsys):
     tool = load_tool("maps_of_runs")
     a, b = tmp_path / "a", tmp_path / "b"
@@ -134,6 +110,7 @@ def test_maps_tool_prints_the_three_shares_per_run_set(tmp_path, capsys):
         assert err.startswith("maps_of_runs: error: ") and err.count("\n") == 1, err
 
 
+@pytest.mark.slow
 def test_tables_of_runs_prints_the_stress_tables_and_their_rule(tmp_path, capsys):
     """Every column of Table 1 and the two stress tables per set, and with --floors (a stage of the
     same settings) the count of columns that meet issue 25's rule, computed from the printed MSEs."""
@@ -212,6 +189,7 @@ def test_goal_grid_tool_writes_the_maps_goals_as_a_goals_file(tmp_path, capsys):
         assert err.startswith("goal_grid: error: ") and err.count("\n") == 1, err
 
 
+@pytest.mark.slow
 def test_score_command_pools_seeds_and_reports_the_mean_over_joints(tmp_path, capsys):
     from warp_critic.cli.main import main
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
@@ -276,8 +254,9 @@ def test_score_command_pools_seeds_and_reports_the_mean_over_joints(tmp_path, ca
     assert again in text and "| paper (Table 1) | MSE | 0.02(0.02) | 0.05(0.04) |" in again
 
 
+@pytest.mark.slow
 def test_benchmark_quick_version_trains_two_seeds_and_prints_the_pooled_table(tmp_path, capsys):
-    tool = load_tool("bench_metatrain")
+    tool = load_tool("bench_metatrain", "bench")
     assert (
         tool.main(
             [
@@ -319,7 +298,7 @@ def test_benchmark_quick_version_trains_two_seeds_and_prints_the_pooled_table(tm
 def test_tools_print_one_line_errors_with_exit_code_2(tmp_path, capsys):
     from warp_critic.cli.main import main
 
-    bench = load_tool("bench_metatrain")
+    bench = load_tool("bench_metatrain", "bench")
     # a bad value is refused by the library under its field name; the command names its flag
     assert main(["score", str(tmp_path), "--goal-noise", "sphere"]) == 2
     err = capsys.readouterr().err
@@ -344,7 +323,7 @@ def test_tools_print_one_line_errors_with_exit_code_2(tmp_path, capsys):
 
 
 def test_no_tool_deletes_run_directories_or_edits_sys_path():
-    for path in sorted((ROOT / "tools").glob("*.py")):
+    for path in sorted([*(ROOT / "tools").glob("*.py"), *(ROOT / "bench").glob("*.py")]):
         src = path.read_text()
         assert "rmtree" not in src and "os.remove" not in src, path.name
         assert "sys.path" not in src, path.name
@@ -357,7 +336,7 @@ def test_no_tool_deletes_run_directories_or_edits_sys_path():
 
 
 def test_bench_baselines_refuses_existing_directories_that_are_not_its_runs(tmp_path, capsys):
-    tool = load_tool("bench_baselines")
+    tool = load_tool("bench_baselines", "bench")
     # a directory with someone's files: refused in one line, nothing touched
     (tmp_path / "reacher-ddpg").mkdir()
     (tmp_path / "reacher-ddpg" / "notes.txt").write_text("mine")
@@ -407,8 +386,9 @@ def test_bench_baselines_refuses_existing_directories_that_are_not_its_runs(tmp_
     assert "run directory not found" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_bench_baselines_trains_then_only_meta_tests_a_complete_run(tmp_path, capsys):
-    tool = load_tool("bench_baselines")
+    tool = load_tool("bench_baselines", "bench")
     argv = [
         "--scenes",
         "reacher",
@@ -506,6 +486,7 @@ def test_protocol_refuses_bad_run_directories_before_any_work(tmp_path):
         run_protocol(ProtocolConfig(run_dirs=[str(tmp_path / "empty")]))
 
 
+@pytest.mark.slow
 def test_protocol_pools_runs_and_checks_training_goal_indices(tmp_path):
     from warp_critic.evaluation.protocol import (
         ProtocolConfig,
@@ -682,22 +663,7 @@ def test_unknown_preset_lists_the_known_ones():
         assert e.value.field == "preset" and all(name in e.value.problem for name in PRESETS)
 
 
-def test_cpu_thread_probe_splits_the_worlds_into_two_shards_bitwise(capsys):
-    probe = load_tool("probe_cpu_threads")
-    # in this process: both shards, one after the other and in two threads, equal one simulator
-    r = probe.run_case(tile=False, worlds=3, steps=2, repeats=1)
-    assert r["serial_bitwise"] and r["threads_bitwise"], r
-    assert min(r["one"], r["serial"], r["threads"]) > 0
-    # the tool's table, each case in its own process
-    assert probe.main(["--paths", "dense", "--worlds", "2", "--steps", "1", "--repeats", "1"]) == 0
-    rows = [ln for ln in capsys.readouterr().out.splitlines() if ln.startswith("dense")]
-    assert len(rows) == 1 and rows[0].count("(bitwise)") == 2, rows
-    with pytest.raises(SystemExit) as e:
-        probe.main(["--paths", "gemm"])
-    assert e.value.code == 2 and "--paths" in capsys.readouterr().err
-
-
-# string literals that name a tools/ file and are no message to a user: the comment written into
+# string literals that name a tools/ or bench/ file and are no message to a user: the comment written into
 # every generated scene (a developer regenerates scenes/ with that script), and the report's text
 # on how its reachability filter was found (a diagnostic for readers of the report)
 NOT_MESSAGES = {
@@ -707,7 +673,8 @@ NOT_MESSAGES = {
 
 
 def tools_in_strings(source: str) -> list[str]:
-    """The string literals of ``source`` (docstrings aside) that name a file under ``tools/``."""
+    """The string literals of ``source`` (docstrings aside) that name a file under ``tools/`` or
+    ``bench/``."""
     import ast
 
     tree = ast.parse(source)
@@ -722,12 +689,13 @@ def tools_in_strings(source: str) -> list[str]:
         if isinstance(node, ast.Constant)
         and isinstance(node.value, str)
         and id(node) not in docstrings
-        and re.search(r"tools/\w+\.py", node.value)
+        and re.search(r"(?:tools|bench)/\w+\.py", node.value)
     ]
 
 
+@pytest.mark.slow
 def test_no_message_in_the_package_names_a_tools_file():
-    """pip installs the package, not tools/: a message that sends a user to a script there sends
+    """pip installs the package, not tools/ or bench/: a message that sends a user to a script there sends
     them nowhere (the commands are ``warp-critic identify``, ``warp-critic score``, ...)."""
     assert tools_in_strings('raise UserError(f"{run}: see tools/identify.py")') == [
         ": see tools/identify.py"

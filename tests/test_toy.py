@@ -40,6 +40,7 @@ def test_closed_forms_are_what_the_formulas_say(s0, g):
     assert cf["ours"] == pytest.approx(cf["optimal"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("s0,g", PAIRS)
 def test_loops_converge_to_the_closed_forms(s0, g):
     cf = closed_form(s0, g)
@@ -75,6 +76,7 @@ def test_converged_critics(s0, g):
     np.testing.assert_allclose(tr_m["phi"][:20] + tr_m["beta"][:20], 0.5, atol=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("s0,g", PAIRS)
 def test_autograd_critic_fits_match_closed_form(s0, g):
     thetas = default_thetas(s0, g, 60)
@@ -144,6 +146,7 @@ def test_curves_stationary_points_for_the_paper_example():
     assert len(fixed) == 1 and fixed[0][0] == pytest.approx(4.0, abs=1e-6)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("s0,g", PAIRS)
 def test_supervised_curve_zeros_are_the_loop_fixed_points(s0, g):
     thetas = default_thetas(s0, g)
@@ -175,6 +178,7 @@ def test_paper_printed_meta_critic_formula_is_not_a_fixed_point():
     assert theta == pytest.approx(closed_form(s0, g)["meta_critic"], abs=1e-8)
 
 
+@pytest.mark.slow
 def test_degenerate_fixed_points_and_initialisations():
     s0, g = -6.0, 0.0
     # ours: c = 0 makes the inner gradient vanish for every phi -> stays at -2 s0/3 = 4
@@ -196,6 +200,7 @@ def test_degenerate_fixed_points_and_initialisations():
     assert byv[("ours", 2.0)]["kind"] == "attracting" and byv[("ours", 2.0)]["distance"] < 1e-9
 
 
+@pytest.mark.slow
 def test_run_toy_writes_outputs(tmp_path, capsys):
     res = run_toy(tmp_path)
     out = capsys.readouterr().out

@@ -3,52 +3,25 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 from conftest import KUKA, REACHER
+from helpers import TINY_TRAIN as TINY
+from helpers import tiny_cfg
 
 from warp_critic.cli.main import main
 from warp_critic.core.errors import UserError
 from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
 from warp_critic.methods import ours as train
-from warp_critic.methods.ours import TrainConfig
 from warp_critic.physics import bridge
 from warp_critic.physics.load import load_scene
 from warp_critic.running.recording import read_entity_paths, read_times
 from warp_critic.running.rundir import load_checkpoint
 
-TINY = [
-    "--goals",
-    "0.5,0.3;-0.4,0.2",
-    "--worlds-per-goal",
-    "2",
-    "--horizon",
-    "6",
-    "--device",
-    "cpu",
-]
 
-
-def tiny_cfg(out: Path, **kw) -> TrainConfig:
-    cfg = TrainConfig(
-        scene=REACHER,
-        goals=[[0.5, 0.3], [-0.4, 0.2]],
-        worlds_per_goal=2,
-        horizon=6,
-        iterations=3,
-        device="cpu",
-        out=str(out),
-        checkpoint_every=1,
-        record_every=2,
-    )
-    for k, v in kw.items():
-        setattr(cfg, k, v)
-    return cfg
-
-
+@pytest.mark.slow
 def test_meta_train_cli_writes_run_directory_and_resumes(tmp_path, capsys):
     out = tmp_path / "run"
     assert main(["meta-train", REACHER, *TINY, "--iterations", "3", "--out", str(out)]) == 0
@@ -113,6 +86,7 @@ def test_meta_train_cli_writes_run_directory_and_resumes(tmp_path, capsys):
     assert torch.load(moved / "checkpoint.pt", weights_only=False)["config"]["out"] == str(moved)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("extra", [{}, {"policy_lifetime": 3, "start_std": 0.2}])
 def test_interrupted_run_resumes_exactly_on_cpu(tmp_path, extra):
     straight = train.meta_train(tiny_cfg(tmp_path / "a", iterations=4, **extra), progress=False)
@@ -205,6 +179,7 @@ def test_outer_gradient_reaches_the_critic_through_model_and_inner_update(tmp_pa
     assert float((g_w * direction).sum()) == pytest.approx(fd, rel=0.05, abs=1e-6)
 
 
+@pytest.mark.slow
 def test_meta_test_uses_no_model_gradient(tmp_path, monkeypatch, capsys):
     out = tmp_path / "run"
     train.meta_train(tiny_cfg(out, iterations=2), progress=False)
@@ -286,6 +261,7 @@ def test_meta_test_records_each_goal_before_and_after_and_its_errors(
     assert a == b and "recording" not in a
 
 
+@pytest.mark.slow
 def test_divergence_stops_with_iteration_and_keeps_last_good_checkpoint(
     tmp_path, monkeypatch, capsys
 ):
@@ -400,6 +376,7 @@ def test_help_and_version(capsys):
         assert flag in text
 
 
+@pytest.mark.slow
 def test_relative_critic_run_meta_tests_from_its_checkpoint(tmp_path):
     out = tmp_path / "rel"
     train.meta_train(
@@ -413,6 +390,7 @@ def test_relative_critic_run_meta_tests_from_its_checkpoint(tmp_path):
     assert res["mean"] >= 0
 
 
+@pytest.mark.slow
 def test_staggered_policy_lifetime_continues_each_policy_until_it_is_replaced(tmp_path):
     """lifetime 2, 2 worlds per goal: slot 0 is fresh at even iterations, slot 1 at odd ones."""
     seen = []
@@ -436,6 +414,7 @@ def test_staggered_policy_lifetime_continues_each_policy_until_it_is_replaced(tm
     assert res["policy_steps"] == ckpt["config"]["inner_steps"] * 2
 
 
+@pytest.mark.slow
 def test_home_starts_keep_some_worlds_at_the_home_pose(tmp_path, capsys):
     seen = []
     train.meta_train(
@@ -466,6 +445,7 @@ def test_home_starts_keep_some_worlds_at_the_home_pose(tmp_path, capsys):
     assert "--home-starts" in capsys.readouterr().err and not (tmp_path / "bad").exists()
 
 
+@pytest.mark.slow
 def test_seeds_batched_in_one_process_equal_single_seed_runs(tmp_path):
     # three seeds share one simulator and one stacked critic; each seed's run directory holds what a
     # run of that seed alone holds (random starts and two inner steps exercise every random draw)

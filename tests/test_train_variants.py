@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import torch
 from conftest import REACHER
+from helpers import variants_train_argv
 
 from warp_critic.core.errors import FieldError
 from warp_critic.physics.load import load_scene
@@ -99,12 +100,13 @@ def test_groups_are_alternatives_one_per_world_in_turn():
     assert not np.isnan(draw(flat, 8, seed=2, iteration=0)).any()
 
 
+@pytest.mark.slow
 def test_grouped_draws_train_with_nulls_in_the_metrics(tmp_path):
     from warp_critic.cli.main import main
 
     text = "arm1.mass=0.25..6 | arm2.stretch=0.7..2"
     out = tmp_path / "run"
-    assert main(_train(out, "--seed", "1", ranges=text, iterations=2)) == 0
+    assert main(variants_train_argv(out, "--seed", "1", ranges=text, iterations=2)) == 0
     rows = _rows(out)
     ranges = parse_ranges(text)
     for it, row in enumerate(rows):
@@ -168,45 +170,17 @@ def _rows(run: Path) -> list[dict]:
     return [json.loads(line) for line in (run / "metrics.jsonl").read_text().splitlines() if line]
 
 
-def _train(  # the ranges hold under saturated torques at this dt and horizon (physics/stability)
-    out: Path,
-    *extra: str,
-    iterations: int = 4,
-    ranges: str = "arm1.mass=0.25..6; arm2.stretch=0.7..2",
-) -> list[str]:
-    return [
-        "meta-train",
-        REACHER,
-        "--iterations",
-        str(iterations),
-        "--horizon",
-        "8",
-        "--worlds-per-goal",
-        "2",
-        "--lr-schedule",
-        "constant",
-        "--checkpoint-every",
-        "2",
-        "--train-variants",
-        ranges,
-        "--device",
-        "cpu",
-        "--out",
-        str(out),
-        *extra,
-    ]
-
-
+@pytest.mark.slow
 def test_draws_in_the_metrics_batched_seeds_and_resume(tmp_path):
     """Each row holds its worlds' draws; batched seeds draw what single-seed runs draw; a run
     stopped at iteration 2 and resumed to 4 draws and trains exactly as the uninterrupted one."""
     from warp_critic.cli.main import main
 
     ranges = parse_ranges("arm1.mass=0.25..6; arm2.stretch=0.7..2")
-    assert main(_train(tmp_path / "batched", "--seeds", "3,4")) == 0
-    assert main(_train(tmp_path / "single", "--seed", "4")) == 0
-    assert main(_train(tmp_path / "half", "--seed", "4", iterations=2)) == 0
-    assert main(_train(tmp_path / "half", "--seed", "4", "--resume")) == 0
+    assert main(variants_train_argv(tmp_path / "batched", "--seeds", "3,4")) == 0
+    assert main(variants_train_argv(tmp_path / "single", "--seed", "4")) == 0
+    assert main(variants_train_argv(tmp_path / "half", "--seed", "4", iterations=2)) == 0
+    assert main(variants_train_argv(tmp_path / "half", "--seed", "4", "--resume")) == 0
     single = _rows(tmp_path / "single")
     assert len(single) == 4
     for it, row in enumerate(single):
@@ -224,6 +198,8 @@ def test_draws_in_the_metrics_batched_seeds_and_resume(tmp_path):
     assert config["train_variants"] == "arm1.mass=0.25..6; arm2.stretch=0.7..2"
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 @pytest.mark.parametrize(
     "value, words",
     [
@@ -286,6 +262,7 @@ def test_history_features_and_the_history_critic():
     assert torch.allclose(critic_loss(critics[0], policy, params, traj, g[0]), expect)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("inputs, width", [("history", 5 * 2), ("pose-dynamics", 4 * 2 + 20)])
 def test_history_and_told_critics_train_resume_and_meta_test(tmp_path, inputs, width):
     """The critics that read more than the states (the last step's response; the world's model,
@@ -295,7 +272,7 @@ def test_history_and_told_critics_train_resume_and_meta_test(tmp_path, inputs, w
     from warp_critic.cli.main import main
 
     run = tmp_path / "run"
-    argv = _train(run, "--critic-input", inputs, iterations=2)
+    argv = variants_train_argv(run, "--critic-input", inputs, iterations=2)
     assert main(argv) == 0
     ckpt = torch.load(run / "checkpoint.pt", weights_only=True)
     assert ckpt["critic_input"] == inputs

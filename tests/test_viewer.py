@@ -24,11 +24,16 @@ from conftest import REACHER
 from warp_critic.cli.main import main
 
 RERUN = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
-pytestmark = pytest.mark.skipif(
-    shutil.which("xvfb-run") is None or RERUN is None,
-    reason="the rerun viewer cannot start here: no xvfb-run (apt-get install xvfb "
-    "mesa-vulkan-drivers) or no rerun binary",
-)
+pytestmark = [
+    pytest.mark.viewer,
+    pytest.mark.xdist_group("test_viewer"),  # one worker: the recordings, made once
+    pytest.mark.subprocess,
+    pytest.mark.skipif(
+        shutil.which("xvfb-run") is None or RERUN is None,
+        reason="the rerun viewer cannot start here: no xvfb-run (apt-get install xvfb "
+        "mesa-vulkan-drivers) or no rerun binary",
+    ),
+]
 WINDOW = "1600x1000"
 
 # panels as fractions (left, top, right, bottom) of the screenshot, inside their title bars and axes

@@ -4,9 +4,9 @@ Runs, within a time budget (default 8 minutes), and writes one JSON file plus a 
 
 1. ``tests/test_cuda.py`` (CUDA against CPU gradients, graph replay against direct launches); on a
    machine without CUDA every test there is skipped and the table says so;
-2. ``tools/bench_dynamics.py``'s differentiable KUKA rollout at 1 to 16,384 worlds on the device and
+2. ``bench/bench_dynamics.py``'s differentiable KUKA rollout at 1 to 16,384 worlds on the device and
    on this machine's CPU, side by side (forward+backward world-steps per second);
-3. ``tools/bench_speed.py``'s meta-training iteration (KUKA, Table 1 preset, 1 seed; the reacher
+3. ``bench/bench_speed.py``'s meta-training iteration (KUKA, Table 1 preset, 1 seed; the reacher
    in ``--tiny``) on the device
    with graph replay and with direct launches, and on the CPU with graph replay.
 
@@ -38,8 +38,8 @@ KIND = "warp-critic/gpu-check-v1"  # the "kind" of the JSON written; an earlier 
 
 
 def _tool(name: str):
-    """A sibling script of ``tools/`` as a module (loaded by path, so the import search path stays as it is)."""
-    spec = importlib.util.spec_from_file_location(f"_{PROG}_{name}", ROOT / "tools" / f"{name}.py")
+    """A benchmark of ``bench/`` as a module (loaded by path, so the import search path stays as it is)."""
+    spec = importlib.util.spec_from_file_location(f"_{PROG}_{name}", ROOT / "bench" / f"{name}.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

@@ -25,7 +25,7 @@ PROG = "probe_identifier"
 def main(argv=None) -> int:
     p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
     p.add_argument(
-        "run_dir", help="an identified run (tools/identify.py, or a stage's -identified)"
+        "run_dir", help="an identified run (warp-critic identify, or a stage's -identified)"
     )
     p.add_argument(
         "--variant",

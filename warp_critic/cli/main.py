@@ -109,13 +109,7 @@ def _not_owned(path, what: str) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from warp_critic.analysis.landscape import command as landscape
-    from warp_critic.analysis.toy import command as toy
-    from warp_critic.evaluation.metatest import MetaTestConfig
-    from warp_critic.methods import methods
-    from warp_critic.methods.baseline_config import META_CRITIC_FIELDS
-    from warp_critic.methods.ours import TrainConfig
-
+    """The ``warp-critic`` parser: every command's flags, in ``--help`` order."""
     p = Parser(
         prog="warp-critic",
         description="Model-based meta-learning of critics for policy gradients "
@@ -123,6 +117,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--version", action="version", version=f"warp-critic {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND", parser_class=Parser)
+    _add_meta_train(sub)
+    _add_meta_test(sub)
+    _add_baseline(sub)
+    import_robot.add_parser(sub)
+    _add_analyze(sub)
+    _add_commands(sub)
+    return p
+
+
+def _add_meta_train(sub) -> None:
+    from warp_critic.methods.ours import TrainConfig
 
     mt = sub.add_parser(
         "meta-train",
@@ -136,6 +141,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_dataclass_arguments(mt, TrainConfig, skip=("scene",))
     mt.set_defaults(func=cmd_meta_train)
+
+
+def _add_meta_test(sub) -> None:
+    from warp_critic.evaluation.metatest import MetaTestConfig
 
     te = sub.add_parser(
         "meta-test",
@@ -153,6 +162,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="write no rerun recording (default: OUT with the suffix .rrd, e.g. RUN_DIR/metatest.rrd)",
     )
     te.set_defaults(func=cmd_meta_test)
+
+
+def _add_baseline(sub) -> None:
+    from warp_critic.methods import methods
 
     baselines = methods(baseline=True)
     bl = sub.add_parser(
@@ -184,7 +197,10 @@ def build_parser() -> argparse.ArgumentParser:
                     action.help = argparse.SUPPRESS
         one.set_defaults(func=cmd_baseline)
 
-    import_robot.add_parser(sub)
+
+def _add_analyze(sub) -> None:
+    from warp_critic.analysis.landscape import command as landscape
+    from warp_critic.analysis.toy import command as toy
 
     an = sub.add_parser(
         "analyze",
@@ -202,6 +218,9 @@ def build_parser() -> argparse.ArgumentParser:
     landscape.add_arguments(al)
     al.set_defaults(func=landscape.run_from_args)
 
+
+def _add_commands(sub) -> None:
+    """The commands that live in their own module of ``warp_critic.cli``."""
     from warp_critic.cli import budget as budget_cli
     from warp_critic.cli import identify as identify_cli
     from warp_critic.cli import reproduce as reproduce_cli
@@ -216,7 +235,6 @@ def build_parser() -> argparse.ArgumentParser:
         sp = sub.add_parser(name, help=module.HELP, description=module.DESCRIPTION)
         module.add_arguments(sp)
         sp.set_defaults(func=module.run_from_args)
-    return p
 
 
 def main(argv: list[str] | None = None) -> int:

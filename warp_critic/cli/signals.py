@@ -47,9 +47,12 @@ def _handler(signum, frame) -> None:
 
 def stop_now() -> None:
     """Write the one line (unless the command wrote it) and exit 130 without clean-up."""
+    # stderr is silenced while Warp starts (core/runtime.py keeps a copy); not imported: not started
+    runtime = sys.modules.get("warp_critic.core.runtime")
+    fd = runtime.stderr_fd() if runtime is not None else 2
     if not _said:
         try:
-            os.write(2, f"warp-critic: interrupted{noted()}\n".encode(errors="replace"))
+            os.write(fd, f"warp-critic: interrupted{noted()}\n".encode(errors="replace"))
         except OSError:
             pass
     os._exit(EXIT_INTERRUPTED)

@@ -27,6 +27,15 @@ MAX_SEEDS = 100
 _warp_started = False
 
 
+#: The file descriptor of the process's stderr: 2, or a copy of it while Warp starts with 2 silenced.
+_stderr = 2
+
+
+def stderr_fd() -> int:
+    """Where a line for the user goes now (file descriptor 2 is /dev/null while Warp starts)."""
+    return _stderr
+
+
 def init_warp(quiet: bool = True) -> None:
     """Initialise Warp once (later calls return at once), without its banner and without the native
     CUDA-driver warning on GPU-less machines (printed unconditionally to file descriptor 2;
@@ -41,12 +50,15 @@ def init_warp(quiet: bool = True) -> None:
         if hasattr(wp, "LOG_WARNING"):
             wp.config.log_level = wp.LOG_WARNING
         sys.stderr.flush()
+        global _stderr
         saved, devnull = os.dup(2), os.open(os.devnull, os.O_WRONLY)
         try:
+            _stderr = saved  # a signal's one line still reaches the user (cli/signals.py)
             os.dup2(devnull, 2)
             wp.init()
         finally:
             os.dup2(saved, 2)
+            _stderr = 2
             os.close(saved)
             os.close(devnull)
     else:
@@ -87,7 +99,7 @@ def graphs_from_env() -> bool:
     """``$WARP_CRITIC_GRAPHS`` (default ``1``): replay captured Warp graphs in the simulator.
 
     ``0`` issues every Warp launch from Python: the same numbers bit for bit, slower; for debugging
-    and for measuring the replay side by side (``tools/bench_speed.py``).
+    and for measuring the replay side by side (``bench/bench_speed.py``).
     """
     text = os.environ.get(GRAPHS_ENV, "1").strip()
     if text not in ("0", "1"):

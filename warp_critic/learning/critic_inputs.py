@@ -326,7 +326,7 @@ if tuple(CRITIC_INPUTS) != CRITIC_INPUT_NAMES:  # the names the lower layers kno
         f"knows {CRITIC_INPUT_NAMES} (warp_critic.core.critic_input_names)"
     )
 
-#: the layouts told each world's model (privileged: ``tools/identify.py`` estimates it instead)
+#: the layouts told each world's model (privileged: ``warp-critic identify`` estimates it instead)
 TOLD_INPUTS: tuple[str, ...] = tuple(n for n, layout in CRITIC_INPUTS.items() if layout.told)
 
 

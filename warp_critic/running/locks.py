@@ -122,6 +122,12 @@ class FolderLock:
         self._lock = None
 
 
+#: A lock held through this many tries, ``PROBE_WAIT_S`` s apart, has an owner: another process's
+#: :func:`holder` holds it for microseconds (two commands checking one folder at once), an owner for
+#: its whole run.
+PROBE_TRIES, PROBE_WAIT_S = 10, 0.05
+
+
 def holder(folder: str | Path) -> dict | None:
     """Who holds ``folder``'s lock now (the content of its lock file), or ``None`` when nobody does."""
     path = Path(folder) / LOCK
@@ -130,14 +136,17 @@ def holder(folder: str | Path) -> dict | None:
     from filelock import FileLock, Timeout
 
     probe = FileLock(str(path), timeout=0, thread_local=False)
-    try:
-        probe.acquire()
-    except Timeout:
-        return _info(path) or {}
-    except OSError:
+    for _ in range(PROBE_TRIES):
+        try:
+            probe.acquire()
+        except Timeout:
+            time.sleep(PROBE_WAIT_S)
+            continue
+        except OSError:
+            return None
+        probe.release()
         return None
-    probe.release()
-    return None
+    return _info(path) or {}
 
 
 def check_not_owned(path: str | Path, what: str, *, reproduce_ok: bool = False) -> None:

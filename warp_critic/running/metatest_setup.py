@@ -7,6 +7,7 @@ registered (:mod:`warp_critic.running.methods`): ours, or ``L = -Q`` of a baseli
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Any
 
 import torch
 
@@ -136,40 +137,12 @@ def setup_meta_test(tc: MetaTestConfig, gen: torch.Generator | None = None) -> M
     """
     check_fields(tc)
     test_variant = task_variant(tc)  # a bad --variant text fails before the run is read
-    ckpt = RunDir.open(tc.run_dir).load_checkpoint(require=("config", "dof", "scene", "method"))
-    try:
-        cfg = TaskConfig.from_dict(ckpt["config"])
-        check_fields(cfg)
-    except (TypeError, UserError) as e:
-        raise UserError(f"{tc.run_dir}: checkpoint holds an unusable config ({e})") from None
-    scene = find_run_scene(ckpt, tc.run_dir)  # by its content, wherever it is now
-    if scene.name != ckpt["scene"] or scene.dof != ckpt["dof"]:
-        raise UserError(
-            f"{tc.run_dir}: checkpoint is for scene {ckpt['scene']} ({ckpt['dof']} dof), "
-            f"but {cfg.scene} is {scene.name} ({scene.dof} dof)"
-        )
-    if ckpt.get("scene_hash") and getattr(scene, "content_hash", None) not in (
-        None,
-        ckpt["scene_hash"],
-    ):
-        raise UserError(
-            f"{tc.run_dir}: the scene file {cfg.scene} has changed since the run was trained"
-        )
-    if test_variant.changes:  # its link names, masses and lengths against the run's scene
-        scene.world_builder(test_variant)
+    ckpt, cfg, scene = _load_run(tc, test_variant)
     horizon = tc.horizon if tc.horizon is not None else cfg.horizon
 
     if gen is None:
         gen = torch.Generator().manual_seed(check_seed(tc.seed))
-    train_goals = torch.tensor(cfg.goals, dtype=torch.float32)
-    lo = torch.as_tensor(scene.q_lower, dtype=torch.float32)
-    hi = torch.as_tensor(scene.q_upper, dtype=torch.float32)
-    if tc.goals is not None:
-        goals = goals_tensor(tc.goals, scene)
-    else:
-        goals = sample_goals(
-            train_goals, tc.num_goals, tc.goal_std, tc.around, lo, hi, gen, tc.goal_noise
-        )
+    goals = _test_goals(tc, cfg, scene, gen)
     G, K = goals.shape[0], tc.inits
     W = G * K
     check_fits(
@@ -197,19 +170,7 @@ def setup_meta_test(tc: MetaTestConfig, gen: torch.Generator | None = None) -> M
     critic = critic.to(dev)
     for p in critic.parameters():
         p.requires_grad_(False)
-    alpha = tc.alpha if tc.alpha is not None else defaults.get("alpha")
-    steps = tc.policy_steps if tc.policy_steps is not None else defaults.get("steps", 1)
-    if tc.policy_steps is None and int(steps) > MAX_POLICY_STEPS:
-        raise FieldError(
-            "policy_steps",
-            f"{tc.run_dir}: the run's default of {steps} critic-gradient steps per policy (inner "
-            f"steps x policy lifetime) is over the limit of {MAX_POLICY_STEPS}: give at most "
-            f"{MAX_POLICY_STEPS}",
-        )
-    if not (isinstance(alpha, (int, float)) and alpha > 0):
-        raise UserError(
-            f"{tc.run_dir}: the run stores no usable policy learning rate (alpha {alpha!r}); give one"
-        )
+    alpha, steps = _policy_step_settings(tc, defaults)
     q0, qd0 = task.home, torch.zeros_like(task.home)
     policy = MLPPolicy(norm)
     params = {
@@ -233,3 +194,65 @@ def setup_meta_test(tc: MetaTestConfig, gen: torch.Generator | None = None) -> M
         horizon=horizon,
         alpha=alpha,
     )
+
+
+def _load_run(tc: MetaTestConfig, test_variant) -> tuple[dict, Any, Scene]:
+    """The run's checkpoint, its task config (a :class:`TaskConfig` as training filled it in: no
+    ``None`` left) and its scene (found by content), checked against each other and against the
+    test's dynamics variant."""
+    ckpt = RunDir.open(tc.run_dir).load_checkpoint(require=("config", "dof", "scene", "method"))
+    try:
+        cfg = TaskConfig.from_dict(ckpt["config"])
+        check_fields(cfg)
+    except (TypeError, UserError) as e:
+        raise UserError(f"{tc.run_dir}: checkpoint holds an unusable config ({e})") from None
+    scene = find_run_scene(ckpt, tc.run_dir)  # by its content, wherever it is now
+    if scene.name != ckpt["scene"] or scene.dof != ckpt["dof"]:
+        raise UserError(
+            f"{tc.run_dir}: checkpoint is for scene {ckpt['scene']} ({ckpt['dof']} dof), "
+            f"but {cfg.scene} is {scene.name} ({scene.dof} dof)"
+        )
+    if ckpt.get("scene_hash") and getattr(scene, "content_hash", None) not in (
+        None,
+        ckpt["scene_hash"],
+    ):
+        raise UserError(
+            f"{tc.run_dir}: the scene file {cfg.scene} has changed since the run was trained"
+        )
+    if test_variant.changes:  # its link names, masses and lengths against the run's scene
+        scene.world_builder(test_variant)
+    return ckpt, cfg, scene
+
+
+def _test_goals(
+    tc: MetaTestConfig, cfg: TaskConfig, scene: Scene, gen: torch.Generator
+) -> torch.Tensor:
+    """The test's goals (G, dof) in rad (or m): ``tc.goals`` as given, else drawn around the run's
+    training goals within the joint limits."""
+    train_goals = torch.tensor(cfg.goals, dtype=torch.float32)
+    lo = torch.as_tensor(scene.q_lower, dtype=torch.float32)
+    hi = torch.as_tensor(scene.q_upper, dtype=torch.float32)
+    if tc.goals is not None:
+        return goals_tensor(tc.goals, scene)
+    return sample_goals(
+        train_goals, tc.num_goals, tc.goal_std, tc.around, lo, hi, gen, tc.goal_noise
+    )
+
+
+def _policy_step_settings(tc: MetaTestConfig, defaults: dict) -> tuple[float, int]:
+    """The policy learning rate ``alpha`` and the critic-gradient steps per policy: the test's, else
+    the run's defaults, checked."""
+    alpha = tc.alpha if tc.alpha is not None else defaults.get("alpha")
+    steps = tc.policy_steps if tc.policy_steps is not None else defaults.get("steps", 1)
+    if tc.policy_steps is None and int(steps) > MAX_POLICY_STEPS:
+        raise FieldError(
+            "policy_steps",
+            f"{tc.run_dir}: the run's default of {steps} critic-gradient steps per policy (inner "
+            f"steps x policy lifetime) is over the limit of {MAX_POLICY_STEPS}: give at most "
+            f"{MAX_POLICY_STEPS}",
+        )
+    if not (isinstance(alpha, (int, float)) and alpha > 0):
+        raise UserError(
+            f"{tc.run_dir}: the run stores no usable policy learning rate (alpha {alpha!r}); give one"
+        )
+    return alpha, steps

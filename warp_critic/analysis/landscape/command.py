@@ -8,6 +8,7 @@ and what the results mean are in ``docs/landscape.md``.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
 
 from warp_critic.analysis import checks
@@ -23,9 +24,17 @@ __all__ = ["add_arguments", "config_from_args", "run_from_args"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the flags of ``warp-critic analyze landscape`` to ``parser``."""
+    """Add the flags of ``warp-critic analyze landscape`` to ``parser`` (in ``--help`` order)."""
     d = LandscapeConfig()
-    A = parser.add_argument
+    _add_run_flags(parser.add_argument, d)
+    _add_rollout_flags(parser.add_argument, d)
+    _add_goal_flags(parser.add_argument, d)
+    _add_q_sup_flags(parser.add_argument, d)
+    _add_variation_flags(parser.add_argument, d)
+
+
+def _add_run_flags(A: Callable[..., object], d: LandscapeConfig) -> None:
+    """Flags: where the results go, how large the run is, on what device."""
     A(
         "--out",
         type=Path,
@@ -62,6 +71,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="DEV",
         help=f"cpu, cuda or auto (default {d.device})",
     )
+
+
+def _add_rollout_flags(A: Callable[..., object], d: LandscapeConfig) -> None:
+    """Flags: the physics of a rollout and the learning rates of ours."""
     A(
         "--horizon",
         type=int,
@@ -104,6 +117,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="K",
         help=f"random policy initialisations per initial state (worlds = 2K; >= 1; default {d.inits_per_state})",
     )
+
+
+def _add_goal_flags(A: Callable[..., object], d: LandscapeConfig) -> None:
+    """Flags: the goals and initial states of training and of the test."""
     A("--goal", type=str, default="1,1", metavar="X,Y", help="training goal in m (default 1,1)")
     A(
         "--test-goals",
@@ -126,6 +143,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="LR",
         help=f"policy learning rate of Q_sup's policy update (> 0; default {d.sup_alpha})",
     )
+
+
+def _add_q_sup_flags(A: Callable[..., object], d: LandscapeConfig) -> None:
+    """Flags: Q_sup, the supervised critic, and how ours sees the goal."""
     A(
         "--sup-fit-steps",
         type=int,
@@ -148,6 +169,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="how L_critic sees the goal: absolute M(s, a, g) (the paper's) or relative M(s - g, a), "
         "like Q_sup (default absolute)",
     )
+
+
+def _add_variation_flags(A: Callable[..., object], d: LandscapeConfig) -> None:
+    """Flags: training-time variation of goals and starts, and the descent check."""
     A(
         "--train-goals",
         type=str,

@@ -28,6 +28,8 @@ from warp_critic.core.errors import FieldError, UserError
 from warp_critic.core.runtime import check_seed
 
 GOAL_INPUTS = ("absolute", "relative")
+# the landscapes' arrays, in the order the outputs take them
+GRIDS = ("axis", "values", "grads", "goals", "optima")
 SUP_REWARDS = ("terminal", "running")
 
 
@@ -131,8 +133,6 @@ def run_landscape(cfg: LandscapeConfig) -> dict:
     descent ``fractions`` per goal and method, ``goal_names``, ``wall_s`` and ``out``.
     """
     from warp_critic.physics.load import load_scene
-    from warp_critic.physics.scene import Variant
-    from warp_critic.physics.simulator import Simulator
 
     cfg.validate()
     t_start = time.time()
@@ -144,17 +144,45 @@ def run_landscape(cfg: LandscapeConfig) -> dict:
             f"{cfg.scene}: the landscape analysis needs a 2-DoF scene, got {scene.dof} DoF"
         )
     out.mkdir(parents=True, exist_ok=True)
-    gen = torch.Generator().manual_seed(cfg.seed)
-    init_states = np.asarray(cfg.init_states, dtype=np.float64)
-    W = len(init_states) * cfg.inits_per_state
-    train_sim = Simulator(
+    trained = _train_critics(cfg, scene, log)
+    fields = _landscapes(cfg, scene, trained)
+    _write_outputs(out, cfg, trained, fields)
+    wall = time.time() - t_start
+    names = goal_names(len(fields["goals"]))
+    if not cfg.quiet:
+        _print_summary(out, cfg, fields, names, wall)
+    return {
+        **{k: fields[k] for k in (*GRIDS, "fractions")},
+        **{k: trained[k] for k in ("trace_new", "trace_before", "ours_loss", "sup_loss")},
+        "goal_names": names,
+        "wall_s": wall,
+        "out": out,
+    }
+
+
+def _simulator(cfg: LandscapeConfig, scene, worlds: int, differentiable: bool):
+    """``worlds`` copies of the point mass at the analysis' time step."""
+    from warp_critic.physics.scene import Variant
+    from warp_critic.physics.simulator import Simulator
+
+    return Simulator(
         scene,
-        [Variant()] * W,
+        [Variant()] * worlds,
         dt=cfg.dt,
         substeps=cfg.substeps,
         device=cfg.device,
-        differentiable=True,
+        differentiable=differentiable,
     )
+
+
+def _train_critics(cfg: LandscapeConfig, scene, log) -> dict:
+    """Meta-train L_critic (ours) and train Q_sup on the training worlds (``len(init_states) x
+    inits_per_state``): the critics, ours' policy traces and both loss curves, and the initial states
+    as an array (K, 2) in m."""
+    gen = torch.Generator().manual_seed(cfg.seed)
+    init_states = np.asarray(cfg.init_states, dtype=np.float64)
+    W = len(init_states) * cfg.inits_per_state
+    train_sim = _simulator(cfg, scene, W, differentiable=True)
     dev = train_sim.torch_device
     q0 = torch.tensor(
         np.repeat(init_states, cfg.inits_per_state, axis=0), dtype=torch.float32, device=dev
@@ -170,27 +198,29 @@ def run_landscape(cfg: LandscapeConfig) -> dict:
     critic, trace_before, trace_new, ours_loss = train_ours(cfg, train_sim, q0, goal, gen, log)
     log(f"training Q_sup (Algorithm 1): {cfg.iterations} iterations, {W} worlds")
     qsup, sup_thetas, sup_loss = train_sup(cfg, train_sim, q0, goal, gen, log)
+    return {
+        "init_states": init_states,
+        "critic": critic,
+        "trace_before": trace_before,
+        "trace_new": trace_new,
+        "ours_loss": ours_loss,
+        "qsup": qsup,
+        "sup_thetas": sup_thetas,
+        "sup_loss": sup_loss,
+    }
 
+
+def _landscapes(cfg: LandscapeConfig, scene, trained: dict) -> dict:
+    """Both critics' values and gradients over the ``grid x grid`` policy parameters for the training
+    goal and the test goals, the analytic optima theta* and the descent fractions per goal and method."""
     P = cfg.grid**2
-    eval_sim = Simulator(
-        scene,
-        [Variant()] * P,
-        dt=cfg.dt,
-        substeps=cfg.substeps,
-        device=cfg.device,
-        differentiable=False,
-    )
-    grad_sim = Simulator(
-        scene,
-        [Variant()] * P,
-        dt=cfg.dt,
-        substeps=cfg.substeps,
-        device=cfg.device,
-        differentiable=True,
-    )
+    eval_sim = _simulator(cfg, scene, P, differentiable=False)
+    grad_sim = _simulator(cfg, scene, P, differentiable=True)
     goals = np.asarray([cfg.goal, *cfg.test_goals], dtype=np.float64)
-    q0_eval = init_states[0]
-    axis, values, grads = compute_landscapes(cfg, eval_sim, grad_sim, critic, qsup, goals, q0_eval)
+    q0_eval = trained["init_states"][0]
+    axis, values, grads = compute_landscapes(
+        cfg, eval_sim, grad_sim, trained["critic"], trained["qsup"], goals, q0_eval
+    )
     optima = np.stack(
         [analytic_optimum(g, q0_eval, cfg.dt, cfg.horizon, cfg.substeps) for g in goals]
     )
@@ -203,51 +233,6 @@ def run_landscape(cfg: LandscapeConfig) -> dict:
     ]
     if not (np.isfinite(values).all() and np.isfinite(grads).all()):
         raise UserError("non-finite landscape values: lower --alpha / --lr or the --range")
-    write_recording(
-        out / "landscape.rrd",
-        cfg,
-        axis,
-        values,
-        grads,
-        goals,
-        optima,
-        trace_new,
-        ours_loss,
-        sup_loss,
-        fractions,
-    )
-    write_figures(out, cfg, axis, values, grads, goals, optima, trace_new, init_states, fractions)
-    np.savez(
-        out / "landscape.npz",
-        axis=axis,
-        values=values,
-        grads=grads,
-        goals=goals,
-        optima=optima,
-        trace_new=trace_new,
-        trace_before=trace_before,
-        ours_loss=ours_loss,
-        sup_loss=sup_loss,
-        sup_thetas=sup_thetas,
-    )
-    wall = time.time() - t_start
-    names = goal_names(len(goals))
-    if not cfg.quiet:
-        print(
-            f"descent success fraction (normalised-gradient descent on the field from each of the "
-            f"{P} grid points, success = within {cfg.tolerance:g} N of theta*):"
-        )
-        print(f"  {'goal':<22} {'theta*':>16} " + " ".join(f"{m:>9}" for m in METHODS))
-        for gi, gn in enumerate(names):
-            g = goals[gi]
-            print(
-                f"  {gn + f' ({g[0]:g},{g[1]:g})':<22} {f'({optima[gi][0]:.2f},{optima[gi][1]:.2f})':>16} "
-                + " ".join(f"{fractions[gi][m]:9.3f}" for m in METHODS)
-            )
-        print(
-            f"wrote {out / 'landscape.rrd'}, {out / 'landscape.png'}, {out / 'exploration.png'} "
-            f"({wall:.1f} s)"
-        )
     return {
         "axis": axis,
         "values": values,
@@ -255,11 +240,45 @@ def run_landscape(cfg: LandscapeConfig) -> dict:
         "goals": goals,
         "optima": optima,
         "fractions": fractions,
-        "trace_new": trace_new,
-        "trace_before": trace_before,
-        "ours_loss": ours_loss,
-        "sup_loss": sup_loss,
-        "goal_names": names,
-        "wall_s": wall,
-        "out": out,
     }
+
+
+def _write_outputs(out: Path, cfg: LandscapeConfig, trained: dict, fields: dict) -> None:
+    """``landscape.rrd``, ``landscape.png``, ``exploration.png`` and ``landscape.npz`` in ``out``."""
+    f, t = fields, trained
+    grids = (f["axis"], f["values"], f["grads"], f["goals"], f["optima"])  # in GRIDS' order
+    write_recording(
+        out / "landscape.rrd",
+        cfg,
+        *grids,
+        t["trace_new"],
+        t["ours_loss"],
+        t["sup_loss"],
+        f["fractions"],
+    )
+    write_figures(out, cfg, *grids, t["trace_new"], t["init_states"], f["fractions"])
+    np.savez(
+        out / "landscape.npz",
+        **dict(zip(GRIDS, grids)),
+        **{k: t[k] for k in ("trace_new", "trace_before", "ours_loss", "sup_loss", "sup_thetas")},
+    )
+
+
+def _print_summary(out: Path, cfg: LandscapeConfig, fields: dict, names, wall: float) -> None:
+    """The descent success fractions per goal and method, and the files written."""
+    goals, optima, fractions = fields["goals"], fields["optima"], fields["fractions"]
+    print(
+        f"descent success fraction (normalised-gradient descent on the field from each of the "
+        f"{cfg.grid**2} grid points, success = within {cfg.tolerance:g} N of theta*):"
+    )
+    print(f"  {'goal':<22} {'theta*':>16} " + " ".join(f"{m:>9}" for m in METHODS))
+    for gi, gn in enumerate(names):
+        g = goals[gi]
+        print(
+            f"  {gn + f' ({g[0]:g},{g[1]:g})':<22} {f'({optima[gi][0]:.2f},{optima[gi][1]:.2f})':>16} "
+            + " ".join(f"{fractions[gi][m]:9.3f}" for m in METHODS)
+        )
+    print(
+        f"wrote {out / 'landscape.rrd'}, {out / 'landscape.png'}, {out / 'exploration.png'} "
+        f"({wall:.1f} s)"
+    )

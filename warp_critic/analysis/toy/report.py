@@ -301,6 +301,17 @@ def run_toy(
     text, md = _format_table(result)
     result["table"], result["table_markdown"] = text, md
 
+    result["files"] = _write_outputs(out_dir, cv, traces, result, s0, g, recorder_factory)
+    if verbose:
+        _print_report(result, s0, g, alpha, iters)
+    return result
+
+
+def _write_outputs(
+    out_dir: Path, cv: dict, traces: dict, result: dict, s0: float, g: float, recorder_factory
+) -> dict:
+    """The figures ``toy_{method}.png`` and the recording ``toy.rrd`` in ``out_dir``: their paths by
+    method (and ``rrd``)."""
     files = {m: out_dir / f"toy_{m}.png" for m in METHODS}
     for m in METHODS:
         _plot_method(files[m], m, cv, result, s0, g)
@@ -312,34 +323,36 @@ def run_toy(
     finally:
         rec.close()
     files["rrd"] = rrd
-    result["files"] = files
+    return files
 
-    if verbose:
-        print(f"1-D toy example (s0={s0:g}, g={g:g}, T={T}, gamma={GAMMA:g}, alpha={alpha:g})")
-        print(text)
-        print(
-            "stationary points of the policy gradient (critic fitted at each theta): "
-            + "; ".join(
-                f"{m}: " + ", ".join(f"{x:.4g} ({k})" for x, k in result["stationary_points"][m])
-                for m in METHODS
-            )
+
+def _print_report(result: dict, s0: float, g: float, alpha: float, iters: int) -> None:
+    """The table, the stationary points, the paper's Meta-Critic formula and the init sweep."""
+    files = result["files"]
+    print(f"1-D toy example (s0={s0:g}, g={g:g}, T={T}, gamma={GAMMA:g}, alpha={alpha:g})")
+    print(result["table"])
+    print(
+        "stationary points of the policy gradient (critic fitted at each theta): "
+        + "; ".join(
+            f"{m}: " + ", ".join(f"{x:.4g} ({k})" for x, k in result["stationary_points"][m])
+            for m in METHODS
         )
-        print(
-            f"paper's printed Meta-Critic formula gives theta = {result['paper_meta_critic_theta']:.4g} "
-            f"(not a fixed point; the loop converges to {th_m:.4g})"
-        )
-        n_sweep = min(iters, 200)
-        print(
-            f"init sweep, at most {n_sweep} iterations (theta0 -> theta; '(~fixed point, kind)' when "
-            "not within 1e-6 of a listed fixed point):"
-        )
-        for variant in dict.fromkeys(r["variant"] for r in result["init_sweep"]):
-            cells = [
-                f"{r['theta0']:.3g}->{r['theta']:.4g}"
-                + ("" if r["distance"] < 1e-6 else f"(~{r['nearest']:.3g},{r['kind']})")
-                for r in result["init_sweep"]
-                if r["variant"] == variant
-            ]
-            print(f"  {variant:<20} " + "  ".join(cells))
-        print(f"wrote {rrd} and {', '.join(str(files[m]) for m in METHODS)}")
-    return result
+    )
+    print(
+        f"paper's printed Meta-Critic formula gives theta = {result['paper_meta_critic_theta']:.4g} "
+        f"(not a fixed point; the loop converges to {result['numerical']['meta_critic']:.4g})"
+    )
+    n_sweep = min(iters, 200)
+    print(
+        f"init sweep, at most {n_sweep} iterations (theta0 -> theta; '(~fixed point, kind)' when "
+        "not within 1e-6 of a listed fixed point):"
+    )
+    for variant in dict.fromkeys(r["variant"] for r in result["init_sweep"]):
+        cells = [
+            f"{r['theta0']:.3g}->{r['theta']:.4g}"
+            + ("" if r["distance"] < 1e-6 else f"(~{r['nearest']:.3g},{r['kind']})")
+            for r in result["init_sweep"]
+            if r["variant"] == variant
+        ]
+        print(f"  {variant:<20} " + "  ".join(cells))
+    print(f"wrote {files['rrd']} and {', '.join(str(files[m]) for m in METHODS)}")

@@ -68,7 +68,7 @@ TASK_FIELDS = ("start_std", "home_starts")
 BASELINE_ITERATIONS = {"reacher": 1600, "kuka": 1500}
 #: Baseline alpha searches every this many iterations (was every 10, at 300 iterations).
 BASELINE_CHECKPOINT_EVERY = 50
-#: The baselines' settings adopted from the committed search (``tools/tune_baselines.py``, its output in
+#: The baselines' settings adopted from the committed search (``bench/tune_baselines.py``, its output in
 #: ``docs/paper/tuning/``): scene -> method -> the published values replaced, only where a complete
 #: one-at-a-time search found a setting that passes the tool's adoption rule, the same for both
 #: baselines (better than the published setting by more than half its seed spread; the scores are in docs/paper/README.md, "the baselines'

@@ -14,9 +14,9 @@ one is resumed from its checkpoint, and a directory that holds files but no chec
 
 Usage::
 
-    python tools/bench_baselines.py                      # reported settings (minutes per run on CPU)
-    python tools/bench_baselines.py --quick              # smoke test: 20 iterations, 3 goals x 2 inits
-    python tools/bench_baselines.py --scenes reacher --methods ddpg --reuse
+    python bench/bench_baselines.py                      # reported settings (minutes per run on CPU)
+    python bench/bench_baselines.py --quick              # smoke test: 20 iterations, 3 goals x 2 inits
+    python bench/bench_baselines.py --scenes reacher --methods ddpg --reuse
 
 Lists are comma-separated (``--stds 0.1,0.4``, ``--extra runs/a,runs/b``). ``--reuse`` meta-tests
 existing run directories without training. The results are also written as JSON to

@@ -22,7 +22,7 @@ iterations after the untimed ones, grouped: Warp kernels incl. graph replay, the
 Python, Newton's Python, torch's backward engine, torch ops, other Python; plus the functions in
 ``warp/`` with the most own time). Read as proportions: profiling slows Python-heavy parts more.
 
-Usage: ``python tools/bench_speed.py [--scene scenes/kuka.usda] [--iterations 8] [--seeds 0,1,2,3,4]
+Usage: ``python bench/bench_speed.py [--scene scenes/kuka.usda] [--iterations 8] [--seeds 0,1,2,3,4]
 [--preset kuka-table1] [--method ours] [--device cpu] [--worlds-per-goal N] [--repeats 1]
 [--against COMMIT]
 [--profile]``.

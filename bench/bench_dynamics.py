@@ -10,9 +10,9 @@ torques and the initial state. A world-step is one physics step of one world.
 
 ``--against COMMIT`` adds the same Newton rollout on another commit's checkout, side by side in one
 run (interleaved, each measurement a fresh process, the best of ``--repeats``; see
-``tools/bench_speed.py``'s ``other_checkout``).
+``bench/bench_speed.py``'s ``other_checkout``).
 
-Usage: ``python tools/bench_dynamics.py [--worlds 1,64,512] [--horizon 100] [--device cpu]
+Usage: ``python bench/bench_dynamics.py [--worlds 1,64,512] [--horizon 100] [--device cpu]
 [--against COMMIT] [--repeats 1]``
 """
 

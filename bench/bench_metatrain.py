@@ -14,7 +14,7 @@ A thin script over :mod:`warp_critic.evaluation.presets` (the settings of the re
 
 Wall time per outer iteration and in total is printed for every run.
 
-Usage: ``python tools/bench_metatrain.py [--scenes reacher,kuka] [--seeds 0,1,2,3,4] [--iterations N]
+Usage: ``python bench/bench_metatrain.py [--scenes reacher,kuka] [--seeds 0,1,2,3,4] [--iterations N]
 [--device cpu] [--quick]``. Run directories go to ``runs/bench-<scene>[-seed<s>]`` (an existing one is
 resumed, a finished one is only meta-tested).
 """

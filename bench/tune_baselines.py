@@ -35,9 +35,9 @@ interrupted training from its last checkpoint (every quarter of the iterations).
 
 Usage::
 
-    nice python tools/tune_baselines.py --scenes reacher --methods ddpg,meta-critic \
+    nice python bench/tune_baselines.py --scenes reacher --methods ddpg,meta-critic \
         --configs 6 --iterations 120 --seeds 100,101 --out runs/tune/tune.json
-    nice python tools/tune_baselines.py --scenes reacher,kuka --design one-at-a-time \
+    nice python bench/tune_baselines.py --scenes reacher,kuka --design one-at-a-time \
         --iterations 100 --seeds 100,101 --out runs/tune/tune.json
 """
 
