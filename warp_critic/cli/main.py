@@ -166,6 +166,7 @@ def _add_meta_test(sub) -> None:
 
 def _add_baseline(sub) -> None:
     from warp_critic.methods import methods
+    from warp_critic.methods.baseline_config import META_CRITIC_FIELDS
 
     baselines = methods(baseline=True)
     bl = sub.add_parser(
