@@ -248,3 +248,67 @@ def drm_step(robot, q, qd, tau, dt, substeps):
         qd = qd + dt * qdd
         q = q + dt * qd
     return q, qd
+
+
+# ------------------------------------------------------------------------------------------------
+# the baselines' agents (TD3, SAC)
+# ------------------------------------------------------------------------------------------------
+
+# the baselines' tiny CLI settings, with a smaller actor and a checkpoint every iteration
+TINY_AGENT = [*TINY_BASELINE, "--actor-hidden", "16", "--checkpoint-every", "1"]
+
+
+def filled_buffer():
+    """A reacher-sized replay buffer (2 joints) full of seeded random rows, none terminal."""
+    import torch
+
+    from warp_critic.methods.replay import ReplayBuffer
+
+    buf = ReplayBuffer(64, 2, "cpu")
+    rows = torch.randn(64, buf.data.shape[1], generator=torch.Generator().manual_seed(2))
+    rows[:, buf.slices["done"]] = 0.0
+    buf._add_rows(rows)
+    return buf
+
+
+def refused_in_one_line(tmp_path, capsys, argv: list[str], fragment: str) -> None:
+    """``warp-critic *argv`` exits 2 with one stderr line holding ``fragment`` and writes no run."""
+    from warp_critic.cli.main import main
+
+    try:
+        code = main([*argv, "--out", str(tmp_path / "run"), "--device", "cpu", "--iterations", "1"])
+    except SystemExit as e:  # argparse's own errors exit from the parser
+        code = e.code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and fragment in err[0], err
+    assert not (tmp_path / "run").exists()
+
+
+# ------------------------------------------------------------------------------------------------
+# a hand-written robot file
+# ------------------------------------------------------------------------------------------------
+
+INERTIA = 'ixx="0.01" iyy="0.05" izz="0.05" ixy="0" ixz="0" iyz="0"'
+LIMIT = 'lower="-1" upper="1" effort="5" velocity="1"'
+
+
+def urdf(
+    inertia: str = INERTIA, mass: str = "2", limit: str = LIMIT, j2: str = "", extra: str = ""
+):
+    """A planar two-link arm (j1, j2 about +y); the arguments replace link l1's inertial or j1's
+    limit, ``j2`` is added inside joint j2, ``extra`` inside <robot>."""
+    return f"""<robot name="r"><link name="base"/>
+<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 1 0"/>
+  <limit {limit}/></joint>
+<link name="l1"><inertial><origin xyz="0.2 0 0"/><mass value="{mass}"/><inertia {inertia}/>
+  </inertial></link>
+<joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0.5 0 0"/>
+  <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="3" velocity="1"/>{j2}</joint>
+<link name="l2"><inertial><origin xyz="0.2 0 0"/><mass value="1"/>
+  <inertia ixx="0.005" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
+{extra}</robot>
+"""
+
+
+# a URDF <mimic> for joint j2 of :func:`urdf`: j2 = 0.5 j1 + 0.1
+MIMIC = '<mimic joint="j1" multiplier="0.5" offset="0.1"/>'

@@ -10,11 +10,14 @@ and holds the case to the table's rule (``test_bad_input.py``'s docstring).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
+import os
 import random
 import shutil
 import signal
+import socket
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -350,3 +353,66 @@ def check_case(case: Case, world, capfd, monkeypatch) -> None:
         assert not [p for p in after_files if p.endswith(".lock") and p not in files], after_files
     if case.check is not None:
         case.check(w)
+
+
+# ------------------------------------------------------------------------------------------------
+# set-ups and checks shared by the misuse tables
+# ------------------------------------------------------------------------------------------------
+
+
+def hold_lock(run: str):
+    """A live process holds the run directory's OS lock (this test process, through its own file lock)."""
+
+    def setup(w):
+        from filelock import FileLock
+
+        d = getattr(w, run) if hasattr(w, run) else w.t / run
+        lock = FileLock(str(d / ".lock"), timeout=0)
+        lock.acquire()
+        w.lock_pid = os.getpid()
+        (d / ".lock").write_text(
+            json.dumps({"pid": w.lock_pid, "host": socket.gethostname(), "started": 0.0})
+        )
+
+        def release():
+            with contextlib.suppress(OSError):
+                (d / ".lock").unlink()
+            lock.release()
+
+        w.cleanups.append(release)
+
+    return setup
+
+
+def reproduce_output(w):
+    """A reproduce output ``rep/`` (marker, results.json, a stage directory with its stage.json)."""
+    rep = w.t / "rep"
+    (rep / "stagedir").mkdir(parents=True)
+    (rep / ".warp-critic-reproduce").write_text('{"kind": "warp-critic/reproduce-output-v1"}\n')
+    (rep / "results.json").write_text('{"kind": "warp-critic/metatest-v1"}\n')
+    (rep / "stagedir" / "stage.json").write_text('{"kind": "warp-critic/metatest-v1"}\n')
+
+
+def disk_full_on(name_part: str):
+    """Writes of files whose name holds ``name_part`` fail as on a full disk (after a partial write)."""
+
+    def patch(monkeypatch, w):
+        import errno
+
+        from warp_critic.running import files
+
+        real = files._write_bytes
+
+        def write(path, data):
+            if name_part in Path(path).name:
+                real(path, data[:10])
+                raise OSError(errno.ENOSPC, "No space left on device")
+            real(path, data)
+
+        monkeypatch.setattr(files, "_write_bytes", write)
+
+    return patch
+
+
+def live_run_kept(w):
+    assert (w.run / ".lock").is_file() and not (w.run / "metatest2.json").exists()

@@ -52,7 +52,11 @@ from misuse_table import (  # noqa: F401 (base, world: the fixtures)
     Case,
     base,
     check_case,
+    disk_full_on,
+    hold_lock,
+    live_run_kept,
     metrics_rows,
+    reproduce_output,
     result_written,
     run_written,
     snapshot,
@@ -161,30 +165,6 @@ def copy_result(w):
     shutil.copy(w.run / "metatest.json", w.t / "prev.json")
 
 
-def hold_lock(run: str):
-    """A live process holds the run directory's OS lock (this test process, through its own file lock)."""
-
-    def setup(w):
-        from filelock import FileLock
-
-        d = getattr(w, run) if hasattr(w, run) else w.t / run
-        lock = FileLock(str(d / ".lock"), timeout=0)
-        lock.acquire()
-        w.lock_pid = os.getpid()
-        (d / ".lock").write_text(
-            json.dumps({"pid": w.lock_pid, "host": socket.gethostname(), "started": 0.0})
-        )
-
-        def release():
-            with contextlib.suppress(OSError):
-                (d / ".lock").unlink()
-            lock.release()
-
-        w.cleanups.append(release)
-
-    return setup
-
-
 def huge_pid_lock(w):
     (w.run / ".lock").write_text(
         json.dumps({"pid": 10**20 - 1, "host": socket.gethostname(), "started": 0})
@@ -273,15 +253,6 @@ def other_scene_in_cwd(w):
     relative_scene(w, (w.t / "changed" / "reacher.usda").read_text())
 
 
-def reproduce_output(w):
-    """A reproduce output ``rep/`` (marker, results.json, a stage directory with its stage.json)."""
-    rep = w.t / "rep"
-    (rep / "stagedir").mkdir(parents=True)
-    (rep / ".warp-critic-reproduce").write_text('{"kind": "warp-critic/reproduce-output-v1"}\n')
-    (rep / "results.json").write_text('{"kind": "warp-critic/metatest-v1"}\n')
-    (rep / "stagedir" / "stage.json").write_text('{"kind": "warp-critic/metatest-v1"}\n')
-
-
 def empty_stage_results(w):
     """A reproduce output whose reacher meta-training stages are complete but hold ``"result": {}``."""
     from warp_critic.reproduce.engine.stages import MARKER, STAGE_KIND
@@ -313,31 +284,6 @@ def http_server(w):
     threading.Thread(target=server.serve_forever, daemon=True).start()
     w.port = server.server_address[1]
     w.cleanups.append(server.shutdown)
-
-
-def disk_full_on(name_part: str):
-    """Writes of files whose name holds ``name_part`` fail as on a full disk (after a partial write)."""
-
-    def patch(monkeypatch, w):
-        import errno
-
-        from warp_critic.running import files
-
-        real = files._write_bytes
-
-        def write(path, data):
-            if name_part in Path(path).name:
-                real(path, data[:10])
-                raise OSError(errno.ENOSPC, "No space left on device")
-            real(path, data)
-
-        monkeypatch.setattr(files, "_write_bytes", write)
-
-    return patch
-
-
-def live_run_kept(w):
-    assert (w.run / ".lock").is_file() and not (w.run / "metatest2.json").exists()
 
 
 # ------------------------------------------------------------------------------------------------

@@ -329,12 +329,10 @@ def test_identify_command_writes_a_run_that_meta_tests_without_the_model(tmp_pat
 def test_identify_with_one_seed_gives_one_result(tmp_path):
     """Two identifications of one run with one --seed agree loss for loss, whatever torch's global
     RNG holds (the identifier's initial weights come from the seed)."""
-    from test_train_variants import _train
-
     from warp_critic.cli.main import main
 
     told = tmp_path / "told"
-    assert main(_train(told, "--critic-input", "pose-dynamics", iterations=1)) == 0
+    assert main(variants_train_argv(told, "--critic-input", "pose-dynamics", iterations=1)) == 0
     losses = []
     for k in range(2):
         torch.manual_seed(100 + k)  # a different global RNG state before each call

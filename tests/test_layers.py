@@ -369,3 +369,21 @@ def test_the_design_table_reads_each_module_s_first_sentence(tmp_path):
         "| `core/a` | Alpha, e.g. the first module (`b`). |",
         "| `core/b` | (no docstring) |",
     ]
+
+
+def test_no_test_module_imports_another():
+    """Shared test code lives in ``tests/helpers.py``, ``misuse_table.py`` and ``conftest.py``: a
+    test module importing another one runs that module's tests' set-up twice and hides what is
+    shared."""
+    found = []
+    for path in sorted((ROOT / "tests").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            names = (
+                [a.name for a in node.names]
+                if isinstance(node, ast.Import)
+                else [node.module or ""]
+                if isinstance(node, ast.ImportFrom)
+                else []
+            )
+            found += [f"{path.name}: {n}" for n in names if n.split(".")[0].startswith("test_")]
+    assert not found, found

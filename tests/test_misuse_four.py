@@ -27,11 +27,11 @@ import sys
 import textwrap
 from pathlib import Path
 
+import misuse_table as table
 import pytest
-import test_bad_input as table
 from conftest import REACHER
-from test_bad_input import MT, TEST, C, base, world  # noqa: F401 (fixtures)
-from test_robot_misuse import MIMIC, urdf
+from helpers import MIMIC, load_tool, urdf
+from misuse_table import MT, TEST, C, base, world  # noqa: F401 (fixtures)
 
 from warp_critic.cli.main import main
 
@@ -244,7 +244,7 @@ CASES = [
 
 @pytest.mark.parametrize("case", CASES)
 def test_misuse_four(case, world, capfd, monkeypatch):  # noqa: F811 (the fixture)
-    table.test_bad_input(case, world, capfd, monkeypatch)
+    table.check_case(case, world, capfd, monkeypatch)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -298,8 +298,6 @@ def test_score_replaces_only_its_own_score(world, capfd):  # noqa: F811 (the fix
 
 
 def test_gpu_check_out_replaces_only_a_gpu_check(tmp_path, capsys):
-    from test_tools import load_tool
-
     gpu_check = load_tool("gpu_check")
     result = tmp_path / "mt.json"
     result.write_text('{"kind": "warp-critic/metatest-v1", "mean": 1.0}\n')
@@ -311,8 +309,6 @@ def test_gpu_check_out_replaces_only_a_gpu_check(tmp_path, capsys):
 
 
 def test_robot_zoo_only_matching_nothing_and_runs_dir_a_file(tmp_path, capsys):
-    from test_tools import load_tool
-
     zoo = load_tool("robot_zoo")
     assert zoo.main(["--only", "no_such_robot_file"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

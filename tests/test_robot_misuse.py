@@ -21,29 +21,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import INERTIA, LIMIT, MIMIC, urdf
 
 from warp_critic.cli.main import main
-
-INERTIA = 'ixx="0.01" iyy="0.05" izz="0.05" ixy="0" ixz="0" iyz="0"'
-LIMIT = 'lower="-1" upper="1" effort="5" velocity="1"'
-
-
-def urdf(
-    inertia: str = INERTIA, mass: str = "2", limit: str = LIMIT, j2: str = "", extra: str = ""
-):
-    """A planar two-link arm (j1, j2 about +y); the arguments replace link l1's inertial or j1's
-    limit, ``j2`` is added inside joint j2, ``extra`` inside <robot>."""
-    return f"""<robot name="r"><link name="base"/>
-<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 1 0"/>
-  <limit {limit}/></joint>
-<link name="l1"><inertial><origin xyz="0.2 0 0"/><mass value="{mass}"/><inertia {inertia}/>
-  </inertial></link>
-<joint name="j2" type="revolute"><parent link="l1"/><child link="l2"/><origin xyz="0.5 0 0"/>
-  <axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="3" velocity="1"/>{j2}</joint>
-<link name="l2"><inertial><origin xyz="0.2 0 0"/><mass value="1"/>
-  <inertia ixx="0.005" iyy="0.02" izz="0.02" ixy="0" ixz="0" iyz="0"/></inertial></link>
-{extra}</robot>
-"""
 
 
 def mjcf(actuator: str = "", equality: str = "") -> str:
@@ -57,7 +37,6 @@ def mjcf(actuator: str = "", equality: str = "") -> str:
 
 
 TRIANGLE = 'ixx="0.001" iyy="0.001" izz="1.0" ixy="0" ixz="0" iyz="0"'
-MIMIC = '<mimic joint="j1" multiplier="0.5" offset="0.1"/>'
 EQ_JOINT = '<equality><joint joint1="j2" joint2="j1" polycoef="0 1 0 0 0"/></equality>'
 XACRO = (
     '<robot name="r" xmlns:xacro="http://www.ros.org/wiki/xacro"><xacro:property name="l" '

@@ -11,8 +11,8 @@ import math
 import pytest
 import torch
 from conftest import REACHER
-from test_td3 import TINY, filled_buffer
-from test_td3 import test_bad_td3_input_is_one_line_and_exit_2 as refused_in_one_line
+from helpers import TINY_AGENT as TINY
+from helpers import filled_buffer, refused_in_one_line
 
 from warp_critic.cli.main import main
 from warp_critic.evaluation.metatest import build_test_critic

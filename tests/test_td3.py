@@ -9,19 +9,17 @@ import math
 import pytest
 import torch
 from conftest import REACHER
-from helpers import TINY_BASELINE
+from helpers import TINY_AGENT, filled_buffer, refused_in_one_line
 
 from warp_critic.cli.main import main
 from warp_critic.evaluation.metatest import build_test_critic
 from warp_critic.learning.losses import td_loss
 from warp_critic.learning.networks import Normalizer
-from warp_critic.methods.replay import ReplayBuffer
 from warp_critic.methods.td3 import TD3Agent, TD3Config, train_td3
 from warp_critic.running.methods import method
 from warp_critic.running.task import TaskConfig
 
-# the baselines' tiny CLI settings, with a smaller actor and a checkpoint every iteration
-TINY = [*TINY_BASELINE, "--actor-hidden", "16", "--checkpoint-every", "1"]
+TINY = TINY_AGENT
 MAX_TORQUE = torch.tensor([2.0, 0.5])
 
 
@@ -40,14 +38,6 @@ def batch(n: int = 32) -> dict[str, torch.Tensor]:
     b["reward"] = torch.randn(n, generator=g)
     b["done"] = torch.zeros(n)
     return b
-
-
-def filled_buffer() -> ReplayBuffer:
-    buf = ReplayBuffer(64, 2, "cpu")
-    rows = torch.randn(64, buf.data.shape[1], generator=torch.Generator().manual_seed(2))
-    rows[:, buf.slices["done"]] = 0.0
-    buf._add_rows(rows)
-    return buf
 
 
 def flat(module: torch.nn.Module) -> torch.Tensor:
@@ -174,13 +164,7 @@ def test_td3_trains_resumes_exactly_and_meta_tests_through_the_cli(tmp_path, cap
     ],
 )
 def test_bad_td3_input_is_one_line_and_exit_2(tmp_path, capsys, argv, fragment):
-    try:
-        code = main([*argv, "--out", str(tmp_path / "run"), "--device", "cpu", "--iterations", "1"])
-    except SystemExit as e:  # argparse's own errors exit from the parser
-        code = e.code
-    err = capsys.readouterr().err.strip().splitlines()
-    assert code == 2 and len(err) == 1 and fragment in err[0], err
-    assert not (tmp_path / "run").exists()
+    refused_in_one_line(tmp_path, capsys, argv, fragment)
 
 
 def test_the_reported_actor_loss_is_the_mean_over_the_delayed_updates(tmp_path, monkeypatch):
