@@ -275,7 +275,7 @@ def test_meta_test_out_a_fifo_is_refused_not_read(world, capfd):  # noqa: F811 (
     os.mkfifo(w.t / "pipe.json")
     argv = [a.format(run=w.run) for a in TEST] + ["--out", str(w.t / "pipe.json")]
     capfd.readouterr()
-    code, _ = table.run_cli(argv, limit=60)
+    code, _ = table.run_main(argv, limit=60)
     err = [x for x in capfd.readouterr().err.splitlines() if x.strip()]
     assert code == 2 and len(err) == 1 and "pipe.json" in err[0] and "FIFO" in err[0], err
     assert not (w.t / "pipe.rrd").exists()

@@ -44,7 +44,7 @@ def test_td3_adds_its_stages_and_changes_none_of_the_paper():
     "baselines, words",
     [
         ("td3", "the paper's baselines are always reproduced: add ddpg, meta-critic"),
-        ("ddpg,meta-critic,sac", "unknown baseline 'sac'"),
+        ("ddpg,meta-critic,ppo", "unknown baseline 'ppo'"),
     ],
 )
 def test_bad_baselines_are_one_line(tmp_path, capsys, baselines, words):

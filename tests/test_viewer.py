@@ -51,7 +51,9 @@ def screenshot(rrd: Path) -> np.ndarray:
 
     png = rrd.with_suffix(".png")
     env = {**os.environ, "WGPU_BACKEND": "vulkan"}
-    cmd = ["xvfb-run", "-a", RERUN, str(rrd), "--screenshot-to", str(png)]
+    # --new: its own viewer on a free port, never streaming into one already listening on 9876
+    # (another screenshot still closing, or a viewer the user has open)
+    cmd = ["xvfb-run", "-a", RERUN, str(rrd), "--new", "--screenshot-to", str(png)]
     p = subprocess.run(
         [*cmd, "--window-size", WINDOW], env=env, capture_output=True, text=True, timeout=300
     )

@@ -41,8 +41,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--methods",
         type=comma_list(str),
-        default=["ours", "ddpg", "meta-critic", "td3"],
-        help="methods, ours first (default ours,ddpg,meta-critic,td3)",
+        default=None,
+        help="methods, ours first (default: every method whose meta-training the folder holds)",
     )
     p.add_argument("--out", required=True, help="the result JSON (resumed when it exists)")
     p.add_argument("--figure", default=None, help="also draw error against steps here (PNG)")

@@ -166,7 +166,7 @@ def _add_meta_test(sub) -> None:
 
 def _add_baseline(sub) -> None:
     from warp_critic.methods import methods
-    from warp_critic.methods.baseline_config import META_CRITIC_FIELDS
+    from warp_critic.methods.baseline_config import META_CRITIC_FIELDS, uses_meta_critic_fields
 
     baselines = methods(baseline=True)
     bl = sub.add_parser(
@@ -192,7 +192,7 @@ def _add_baseline(sub) -> None:
             help="USD scene, e.g. scenes/reacher.usda, or a robot file (.urdf, .xml, .usd)",
         )
         add_dataclass_arguments(one, entry.config, skip=("scene", "method"))
-        if entry.name != "meta-critic":  # not offered; given anyway, the config names the method
+        if not uses_meta_critic_fields(entry.name):  # not offered; given anyway, refused
             for action in one._actions:
                 if action.dest in META_CRITIC_FIELDS:
                     action.help = argparse.SUPPRESS

@@ -25,6 +25,11 @@ META_CRITIC_FIELDS = (
 )
 
 
+def uses_meta_critic_fields(method: str) -> bool:
+    """Whether ``method`` reads :data:`META_CRITIC_FIELDS` (Meta-Critic shares this config)."""
+    return method == "meta-critic"
+
+
 @dataclass
 class BaselineConfig(TaskConfig):
     """The baselines' training (DDPG and Meta-Critic; TD3's and SAC's configs subclass it, with their
@@ -132,7 +137,7 @@ class BaselineConfig(TaskConfig):
         with ``scene``, the replay buffers' memory (``S`` seeds x the transitions they can hold x
         ``7 dof + 2`` float32 each) before any is allocated."""
         super().check(scene)
-        if self.method != "meta-critic":
+        if not uses_meta_critic_fields(self.method):
             for name in META_CRITIC_FIELDS:
                 value = getattr(self, name)
                 if value != self.__dataclass_fields__[name].default:

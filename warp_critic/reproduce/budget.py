@@ -336,21 +336,27 @@ def run_budget(
 # ------------------------------------------------------------------------------------------------
 
 
-def runs_of_reproduce(out: Path, scene: str, methods: list[str]) -> dict[str, list[str]]:
-    """``method -> per-seed run directories`` of the ``metatrain-<scene>-<method>-<hash>`` stages of a
-    ``warp-critic reproduce`` output folder (exactly one complete stage per method)."""
+def runs_of_reproduce(out: Path, scene: str, methods: list[str] | None) -> dict[str, list[str]]:
+    """``method -> per-seed run directories`` of the meta-training stages
+    (:func:`~warp_critic.reproduce.experiments.naming.stage_name`) of a ``warp-critic reproduce``
+    output folder, exactly one complete stage per method; ``methods`` None: every registered method
+    (ours first) whose stage the folder holds."""
+    from warp_critic.reproduce.experiments.naming import stage_name
+    from warp_critic.running.methods import names
+
     runs = {}
-    for m in methods:
-        found = sorted(
-            p for p in out.glob(f"metatrain-{scene}-{m}-*") if (p / "stage.json").is_file()
-        )
+    for m in names() if methods is None else methods:
+        prefix = stage_name("metatrain", scene, m)
+        found = sorted(p for p in out.glob(f"{prefix}-*") if (p / "stage.json").is_file())
+        if not found and methods is None:
+            continue
         if len(found) != 1:
             what = (
                 "no complete stage"
                 if not found
                 else f"{len(found)} stages ({', '.join(p.name for p in found)})"
             )
-            raise FieldError("from", f"{out}: {what} metatrain-{scene}-{m}-*; one expected")
+            raise FieldError("from", f"{out}: {what} {prefix}-*; one expected")
         seeds = sorted((found[0] / "run").glob("seed*"), key=lambda p: int(p.name[4:] or 0))
         if not seeds:
             raise FieldError("from", f"{found[0]}: no run/seed* directories")
