@@ -169,13 +169,13 @@ def sweep_method(cfg: BudgetConfig, method: str) -> dict[str, Any]:
     {scale: {N: [MSE per seed]}}, "untrained": MSE, "diverged", "seconds"}`` (MSE in rad^2)."""
     from warp_critic.physics.scene import Variant
     from warp_critic.reproduce.experiments.evaluate import Job, evaluate
-    from warp_critic.reproduce.experiments.generalize import _train_goals_and_limits
+    from warp_critic.reproduce.experiments.generalize import train_goals_and_limits
 
     t = time.perf_counter()
     dirs = [str(d) for d in cfg.runs[method]]
     jobs = []
     for rd in dirs:
-        _, goals, _, _ = _train_goals_and_limits(rd)
+        _, goals, _, _ = train_goals_and_limits(rd)
         jobs += [Job((rd, s), rd, goals, Variant(), alpha_scale=s) for s in cfg.alpha_scales]
     r = evaluate(
         jobs,
@@ -212,15 +212,15 @@ def report_method(
     ``{"cells": [{"scale", "steps", "std", "mse_mean", "mse_per_seed", "untrained"}], "seconds"}``."""
     from warp_critic.physics.scene import Variant
     from warp_critic.reproduce.experiments.evaluate import Job, evaluate
-    from warp_critic.reproduce.experiments.generalize import _sample, _train_goals_and_limits
+    from warp_critic.reproduce.experiments.generalize import draw_goals, train_goals_and_limits
 
     t = time.perf_counter()
     dirs = [str(d) for d in cfg.runs[method]]
-    _, train_goals, lo, hi = _train_goals_and_limits(dirs[0])
+    _, train_goals, lo, hi = train_goals_and_limits(dirs[0])
     scales = sorted({s for s, _ in budgets})
     cells = []
     for c, std in enumerate(cfg.report_stds):
-        goals = _sample(
+        goals = draw_goals(
             train_goals,
             lo,
             hi,

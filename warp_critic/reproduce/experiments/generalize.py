@@ -47,7 +47,8 @@ from warp_critic.reproduce.experiments.evaluate import (
 from warp_critic.running.task_inputs import inside_limits
 
 
-def _train_goals_and_limits(run_dir: str):
+def train_goals_and_limits(run_dir: str):
+    """A run's scene, its training goals ``(G, dof)`` rad and its joint limits ``(dof,)`` rad."""
     from warp_critic.running.rundir import RunDir
     from warp_critic.running.scenefile import find_run_scene
 
@@ -59,7 +60,9 @@ def _train_goals_and_limits(run_dir: str):
     return scene, goals, lo, hi
 
 
-def _sample(train_goals, lo, hi, num, std, around, noise, seed):
+def draw_goals(train_goals, lo, hi, num, std, around, noise, seed):
+    """``num`` goals ``(num, dof)`` rad drawn around the training goals (or ``around``) with ``std``,
+    inside ``[lo, hi]``, from ``seed`` (:func:`~warp_critic.evaluation.metatest.sample_goals`)."""
     from warp_critic.evaluation.metatest import sample_goals
 
     gen = torch.Generator().manual_seed(int(seed))
@@ -112,7 +115,7 @@ def run_tables_stage(
 
     first = str(runs["ours"][0])
     runs = {m: runs[m] for m in (only if only is not None else runs)}
-    scene, train_goals, lo, hi = _train_goals_and_limits(first)
+    scene, train_goals, lo, hi = train_goals_and_limits(first)
     steps = default_steps(first)
     train_mass = round(float(scene.world_builder().body_mass[scene.ee_body]), 6)
     columns = {
@@ -128,7 +131,7 @@ def run_tables_stage(
         "stress_mass": 0.0,
         "stress_length": float(np.linalg.norm(scene.tip_offset)),
     }
-    dyn_goals = _sample(
+    dyn_goals = draw_goals(
         train_goals,
         lo,
         hi,
@@ -200,7 +203,7 @@ def _table_jobs(s: dict, columns: dict, runs: dict, train: tuple, dyn_goals) -> 
     for table, values in columns.items():
         for ci, v in enumerate(values):
             if table == "table1":
-                goals = _sample(
+                goals = draw_goals(
                     train_goals,
                     lo,
                     hi,
@@ -276,7 +279,7 @@ def run_maps_stage(
 
     first = str(runs["ours"][0])
     runs = {m: runs[m] for m in (only if only is not None else runs)}
-    scene, train_goals, lo, hi = _train_goals_and_limits(first)
+    scene, train_goals, lo, hi = train_goals_and_limits(first)
     steps = default_steps(first)
     n = int(s["grid"])
     grid, (ax0, ax1) = goal_grid(lo, hi, n, float(s["limit_fraction"]))
