@@ -1,10 +1,15 @@
 """The paper's stages by name (:func:`stage_name`, the one place a stage name is built) and what each
 produces (:class:`Outputs`, the ``outputs`` of its :class:`~warp_critic.reproduce.engine.stage.Stage`).
 
-Names: ``toy``, ``landscape``, ``maps``, ``tables``, ``tables-heldout``; one meta-training per robot
-and method, ``metatrain-<robot>-<method>``; an extra baseline's evaluations ``<method>-maps`` /
+Names: ``toy``, ``landscape``, ``maps``, ``tables``; one meta-training per robot and method,
+``metatrain-<robot>-<method>``; an extra baseline's evaluations ``<method>-maps`` /
 ``<method>-tables``; beyond the paper, one meta-training per robot and recipe,
-``beyond-metatrain-<robot>-<recipe>``, and ``beyond-maps`` / ``beyond-tables``.
+``beyond-metatrain-<robot>-<recipe>``, and ``beyond-maps`` / ``beyond-tables``. On the held-out goal
+seeds (:data:`~warp_critic.evaluation.seed_uses.HELD_OUT_SEEDS`): ``tables-heldout`` and
+``maps-heldout`` on the first, ``tables-heldout-<seed>`` / ``maps-heldout-<seed>`` on the others,
+each also ``by`` an extra baseline (``td3-tables-heldout-1010``) or by ours at the baselines'
+environment steps (:data:`EQUAL_STEPS`: ``metatrain-kuka-ours-equal-steps``,
+``equal-steps-tables-heldout``).
 """
 
 from __future__ import annotations
@@ -14,8 +19,10 @@ from dataclasses import dataclass
 
 #: the recipes beyond the paper (``--beyond``): kept apart, never part of the paper's stages
 BEYOND = "beyond"
-#: the goal seed that chose nothing: Tables 1-3 again (``tables-heldout``)
+#: the goal seeds that chose nothing: Tables 1-3 and the maps again (``tables-heldout``)
 HELDOUT = "heldout"
+#: ours meta-trained on the baselines' environment steps (the equal-budget rows)
+EQUAL_STEPS = "equal-steps"
 
 
 def stage_name(
@@ -25,21 +32,30 @@ def stage_name(
     *,
     recipe: str | None = None,
     by: str | None = None,
-    heldout: bool = False,
+    heldout: bool | int = False,
+    equal_steps: bool = False,
 ) -> str:
     """The name of a stage of ``kind`` (toy, landscape, metatrain, maps, tables).
 
     ``metatrain`` names one robot (``scene``) and either a ``method`` or a ``recipe`` beyond the
-    paper; an evaluation (maps, tables) is the paper's, or ``by`` an extra baseline or
-    :data:`BEYOND`; ``heldout``: Tables 1-3 on the held-out goal seed.
+    paper (``equal_steps``: ours at the baselines' environment steps); an evaluation (maps, tables) is
+    the paper's, or ``by`` an extra baseline, :data:`BEYOND` or :data:`EQUAL_STEPS`; ``heldout``: on
+    a held-out goal seed (``True``: the first; a seed: that one, named by it unless the first).
     """
     if kind == "metatrain":
         if scene is None or (method is None) == (recipe is None):
             raise ValueError("a meta-training stage names a robot and a method or a recipe")
         if recipe is not None:
             return "-".join((BEYOND, kind, scene, recipe))
-        return "-".join((kind, scene, str(method)))
-    parts = ([by] if by else []) + [kind] + ([HELDOUT] if heldout else [])
+        return "-".join((kind, scene, str(method)) + ((EQUAL_STEPS,) if equal_steps else ()))
+    parts = ([by] if by else []) + [kind]
+    if heldout is not False:
+        from warp_critic.evaluation.seed_uses import HELD_OUT_SEEDS
+
+        parts.append(HELDOUT)
+        # the first seed's stages keep the names they had before there were three seeds
+        if heldout is not True and int(heldout) != HELD_OUT_SEEDS[0]:
+            parts.append(str(int(heldout)))
     return "-".join(parts)
 
 
@@ -62,6 +78,8 @@ class Outputs:
     rows: tuple[str, ...] | None = None
     adds_to: str | None = None
     labels: Mapping[str, str] | None = None
+    #: the ``--only`` group it runs with besides its own name (the held-out seeds after the first)
+    part_of: str | None = None
 
 
-__all__ = ["BEYOND", "HELDOUT", "Outputs", "is_beyond", "stage_name"]
+__all__ = ["BEYOND", "EQUAL_STEPS", "HELDOUT", "Outputs", "is_beyond", "stage_name"]

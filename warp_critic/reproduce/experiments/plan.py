@@ -1,8 +1,9 @@
 """The plan of a ``reproduce`` call: its flags checked (:class:`ReproduceConfig`), every stage with
 its settings, hash and inputs (:func:`plan`), and the stages the call needs, in waves (:func:`needed`).
 
-Stage order: toy, landscape, metatrain, maps, tables, tables-heldout (Tables 1-3 again on a goal
-seed that chose nothing). ``maps`` needs the reacher ``metatrain`` sub-stages and ``tables`` the
+Stage order: toy, landscape, metatrain, maps, tables, tables-heldout and maps-heldout (Tables 1-3
+and the maps again on each goal seed that chose nothing, with ours at the baselines' environment
+steps: :mod:`~warp_critic.reproduce.experiments.heldout`). ``maps`` needs the reacher ``metatrain`` sub-stages and ``tables`` the
 KUKA ones: they are run (or found complete) first even when ``--only``
 does not name ``metatrain``.
 """
@@ -22,6 +23,7 @@ from warp_critic.reproduce.experiments.extra_baselines import (
     plan_extra,
     selected_extra,
 )
+from warp_critic.reproduce.experiments.heldout import plan_heldout
 from warp_critic.reproduce.experiments.naming import BEYOND, Outputs, is_beyond, stage_name
 from warp_critic.reproduce.experiments.settings import (
     METHODS,
@@ -148,20 +150,8 @@ def plan(settings: dict, beyond: bool = False, extra: tuple[str, ...] = ()) -> d
         dep = {n: p[n].dir_name for n in (stage_name("metatrain", scene, m) for m in METHODS)}
         h = stage_hash(group, settings[group], dep)
         p[group] = Stage(group, group, settings[group], dep, h, Outputs(scene=scene))
-    from warp_critic.evaluation.seed_uses import HELDOUT_TABLES
-
-    held = {**settings["tables"], **HELDOUT_TABLES}  # Tables 1-3 on a goal seed that chose nothing
-    tables_dep = p["tables"].depends
-    name = stage_name("tables", heldout=True)
-    p[name] = Stage(
-        name,
-        "tables",
-        held,
-        tables_dep,
-        stage_hash("tables", held, tables_dep),
-        Outputs(scene="kuka"),
-    )
     plan_extra(settings, p, hashes, extra)
+    plan_heldout(settings, p, hashes, extra)
     if beyond:
         plan_beyond(settings, p, hashes)
     return p
@@ -215,11 +205,16 @@ def needed(rc: ReproduceConfig, stages: dict[str, Stage]) -> list[list[str]]:
             for ev in BEYOND_EVALS:
                 first += list(stages[ev].depends)
                 second.append(ev)
-        else:
-            first += list(stages[group].depends)
-            second.append(group)
+        else:  # an evaluation, and the stages that run with it (the other held-out seeds)
+            for name in [group] + [n for n, st in stages.items() if _part_of(st) == group]:
+                first += list(stages[name].depends)
+                second.append(name)
     # each stage once: --beyond with --only beyond-maps names that stage twice
     return [list(dict.fromkeys(first)), list(dict.fromkeys(second))]
+
+
+def _part_of(st: Stage) -> str | None:
+    return getattr(st.outputs, "part_of", None)
 
 
 def load_point_mass_hash() -> str:
