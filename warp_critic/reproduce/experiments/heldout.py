@@ -71,10 +71,10 @@ def _add_rows(
     method ``row``'s) on ``seed``, its rows added to that seed's paper stage; it runs with the
     held-out group (``--only tables-heldout``)."""
     nominal = stage_name("metatrain", scene, "ours")
+    labels = {dep_name: row} if dep_name else None  # else the row is its method's name
     dep_name = dep_name or stage_name("metatrain", scene, row)
     dep = {nominal: p[nominal].dir_name, dep_name: p[dep_name].dir_name}
     name = stage_name(group, by=by, heldout=seed)
-    labels = {dep_name: row} if dep_name != stage_name("metatrain", scene, row) else None
     p[name] = Stage(
         name,
         group,

@@ -10,6 +10,7 @@ from warp_critic.reproduce.experiments.settings import METHOD_LABELS, METHODS, p
 from warp_critic.reproduce.report import paper as rp
 from warp_critic.reproduce.report.departures import departures_line
 from warp_critic.reproduce.report.draft import Draft, fmt
+from warp_critic.reproduce.report.heldout import judged_on_heldout
 from warp_critic.reproduce.report.plots import figure, plot_goal_maps
 from warp_critic.reproduce.report.rules import (
     COMPARE_RULE,
@@ -18,6 +19,7 @@ from warp_critic.reproduce.report.rules import (
     map_reason,
     map_verdict,
 )
+from warp_critic.reproduce.report.tables import SHOWN_NOT_JUDGED
 
 
 def maps_section(d: Draft) -> None:
@@ -45,9 +47,15 @@ def maps_section(d: Draft) -> None:
         lines, g = rp.grid_summary(M, kind, sv)
         grid_means[kind], grid_rows[kind] = g["means"], g["rows"]
         d.md += lines + [""]
+    judged = not judged_on_heldout(d, "maps")
+    if not judged:
+        d.md += [SHOWN_NOT_JUDGED, ""]
+    claims_before = len(d.claims)
     verdicts = {"goals": _goal_claim(d, M, gm, frac, p4)}
     for fig_no, kind, png in ((5, "mass", p5), (6, "length", p6)):
         verdicts[kind] = _dynamics_claim(d, fig_no, kind, png, grid_means[kind], grid_rows[kind])
+    if not judged:  # the figures stay; their claims are the held-out seeds' (report/heldout.py)
+        del d.claims[claims_before:]
     d.results["maps"] = {
         "goals_mse_mean": gm,
         "goals_fraction_below_0.05": frac,

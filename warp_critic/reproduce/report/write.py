@@ -26,6 +26,7 @@ from warp_critic.reproduce.report import paper as rp
 from warp_critic.reproduce.report.analyses import landscape_section, toy_section
 from warp_critic.reproduce.report.beyond import beyond_section
 from warp_critic.reproduce.report.draft import Draft, rel
+from warp_critic.reproduce.report.heldout import heldout_section
 from warp_critic.reproduce.report.maps import maps_section
 from warp_critic.reproduce.report.tables import tables_section
 from warp_critic.reproduce.report.training import metatrain_section
@@ -38,6 +39,7 @@ SECTIONS = (
     metatrain_section,
     maps_section,
     tables_section,
+    heldout_section,
     beyond_section,
 )
 
