@@ -129,7 +129,7 @@ def test_table_claims_are_comparative_at_the_stated_share():
     assert met[0]["verdict"] == "met" and not_met[0]["verdict"] == "not met"
     assert "1000, 1010, 1020" in met[0]["claim"]
     # ours at the baselines' environment steps is judged as its own row: 0.35 is between them
-    equal = next(c for c in met if "equal budgets" in c["claim"])
+    equal = next(c for c in met if "equal environment steps" in c["claim"])
     assert equal["verdict"] == "not met" and "0 of 10" in equal["ours"]
 
 

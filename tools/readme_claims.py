@@ -4,8 +4,9 @@
     python tools/readme_claims.py --write   # README.md's claims block, from docs/paper/results.json
     python tools/readme_claims.py --check   # exit 1 when the block is not the one --write gives
 
-Every number and verdict in the block is read from ``results.json``: the report's table cells,
-map means and shares, and the counts its claims state (``ours first at N of M levels``, ``below
+Every number and verdict in the block is read from ``results.json``: the held-out goal seeds'
+pooled tables and maps (the claims of Tables 1-3 and Figures 4-6 are judged there), the seed-1
+Table 1 cells' paper values, and the counts its claims state (``ours first at N of M levels``, ``below
 both (all seeds) in N of M columns``, ...). A row over several claims gives their verdicts, once
 where they agree. So the README says what the report computed, never more leniently.
 """
@@ -67,35 +68,58 @@ def _and(items: list[str]) -> str:
     return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
 
 
+def _held(r: dict) -> tuple[dict, str]:
+    """The pooled held-out tables and the claims' prefix naming their seeds."""
+    if "heldout" not in r or "tables" not in r["heldout"]:
+        raise Missing("no held-out tables")
+    held = r["heldout"]["tables"]
+    return held, f"held-out goal seeds {', '.join(str(s) for s in held['seeds'])}"
+
+
+def _ci(cell: dict) -> str:
+    return f"{cell['mean']:.3f} [{cell['lo']:.3f}, {cell['hi']:.3f}]"
+
+
 def rows(r: dict) -> list[tuple[str, str, str]]:
     """``(the paper claims, measured, verdict)`` per row, from a report's ``results.json``."""
     out = []
-    ours = [_cell(r, "ours", s) for s in STDS]
-    paper = " / ".join(f"{c['paper'][0]:g}" for c in ours)
+    held, where = _held(r)
+    t1 = held["table1"]
+    at = [t1["values"].index(s) for s in STDS]
+    paper = " / ".join(f"{_cell(r, 'ours', s)['paper'][0]:g}" for s in STDS)
     cells = {
-        m: " / ".join(f"{_cell(r, m, s)['mse_mean']:.3f}" for s in STDS)
-        for m in ("ours", "ddpg", "meta-critic")
+        m: " / ".join(_ci(t1["rows"][m][ci]) for ci in at) for m in ("ours", "ddpg", "meta-critic")
     }
     out.append(
         (
             f"Table 1 (KUKA, new goals): MSE {paper} at goal std {' / '.join(f'{s:g}' for s in STDS)}",
-            f"{cells['ours']} (DDPG {cells['ddpg']}, Meta-Critic {cells['meta-critic']})",
-            _verdict(r, "Table 1: ours at"),
+            f"{cells['ours']} (DDPG {cells['ddpg']}, Meta-Critic {cells['meta-critic']}; mean "
+            f"[95% interval] over the {where})",
+            _verdict(r, f"Table 1 ({where}): ours at the paper"),
         )
     )
-    tables = ("Table 1: ours below", "Table 2: ours below", "Table 3: ours below")
-    below = [
-        _find(r"below both \(all seeds\) in (\d+) of (\d+) columns", _claim(r, t)["ours"])
-        for t in tables
-    ]
-    out.append(
-        (
-            "Tables 1-3: ours below DDPG and Meta-Critic (comparative: the share of columns)",
-            f"below both in {_and([f'{a} of {b}' for a, b in below])} columns",
-            _verdict(r, *tables),
+    for who, claim in (
+        ("ours", "ours below"),
+        ("ours trained on the baselines' 1.2M KUKA environment steps", "ours at the baselines'"),
+    ):
+        tables = [f"Table {i} ({where}): {claim}" for i in (1, 2, 3)]
+        below = [
+            _find(
+                r"below both \(all seeds\) in (\d+) of (\d+) columns, its 95% interval wholly "
+                r"below both in (\d+) of",
+                _claim(r, t)["ours"],
+            )
+            for t in tables
+        ]
+        out.append(
+            (
+                f"Tables 1-3: {who} below DDPG and Meta-Critic (comparative: the share of columns)",
+                f"below both in {_and([f'{a} of {b}' for a, b, _ in below])} columns; the 95% "
+                f"intervals apart in {_and([c for _, _, c in below])}",
+                _verdict(r, *tables),
+            )
         )
-    )
-    values = ("Table 1: ours at", "Table 2: ours at", "Table 3: ours at")
+    values = [f"Table {i} ({where}): ours at the paper" for i in (1, 2, 3)]
     hits = [
         _find(
             r"within its printed std in (\d+) of (\d+) columns \(strictly at or below its value: "
@@ -112,33 +136,30 @@ def rows(r: dict) -> list[tuple[str, str, str]]:
             _verdict(r, *values),
         )
     )
-    means = r["maps"]["grid_means"]
-    labels = {
-        "ours": "this run: L_critic (ours)",
-        "DDPG": "this run: DDPG, all seeds",
-        "Meta-Critic": "this run: Meta-Critic, all seeds",
-    }
+    maps = r["heldout"].get("maps")
+    if maps is None:
+        raise Missing("no held-out maps")
+    mwhere = f"held-out goal seeds {', '.join(str(s) for s in maps['seeds'])}"
     grid = {
-        k: " / ".join(f"{means[axis][v]:.3f}" for axis in ("mass", "length"))
-        for k, v in labels.items()
+        m: " / ".join(f"{maps['grid_mean'][axis][m]['mean']:.3f}" for axis in ("mass", "length"))
+        for m in ("ours", "ddpg", "meta-critic")
     }
-    won = " / ".join(str(r["maps"]["verdicts"][k]["below_all"]) for k in ("mass", "length"))
-    cells = r["maps"]["verdicts"]["mass"]["cells"]
+    won = " / ".join(str(maps["verdicts"][k]["below_all"]) for k in ("mass", "length"))
     out.append(
         (
             "Figures 5 / 6 (reacher, new link masses / lengths): ours better than the baselines",
-            f"ours below every baseline in {won} of {cells} cells; grid mean MSE {grid['ours']}; "
-            f"DDPG {grid['DDPG']}; Meta-Critic {grid['Meta-Critic']}",
-            _verdict(r, "Figure 5", "Figure 6"),
+            f"ours below every baseline in {won} of {maps['verdicts']['mass']['cells']} cells; "
+            f"grid mean MSE {grid['ours']}; DDPG {grid['ddpg']}; Meta-Critic {grid['meta-critic']}",
+            _verdict(r, f"Figure 5 ({mwhere})", f"Figure 6 ({mwhere})"),
         )
     )
-    share = r["maps"]["goals_fraction_below_0.05"]
+    share = maps["goals_fraction_below_0.05"]
     out.append(
         (
             "Figure 4 (reacher): ours low over the whole goal space",
             f"{share['ours']:.0%} of the goal grid below 0.05 MSE (DDPG {share['ddpg']:.0%}, "
             f"Meta-Critic {share['meta-critic']:.0%})",
-            _verdict(r, "Figure 4"),
+            _verdict(r, f"Figure 4 ({mwhere})"),
         )
     )
     for axis in ("iterations", "environment steps"):

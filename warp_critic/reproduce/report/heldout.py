@@ -133,7 +133,7 @@ def judge_tables(pooled: dict, seeds: list[int]) -> list[dict]:
             claims.append(
                 {
                     "claim": f"{name}: {label} below DDPG and Meta-Critic"
-                    + (" (equal budgets: 1.2M steps each)" if ours != "ours" else ""),
+                    + (" (equal environment steps)" if ours != "ours" else ""),
                     "paper": "ours lowest in every column",
                     "ours": f"{label} below both (all seeds) in {wa} of {ca} columns, its 95% "
                     f"interval wholly below both in {apart} of {ca}",
@@ -163,7 +163,13 @@ def pool_maps(results: list[dict]) -> dict:
     first = results[0]
     methods = present(first["goals"])
     goals = {m: np.mean([r["goals"][m]["mse"] for r in results], axis=0).tolist() for m in methods}
-    out: dict = {"goals": goals, "grid_mean": {"goals": {}}}
+    out: dict = {
+        "goals": goals,
+        "goals_fraction_below_0.05": {
+            m: float((np.asarray(g) < 0.05).mean()) for m, g in goals.items()
+        },
+        "grid_mean": {"goals": {}},
+    }
     for m in methods:
         out["grid_mean"]["goals"][m] = _interval(
             np.array([r["goals"][m]["mse_per_seed"] for r in results]).T
@@ -186,14 +192,16 @@ def pool_maps(results: list[dict]) -> dict:
     return out
 
 
-def judge_maps(pooled: dict, seeds: list[int]) -> list[dict]:
+def judge_maps(pooled: dict, seeds: list[int]) -> tuple[list[dict], dict]:
     """The claims rows of Figures 4-6 on the held-out seeds, under the same rules as on seed 1:
-    Figure 4's absolute map rule, Figures 5-6 comparative cell by cell."""
+    Figure 4's absolute map rule, Figures 5-6 comparative cell by cell; and the verdicts' numbers
+    (``goals`` / ``mass`` / ``length`` -> :func:`~warp_critic.reproduce.report.rules.map_verdict`)."""
     where = f"held-out goal seeds {', '.join(str(s) for s in seeds)}"
     base = [m for m in METHODS if m != "ours"]
     claims = []
     g = pooled["goals"]
     v4 = map_verdict(g["ours"], {METHOD_LABELS[m]: g[m] for m in base if m in g})
+    verdicts = {"goals": v4}
     claims.append(
         {
             "claim": f"Figure 4 ({where}): ours generalises over the full state space of the reacher",
@@ -207,6 +215,8 @@ def judge_maps(pooled: dict, seeds: list[int]) -> list[dict]:
         cells = pooled[kind]
         v = map_verdict(cells["ours"], {METHOD_LABELS[m]: cells[m] for m in base if m in cells})
         verdict, share = compare_verdict(v["below_all"], v["cells"])
+        v["verdict"], v["rule"] = verdict, "comparative"
+        verdicts[kind] = v
         claims.append(
             {
                 "claim": f"Figure {fig_no} ({where}): ours generalises to "
@@ -218,7 +228,7 @@ def judge_maps(pooled: dict, seeds: list[int]) -> list[dict]:
                 "reason": f"{share} (all seeds). {COMPARE_RULE}",
             }
         )
-    return claims
+    return claims, verdicts
 
 
 def _grid_means(pooled: dict, kind: str) -> str:
@@ -233,7 +243,7 @@ def _ci(c: dict) -> str:
 
 def _label(row: str) -> str:
     if row == EQUAL_STEPS_ROW:
-        return f"{METHOD_LABELS['ours']}, 1.2M environment steps (the baselines' budget)"
+        return f"{METHOD_LABELS['ours']}, trained on the baselines' environment steps"
     m, _, solved = row.partition(":")
     return METHOD_LABELS.get(m, m) + (", seeds that solved training" if solved else "")
 
@@ -277,6 +287,9 @@ def heldout_section(d: Draft) -> None:
         "",
     ]
     out = d.results.setdefault("heldout", {})
+    budget = equal_steps_line(d)
+    if budget:
+        d.md += [budget, ""]
     if tables:
         pooled = pool_tables(tables, d.solved.get("kuka", {}))
         out["tables"] = {"seeds": seeds, **pooled}
@@ -284,7 +297,13 @@ def heldout_section(d: Draft) -> None:
         d.claims += judge_tables(pooled, seeds)
     if maps:
         pm = pool_maps(maps)
-        out["maps"] = {"seeds": mseeds, "grid_mean": pm["grid_mean"]}
+        claims, verdicts = judge_maps(pm, mseeds)
+        out["maps"] = {
+            "seeds": mseeds,
+            "grid_mean": pm["grid_mean"],
+            "goals_fraction_below_0.05": pm["goals_fraction_below_0.05"],
+            "verdicts": verdicts,
+        }
         d.md += [f"### Figures 4-6, held-out goal seeds {', '.join(map(str, mseeds))}", ""]
         d.md += ["| grid mean MSE [95% interval] | goal grid | mass grid | length grid |"]
         d.md += ["|---|---|---|---|"]
@@ -294,7 +313,37 @@ def heldout_section(d: Draft) -> None:
                 f"| {_label(m)} | " + " | ".join(_ci(c) if c else "—" for c in cells) + " |"
             )
         d.md.append("")
-        d.claims += judge_maps(pm, mseeds)
+        d.claims += claims
+
+
+def equal_steps_line(d: Draft) -> str | None:
+    """The sentence on ours' meta-training at the baselines' environment steps (``None``: not
+    run), its numbers read from the meta-training stages' records."""
+    from warp_critic.reproduce.experiments.settings import SCENES
+
+    lines = []
+    for scene in SCENES:
+        eq = d.recs.get(stage_name("metatrain", scene, "ours", equal_steps=True))
+        if eq is None:
+            continue
+        r = eq.data["result"]
+        steps = r["iterations"] * r["env_steps_per_iteration"]
+        other = {}
+        for m in METHODS:
+            rec = d.recs.get(stage_name("metatrain", scene, m))
+            if rec is not None:
+                res = rec.data["result"]
+                other[m] = res["iterations"] * res["env_steps_per_iteration"]
+        lines.append(
+            f"Equal budgets ({scene}): the row '{_label(EQUAL_STEPS_ROW)}' is ours meta-trained "
+            f"anew, with its settings, for {r['iterations']} iterations x "
+            f"{r['env_steps_per_iteration']} environment steps = {steps:,} steps (its learning-rate "
+            "schedule over those iterations; stage "
+            f"`{eq.dir.name}`); the full run: "
+            + ", ".join(f"{METHOD_LABELS[m]} {v:,}" for m, v in other.items())
+            + " steps."
+        )
+    return " ".join(lines) or None
 
 
 def _tables_markdown(d: Draft, pooled: dict, seeds: list[int]) -> None:

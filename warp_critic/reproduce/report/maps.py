@@ -94,7 +94,8 @@ def _goal_grid_lines(d: Draft, M: dict, gm: dict, frac: dict, sv: dict) -> None:
         ]
     goal_rows = rp.method_rows(lambda ci, m: M["goals"][m], 1, sv, None)
     md += ["| goal grid | mean MSE over the grid |", "|---|---|"]
-    md += [f"| {lab} | {fmt(v[0][0]) if v[0] else '—'} |" for lab, _, v in goal_rows] + [""]
+    md += [f"| {r.label} | {fmt(r.values[0][0]) if r.values[0] else '—'} |" for r in goal_rows]
+    md += [""]
     if M.get("diverged"):
         md += [rp.diverged_line(M["diverged"]), ""]
     md += [
@@ -139,25 +140,25 @@ def _goal_claim(d: Draft, M: dict, gm: dict, frac: dict, png) -> dict:
 
 
 def _dynamics_claim(
-    d: Draft, fig_no: int, kind: str, png, grid_means: dict, grid_rows: list[tuple]
+    d: Draft, fig_no: int, kind: str, png, grid_means: dict, grid_rows: list[rp.Row]
 ) -> dict:
     """Figure 5 (``kind`` mass) or 6 (length) and its claim; returns its verdict. The rows are
     found by their method's registry name; a row's label (``this run: ...``) is only shown."""
     kinds = {"mass": "masses", "length": "lengths"}[kind]
     # the claims compare ours with the paper's baselines (an extra one is shown only)
-    claimed = [(lab, m, vals) for lab, m, vals in grid_rows if m in METHODS]
-    means = {lab: grid_means[lab] for lab, _, _ in claimed if lab in grid_means}
-    ours = next([c[0] for c in vals] for _, m, vals in claimed if m == "ours")
+    claimed = [r for r in grid_rows if r.method in METHODS]
+    means = {r.label: grid_means[r.label] for r in claimed if r.label in grid_means}
+    ours = next([c[0] for c in r.values] for r in claimed if r.method == "ours")
     cells = {
-        rp.shown(lab): [c[0] for c in vals]
-        for lab, m, vals in claimed
-        if m != "ours" and all(c is not None for c in vals)
+        rp.shown(r.label): [c[0] for c in r.values]
+        for r in claimed
+        if r.method != "ours" and all(c is not None for c in r.values)
     }
     v = map_verdict(ours, cells)
     # the claim is comparative ("better than the baselines"): judged cell by cell
     v["verdict"], share = compare_verdict(v["below_all"], v["cells"])
     v["rule"] = "comparative"
-    solved_row = any(m != "ours" and lab in means and "solved" in lab for lab, m, _ in claimed)
+    solved_row = any(r.method != "ours" and r.label in means and r.solved_only for r in claimed)
     d.figures.append(
         (
             f"Figure {fig_no}: reacher {kind}",

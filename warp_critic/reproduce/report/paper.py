@@ -17,6 +17,7 @@ Definitions (stated in the report):
 from __future__ import annotations
 
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -168,15 +169,25 @@ def shown(label: str) -> str:
     return label.removeprefix(THIS_RUN)
 
 
+class Row(NamedTuple):
+    """One row of this run's numbers: its shown label, its method's registry name, ``(mean, std)``
+    or ``None`` per column, and whether it holds only the seeds that solved training."""
+
+    label: str
+    method: str
+    values: list
+    solved_only: bool = False
+
+
 def method_rows(
     cells_of, n_cols: int, solved: dict[str, list[bool]], fmt_cell, shown=METHODS
-) -> list[tuple]:
-    """(label, method, [(mean, std) or None per column]) rows: ours, then each baseline with all
-    seeds and with its solved seeds; ``shown``: the methods with numbers (default the paper's)."""
-    rows: list[tuple] = []
+) -> list[Row]:
+    """Rows: ours, then each baseline with all seeds and with its solved seeds; ``shown``: the
+    methods with numbers (default the paper's)."""
+    rows: list[Row] = []
     for m in shown:
         rows.append(
-            (
+            Row(
                 f"{THIS_RUN}{METHOD_LABELS[m]}" + (", all seeds" if m != "ours" else ""),
                 m,
                 [(c["mse_mean"], c["mse_std"]) for c in (cells_of(ci, m) for ci in range(n_cols))],
@@ -187,17 +198,18 @@ def method_rows(
             label = (
                 f"{THIS_RUN}{METHOD_LABELS[m]}, seeds that solved training ({sum(ok)} of {len(ok)})"
             )
-            rows.append((label, m, [solved_cell(cells_of(ci, m), ok) for ci in range(n_cols)]))
+            vals = [solved_cell(cells_of(ci, m), ok) for ci in range(n_cols)]
+            rows.append(Row(label, m, vals, solved_only=True))
     return rows
 
 
-def beats_baselines(rows: list[tuple], n_cols: int, which: str) -> tuple[int, int]:
+def beats_baselines(rows: list[Row], n_cols: int, which: str) -> tuple[int, int]:
     """(columns where ours is below every baseline row of ``which`` ('all' / 'solved'), comparable)."""
-    ours = next(r for r in rows if r[1] == "ours")[2]
-    pick = [r for r in rows if r[1] in BASELINES and (("solved" in r[0]) == (which == "solved"))]
+    ours = next(r for r in rows if r.method == "ours").values
+    pick = [r for r in rows if r.method in BASELINES and r.solved_only == (which == "solved")]
     wins = comparable = 0
     for ci in range(n_cols):
-        others = [r[2][ci] for r in pick if r[2][ci] is not None]
+        others = [r.values[ci] for r in pick if r.values[ci] is not None]
         if not others or len(others) < len(pick):
             continue
         comparable += 1
@@ -272,7 +284,7 @@ def grid_summary(M: dict, kind: str, solved: dict[str, list[bool]]) -> tuple[lis
         "|---|---|---|---|",
     ]
     means = {}
-    for label, _m, vals in rows:
+    for label, _m, vals, _solved in rows:
         if any(v is None for v in vals):
             lines.append(f"| {label} | — | — | — |")
             continue

@@ -74,14 +74,14 @@ def table_markdown(
     rows = method_rows(lambda ci, m: cells[(ci, m)], len(values), solved, None, measured)
     out_cells, summary = [], []
     paper_hits = (0, 0)
-    for row_label, m, vals in rows:
+    for row_label, m, vals, solved_only in rows:
         shown = []
         for ci, (v, val) in enumerate(zip(values, vals)):
             ref = paper.get(m, {}).get(v) if paper is not None else None
             ok = ref is not None and val is not None and val[0] <= ref[0]
             mark = MARK if m == "ours" else BASELINE_MARK
             shown.append(_cell(val) + (f" {mark}" if ok else ""))
-            if "solved" in row_label:
+            if solved_only:
                 continue
             c = cells[(ci, m)]
             out_cells.append(
@@ -103,7 +103,7 @@ def table_markdown(
                 }
             )
         lines.append(f"| {row_label} | " + " | ".join(shown) + " |")
-        if paper is not None and m in paper and "solved" not in row_label:
+        if paper is not None and m in paper and not solved_only:
             comparable = [ci for ci, v in enumerate(values) if v in paper[m]]
             hits = sum(vals[ci][0] <= paper[m][values[ci]][0] for ci in comparable)
             if m == "ours":
