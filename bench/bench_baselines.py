@@ -191,6 +191,7 @@ def run(args) -> list[dict]:
     from warp_critic.evaluation.metatest import MetaTestConfig, meta_test
     from warp_critic.evaluation.presets import preset
     from warp_critic.evaluation.protocol import ProtocolConfig, check_settings
+    from warp_critic.methods import method as method_of
     from warp_critic.methods.baseline_config import BaselineConfig
     from warp_critic.methods.ddpg import train_ddpg
     from warp_critic.methods.meta_critic import train_meta_critic
@@ -221,7 +222,7 @@ def run(args) -> list[dict]:
                 _checkpoint(run_dir)  # a one-line error now rather than after the other runs
                 jobs.append((f"{scene}-{method}", run_dir, None, "complete"))
                 continue
-            cfg = BaselineConfig(
+            cfg = method_of(method).config(
                 scene=str(ROOT / "scenes" / f"{scene}.usda"),
                 seed=args.seed,
                 device=args.device,

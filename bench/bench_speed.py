@@ -145,12 +145,11 @@ def _result(result, wall: float, prof, package: str) -> dict:
 
 def _train_baseline(job: dict, out: Path, callback):
     """A baseline's ``job['iterations']`` iterations (published settings, fixed alpha)."""
-    from warp_critic.methods.baseline_config import BaselineConfig
-    from warp_critic.methods.ddpg import train_ddpg
-    from warp_critic.methods.meta_critic import train_meta_critic
+    from warp_critic.methods import method
 
     seeds = job["seeds"]
-    cfg = BaselineConfig(
+    entry = method(job["method"])
+    cfg = entry.config(
         scene=job["scene"],
         method=job["method"],
         iterations=job["iterations"],
@@ -163,8 +162,7 @@ def _train_baseline(job: dict, out: Path, callback):
         warmup_iterations=1,
         metatest_alpha=1e-3,
     )
-    train = train_ddpg if job["method"] == "ddpg" else train_meta_critic
-    return train(cfg, callbacks=[callback], progress=False, record=False)
+    return entry.train(cfg, callbacks=[callback], progress=False, record=False)
 
 
 # -- the driving side ------------------------------------------------------------------------------

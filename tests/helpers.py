@@ -81,11 +81,17 @@ def tiny_cfg(out: Path, **kw):
 
 
 def tiny_baseline_cfg(out: Path, method: str, **kw):
-    """``BaselineConfig`` of ``TINY_BASELINE`` for ``method``: 3 iterations, a checkpoint every one,
-    into ``out``; ``kw`` overrides fields."""
-    from warp_critic.methods.baseline_config import BaselineConfig
+    """``method``'s config (the registry's: ``BaselineConfig`` for DDPG, ``MetaCriticConfig``, ...)
+    of ``TINY_BASELINE``: 3 iterations, a checkpoint every one, into ``out``; ``kw`` overrides fields
+    (its own only: a field of another method's config is a mistake of the test)."""
+    from dataclasses import fields
 
-    cfg = BaselineConfig(
+    from warp_critic.methods import method as method_of
+
+    config = method_of(method).config
+    unknown = set(kw) - {f.name for f in fields(config)}
+    assert not unknown, f"{method}'s config has no {sorted(unknown)}"
+    cfg = config(
         scene=REACHER,
         method=method,
         goals=[[0.5, 0.3]],

@@ -17,10 +17,10 @@ from warp_critic.core.errors import UserError
 from warp_critic.evaluation.metatest import MetaTestConfig, build_test_critic, meta_test
 from warp_critic.learning.networks import Normalizer
 from warp_critic.learning.rollout import Trajectory
+from warp_critic.methods import method as method_of
 from warp_critic.methods import q_networks as baseline_networks
-from warp_critic.methods.baseline_config import BaselineConfig
 from warp_critic.methods.ddpg import train_ddpg
-from warp_critic.methods.meta_critic import train_meta_critic
+from warp_critic.methods.meta_critic import MetaCriticConfig, train_meta_critic
 from warp_critic.methods.replay import ReplayBuffer, rewards
 from warp_critic.physics.load import load_scene
 from warp_critic.running.recording import read_entity_paths, read_times
@@ -38,7 +38,7 @@ TRAIN = {"ddpg": train_ddpg, "meta-critic": train_meta_critic}
 def test_baseline_learns_and_its_q_runs_through_meta_test(tmp_path, method):
     # the reacher's four default goals, 4 worlds each, a shortened horizon; published DDPG settings
     out = tmp_path / method
-    cfg = BaselineConfig(
+    cfg = method_of(method).config(
         scene=REACHER,
         method=method,
         iterations=40,
@@ -268,7 +268,7 @@ def test_baseline_cli_writes_run_directory_and_resumes(tmp_path, capsys):
 
 
 def test_default_out_directory():
-    cfg = BaselineConfig(scene=REACHER, method="meta-critic")
+    cfg = MetaCriticConfig(scene=REACHER)
     filled = cfg.fill_defaults(load_scene(REACHER))
     assert filled.out == "runs/reacher-meta-critic" and filled.horizon is not None and filled.goals
     assert (

@@ -36,6 +36,7 @@ def test_every_exported_name_resolves(name):
 def test_the_top_level_api_is_the_layers_objects():
     import warp_critic
     from warp_critic.evaluation.metatest import meta_test
+    from warp_critic.methods.meta_critic import MetaCriticConfig, train_meta_critic
     from warp_critic.methods.ours import TrainConfig
     from warp_critic.methods.sac import SACConfig, train_sac
     from warp_critic.methods.td3 import TD3Config, train_td3
@@ -43,6 +44,8 @@ def test_the_top_level_api_is_the_layers_objects():
     assert warp_critic.meta_test is meta_test and warp_critic.TrainConfig is TrainConfig
     assert warp_critic.train_td3 is train_td3 and warp_critic.TD3Config is TD3Config
     assert warp_critic.train_sac is train_sac and warp_critic.SACConfig is SACConfig
+    assert warp_critic.train_meta_critic is train_meta_critic
+    assert warp_critic.MetaCriticConfig is MetaCriticConfig
 
 
 # analysis exports one plain function, not lazily

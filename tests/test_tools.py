@@ -600,7 +600,7 @@ def test_presets_are_the_reported_settings_keyed_by_config_fields():
         preset,
     )
     from warp_critic.evaluation.protocol import ProtocolConfig, check_settings
-    from warp_critic.methods.baseline_config import BaselineConfig
+    from warp_critic.methods import method
     from warp_critic.methods.ours import TrainConfig
 
     assert preset("kuka-table1") == {
@@ -614,16 +614,15 @@ def test_presets_are_the_reported_settings_keyed_by_config_fields():
     }
     assert preset("reacher") == {"iterations": 400, "inner_steps": 3, "alpha": 3e-4}
     assert set(PRESETS) == set(DESCRIPTIONS) == set(SCENES) == set(EVALUATIONS)
-    train_fields = {f.name for f in dataclasses.fields(TrainConfig)}
-    baseline_fields = {f.name for f in dataclasses.fields(BaselineConfig)}
     for name in PRESETS:
         settings = preset(name)
-        fields = baseline_fields if "method" in settings else train_fields
+        config = method(settings["method"]).config if "method" in settings else TrainConfig
+        fields = {f.name for f in dataclasses.fields(config)}
         assert set(settings) <= fields, (name, set(settings) - fields)
         assert DESCRIPTIONS[name] and "\n" not in DESCRIPTIONS[name]
         assert SCENES[name] is None or (ROOT / "scenes" / f"{SCENES[name]}.usda").is_file()
         check_settings(ProtocolConfig(**evaluation(name)))
-        (BaselineConfig if "method" in settings else TrainConfig)(scene=REACHER, **preset(name))
+        config(scene=REACHER, **preset(name))
     # a copy: changing it leaves the preset alone
     p = preset("kuka-table1")
     p["iterations"] = 1

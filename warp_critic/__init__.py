@@ -23,7 +23,7 @@ if TYPE_CHECKING:  # the names for IDEs and type checkers (Newton's pattern); at
     from warp_critic.evaluation.protocol import ProtocolConfig, run_protocol
     from warp_critic.methods.baseline_config import BaselineConfig
     from warp_critic.methods.ddpg import train_ddpg
-    from warp_critic.methods.meta_critic import train_meta_critic
+    from warp_critic.methods.meta_critic import MetaCriticConfig, train_meta_critic
     from warp_critic.methods.ours import TrainConfig, meta_train
     from warp_critic.methods.sac import SACConfig, train_sac
     from warp_critic.methods.td3 import TD3Config, train_td3
@@ -46,7 +46,7 @@ __all__, __getattr__, __dir__ = lazy_exports(
         "warp_critic.methods.ours": ("TrainConfig", "meta_train"),
         "warp_critic.methods.baseline_config": ("BaselineConfig",),
         "warp_critic.methods.ddpg": ("train_ddpg",),
-        "warp_critic.methods.meta_critic": ("train_meta_critic",),
+        "warp_critic.methods.meta_critic": ("MetaCriticConfig", "train_meta_critic"),
         "warp_critic.methods.td3": ("TD3Config", "train_td3"),
         "warp_critic.methods.sac": ("SACConfig", "train_sac"),
         "warp_critic.evaluation.metatest": ("MetaTestConfig", "meta_test"),

@@ -28,11 +28,26 @@ class Parser(argparse.ArgumentParser):
     (the same start as every other user error, whichever subcommand's parser found it).
 
     A value that starts with a negative number (``--max-torque -1,1``, ``--tip-offset -0.1,0,0``) is
-    a value, not an unknown flag: argparse takes only a lone ``-1`` or ``-.5`` for a number."""
+    a value, not an unknown flag: argparse takes only a lone ``-1`` or ``-.5`` for a number.
 
-    def __init__(self, *args, **kwargs):
+    :attr:`refused` maps a flag this parser does not take to why (``--aux-lr``: "is a Meta-Critic
+    setting; ddpg does not use it"): given anyway, it is that one line rather than argparse's
+    "unrecognized arguments"."""
+
+    def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = NEGATIVE_VALUE
+        self.refused: dict[str, str] = {}
+
+    def parse_known_args(self, args=None, namespace=None):
+        # a subcommand's parser is called through this too (argparse's _SubParsersAction), so
+        # its refused flags are named before the top parser reports them as unrecognized
+        namespace, extras = super().parse_known_args(args, namespace)
+        for arg in extras:
+            flag = arg.split("=", 1)[0]
+            if flag in self.refused:
+                self.error(f"{flag} {self.refused[flag]}")
+        return namespace, extras
 
     def error(self, message: str) -> typing.NoReturn:  # noqa: D401
         root, *command = self.prog.split()

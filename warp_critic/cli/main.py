@@ -18,6 +18,7 @@ if __name__ == "__main__":  # python -m warp_critic.cli.main: the handlers befor
 
 import argparse  # noqa: E402
 import errno  # noqa: E402
+from dataclasses import fields  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from warp_critic import __version__
@@ -166,7 +167,6 @@ def _add_meta_test(sub) -> None:
 
 def _add_baseline(sub) -> None:
     from warp_critic.methods import methods
-    from warp_critic.methods.baseline_config import META_CRITIC_FIELDS, uses_meta_critic_fields
 
     baselines = methods(baseline=True)
     bl = sub.add_parser(
@@ -192,11 +192,23 @@ def _add_baseline(sub) -> None:
             help="USD scene, e.g. scenes/reacher.usda, or a robot file (.urdf, .xml, .usd)",
         )
         add_dataclass_arguments(one, entry.config, skip=("scene", "method"))
-        if not uses_meta_critic_fields(entry.name):  # not offered; given anyway, refused
-            for action in one._actions:
-                if action.dest in META_CRITIC_FIELDS:
-                    action.help = argparse.SUPPRESS
+        one.refused = _others_settings(entry, baselines)
         one.set_defaults(func=cmd_baseline)
+
+
+def _others_settings(entry, baselines) -> dict[str, str]:
+    """``{flag: why refused}`` for the flags of the other baselines' configs that ``entry``'s
+    config lacks (``--aux-lr`` for DDPG): a user who gives one gets told whose setting it is."""
+    own = {f.name for f in fields(entry.config)}
+    owners: dict[str, list[str]] = {}
+    for other in baselines:
+        for f in fields(other.config):
+            if f.name not in own:
+                owners.setdefault(f.name, []).append(other.label)
+    return {
+        flag_of(name): f"is a {' and '.join(labels)} setting; {entry.name} does not use it"
+        for name, labels in owners.items()
+    }
 
 
 def _add_analyze(sub) -> None:

@@ -1,6 +1,7 @@
-"""The baselines' config (DDPG and Meta-Critic; TD3's and SAC's subclass it): the shared task
-fields of :class:`~warp_critic.running.task.TaskConfig` plus the published DDPG and Meta-Critic
-settings; the protocol they train with is described in :mod:`warp_critic.methods.baseline`."""
+"""The baselines' config (DDPG's; Meta-Critic's, TD3's and SAC's subclass it with their own
+fields and defaults): the shared task fields of :class:`~warp_critic.running.task.TaskConfig` plus
+the published DDPG settings; the protocol they train with is described in
+:mod:`warp_critic.methods.baseline`."""
 
 from __future__ import annotations
 
@@ -8,32 +9,18 @@ from dataclasses import dataclass
 
 from warp_critic.core.errors import FieldError
 from warp_critic.core.memory import check_fits
-from warp_critic.methods.q_networks import AUX_INPUTS
 from warp_critic.methods.replay import NOISE_KINDS, REWARD_KINDS
 from warp_critic.physics import schema
 from warp_critic.running.config import filled, spec
 from warp_critic.running.task import TaskConfig
 
-#: The settings only Meta-Critic uses (another method refuses them rather than ignore them).
-META_CRITIC_FIELDS = (
-    "aux_lr",
-    "aux_weight_decay",
-    "aux_hidden",
-    "aux_input",
-    "aux_weight",
-    "virtual_lr",
-)
-
-
-def uses_meta_critic_fields(method: str) -> bool:
-    """Whether ``method`` reads :data:`META_CRITIC_FIELDS` (Meta-Critic shares this config)."""
-    return method == "meta-critic"
-
 
 @dataclass
 class BaselineConfig(TaskConfig):
-    """The baselines' training (DDPG and Meta-Critic; TD3's and SAC's configs subclass it, with their
-    own published defaults). ``None`` = the scene's default (as for meta-train).
+    """The baselines' training: DDPG's config, and the base of every other baseline's
+    (``MetaCriticConfig``, ``TD3Config``, ``SACConfig`` add their own fields and published
+    defaults; the method registry names each method's). ``None`` = the scene's default (as for
+    meta-train).
 
     Defaults follow the published DDPG settings (Lillicrap et al. 2015): Adam with actor lr 1e-4 and
     critic lr 1e-3, gamma 0.99, minibatch 64, replay buffer 1e6, Ornstein-Uhlenbeck exploration
@@ -41,8 +28,6 @@ class BaselineConfig(TaskConfig):
     tau = 5e-3 (TD3-era DDPG implementations; 1e-3 lags too far behind in runs of a few thousand
     updates) and no L2 weight decay on Q by default (``critic_weight_decay`` 1e-2 restores it);
     plus a 5-iteration random-action warm-up (``warmup_iterations`` 0 disables it).
-    Meta-Critic settings follow Zhou et al. 2020's code: meta-critic lr 1e-3, weight decay 1e-4,
-    2 x 100 hidden units, virtual step size = the actor lr.
     """
 
     method: str = spec(
@@ -87,31 +72,6 @@ class BaselineConfig(TaskConfig):
     reward_scale: float = spec(1.0, "multiply the reward by this", gt=0)
     actor_hidden: int = spec(64, "actor hidden units (2 tanh layers)", gt=0, cap=8192)
     critic_hidden: int = spec(400, "Q hidden units (2 ELU layers)", gt=0, cap=8192)
-    # -- Meta-Critic -----------------------------------------------------------------------------
-    aux_lr: float = spec(
-        1e-3, "meta-critic only: learning rate of the auxiliary loss h_omega (Adam)", gt=0, cap=1e3
-    )
-    aux_weight_decay: float = spec(1e-4, "meta-critic only: weight decay of h_omega", ge=0)
-    aux_hidden: int = spec(
-        100, "meta-critic only: h_omega hidden units (2 ReLU layers)", gt=0, cap=8192
-    )
-    aux_input: str = spec(
-        "action",
-        "meta-critic only: what h_omega sees besides s - g. action: the actor's action mu(s), "
-        "so its gradient reaches the actor through the action; features: the actor's last hidden "
-        "layer and the stored action (Zhou et al.'s DDPG_MC_sa), so it reaches the actor through "
-        "its features",
-        choices=AUX_INPUTS,
-    )
-    aux_weight: float = spec(
-        1.0, "meta-critic only: weight of the auxiliary loss in the actor update", ge=0
-    )
-    virtual_lr: float | None = spec(
-        None,
-        "meta-critic only: SGD step of the virtual actor updates (default: the actor lr)",
-        gt=0,
-        cap=1e3,
-    )
     # -- meta-test defaults stored in the checkpoint ---------------------------------------------
     # named ``alpha`` before 2026-12 (a run's config.json / checkpoint may still say so: from_dict)
     metatest_alpha: float | None = spec(
@@ -132,19 +92,10 @@ class BaselineConfig(TaskConfig):
     scene_fields = TaskConfig.scene_fields + ("inner_steps",)
 
     def check(self, scene=None) -> None:
-        """:meth:`TaskConfig.check`, and: Meta-Critic's settings only for Meta-Critic (another
-        method would record and ignore them), a minibatch no larger than the replay buffer, and,
-        with ``scene``, the replay buffers' memory (``S`` seeds x the transitions they can hold x
+        """:meth:`TaskConfig.check`, and: a minibatch no larger than the replay buffer, and, with
+        ``scene``, the replay buffers' memory (``S`` seeds x the transitions they can hold x
         ``7 dof + 2`` float32 each) before any is allocated."""
         super().check(scene)
-        if not uses_meta_critic_fields(self.method):
-            for name in META_CRITIC_FIELDS:
-                value = getattr(self, name)
-                if value != self.__dataclass_fields__[name].default:
-                    raise FieldError(
-                        name,
-                        f"is a Meta-Critic setting; {self.method} does not use it (got {value!r})",
-                    )
         if self.batch_size > self.buffer_size:
             raise FieldError(
                 "batch_size",
@@ -163,8 +114,11 @@ class BaselineConfig(TaskConfig):
 
     @classmethod
     def from_dict(cls, d: dict):
-        """As :meth:`SerializableConfig.from_dict`; a saved config's old key ``alpha`` (the field
-        :attr:`metatest_alpha`'s name in runs written before 2026-12) is read as ``metatest_alpha``."""
+        """As :meth:`SerializableConfig.from_dict` (a key that is no field of ``cls`` is ignored,
+        so a run written before 2026-12, whose config holds Meta-Critic's ``aux_*`` and
+        ``virtual_lr`` whatever its method, loads as DDPG's, TD3's or SAC's: those methods never
+        read them); a saved config's old key ``alpha`` (the field :attr:`metatest_alpha`'s name in
+        runs written before 2026-12) is read as ``metatest_alpha``."""
         if "alpha" in d and "metatest_alpha" not in d:
             d = {**{k: v for k, v in d.items() if k != "alpha"}, "metatest_alpha": d["alpha"]}
         return super().from_dict(d)

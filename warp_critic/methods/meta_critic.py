@@ -36,11 +36,15 @@ Variant implemented (documented choice):
 The Q function is learned exactly as in DDPG (TD regression, target networks, soft updates). At
 meta-test we use the main Q (the paper: "we use the critics (q-functions) that were trained during
 meta-train"): ``L = -Q``; ``h_omega`` is saved in the checkpoint but not used there.
+
+Its settings are :class:`MetaCriticConfig`'s: DDPG's :class:`BaselineConfig` plus ``h_omega``'s
+(``aux_*``) and the virtual step (``virtual_lr``), flags of ``warp-critic baseline meta-critic``
+only.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import torch
 from torch import nn
@@ -53,8 +57,42 @@ from warp_critic.methods.baseline_config import BaselineConfig
 from warp_critic.methods.ddpg import DDPGAgent
 from warp_critic.methods.q_networks import _GoalInput, test_critic_from_checkpoint
 from warp_critic.methods.replay import ReplayBuffer
+from warp_critic.running.config import spec
 from warp_critic.running.loop import TrainResult
 from warp_critic.running.methods import Method, register
+
+#: what ``h_omega`` sees besides ``s - g`` (:attr:`MetaCriticConfig.aux_input`)
+AUX_INPUTS = ("action", "features")
+
+
+@dataclass
+class MetaCriticConfig(BaselineConfig):
+    """Meta-Critic training: DDPG's fields and defaults (:class:`BaselineConfig`) plus the
+    auxiliary loss ``h_omega`` and its virtual steps.
+
+    Defaults follow Zhou et al. 2020's code: meta-critic (``h_omega``) Adam lr 1e-3, weight decay
+    1e-4, 2 x 100 hidden units, auxiliary weight 1, virtual step size = the actor lr. A run written
+    before 2026-12 (when every baseline's config held these fields) loads unchanged.
+    """
+
+    method: str = spec("meta-critic", "the baseline's name in the method registry")
+    aux_lr: float = spec(1e-3, "learning rate of the auxiliary loss h_omega (Adam)", gt=0, cap=1e3)
+    aux_weight_decay: float = spec(1e-4, "weight decay of h_omega", ge=0)
+    aux_hidden: int = spec(100, "h_omega hidden units (2 ReLU layers)", gt=0, cap=8192)
+    aux_input: str = spec(
+        "action",
+        "what h_omega sees besides s - g. action: the actor's action mu(s), so its gradient "
+        "reaches the actor through the action; features: the actor's last hidden layer and the "
+        "stored action (Zhou et al.'s DDPG_MC_sa), so it reaches the actor through its features",
+        choices=AUX_INPUTS,
+    )
+    aux_weight: float = spec(1.0, "weight of the auxiliary loss in the actor update", ge=0)
+    virtual_lr: float | None = spec(
+        None,
+        "SGD step of the virtual actor updates (default: the actor lr)",
+        gt=0,
+        cap=1e3,
+    )
 
 
 class AuxiliaryLoss(_GoalInput):
@@ -157,7 +195,11 @@ def aux_alive_basis(metrics: list[dict]) -> str | None:
 class MetaCriticAgent(DDPGAgent):
     """DDPG plus the online-learned auxiliary actor loss ``h_omega``."""
 
+    cfg: MetaCriticConfig
+
     def __init__(self, cfg: BaselineConfig, dof: int, norm: Normalizer, device):
+        if not isinstance(cfg, MetaCriticConfig):
+            raise TypeError(f"Meta-Critic needs a MetaCriticConfig, got {type(cfg).__name__}")
         super().__init__(cfg, dof, norm, device)
         feats = cfg.actor_hidden if cfg.aux_input == "features" else 0
         self.aux = AuxiliaryLoss(dof, norm, cfg.aux_hidden, feats).to(device)
@@ -235,7 +277,7 @@ class MetaCriticAgent(DDPGAgent):
         self.aux_opt.load_state_dict(state["aux_opt"])
 
 
-def train_meta_critic(cfg: BaselineConfig, **kwargs) -> TrainResult:
+def train_meta_critic(cfg: MetaCriticConfig, **kwargs) -> TrainResult:
     """Train (or resume) Meta-Critic; ``kwargs`` go to :func:`~warp_critic.methods.baseline.train_baseline`."""
     result = train_baseline(replace(cfg, method="meta-critic"), MetaCriticAgent, **kwargs)
     for r in result.seeds or [result]:
@@ -254,12 +296,12 @@ register(
         order=2,
         label="Meta-Critic",
         colour="tab:green",
-        config=BaselineConfig,
+        config=MetaCriticConfig,
         train=train_meta_critic,
         critic_loader=test_critic_from_checkpoint,
         cite="Zhou et al. 2020",
         preset={"method": "meta-critic", "iterations": 300},
-        preset_description="Meta-Critic baseline: Zhou et al.'s settings (BaselineConfig defaults), 300 iterations",
+        preset_description="Meta-Critic baseline: Zhou et al.'s settings (MetaCriticConfig defaults), 300 iterations",
         paper_label="paper (Table 1, Meta-Critic)",
         table_label="paper: Meta Critic",
         run_summary=lambda rows: {

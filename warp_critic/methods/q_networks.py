@@ -16,8 +16,6 @@ from warp_critic.core.errors import UserError
 from warp_critic.learning.networks import Normalizer, wrap_angles
 from warp_critic.running.methods import names
 
-AUX_INPUTS = ("action", "features")  # what Meta-Critic's h_omega sees (BaselineConfig.aux_input)
-
 
 class _GoalInput(nn.Module):
     """Holds the fixed normaliser as buffers (checkpoints are self-contained)."""
