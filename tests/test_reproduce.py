@@ -106,6 +106,15 @@ def test_quick_end_to_end(quick):
         assert claim["verdict"] in ("met", "not met", "not comparable"), claim
         assert f"**{claim['verdict']}**" in report
     assert "as in the paper" not in report
+    # goal seed 1 chose the settings: Tables 1-3 and Figures 4-6 are judged on the held-out seeds
+    names = [c["claim"] for c in results["claims"]]
+    for fig in ("Table 1", "Table 2", "Table 3", "Figure 4", "Figure 5", "Figure 6"):
+        judged = [n for n in names if n.startswith(fig)]
+        assert judged and all(n.startswith(f"{fig} (held-out goal seeds 1000)") for n in judged)
+    held = results["heldout"]["tables"]["table1"]
+    assert {"ours", "ddpg", "meta-critic", "ours-equal-steps"} <= set(held["rows"])
+    assert all(c["lo"] <= c["mean"] <= c["hi"] for r in held["rows"].values() for c in r)
+    assert "Shown, not judged" in report and "Equal budgets (kuka)" in report
     for cell in results["tables"]:
         stage = out / cell["file"]
         assert stage.is_file()
@@ -137,7 +146,9 @@ def test_second_call_skips_every_stage(quick, capsys):
     out, rc, _ = quick
     assert rc == 0
     before = _stage_mtimes(out)
-    assert len(before) == 11  # toy, landscape, 6 metatrain, maps, tables, tables-heldout
+    # toy, landscape, 6 metatrain, maps, tables; held out: tables, maps, ours at the baselines'
+    # environment steps (its meta-training and its rows)
+    assert len(before) == 14
     t = time.perf_counter()
     capsys.readouterr()
     assert reproduce_main(["--quick", "--out", str(out), "--device", "cpu"]) == 0
@@ -394,9 +405,9 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     archive = tmp_path / "archive"
     assert carry.main(["save", str(out), str(archive)]) == 0
     names = {p.name for p in archive.iterdir()}
-    assert len(names) == 11 and not list(archive.rglob("*.rrd"))
+    assert len(names) == 14 and not list(archive.rglob("*.rrd"))
     ckpts = list(archive.rglob("checkpoint.pt"))
-    assert len(ckpts) == 6 * 2  # 6 meta-trainings x 2 quick seeds
+    assert len(ckpts) == 7 * 2  # 7 meta-trainings (ours twice on the KUKA) x 2 quick seeds
     from warp_critic.physics.scene import scenes_dir
 
     shipped = str(scenes_dir().resolve())
@@ -430,7 +441,7 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     capsys.readouterr()
     assert reproduce_main(["--quick", "--out", str(other), "--device", "cpu"]) == 0
     err = capsys.readouterr().err
-    assert "3 stage(s) to run" in err  # maps, tables, tables-heldout
+    assert "4 stage(s) to run" in err  # maps, tables, tables-heldout, maps-heldout
     cells = {
         (c["table"], c["value"], c["method"]): c["mse_mean"]
         for c in json.loads((out / "results.json").read_text())["tables"]
