@@ -76,6 +76,11 @@ def _held(r: dict) -> tuple[dict, str]:
     return held, f"held-out goal seeds {', '.join(str(s) for s in held['seeds'])}"
 
 
+def _counts(r: dict, claims: list[str], pattern: str) -> list[tuple[str, ...]]:
+    """The numbers ``pattern`` reads from each claim's measurement."""
+    return [_find(pattern, _claim(r, c)["ours"]) for c in claims]
+
+
 def _ci(cell: dict) -> str:
     return f"{cell['mean']:.3f} [{cell['lo']:.3f}, {cell['hi']:.3f}]"
 
@@ -103,14 +108,12 @@ def rows(r: dict) -> list[tuple[str, str, str]]:
         ("ours trained on the baselines' 1.2M KUKA environment steps", "ours at the baselines'"),
     ):
         tables = [f"Table {i} ({where}): {claim}" for i in (1, 2, 3)]
-        below = [
-            _find(
-                r"below both \(all seeds\) in (\d+) of (\d+) columns, its 95% interval wholly "
-                r"below both in (\d+) of",
-                _claim(r, t)["ours"],
-            )
-            for t in tables
-        ]
+        below = _counts(
+            r,
+            tables,
+            r"below both \(all seeds\) in (\d+) of (\d+) columns, its 95% interval wholly "
+            r"below both in (\d+) of",
+        )
         out.append(
             (
                 f"Tables 1-3: {who} below DDPG and Meta-Critic (comparative: the share of columns)",
@@ -120,14 +123,12 @@ def rows(r: dict) -> list[tuple[str, str, str]]:
             )
         )
     values = [f"Table {i} ({where}): ours at the paper" for i in (1, 2, 3)]
-    hits = [
-        _find(
-            r"within its printed std in (\d+) of (\d+) columns \(strictly at or below its value: "
-            r"(\d+) of",
-            _claim(r, t)["ours"],
-        )
-        for t in values
-    ]
+    hits = _counts(
+        r,
+        values,
+        r"within its printed std in (\d+) of (\d+) columns \(strictly at or below its value: "
+        r"(\d+) of",
+    )
     out.append(
         (
             "Tables 1-3: ours at the paper's values (its printed decimals, within its printed std)",
