@@ -38,6 +38,7 @@ def test_every_held_out_seed_chose_nothing_and_draws_no_goal_twice():
     assert sum(len(r) for r in ranges) == len(set().union(*ranges))
 
 
+@pytest.mark.slow  # builds the full plan (loads every scene): seconds
 def test_plan_scores_tables_and_maps_on_every_held_out_seed_with_the_extra_rows():
     _, p = _plan(baselines=["ddpg", "meta-critic", "td3"])
     for group in ("tables", "maps"):
@@ -55,6 +56,7 @@ def test_plan_scores_tables_and_maps_on_every_held_out_seed_with_the_extra_rows(
     assert p["tables-heldout"].dir_name in published
 
 
+@pytest.mark.slow  # builds the full plan (loads every scene): seconds
 def test_the_held_out_group_runs_every_seed_and_the_equal_step_rows():
     rc, p = _plan(only=["tables-heldout"], baselines=["ddpg", "meta-critic", "td3"])
     first, second = needed(rc, p)
@@ -71,6 +73,7 @@ def test_the_held_out_group_runs_every_seed_and_the_equal_step_rows():
     assert "metatrain-kuka-ours-equal-steps" in first
 
 
+@pytest.mark.slow  # builds the full plan (loads every scene): seconds
 def test_equal_step_iterations_match_the_baselines_environment_steps():
     """375 of ours' iterations are the baselines' 1500: read from the published stage records."""
 
@@ -155,3 +158,34 @@ def test_pool_tables_means_over_training_and_goal_seeds():
     assert ours["lo"] >= 0.1 - 1e-12 and ours["hi"] <= 0.16 + 1e-12
     solved = pooled["table1"]["rows"]["ddpg:solved"][0]
     assert solved["mean"] == pytest.approx(0.32)  # training seed 0 only, over both goal seeds
+
+
+def test_pool_maps_averages_cells_over_goal_seeds_with_solved_rows():
+    def result(offset):
+        def cells(base):
+            return [
+                {
+                    "mse_mean": base + offset + 0.01,
+                    "mse_per_seed": [base + offset, base + offset + 0.02],
+                }
+            ] * 4
+
+        return {
+            "goals": {
+                m: {"mse": [base + offset] * 9, "mse_per_seed": [base + offset, base + offset]}
+                for m, base in (("ours", 0.01), ("ddpg", 0.3))
+            },
+            "mass": {"ours": cells(0.01), "ddpg": cells(0.3)},
+            "length": {"ours": cells(0.01), "ddpg": cells(0.3)},
+        }
+
+    pooled = H.pool_maps([result(0.0), result(0.02)], {"ddpg": [False, True]})
+    assert pooled["goals"]["ours"] == pytest.approx([0.02] * 9)
+    assert pooled["goals_fraction_below_0.05"] == {"ours": 1.0, "ddpg": 0.0}
+    assert pooled["mass"]["ddpg"] == pytest.approx([0.32] * 4)
+    assert pooled["mass"]["ddpg:solved"] == pytest.approx([0.33] * 4)  # training seed 1 only
+    grid = pooled["grid_mean"]["mass"]["ours"]
+    assert grid["mean"] == pytest.approx(0.03) and grid["lo"] <= grid["mean"] <= grid["hi"]
+    claims, verdicts = H.judge_maps(pooled, [1000, 1010])
+    assert [c["verdict"] for c in claims] == ["met", "met", "met"]  # ours 0.02 on every goal
+    assert verdicts["mass"]["below_all"] == 4 and "seeds that solved" in claims[1]["reason"]
