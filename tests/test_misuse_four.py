@@ -354,6 +354,7 @@ def test_a_urdf_saved_as_txt_is_imported(tmp_path, capfd):
     assert out.is_file()
 
 
+@pytest.mark.slow
 def test_reproduce_beyond_only_runs_what_its_names_need(tmp_path):
     """``reproduce --quick --beyond --only metatrain-reacher-ours`` plans that one stage, as without
     ``--beyond`` (it planned 13)."""
@@ -370,6 +371,8 @@ def test_reproduce_beyond_only_runs_what_its_names_need(tmp_path):
     assert len(stages(beyond=True)) > len(stages())  # --beyond alone still adds the group
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_a_signal_while_the_interpreter_shuts_down_is_not_a_kill(tmp_path):
     """A SIGTERM that lands after the command, while Python tears itself down (it has put the default
     handlers back by then): the process ends as the command did, not killed (exit 143, no line)."""
@@ -399,6 +402,8 @@ def test_a_signal_while_the_interpreter_shuts_down_is_not_a_kill(tmp_path):
     assert p.returncode == 2 and len(err) == 1 and "missing.urdf" in err[0], (p.returncode, err)
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_a_console_that_cannot_encode_the_path(tmp_path, base):  # noqa: F811 (the fixture)
     """``PYTHONIOENCODING=ascii`` under ``LC_ALL=C``: the result path ``R ü/metatest.json`` is printed
     escaped (it was a ``UnicodeEncodeError`` traceback after the files were written)."""

@@ -221,6 +221,7 @@ def test_bad_input(tmp_path, capsys, argv, words):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_bad_out(tmp_path, capsys):
     f = tmp_path / "file"
     f.write_text("keep me")
@@ -327,6 +328,7 @@ def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
     assert cell["mse_mean"] == float("inf") and cell["diverged"] == r["diverged"]
 
 
+@pytest.mark.slow
 def test_grid_figure_shows_a_diverged_cell_in_black(tmp_path):
     from warp_critic.reproduce.experiments.settings import METHODS
     from warp_critic.reproduce.report import paper as rp
