@@ -253,6 +253,7 @@ SLOW = frozenset(
         "c06-ddpg-live-lock",
         "c06-ddpg-dead-lock-taken-over",
         "c06-dead-lock-taken-over",
+        "c06-garbage-lock-taken-over",
         "c06-stale-lock-pid-1-taken-over",
         "c07-resume-missing-metrics",
         "c12-ddpg",
@@ -271,6 +272,7 @@ SLOW = frozenset(
         "c16-garbage-recording-resume",
         "c16-garbage-segment-of-a-killed-process",
         "c17-disk-full-png",
+        "c17-lock-naming-a-huge-pid",
         "c17-metrics-row-without-task-loss",
         "c17-stage-json-with-empty-result",
         "c18-ray-address-of-a-plain-http-server",
@@ -280,6 +282,7 @@ SLOW = frozenset(
         "s47-train-variants-heavy-link-trains",
         "s47-train-variants-light-link-with-drop-trains",
         "t47-train-variants-blank",
+        "w56-score-a-run-a-live-training-holds",
     }
 )
 

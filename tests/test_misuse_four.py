@@ -326,6 +326,7 @@ def test_robot_zoo_only_matching_nothing_and_runs_dir_a_file(tmp_path, capsys):
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_lock_mimic_follows_the_given_home(tmp_path, capfd):
     """``--lock-mimic --home j1=0.5``: j2 = 0.1 + 0.5 j1 is welded at 0.35 (it was welded where the
     file's home put it, 0.1, breaking the coupling at the home the scene records)."""

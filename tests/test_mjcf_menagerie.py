@@ -173,6 +173,7 @@ def test_a_plugin_actuator_drives_its_joint_with_its_force_range(tmp_path, capfd
     np.testing.assert_allclose(scene.effort_limit, [20.0, 0.9])
 
 
+@pytest.mark.slow
 def test_names_with_slashes_and_dots_import_and_write(tmp_path, capfd):
     """Shadow's DEX-EE names joints F0/J0 (newton's labels join names with '/'); DRM's Allegro
     names a link link_9.0, not a valid USD prim name."""

@@ -543,6 +543,7 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
         assert words in err and len(err.splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_only_one_beyond_evaluation_plans_it_and_what_it_reads():
     from warp_critic.reproduce.experiments.plan import ReproduceConfig, needed, plan
 
