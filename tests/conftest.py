@@ -7,11 +7,20 @@
   change it work on a copy (``copy_of``).
 * ``mesh_arm``: a planar two-link MJCF arm whose links are triangle meshes (no collision, explicit
   inertials), for the recordings' mesh drawing.
+* A test that starts a child process (a program through :mod:`subprocess`, or a fresh interpreter
+  through :mod:`multiprocessing`; from its own code, a fixture it sets up first, or a ``tools/`` or
+  ``bench/`` script it runs) fails unless it is marked ``subprocess``: the marker is kept true by
+  running, not by reading the code. The package's own children (a recording's ``rerun rrd
+  optimize``, ``--jobs`` workers, Ray) are what a command does, as its file writes are: not counted.
 """
 
 from __future__ import annotations
 
+import os
+import shlex
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -27,6 +36,96 @@ def pytest_configure(config):
     from warp_critic.core import runtime
 
     runtime.init()
+
+
+# ------------------------------------------------------------------------------------------------
+# a test that starts a child process is marked ``subprocess``
+# ------------------------------------------------------------------------------------------------
+
+# the child processes a test started since the last test report, as short command lines
+STARTED: list[str] = []
+
+
+def _started_by_the_tests() -> bool:
+    """Whether the child being started was asked for by the repository's code outside the package:
+    the innermost frame of ``warp_critic`` itself (a package child, by module name, so an installed
+    package counts too) or of a file of this repository (tests, tools, bench) decides; frames of the
+    standard library and installed packages in between do not. No such frame: a library's own
+    thread started it, which no test asked for."""
+    frame = sys._getframe(2)
+    while frame is not None:
+        module = frame.f_globals.get("__name__", "")
+        if module == "warp_critic" or module.startswith("warp_critic."):
+            return False
+        path = frame.f_code.co_filename
+        if path.startswith(f"{ROOT}{os.sep}") and f"{os.sep}site-packages{os.sep}" not in path:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _command(args) -> str:
+    text = args if isinstance(args, str | bytes) else shlex.join(map(str, args))
+    text = text.decode(errors="replace") if isinstance(text, bytes) else text
+    return text if len(text) <= 120 else text[:117] + "..."
+
+
+def watch_children() -> None:
+    """Record in :data:`STARTED` every child process the tests start from now on (see
+    :func:`_started_by_the_tests`): programs (every :class:`subprocess.Popen`, which
+    ``subprocess.run`` goes through) and :mod:`multiprocessing`'s fresh interpreters (spawn and
+    forkserver). Called once per test process, on its first test (an xdist controller runs none and
+    is left alone); the children themselves are fresh interpreters and unpatched."""
+    import multiprocessing.util
+
+    execute_child = subprocess.Popen._execute_child
+    spawnv_passfds = multiprocessing.util.spawnv_passfds
+
+    def watched_execute_child(self, args, *rest, **kw):
+        if _started_by_the_tests():
+            STARTED.append(_command(args))
+        return execute_child(self, args, *rest, **kw)
+
+    def watched_spawnv_passfds(path, args, passfds):
+        if _started_by_the_tests():
+            STARTED.append(_command(args))
+        return spawnv_passfds(path, args, passfds)
+
+    subprocess.Popen._execute_child = watched_execute_child
+    multiprocessing.util.spawnv_passfds = watched_spawnv_passfds
+
+
+def unmarked_children(item: pytest.Item, report: pytest.TestReport) -> None:
+    """Turn ``report`` (one phase of ``item``: setup, call or teardown) into a failure naming the
+    first child process of :data:`STARTED` when ``item`` is not marked ``subprocess``; clear
+    :data:`STARTED` either way. A phase that already failed or was skipped keeps its own report."""
+    started = list(STARTED)
+    STARTED.clear()
+    if started and report.passed and item.get_closest_marker("subprocess") is None:
+        report.outcome = "failed"
+        report.longrepr = (
+            f"{item.nodeid} started {len(started)} child process(es) ({started[0]}) in its "
+            f"{report.when} but is not marked @pytest.mark.subprocess (mark it, and slow if it "
+            "takes seconds)"
+        )
+
+
+_watching = False
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_protocol(item, nextitem):
+    global _watching
+    if not _watching:
+        watch_children()
+        _watching = True
+
+
+@pytest.hookimpl(wrapper=True)
+def pytest_runtest_makereport(item, call):
+    report = yield
+    unmarked_children(item, report)
+    return report
 
 
 @pytest.fixture(scope="session")

@@ -238,7 +238,8 @@ class Case:
     )
 
 
-# the cases that take seconds (they train, resume or start a pool): left out of the fast loop
+# the cases that take half a second or more (they train, resume, start a pool or meet a live lock):
+# left out of the fast loop
 SLOW = frozenset(
     {
         "c01-no-goals-given-file",
@@ -249,15 +250,21 @@ SLOW = frozenset(
         "c03-truncated-last-metrics-line",
         "c04-reproduce-out-name-too-long",
         "c05-resume-user-dir",
+        "c06-ddpg-live-lock",
         "c06-ddpg-dead-lock-taken-over",
         "c06-dead-lock-taken-over",
+        "c06-garbage-lock-taken-over",
         "c06-stale-lock-pid-1-taken-over",
         "c07-resume-missing-metrics",
+        "c12-ddpg",
         "c12-meta-critic",
         "c12-meta-train",
         "c12-resume",
         "c13-jobs-huge",
         "c13-jobs-zero",
+        "c14-meta-test-out-inside-a-live-run",
+        "c14-meta-test-out-replaces-results-json",
+        "c14-meta-train-inside-a-live-run",
         "c14-reproduce-inside-a-live-run",
         "c15-asymmetric-limits-start-std",
         "c15-resume-a-checkpoint-of-another-run",
@@ -265,6 +272,8 @@ SLOW = frozenset(
         "c16-garbage-recording-resume",
         "c16-garbage-segment-of-a-killed-process",
         "c17-disk-full-png",
+        "c17-lock-naming-a-huge-pid",
+        "c17-metrics-row-without-task-loss",
         "c17-stage-json-with-empty-result",
         "c18-ray-address-of-a-plain-http-server",
         "d48-resume-run-stopped-before-first-checkpoint",
@@ -273,6 +282,7 @@ SLOW = frozenset(
         "s47-train-variants-heavy-link-trains",
         "s47-train-variants-light-link-with-drop-trains",
         "t47-train-variants-blank",
+        "w56-score-a-run-a-live-training-holds",
     }
 )
 

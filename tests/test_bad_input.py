@@ -785,6 +785,7 @@ CASES = [
         "lock-of-another-host",
         RESUME,
         setup=write_lock("run", dead_pid, lambda: "another-host.example"),
+        marks=pytest.mark.subprocess,  # dead_pid starts and reaps a process
         says=("another-host.example",),
     ),
     C(
@@ -805,6 +806,7 @@ CASES = [
         RESUME,
         code=0,
         setup=write_lock("run", dead_pid),
+        marks=pytest.mark.subprocess,  # dead_pid starts and reaps a process
         warns=1,
         says=("{lock_pid}", "taking over"),
         changes=("run/",),
@@ -816,6 +818,7 @@ CASES = [
         RESUME_DDPG,
         code=0,
         setup=write_lock("ddpg", dead_pid),
+        marks=pytest.mark.subprocess,  # dead_pid starts and reaps a process
         warns=1,
         says=("{lock_pid}",),
         changes=("ddpg/",),

@@ -326,6 +326,7 @@ def test_identify_command_writes_a_run_that_meta_tests_without_the_model(tmp_pat
         assert words in err, err
 
 
+@pytest.mark.slow
 def test_identify_with_one_seed_gives_one_result(tmp_path):
     """Two identifications of one run with one --seed agree loss for loss, whatever torch's global
     RNG holds (the identifier's initial weights come from the seed)."""

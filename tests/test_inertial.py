@@ -88,6 +88,7 @@ def test_inertial_critic_moves_every_pose_by_the_same_acceleration(reacher):
     assert torch.allclose(inertial.torque_metric(home)[0], torch.eye(2), atol=1e-5)
 
 
+@pytest.mark.slow
 def test_inertial_critic_gradient_is_a_metric_step_on_the_same_loss(reacher):
     """``J^T P dL/dtau`` per world, against the same product assembled by hand."""
     _, sim, norm = reacher

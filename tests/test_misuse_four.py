@@ -326,6 +326,7 @@ def test_robot_zoo_only_matching_nothing_and_runs_dir_a_file(tmp_path, capsys):
 # ------------------------------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_lock_mimic_follows_the_given_home(tmp_path, capfd):
     """``--lock-mimic --home j1=0.5``: j2 = 0.1 + 0.5 j1 is welded at 0.35 (it was welded where the
     file's home put it, 0.1, breaking the coupling at the home the scene records)."""
@@ -354,6 +355,7 @@ def test_a_urdf_saved_as_txt_is_imported(tmp_path, capfd):
     assert out.is_file()
 
 
+@pytest.mark.slow
 def test_reproduce_beyond_only_runs_what_its_names_need(tmp_path):
     """``reproduce --quick --beyond --only metatrain-reacher-ours`` plans that one stage, as without
     ``--beyond`` (it planned 13)."""
@@ -370,6 +372,8 @@ def test_reproduce_beyond_only_runs_what_its_names_need(tmp_path):
     assert len(stages(beyond=True)) > len(stages())  # --beyond alone still adds the group
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_a_signal_while_the_interpreter_shuts_down_is_not_a_kill(tmp_path):
     """A SIGTERM that lands after the command, while Python tears itself down (it has put the default
     handlers back by then): the process ends as the command did, not killed (exit 143, no line)."""
@@ -399,6 +403,8 @@ def test_a_signal_while_the_interpreter_shuts_down_is_not_a_kill(tmp_path):
     assert p.returncode == 2 and len(err) == 1 and "missing.urdf" in err[0], (p.returncode, err)
 
 
+@pytest.mark.slow
+@pytest.mark.subprocess
 def test_a_console_that_cannot_encode_the_path(tmp_path, base):  # noqa: F811 (the fixture)
     """``PYTHONIOENCODING=ascii`` under ``LC_ALL=C``: the result path ``R ü/metatest.json`` is printed
     escaped (it was a ``UnicodeEncodeError`` traceback after the files were written)."""

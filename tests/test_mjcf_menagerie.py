@@ -70,6 +70,7 @@ COUPLED = '<equality><joint joint1="finger_r" joint2="finger_l"/></equality>'
 LINKAGE = '<equality><connect body1="left" body2="right" anchor="0 0 0"/></equality>'
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "how, actuators, extra",
     [
@@ -172,6 +173,7 @@ def test_a_plugin_actuator_drives_its_joint_with_its_force_range(tmp_path, capfd
     np.testing.assert_allclose(scene.effort_limit, [20.0, 0.9])
 
 
+@pytest.mark.slow
 def test_names_with_slashes_and_dots_import_and_write(tmp_path, capfd):
     """Shadow's DEX-EE names joints F0/J0 (newton's labels join names with '/'); DRM's Allegro
     names a link link_9.0, not a valid USD prim name."""
@@ -264,6 +266,7 @@ def test_a_missing_mesh_is_one_note_unless_the_inertia_needs_it(tmp_path, capfd)
     assert "body 'l2'" in err and "no <inertial>" in err and "gone.stl" in err
 
 
+@pytest.mark.slow
 def test_meshes_are_drawn_not_simulated(tmp_path, capfd):
     _stl(tmp_path / "tet.stl")
     scene = load_robot(write(tmp_path, "drawn.xml", _mesh_arm("tet.stl")))
@@ -289,6 +292,7 @@ def test_meshes_are_drawn_not_simulated(tmp_path, capfd):
     assert needs.build_model([Variant()]).shape_count == 1
 
 
+@pytest.mark.slow
 def test_a_derived_torque_bound_says_so_and_follows_gravity(tmp_path, capfd):
     text = arm().replace('<motor joint="a2" ctrlrange="-5 5"/>', '<motor joint="a2"/>')
     scene = load_robot(write(tmp_path, "free.xml", text))
@@ -352,6 +356,7 @@ def test_rounding_size_inertia_errors_are_repaired_with_a_note(tmp_path, capfd):
     assert code == 2 and "triangle inequality" in err and "--repair-inertia" in err
 
 
+@pytest.mark.slow
 def test_robot_zoo_surveys_a_menagerie_checkout_folder(tmp_path, capsys):
     """tools/robot_zoo.py --menagerie DIR: a row per Menagerie file found there (named DIR/FILE),
     a folder with none of them refused in one line."""

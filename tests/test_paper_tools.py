@@ -108,6 +108,7 @@ def test_tools_bad_input_is_one_line_exit_2(name, argv, words, capsys):
     assert err.count("\n") == 1 and ": error: " in err and words in err, err
 
 
+@pytest.mark.slow
 def test_probe_finds_the_reachers_light_links_unstable_at_its_dt_and_stable_at_half():
     """The reacher at its dt (0.01 s x 2): nominal stable, 0.25 kg links non-finite under saturated
     switching torques; the same control period at dt 0.005 s x 4 keeps them finite."""

@@ -5,11 +5,15 @@ per-world minimum."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from warp_critic.learning import rollout as rollout_module
 from warp_critic.physics.scene import Variant
 from warp_critic.reproduce.experiments import reach
+
+# both tests run the open-loop floor over a finished run (about a second each): not in the fast loop
+pytestmark = pytest.mark.slow
 
 GOALS = torch.tensor([[0.5, -1.0], [-0.5, 1.0], [0.3, 0.2]])
 

@@ -451,6 +451,7 @@ def test_config_records_the_scene_file_and_its_content_hash(tmp_path):
     assert config["scene_hash"] == load_scene(REACHER).content_hash
 
 
+@pytest.mark.slow
 def test_report_names_the_seeds_that_were_trained():
     from warp_critic.reproduce.experiments.plan import ReproduceConfig, plan
     from warp_critic.reproduce.report.write import seeds_trained

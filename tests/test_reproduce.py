@@ -232,6 +232,7 @@ def test_bad_input(tmp_path, capsys, argv, words):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_bad_out(tmp_path, capsys):
     f = tmp_path / "file"
     f.write_text("keep me")
@@ -338,6 +339,7 @@ def test_a_diverged_world_is_inf_and_leaves_the_others_alone(quick):
     assert cell["mse_mean"] == float("inf") and cell["diverged"] == r["diverged"]
 
 
+@pytest.mark.slow
 def test_grid_figure_shows_a_diverged_cell_in_black(tmp_path):
     from warp_critic.reproduce.experiments.settings import METHODS
     from warp_critic.reproduce.report import paper as rp
@@ -552,6 +554,7 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
         assert words in err and len(err.splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_only_one_beyond_evaluation_plans_it_and_what_it_reads():
     from warp_critic.reproduce.experiments.plan import ReproduceConfig, needed, plan
 

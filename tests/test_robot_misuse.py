@@ -226,6 +226,7 @@ def _import(tmp_path, capfd, name: str, text: str, *flags: str, note: str | None
     return stdout, stage, repairs
 
 
+@pytest.mark.slow
 def test_repair_inertia_projects_to_the_nearest_valid_tensor_and_records_it(tmp_path, capfd):
     from warp_critic.physics.inertia_checks import inertia_problem, nearest_valid
     from warp_critic.physics.load import load_scene

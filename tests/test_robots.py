@@ -392,6 +392,7 @@ def test_run_config_states_each_derived_default_with_its_rule(two_link, tmp_path
     assert code == 0 and out.is_file(), err
 
 
+@pytest.mark.slow
 def test_load_task_scene_logs_the_derived_defaults_and_prints_nothing(two_link, capfd, caplog):
     import dataclasses
     import logging

@@ -139,6 +139,7 @@ def test_the_critic_target_is_the_soft_minimum_of_the_twin_targets():
     assert stats["critic_loss"] == pytest.approx(2 * (y.square().mean()).item(), rel=1e-5)
 
 
+@pytest.mark.slow
 def test_sac_learns_the_reacher(tmp_path):
     # the reacher's four default goals, 4 worlds each, a shortened horizon, SAC's settings but a
     # smaller minibatch (for time); after the 5 warm-up iterations the actor starts
@@ -164,6 +165,7 @@ def test_sac_learns_the_reacher(tmp_path):
     assert not any("temperature" in r for r in rows[:5])  # the warm-up trains only the Qs
 
 
+@pytest.mark.slow
 def test_sac_resumes_exactly_and_meta_tests_min_q_through_the_cli(tmp_path, capsys):
     straight, part = tmp_path / "straight", tmp_path / "part"
     argv = ["baseline", "sac", REACHER, *TINY]

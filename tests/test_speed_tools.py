@@ -16,7 +16,10 @@ from helpers import load_tool
         ["--iterations", "2"],
         ["--seeds", "a,b"],
         ["--repeats", "0"],
-        ["--against", "no-such-commit-0123", "--seeds", "0"],
+        # git is asked for the commit, and refuses it
+        pytest.param(
+            ["--against", "no-such-commit-0123", "--seeds", "0"], marks=pytest.mark.subprocess
+        ),
         ["--worlds-per-goal", "0"],
         ["--worlds-per-goal", "8", "--method", "ddpg"],
     ],

@@ -25,6 +25,7 @@ from warp_critic.cli.main import main
 
 RERUN = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.which("rerun")
 pytestmark = [
+    pytest.mark.slow,  # the recordings train and the viewer starts: minutes in all
     pytest.mark.viewer,
     pytest.mark.xdist_group("test_viewer"),  # one worker: the recordings, made once
     pytest.mark.subprocess,
