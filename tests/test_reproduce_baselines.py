@@ -16,7 +16,11 @@ from warp_critic.reproduce.experiments.naming import BEYOND, Outputs, stage_name
 from warp_critic.reproduce.experiments.plan import ReproduceConfig, plan
 from warp_critic.reproduce.experiments.settings import default_settings
 
-TD3_STAGES = ["metatrain-kuka-td3", "metatrain-reacher-td3", "td3-maps", "td3-tables"]
+TD3_STAGES = sorted(
+    ["metatrain-kuka-td3", "metatrain-reacher-td3", "td3-maps", "td3-tables"]
+    # its rows on every held-out goal seed
+    + [f"td3-{g}-heldout{s}" for g in ("maps", "tables") for s in ("", "-1010", "-1020")]
+)
 
 
 def test_td3_adds_its_stages_and_changes_none_of_the_paper():

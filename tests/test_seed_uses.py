@@ -13,7 +13,8 @@ def test_the_held_out_seed_chose_nothing_and_seed_1_is_not_held_out():
     assert "not a held-out test" in seed_uses.seed_note(1)
     assert "held out" in seed_uses.seed_note(seed_uses.HELD_OUT_SEED)
     scored = {u.seed for u in seed_uses.SEED_USES if u.use == "scored"}
-    assert scored == {1}
+    assert scored == {1, *seed_uses.HELD_OUT_SEEDS}
+    assert all(seed_uses.chose(s) == [] for s in seed_uses.HELD_OUT_SEEDS)
 
 
 def test_the_held_out_stage_keeps_the_tables_stage_and_its_hash():

@@ -253,28 +253,33 @@ def default_settings(quick: bool, seeds: int, extra: tuple[str, ...] = ()) -> di
         },
     }
     if quick:
-        s["toy"].update(iters=100, grid=60)
-        s["landscape"].update(iterations=12, grid=7, inits_per_state=2, sup_fit_steps=2)
-        s["tables"].update(
-            stds=[0.1, 0.5, 1.0],
-            masses=[0.0, 4.0, 9.0],
-            lengths=[0.2, 1.0, 2.0],
-            num_goals=3,
-            inits=2,
-            stress_masses=[0.0, 9.0],
-            stress_lengths=[0.2, 2.0],
-            reach_iterations=1,
-        )
-        s["heldout"].update(seeds=[HELD_OUT_SEEDS[0]], equal_step_iterations={"kuka": 3})
-        s["maps"].update(
-            grid=4,
-            masses=[0.5, 1.0, 2.0],
-            lengths=[0.75, 1.0, 1.5],
-            inits=2,
-            reach_iterations=1,
-            reach_lrs=[0.1],
-        )
+        _quick(s)
     return s
+
+
+def _quick(s: dict) -> None:
+    """``--quick``: the evaluations on a handful of goals, cells and initialisations (plumbing)."""
+    s["toy"].update(iters=100, grid=60)
+    s["landscape"].update(iterations=12, grid=7, inits_per_state=2, sup_fit_steps=2)
+    s["tables"].update(
+        stds=[0.1, 0.5, 1.0],
+        masses=[0.0, 4.0, 9.0],
+        lengths=[0.2, 1.0, 2.0],
+        num_goals=3,
+        inits=2,
+        stress_masses=[0.0, 9.0],
+        stress_lengths=[0.2, 2.0],
+        reach_iterations=1,
+    )
+    s["heldout"].update(seeds=[HELD_OUT_SEEDS[0]], equal_step_iterations={"kuka": 3})
+    s["maps"].update(
+        grid=4,
+        masses=[0.5, 1.0, 2.0],
+        lengths=[0.75, 1.0, 1.5],
+        inits=2,
+        reach_iterations=1,
+        reach_lrs=[0.1],
+    )
 
 
 def _parse_value(text: str):
