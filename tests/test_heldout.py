@@ -189,3 +189,24 @@ def test_pool_maps_averages_cells_over_goal_seeds_with_solved_rows():
     claims, verdicts = H.judge_maps(pooled, [1000, 1010])
     assert [c["verdict"] for c in claims] == ["met", "met", "met"]  # ours 0.02 on every goal
     assert verdicts["mass"]["below_all"] == 4 and "seeds that solved" in claims[1]["reason"]
+
+
+@pytest.mark.parametrize(
+    "value, words",
+    [
+        ("[1000,1001]", "draw the same Table 1 goals"),
+        ("[2000]", "chose a setting: it cannot be held out"),
+        ("[1]", "chose a setting"),
+        ("[]", "one or more goal seeds"),
+        ("[1000.5]", "heldout.seeds"),
+    ],
+)
+def test_a_held_out_seed_that_chose_or_overlaps_is_refused(value, words):
+    from warp_critic.core.errors import FieldError
+
+    with pytest.raises(FieldError, match="set") as e:
+        ReproduceConfig(quick=True, overrides=[f"heldout.seeds={value}"]).validate()
+    assert words in str(e.value) and "\n" not in str(e.value)
+    bad_iters = ["heldout.equal_step_iterations.kuka=0"]
+    with pytest.raises(FieldError, match="equal_step_iterations"):
+        ReproduceConfig(quick=True, overrides=bad_iters).validate()

@@ -220,6 +220,36 @@ def check_all(settings: dict, defaults: dict) -> None:
     check_tables(settings["tables"], goals["kuka"])
     check_maps(settings["maps"])
     check_beyond(settings["beyond"], settings["metatrain"]["seeds"])
+    check_heldout(settings["heldout"], settings["tables"], settings["maps"])
+
+
+def check_heldout(h: dict, tables: dict, maps: dict) -> None:
+    """The held-out goal seeds: each chose nothing, none equals the seed ``tables`` / ``maps``
+    score on, and no two draw a Table 1 goal twice (column ``c`` draws from ``seed + c``); ours'
+    iterations at the baselines' environment steps, a positive whole number per robot."""
+    from warp_critic.evaluation.seed_uses import chose
+
+    seeds = h["seeds"]
+    if not isinstance(seeds, list) or not seeds:
+        raise bad("heldout.seeds", seeds, "must be a list of one or more goal seeds")
+    columns = len(tables["stds"])
+    for s in seeds:
+        number("heldout.seeds", s, lo=0, hi=2**32 - 1, integer=True)
+        if chose(s):
+            raise bad("heldout.seeds", s, f"goal seed {s} chose a setting: it cannot be held out")
+        if s in (tables["seed"], maps["seed"]):
+            raise bad("heldout.seeds", s, "is the seed the tables and maps stages score on")
+    ranges = sorted((int(s), int(s) + columns) for s in [*seeds, tables["seed"]])
+    for (a, a_end), (b, _) in zip(ranges, ranges[1:]):
+        if b < a_end:
+            raise bad(
+                "heldout.seeds",
+                seeds,
+                f"seeds {a} and {b} draw the same Table 1 goals (each draws {columns} seeds, "
+                "one per column): space them at least that far apart",
+            )
+    for robot, n in h["equal_step_iterations"].items():
+        number(f"heldout.equal_step_iterations.{robot}", n, lo=1, hi=10**7, integer=True)
 
 
 def check_beyond(b: dict, seeds: list) -> None:
