@@ -290,6 +290,35 @@ def refused_in_one_line(tmp_path, capsys, argv: list[str], fragment: str) -> Non
     assert not (tmp_path / "run").exists()
 
 
+def straight_and_resumed(tmp_path, method: str) -> tuple[Path, list[list[dict]]]:
+    """``warp-critic baseline METHOD`` on the reacher for 3 iterations straight, and for 2 then
+    resumed to 3; returns the straight run's directory and both runs' metrics rows."""
+    import json
+
+    from warp_critic.cli.main import main
+
+    straight, part = tmp_path / "straight", tmp_path / "part"
+    argv = ["baseline", method, REACHER, *TINY_AGENT]
+    assert main([*argv, "--iterations", "3", "--out", str(straight)]) == 0
+    assert main([*argv, "--iterations", "2", "--out", str(part)]) == 0
+    assert main([*argv, "--iterations", "3", "--out", str(part), "--resume"]) == 0
+    rows = [
+        [json.loads(x) for x in (d / "metrics.jsonl").read_text().splitlines()]
+        for d in (straight, part)
+    ]
+    return straight, rows
+
+
+def reacher_normalizer(max_torque, qd_scale: float = 5.0):
+    """The policy/critic normaliser over the reacher's joint limits (+-2.97 rad)."""
+    import torch
+
+    from warp_critic.learning.networks import Normalizer
+
+    lim = torch.tensor([2.97, 2.97])
+    return Normalizer.from_limits(-lim, lim, torch.tensor(max_torque), qd_scale)
+
+
 # ------------------------------------------------------------------------------------------------
 # a hand-written robot file
 # ------------------------------------------------------------------------------------------------

@@ -10,6 +10,7 @@ import pytest
 import torch
 from conftest import REACHER
 from helpers import TINY_BASELINE as TINY
+from helpers import reacher_normalizer
 from helpers import tiny_baseline_cfg as tiny_cfg
 
 from warp_critic.cli.main import main
@@ -78,12 +79,7 @@ def test_baseline_learns_and_its_q_runs_through_meta_test(tmp_path, method):
     )  # the scene's, as ours
 
     # the meta-test critic is -Q(s - g, a)
-    norm = Normalizer.from_limits(
-        torch.tensor([-2.97, -2.97]),
-        torch.tensor([2.97, 2.97]),
-        torch.tensor(tc.max_torque),
-        tc.qd_scale,
-    )
+    norm = reacher_normalizer(tc.max_torque, tc.qd_scale)
     loss_fn, defaults = build_test_critic(ckpt, norm)
     assert defaults["alpha"] > 0 and defaults["steps"] == 3
     assert defaults["alpha"] == ckpt["metrics"]["alpha"]  # selected by the fresh-policy grid search

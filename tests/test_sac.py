@@ -11,8 +11,7 @@ import math
 import pytest
 import torch
 from conftest import REACHER
-from helpers import TINY_AGENT as TINY
-from helpers import filled_buffer, refused_in_one_line
+from helpers import filled_buffer, reacher_normalizer, refused_in_one_line, straight_and_resumed
 
 from warp_critic.cli.main import main
 from warp_critic.evaluation.metatest import build_test_critic
@@ -167,15 +166,8 @@ def test_sac_learns_the_reacher(tmp_path):
 
 @pytest.mark.slow
 def test_sac_resumes_exactly_and_meta_tests_min_q_through_the_cli(tmp_path, capsys):
-    straight, part = tmp_path / "straight", tmp_path / "part"
-    argv = ["baseline", "sac", REACHER, *TINY]
-    assert main([*argv, "--iterations", "3", "--out", str(straight)]) == 0
-    assert main([*argv, "--iterations", "2", "--out", str(part)]) == 0
-    assert main([*argv, "--iterations", "3", "--out", str(part), "--resume"]) == 0
-    rows = [
-        [json.loads(x) for x in (d / "metrics.jsonl").read_text().splitlines()]
-        for d in (straight, part)
-    ]
+    straight, rows = straight_and_resumed(tmp_path, "sac")
+    part = tmp_path / "part"
     assert [r["iteration"] for r in rows[1]] == [0, 1, 2]
     drop = ("seconds",)
     assert [{k: v for k, v in r.items() if k not in drop} for r in rows[0]] == [
@@ -192,9 +184,7 @@ def test_sac_resumes_exactly_and_meta_tests_min_q_through_the_cli(tmp_path, caps
 
     # meta-test descends -min(Q1, Q2) of the checkpoint
     tc = TaskConfig.from_dict(ckpt["config"])
-    n = Normalizer.from_limits(
-        torch.tensor([-2.97, -2.97]), torch.tensor([2.97, 2.97]), torch.tensor(tc.max_torque), 5.0
-    )
+    n = reacher_normalizer(tc.max_torque)
     loss_fn, defaults = build_test_critic(ckpt, n)
     assert defaults["alpha"] == ckpt["selected_alpha"] > 0
     twin = TwinQ(2, n, int(ckpt["critic_hidden"]))

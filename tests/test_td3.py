@@ -9,7 +9,12 @@ import math
 import pytest
 import torch
 from conftest import REACHER
-from helpers import TINY_AGENT, filled_buffer, refused_in_one_line
+from helpers import (
+    TINY_AGENT,
+    filled_buffer,
+    reacher_normalizer,
+    refused_in_one_line,
+)
 
 from warp_critic.cli.main import main
 from warp_critic.evaluation.metatest import build_test_critic
@@ -138,9 +143,7 @@ def test_td3_trains_resumes_exactly_and_meta_tests_through_the_cli(tmp_path, cap
 
     # meta-test descends -Q1: the checkpoint's first critic, not the second
     tc = TaskConfig.from_dict(ckpt["config"])
-    norm = Normalizer.from_limits(
-        torch.tensor([-2.97, -2.97]), torch.tensor([2.97, 2.97]), torch.tensor(tc.max_torque), 5.0
-    )
+    norm = reacher_normalizer(tc.max_torque)
     loss_fn, defaults = build_test_critic(ckpt, norm)
     assert defaults["alpha"] == ckpt["selected_alpha"] > 0
     state = ckpt["agent_state"]
