@@ -10,10 +10,11 @@ import pytest
 import torch
 from conftest import REACHER
 from helpers import (
-    TINY_AGENT,
     filled_buffer,
     reacher_normalizer,
     refused_in_one_line,
+    straight_and_resumed,
+    tiny_baseline_cfg,
 )
 
 from warp_critic.cli.main import main
@@ -24,7 +25,6 @@ from warp_critic.methods.td3 import TD3Agent, TD3Config, train_td3
 from warp_critic.running.methods import method
 from warp_critic.running.task import TaskConfig
 
-TINY = TINY_AGENT
 MAX_TORQUE = torch.tensor([2.0, 0.5])
 
 
@@ -122,15 +122,7 @@ def test_the_actor_and_targets_move_only_every_policy_delay_critic_updates():
 
 @pytest.mark.slow
 def test_td3_trains_resumes_exactly_and_meta_tests_through_the_cli(tmp_path, capsys):
-    straight, part = tmp_path / "straight", tmp_path / "part"
-    argv = ["baseline", "td3", REACHER, *TINY]
-    assert main([*argv, "--iterations", "3", "--out", str(straight)]) == 0
-    assert main([*argv, "--iterations", "2", "--out", str(part)]) == 0
-    assert main([*argv, "--iterations", "3", "--out", str(part), "--resume"]) == 0
-    rows = [
-        [json.loads(x) for x in (d / "metrics.jsonl").read_text().splitlines()]
-        for d in (straight, part)
-    ]
+    straight, rows = straight_and_resumed(tmp_path, "td3")
     assert [r["iteration"] for r in rows[1]] == [0, 1, 2]
     keys = ("task_loss", "critic_loss", "actor_loss", "q_mean")
     assert [[r.get(k) for k in keys] for r in rows[0]] == [
@@ -181,19 +173,13 @@ def test_the_reported_actor_loss_is_the_mean_over_the_delayed_updates(tmp_path, 
         return stats
 
     monkeypatch.setattr(TD3Agent, "update", spy)
-    cfg = TD3Config(
-        scene=REACHER,
-        goals=[[0.5, 0.3]],
-        worlds_per_goal=2,
-        horizon=5,
+    cfg = tiny_baseline_cfg(
+        tmp_path / "run",
+        "td3",
         iterations=2,
-        device="cpu",
-        out=str(tmp_path / "run"),
         critic_hidden=16,
         actor_hidden=8,
         updates_per_iteration=4,
-        batch_size=8,
-        warmup_iterations=1,
     )
     rows = train_td3(cfg, progress=False, record=False).metrics
     assert len(seen) == 2  # iteration 1: 4 critic updates, the actor on the 2nd and the 4th
