@@ -162,7 +162,7 @@ def snapshot(root: Path) -> tuple[dict[str, str], set[str]]:
 
 
 class _Deadline(KeyboardInterrupt):
-    pass
+    """The alarm of :func:`run_main`: an interrupt, so the command stops as on Ctrl-C (exit 130)."""
 
 
 def run_main(argv: list[str], limit: float) -> tuple[int, float]:
