@@ -50,12 +50,12 @@ def maps_section(d: Draft) -> None:
     judged = not judged_on_heldout(d, "maps")
     if not judged:
         d.md += [SHOWN_NOT_JUDGED, ""]
-    claims_before = len(d.claims)
-    verdicts = {"goals": _goal_claim(d, M, gm, frac, p4)}
+    # the figures stay either way; unjudged, their claims are the held-out seeds' (report/heldout.py)
+    verdicts = {"goals": _goal_claim(d, M, gm, frac, p4, judged)}
     for fig_no, kind, png in ((5, "mass", p5), (6, "length", p6)):
-        verdicts[kind] = _dynamics_claim(d, fig_no, kind, png, grid_means[kind], grid_rows[kind])
-    if not judged:  # the figures stay; their claims are the held-out seeds' (report/heldout.py)
-        del d.claims[claims_before:]
+        verdicts[kind] = _dynamics_claim(
+            d, fig_no, kind, png, grid_means[kind], grid_rows[kind], judged
+        )
     d.results["maps"] = {
         "goals_mse_mean": gm,
         "goals_fraction_below_0.05": frac,
@@ -108,8 +108,8 @@ def _goal_grid_lines(d: Draft, M: dict, gm: dict, frac: dict, sv: dict) -> None:
     ]
 
 
-def _goal_claim(d: Draft, M: dict, gm: dict, frac: dict, png) -> dict:
-    """Figure 4 and its claim; returns its verdict."""
+def _goal_claim(d: Draft, M: dict, gm: dict, frac: dict, png, judged: bool) -> dict:
+    """Figure 4 and (``judged``) its claim; returns its verdict."""
     best = min(gm, key=gm.__getitem__)
     v4 = map_verdict(
         M["goals"]["ours"]["mse"],
@@ -124,25 +124,31 @@ def _goal_claim(d: Draft, M: dict, gm: dict, frac: dict, png) -> dict:
             f"of the grid.",
         )
     )
-    d.claims.append(
-        {
-            "claim": "Figure 4: ours generalises over the full state space of the reacher",
-            "paper": "goal map: ours low everywhere, the baselines only near the training goals",
-            "ours": "fraction of the 2-D goal grid below 0.05 MSE: "
-            + ", ".join(f"{METHOD_LABELS[m]} {frac[m]:.0%}" for m in METHODS)
-            + "; grid mean: "
-            + ", ".join(f"{METHOD_LABELS[m]} {fmt(gm[m])}" for m in METHODS),
-            "verdict": v4["verdict"],
-            "reason": map_reason(v4),
-        }
-    )
+    claim = {
+        "claim": "Figure 4: ours generalises over the full state space of the reacher",
+        "paper": "goal map: ours low everywhere, the baselines only near the training goals",
+        "ours": "fraction of the 2-D goal grid below 0.05 MSE: "
+        + ", ".join(f"{METHOD_LABELS[m]} {frac[m]:.0%}" for m in METHODS)
+        + "; grid mean: "
+        + ", ".join(f"{METHOD_LABELS[m]} {fmt(gm[m])}" for m in METHODS),
+        "verdict": v4["verdict"],
+        "reason": map_reason(v4),
+    }
+    if judged:
+        d.claims.append(claim)
     return v4
 
 
 def _dynamics_claim(
-    d: Draft, fig_no: int, kind: str, png, grid_means: dict, grid_rows: list[rp.Row]
+    d: Draft,
+    fig_no: int,
+    kind: str,
+    png,
+    grid_means: dict,
+    grid_rows: list[rp.Row],
+    judged: bool,
 ) -> dict:
-    """Figure 5 (``kind`` mass) or 6 (length) and its claim; returns its verdict. The rows are
+    """Figure 5 (``kind`` mass) or 6 (length) and (``judged``) its claim; returns its verdict. The rows are
     found by their method's registry name; a row's label (``this run: ...``) is only shown."""
     kinds = {"mass": "masses", "length": "lengths"}[kind]
     # the claims compare ours with the paper's baselines (an extra one is shown only)
@@ -169,21 +175,20 @@ def _dynamics_claim(
             + ".",
         )
     )
-    d.claims.append(
-        {
-            "claim": f"Figure {fig_no}: ours generalises to "
-            + ("heavier / lighter links" if kind == "mass" else "new link lengths")
-            + " better than the baselines",
-            "paper": f"2-D map over the {kinds} of both links; ours lowest",
-            "ours": "grid mean MSE: "
-            + ", ".join(f"{rp.shown(k)} {fmt(v)}" for k, v in means.items()),
-            "verdict": v["verdict"],
-            "reason": f"{share}; lowest grid mean: "
-            f"{'ours' if v['lowest'] == 'ours' else v['lowest']}; ours below "
-            f"{MAP_LEVEL:g} MSE on {v['share']:.1%} of the cells. {COMPARE_RULE}"
-            + ("" if solved_row else "; no baseline seed solved training"),
-        }
-    )
+    claim = {
+        "claim": f"Figure {fig_no}: ours generalises to "
+        + ("heavier / lighter links" if kind == "mass" else "new link lengths")
+        + " better than the baselines",
+        "paper": f"2-D map over the {kinds} of both links; ours lowest",
+        "ours": "grid mean MSE: " + ", ".join(f"{rp.shown(k)} {fmt(v)}" for k, v in means.items()),
+        "verdict": v["verdict"],
+        "reason": f"{share}; lowest grid mean: "
+        f"{'ours' if v['lowest'] == 'ours' else v['lowest']}; ours below "
+        f"{MAP_LEVEL:g} MSE on {v['share']:.1%} of the cells. {COMPARE_RULE}"
+        + ("" if solved_row else "; no baseline seed solved training"),
+    }
+    if judged:
+        d.claims.append(claim)
     return v
 
 
