@@ -24,6 +24,8 @@ class SeedUse:
 
 #: the goal seed that chooses each method's meta-test budget (:mod:`warp_critic.reproduce.budget`)
 CHOOSE_BUDGET_SEED = 2000
+#: the goal seed that scores every method's tuning candidates (``bench/tune.py``)
+TUNE_SEED = 3000
 
 SEED_USES: tuple[SeedUse, ...] = (
     SeedUse(
@@ -49,6 +51,13 @@ SEED_USES: tuple[SeedUse, ...] = (
         "each method's meta-test budget (step size and number of critic-gradient steps): the "
         "initialisations of the fresh policies on the run's training goals",
         "warp-critic budget --choose-seed (its default); reproduce/budget.py",
+    ),
+    SeedUse(
+        TUNE_SEED,
+        "chose",
+        "every method's hyper-parameters (one tuning procedure for all): the initialisations of "
+        "the fresh policies that score each candidate on its run's training goals",
+        "bench/tune.py TUNE_SEED",
     ),
     SeedUse(
         1,

@@ -1,0 +1,377 @@
+#!/usr/bin/env python
+"""One tuning procedure for every reproduced method: ours, DDPG, Meta-Critic and TD3.
+
+A reviewer's first question of a comparison is whether every method had the same chance. This
+search gives each method exactly the same one, scene by scene:
+
+* **Candidates** (:func:`candidates`): the method's own setting as ``reproduce`` would train it
+  before any adoption (the baselines' published settings, ours' scene preset) and six
+  one-at-a-time changes of the same three knobs (:data:`KNOBS`): the critic's learning rate and the
+  policy's learning rate, each half a decade down and up (x0.316, x3.16), and the critic's width
+  (x0.5, x2). Seven candidates per method. Ours' policy learning rate is its inner step ``alpha``;
+  a baseline's is its actor's. Nothing else is searched for anyone (the task fields -- goals,
+  starts, horizon, meta-test updates -- are reproduce's, shared by all).
+* **Training**: reproduce's training task on seeds :data:`SEEDS` (never the reported 0-4), for the
+  same number of environment steps, :data:`TRAIN_STEPS` (counted as reproduce counts them: ours
+  ``(inner_steps + 1) x worlds x horizon`` per iteration, a baseline ``worlds x horizon``); each
+  method's learning-rate schedule spans its own truncated run.
+* **Score** (:func:`score_runs`): the meta-test the tables use, on the run's training goals:
+  ``--inits`` fresh policies per goal drawn from goal seed :data:`TUNE_SEED` (it draws nothing
+  else: ``warp_critic/evaluation/seed_uses.py``), ``inner_steps`` critic-gradient steps at each
+  step size in the run's own meta-test step size x :data:`SCALES`. The score is the lowest over
+  the step sizes of the mean final MSE (rad^2, mean over joints, seeds, goals and inits); the
+  per-seed MSEs at that step size give the seed spread.
+* **Adoption** (:data:`ADOPT_RULE`, :func:`adopted`): the best candidate replaces the method's own
+  setting when its score is lower by more than half the spread of the own setting's per-seed
+  scores.
+
+Every scored candidate is a row of ``--out`` (JSON, rewritten after each), so the search resumes:
+a rerun keeps the rows already scored (same scene, method, change, steps, seeds, inits) and
+continues an interrupted training from its last checkpoint (every quarter of the run), kept in
+``--runs``. Prints one line per candidate and, per scene and method, the candidates sorted by
+score and whether the best is adopted.
+
+Usage::
+
+    nice python bench/tune.py --scenes reacher,kuka --out docs/paper/tuning/uniform.json \
+        --runs runs/tune-uniform
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from warp_critic.cli.flags import ToolParser, comma_list, user_message
+from warp_critic.core.errors import UserError
+from warp_critic.evaluation.seed_uses import TUNE_SEED
+
+PROG = "tune"
+#: environment steps every candidate trains for: a quarter of every method's reacher budget
+#: (1.28M) and of the baselines' KUKA budget (1.2M rounded up to ours' whole iterations)
+TRAIN_STEPS = 320_000
+SEEDS = (100, 101)
+#: multiples of a run's own meta-test step size the score is the best of
+SCALES = (0.1, 0.316, 1.0, 3.16, 10.0)
+#: the three knobs every method's candidates change one at a time: the config field per method
+#: kind, and the factors applied to the method's own value
+KNOBS: dict[str, dict[str, Any]] = {
+    "critic learning rate": {"ours": "lr", "baseline": "critic_lr", "factors": (0.316, 3.16)},
+    "policy learning rate": {"ours": "alpha", "baseline": "actor_lr", "factors": (0.316, 3.16)},
+    "critic width": {"ours": "critic_hidden", "baseline": "critic_hidden", "factors": (0.5, 2.0)},
+}
+ADOPT_RULE = (
+    "the best candidate replaces the method's own setting when its score is lower by more than "
+    "half the spread of the own setting's per-seed scores; the same rule for every method"
+)
+
+
+# ------------------------------------------------------------------------------------------------
+# the candidates (pure but for reading the scene's defaults)
+# ------------------------------------------------------------------------------------------------
+
+
+def own_setting(scene: str, method: str) -> dict[str, Any]:
+    """The method's training values as ``reproduce`` sets them, without any earlier adoption
+    (``settings.TUNED``): its published setting (a baseline) or its scene preset (ours)."""
+    from warp_critic.evaluation.presets import preset
+    from warp_critic.reproduce.experiments.settings import TUNED, default_settings
+
+    values = dict(default_settings(False, 1, extra=_extra(method))["metatrain"][scene][method])
+    published = preset(method) if method != "ours" else {}
+    for key in TUNED.get(scene, {}).get(method, {}):
+        if key in published:
+            values[key] = published[key]
+        else:
+            values.pop(key, None)
+    return values
+
+
+def _extra(method: str) -> tuple[str, ...]:
+    from warp_critic.reproduce.experiments.settings import METHODS
+
+    return () if method in METHODS else (method,)
+
+
+def knob_values(scene: str, method: str) -> dict[str, float]:
+    """The method's own value of each knob's field (a scene default filled in where unset)."""
+    from warp_critic.methods import method as method_of
+    from warp_critic.physics.load import load_scene
+    from warp_critic.reproduce.experiments.metatrain import scene_file
+
+    kind = "baseline" if method_of(method).baseline else "ours"
+    values = own_setting(scene, method)
+    defaults = load_scene(scene_file(scene)).defaults
+    config = method_of(method).config
+    out = {}
+    for knob in KNOBS.values():
+        name = knob[kind]
+        v = values.get(name)
+        if v is None:
+            v = defaults.get(name)
+        if v is None:
+            v = config.__dataclass_fields__[name].default
+        out[name] = v
+    return out
+
+
+def candidates(scene: str, method: str) -> list[dict[str, float]]:
+    """The changes to :func:`own_setting` tried: ``{}`` (the own setting) first, then one
+    ``{field: value}`` per knob and factor (:data:`KNOBS`): seven for every method."""
+    out: list[dict[str, float]] = [{}]
+    for name, v in knob_values(scene, method).items():
+        factors = next(k["factors"] for k in KNOBS.values() if name in (k["ours"], k["baseline"]))
+        for f in factors:
+            new = v * f
+            out.append({name: int(round(new)) if isinstance(v, int) else float(f"{new:.3g}")})
+    return out
+
+
+def iterations_for(scene: str, method: str, values: dict, steps: int) -> int:
+    """Iterations of ``method`` that take ``steps`` environment steps (rounded up)."""
+    from warp_critic.methods import method as method_of
+    from warp_critic.physics.load import load_scene
+    from warp_critic.reproduce.experiments.metatrain import make_config, scene_file
+    from warp_critic.running.config import filled
+
+    cfg = make_config(scene, method, values, list(SEEDS), Path("unused"), "cpu", False)
+    cfg = cfg.fill_defaults(load_scene(scene_file(scene)))
+    worlds = len(filled(cfg.goals, "goals")) * cfg.worlds_per_goal
+    per = method_of(method).samples_per_iteration(cfg) * worlds * filled(cfg.horizon, "horizon")
+    return math.ceil(steps / per)
+
+
+# ------------------------------------------------------------------------------------------------
+# training and scoring
+# ------------------------------------------------------------------------------------------------
+
+
+def train(scene: str, method: str, change: dict, args, run: Path) -> tuple[list[str], float]:
+    """Trains one candidate on every seed (resuming from its checkpoints); its seeds' run dirs."""
+    from warp_critic.methods import method as method_of
+    from warp_critic.reproduce.experiments.metatrain import make_config
+
+    values = {**own_setting(scene, method), **change}
+    iterations = iterations_for(scene, method, values, args.train_steps)
+    every = max(1, iterations // 4)
+    values.update(iterations=iterations, checkpoint_every=every, record_every=every)
+    if args.tiny:  # plumbing only (tests)
+        values.update(
+            worlds_per_goal=1, horizon=5, critic_hidden=min(values.get("critic_hidden") or 400, 16)
+        )
+    resume = all((run / f"seed{s}" / "checkpoint.pt").is_file() for s in args.seeds)
+    cfg = make_config(scene, method, values, list(args.seeds), run, args.device, resume)
+    t0 = time.perf_counter()
+    result = method_of(method).train(cfg, progress=False, record=False)
+    return [str(r.run_dir) for r in result.seeds], time.perf_counter() - t0
+
+
+def score_runs(run_dirs: list[str], inits: int, device: str) -> dict[str, Any]:
+    """The candidate's score (module docstring): ``{"score", "per_seed", "scale", "by_scale"}``."""
+    from warp_critic.physics.scene import Variant
+    from warp_critic.reproduce.experiments.evaluate import Job, evaluate
+    from warp_critic.reproduce.experiments.generalize import train_goals_and_limits
+
+    jobs = []
+    for rd in run_dirs:
+        _, goals, _, _ = train_goals_and_limits(rd)
+        jobs += [Job((rd, s), rd, goals, Variant(), alpha_scale=s) for s in SCALES]
+    steps = int(json.loads((Path(run_dirs[0]) / "config.json").read_text()).get("inner_steps") or 3)
+    r = evaluate(jobs, inits=inits, steps=steps, seed=TUNE_SEED, device=device, progress=False)
+    dof = r["dof"]
+    by_scale: dict[str, list[float]] = {}
+    for s in SCALES:
+        per = []
+        for k, j in enumerate(jobs):
+            if j.alpha_scale == s:
+                e = r["errors"][k].ravel() / dof
+                per.append(float(e.mean()) if all(map(math.isfinite, e)) else math.inf)
+        by_scale[f"{s:g}"] = per
+    return pick(by_scale)
+
+
+def pick(by_scale: dict[str, list[float]]) -> dict[str, Any]:
+    """The step size with the lowest mean per-seed MSE (ties: the smaller; a diverged seed makes
+    its step size ``inf``); ``score`` is that mean, ``per_seed`` its seeds' MSEs."""
+    means = {
+        s: (sum(v) / len(v) if all(map(math.isfinite, v)) else math.inf)
+        for s, v in by_scale.items()
+    }
+    scale = min(means, key=lambda s: (means[s], float(s)))
+    return {
+        "score": means[scale],
+        "per_seed": by_scale[scale],
+        "scale": float(scale),
+        "by_scale": by_scale,
+    }
+
+
+def adopted(best: dict, own: dict) -> bool:
+    """Whether ``best`` beats the method's own setting ``own`` by more than the seed noise
+    (:data:`ADOPT_RULE`)."""
+    if best["change"] == own["change"] or not math.isfinite(best["score"]):
+        return False
+    spread = max(own["per_seed"]) - min(own["per_seed"])
+    return own["score"] - best["score"] > spread / 2
+
+
+def adoption(rows: list[dict], scene: str, method: str) -> dict | None:
+    """``{"best", "own", "adopt", "complete"}`` for a scene and method's rows, or ``None`` before
+    its own setting is scored. ``complete``: every candidate is scored (only a complete search
+    may adopt)."""
+    mine = sorted(
+        (r for r in rows if (r["scene"], r["method"]) == (scene, method)), key=lambda r: r["score"]
+    )
+    own = next((r for r in mine if r["change"] == {}), None)
+    if own is None:
+        return None
+    wanted = candidates(scene, method)
+    complete = all(any(r["change"] == c for r in mine) for c in wanted)
+    return {
+        "best": mine[0],
+        "own": own,
+        "complete": complete,
+        "adopt": complete and adopted(mine[0], own),
+    }
+
+
+# ------------------------------------------------------------------------------------------------
+# the command
+# ------------------------------------------------------------------------------------------------
+
+
+def main(argv=None) -> int:
+    from warp_critic.reproduce.experiments.settings import ALL_METHODS
+
+    p = ToolParser(prog=PROG, description=__doc__.split("\n\n")[0])
+    p.add_argument("--scenes", type=comma_list(str), default=["reacher", "kuka"])
+    p.add_argument(
+        "--methods", type=comma_list(str), default=["ours", "ddpg", "meta-critic", "td3"]
+    )
+    p.add_argument(
+        "--train-steps", type=int, default=TRAIN_STEPS, help="environment steps per candidate"
+    )
+    p.add_argument("--seeds", type=comma_list(int), default=list(SEEDS))
+    p.add_argument(
+        "--inits", type=int, default=5, help="fresh policies per training goal in the score"
+    )
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--out", default="runs/tune-uniform/tune.json")
+    p.add_argument(
+        "--runs", default="runs/tune-uniform", help="where the candidates' runs (checkpoints) go"
+    )
+    p.add_argument(
+        "--tiny", action="store_true", help="plumbing only: tiny rollouts and networks (tests)"
+    )
+    args = p.parse_args(argv)
+    for s in args.scenes:
+        if s not in ("reacher", "kuka"):
+            p.error(f"--scenes: unknown scene {s!r} (reacher, kuka)")
+    for m in args.methods:
+        if m not in ALL_METHODS:
+            p.error(f"--methods: unknown method {m!r} ({', '.join(ALL_METHODS)})")
+    if args.train_steps < 1 or args.inits < 1 or not args.seeds:
+        p.error("--train-steps and --inits at least 1, and at least one seed")
+    if any(s < 5 for s in args.seeds):
+        p.error("--seeds: use seeds other than the reported 0-4")
+    out = Path(args.out)
+    try:
+        rows = _done_rows(out, args)
+        for scene in args.scenes:
+            for method in args.methods:
+                for change in candidates(scene, method):
+                    if any(
+                        (r["scene"], r["method"], r["change"]) == (scene, method, change)
+                        for r in rows
+                    ):
+                        continue  # scored by an earlier call
+                    run = Path(args.runs) / f"{scene}-{method}-{_slug(change)}"
+                    dirs, seconds = train(scene, method, change, args, run)
+                    row = {
+                        "scene": scene,
+                        "method": method,
+                        "change": change,
+                        "seconds": seconds,
+                        **score_runs(dirs, args.inits, args.device),
+                    }
+                    rows.append(row)
+                    _write(out, args, rows)
+                    print(
+                        f"{scene} {method} {change or 'own setting'}: score {row['score']:.4g} "
+                        f"(per seed {', '.join(f'{x:.4g}' for x in row['per_seed'])}, x{row['scale']:g} "
+                        f"step; {seconds:.0f} s)",
+                        flush=True,
+                    )
+    except UserError as e:  # a user mistake (bad path, ...) as one line
+        p.exit(2, f"{PROG}: error: {user_message(e)}\n")
+    _print_summary(rows, args)
+    return 0
+
+
+def _print_summary(rows: list[dict], args) -> None:
+    for scene in args.scenes:
+        for method in args.methods:
+            a = adoption(rows, scene, method)
+            if a is None:
+                continue
+            print(f"\n{scene} {method}: sorted by score (rad^2, lower is better)")
+            for r in sorted(
+                (r for r in rows if (r["scene"], r["method"]) == (scene, method)),
+                key=lambda r: r["score"],
+            ):
+                print(f"  {r['score']:.4g}  {r['change'] or 'own setting'}")
+            what = "the best" if a["adopt"] else "its own"
+            done = "" if a["complete"] else " (search incomplete: nothing adopted yet)"
+            print(
+                f"  best {a['best']['change'] or 'own setting'}: adopt {what} setting{done} (rule: {ADOPT_RULE})"
+            )
+
+
+def _slug(change: dict) -> str:
+    return "own" if not change else "-".join(f"{k}{v:g}" for k, v in change.items())
+
+
+def _done_rows(out: Path, args) -> list[dict]:
+    """The candidates an earlier call scored into ``out`` with the same procedure (none when it
+    does not exist yet); another procedure's file is refused."""
+    if not out.is_file():
+        return []
+    try:
+        data = json.loads(out.read_text())
+        rows, procedure = data["rows"], data["procedure"]
+        for r in rows:
+            r["scene"], r["method"], r["change"], r["score"]
+    except (ValueError, KeyError, TypeError):
+        raise UserError(f"{out}: not a {PROG} result file; choose another --out") from None
+    if procedure != _procedure(args):
+        raise UserError(f"{out}: scored with another procedure ({procedure}); choose another --out")
+    return rows
+
+
+def _procedure(args) -> dict:
+    return {
+        "train_steps": args.train_steps,
+        "seeds": list(args.seeds),
+        "inits": args.inits,
+        "score_seed": TUNE_SEED,
+        "scales": list(SCALES),
+        "tiny": bool(args.tiny),
+    }
+
+
+def _write(out: Path, args, rows: list[dict]) -> None:
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_suffix(".tmp")
+    tmp.write_text(
+        json.dumps({"procedure": _procedure(args), "rule": ADOPT_RULE, "rows": rows}, indent=1)
+        + "\n"
+    )
+    tmp.replace(out)  # never a half-written file
+
+
+if __name__ == "__main__":
+    sys.exit(main())

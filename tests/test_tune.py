@@ -1,0 +1,130 @@
+"""bench/tune.py: one tuning procedure for ours, DDPG, Meta-Critic and TD3 -- the same candidate
+count and knobs, the same environment steps, the same score and the same adoption rule."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+from helpers import load_tool
+
+METHODS = ("ours", "ddpg", "meta-critic", "td3")
+
+
+@pytest.fixture(scope="module")
+def tool():
+    return load_tool("tune", "bench")
+
+
+@pytest.mark.parametrize("scene", ["reacher", "kuka"])
+def test_every_method_gets_seven_candidates_on_the_same_three_knobs(tool, scene):
+    for m in METHODS:
+        cands = tool.candidates(scene, m)
+        own = tool.knob_values(scene, m)
+        assert cands[0] == {} and len(cands) == 7, (m, cands)
+        assert all(len(c) == 1 for c in cands[1:])
+        kind = "ours" if m == "ours" else "baseline"
+        for knob in tool.KNOBS.values():  # each knob down and up once, by its factors
+            name = knob[kind]
+            got = sorted(c[name] / own[name] for c in cands[1:] if name in c)
+            assert got == pytest.approx(sorted(knob["factors"]), rel=2e-3), (m, name)
+
+
+def test_the_own_setting_undoes_earlier_adoptions(tool):
+    """The search starts from the published settings, not from an earlier search's pick."""
+    from warp_critic.reproduce.experiments.settings import TUNED, default_settings
+
+    mc = tool.own_setting("reacher", "meta-critic")
+    assert "updates_per_iteration" in TUNED["reacher"]["meta-critic"]  # what is undone here
+    assert "updates_per_iteration" not in mc
+    assert default_settings(False, 1)["metatrain"]["reacher"]["ddpg"]["actor_lr"] == 1e-3
+    assert "actor_lr" not in tool.own_setting("reacher", "ddpg")  # the config's published 1e-4
+    assert tool.knob_values("reacher", "ddpg")["actor_lr"] == 1e-4
+    assert (
+        tool.own_setting("kuka", "ours") == default_settings(False, 1)["metatrain"]["kuka"]["ours"]
+    )
+
+
+@pytest.mark.parametrize("scene", ["reacher", "kuka"])
+def test_every_method_trains_for_the_same_environment_steps(tool, scene):
+    its = {
+        m: tool.iterations_for(scene, m, tool.own_setting(scene, m), tool.TRAIN_STEPS)
+        for m in METHODS
+    }
+    # ours counts (3 inner + 1) rollouts of 16 worlds x 50 steps per iteration, a baseline one
+    assert its == {"ours": 100, "ddpg": 400, "meta-critic": 400, "td3": 400}
+
+
+def test_the_score_is_the_best_step_size_and_a_diverged_seed_rules_its_step_size_out(tool):
+    got = tool.pick({"0.1": [0.3, 0.5], "1": [0.2, float("inf")], "10": [0.35, 0.25]})
+    assert (
+        got["scale"] == 10.0
+        and got["score"] == pytest.approx(0.3)
+        and got["per_seed"] == [0.35, 0.25]
+    )
+    tie = tool.pick({"0.1": [0.2, 0.2], "1": [0.2, 0.2]})
+    assert tie["scale"] == 0.1
+
+
+def test_one_adoption_rule_for_every_method(tool):
+    own = {"change": {}, "score": 0.9, "per_seed": [1.0, 0.8]}
+    better = {"change": {"lr": 1e-3}, "score": 0.79}
+    assert tool.adopted(better, own)  # 0.11 below, more than half the 0.2 spread
+    assert not tool.adopted({**better, "score": 0.81}, own)
+    assert not tool.adopted({**own, "score": 0.1}, own)  # the own setting itself
+    assert not tool.adopted({**better, "score": float("inf")}, own)
+
+
+def test_only_a_complete_search_adopts(tool):
+    rows = [
+        {
+            "scene": "reacher",
+            "method": "td3",
+            "change": c,
+            "score": 0.5 - 0.01 * k,
+            "per_seed": [0.5, 0.5],
+        }
+        for k, c in enumerate(tool.candidates("reacher", "td3"))
+    ]
+    full = tool.adoption(rows, "reacher", "td3")
+    assert full["complete"] and full["adopt"] and full["best"] is rows[-1]
+    part = tool.adoption(rows[:-1], "reacher", "td3")
+    assert not part["complete"] and not part["adopt"]
+    assert tool.adoption(rows[1:], "reacher", "td3") is None  # the own setting not scored yet
+
+
+@pytest.mark.slow
+def test_a_tiny_search_scores_every_candidate_and_resumes_without_retraining(
+    tool, tmp_path, capsys
+):
+    out = tmp_path / "tune.json"
+    argv = ["--tiny", "--train-steps", "400", "--scenes", "reacher", "--methods", "ours",
+            "--inits", "1", "--out", str(out), "--runs", str(tmp_path / "runs")]  # fmt: skip
+    assert tool.main(argv) == 0
+    rows = json.loads(out.read_text())["rows"]
+    assert [r["change"] for r in rows] == tool.candidates("reacher", "ours")
+    assert all(len(r["per_seed"]) == 2 and r["score"] > 0 for r in rows)
+    capsys.readouterr()
+    assert tool.main(argv) == 0  # every candidate scored: nothing trains again
+    assert "score" not in capsys.readouterr().out.split("sorted by score")[0]
+    assert json.loads(out.read_text())["rows"] == rows
+    with pytest.raises(SystemExit) as e:  # another procedure's file is refused, not mixed in
+        tool.main([*argv[:2], "800", *argv[3:]])
+    assert e.value.code == 2
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--scenes", "pendulum"], "unknown scene"),
+        (["--seeds", "0,100"], "other than the reported"),
+        (["--methods", "ppo"], "unknown method"),
+        (["--inits", "0"], "at least 1"),
+    ],
+)
+def test_bad_input_is_one_line_exit_2(tool, argv, words, capsys):
+    with pytest.raises(SystemExit) as e:
+        tool.main(argv)
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and words in err, err
