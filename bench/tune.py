@@ -21,9 +21,13 @@ search gives each method exactly the same one, scene by scene:
   step size in the run's own meta-test step size x :data:`SCALES`. The score is the lowest over
   the step sizes of the mean final MSE (rad^2, mean over joints, seeds, goals and inits); the
   per-seed MSEs at that step size give the seed spread.
-* **Adoption** (:data:`ADOPT_RULE`, :func:`adopted`): the best candidate replaces the method's own
-  setting when its score is lower by more than half the spread of the own setting's per-seed
-  scores.
+* **Adoption** (:data:`ADOPT_RULE`, :func:`adoption`): the best candidate of a complete search is
+  *proposed* when its score is lower than the own setting's by more than half the spread of the
+  own setting's per-seed scores. A proposal is *confirmed* at full length: the own setting and the
+  proposal train again for the method's whole ``reproduce`` run (its iterations, on the same seeds)
+  and the proposal is adopted only if it passes the same rule there. A truncated search favours
+  settings that learn fast; without this step a change that helps early can be adopted and hurt at
+  full length (an earlier search adopted 2x updates for Meta-Critic that way).
 
 Every scored candidate is a row of ``--out`` (JSON, rewritten after each), so the search resumes:
 a rerun keeps the rows already scored (same scene, method, change, steps, seeds, inits) and
@@ -66,8 +70,11 @@ KNOBS: dict[str, dict[str, Any]] = {
 }
 ADOPT_RULE = (
     "the best candidate replaces the method's own setting when its score is lower by more than "
-    "half the spread of the own setting's per-seed scores; the same rule for every method"
+    "half the spread of the own setting's per-seed scores, both after the truncated search and "
+    "again at the method's full training length; the same rule for every method"
 )
+#: a row's training length: the search's truncation or the method's whole reproduce run
+TRUNCATED, FULL = "truncated", "full"
 
 
 # ------------------------------------------------------------------------------------------------
@@ -150,13 +157,19 @@ def iterations_for(scene: str, method: str, values: dict, steps: int) -> int:
 # ------------------------------------------------------------------------------------------------
 
 
-def train(scene: str, method: str, change: dict, args, run: Path) -> tuple[list[str], float]:
-    """Trains one candidate on every seed (resuming from its checkpoints); its seeds' run dirs."""
+def train(
+    scene: str, method: str, change: dict, args, run: Path, length: str = TRUNCATED
+) -> tuple[list[str], float]:
+    """Trains one candidate on every seed (resuming from its checkpoints) for the search's
+    environment steps or (``length`` :data:`FULL`) the method's reproduce iterations; returns its
+    seeds' run dirs and the seconds it took."""
     from warp_critic.methods import method as method_of
     from warp_critic.reproduce.experiments.metatrain import make_config
 
     values = {**own_setting(scene, method), **change}
     iterations = iterations_for(scene, method, values, args.train_steps)
+    if length == FULL:
+        iterations = 2 * iterations if args.tiny else int(values["iterations"])
     every = max(1, iterations // 4)
     values.update(iterations=iterations, checkpoint_every=every, record_every=every)
     if args.tiny:  # plumbing only (tests)
@@ -220,23 +233,37 @@ def adopted(best: dict, own: dict) -> bool:
 
 
 def adoption(rows: list[dict], scene: str, method: str) -> dict | None:
-    """``{"best", "own", "adopt", "complete"}`` for a scene and method's rows, or ``None`` before
-    its own setting is scored. ``complete``: every candidate is scored (only a complete search
-    may adopt)."""
-    mine = sorted(
-        (r for r in rows if (r["scene"], r["method"]) == (scene, method)), key=lambda r: r["score"]
-    )
-    own = next((r for r in mine if r["change"] == {}), None)
+    """What a scene and method's rows decide, or ``None`` before its own setting is scored:
+    ``{"best", "own", "complete", "proposed", "confirm", "adopt"}``. ``complete``: every candidate
+    of the truncated search is scored (only a complete search proposes); ``proposed``: the best
+    passes :func:`adopted`; ``confirm``: ``None`` while the full-length runs of the own setting and
+    the proposal are not both scored, else whether the proposal passes there too; ``adopt``: the
+    change adopted (``{}``: the own setting)."""
+    mine = [r for r in rows if (r["scene"], r["method"]) == (scene, method)]
+    search = sorted((r for r in mine if r.get("length", TRUNCATED) == TRUNCATED), key=_score)
+    own = next((r for r in search if r["change"] == {}), None)
     if own is None:
         return None
-    wanted = candidates(scene, method)
-    complete = all(any(r["change"] == c for r in mine) for c in wanted)
+    complete = all(any(r["change"] == c for r in search) for c in candidates(scene, method))
+    proposed = complete and adopted(search[0], own)
+    confirm = None
+    if proposed:
+        full = {json.dumps(r["change"]): r for r in mine if r.get("length") == FULL}
+        pair = full.get("{}"), full.get(json.dumps(search[0]["change"]))
+        if pair[0] is not None and pair[1] is not None:
+            confirm = adopted(pair[1], pair[0])
     return {
-        "best": mine[0],
+        "best": search[0],
         "own": own,
         "complete": complete,
-        "adopt": complete and adopted(mine[0], own),
+        "proposed": proposed,
+        "confirm": confirm,
+        "adopt": search[0]["change"] if confirm else {},
     }
+
+
+def _score(row: dict) -> float:
+    return row["score"]
 
 
 # ------------------------------------------------------------------------------------------------
@@ -284,32 +311,38 @@ def main(argv=None) -> int:
         for scene in args.scenes:
             for method in args.methods:
                 for change in candidates(scene, method):
-                    if any(
-                        (r["scene"], r["method"], r["change"]) == (scene, method, change)
-                        for r in rows
-                    ):
-                        continue  # scored by an earlier call
-                    run = Path(args.runs) / f"{scene}-{method}-{_slug(change)}"
-                    dirs, seconds = train(scene, method, change, args, run)
-                    row = {
-                        "scene": scene,
-                        "method": method,
-                        "change": change,
-                        "seconds": seconds,
-                        **score_runs(dirs, args.inits, args.device),
-                    }
-                    rows.append(row)
-                    _write(out, args, rows)
-                    print(
-                        f"{scene} {method} {change or 'own setting'}: score {row['score']:.4g} "
-                        f"(per seed {', '.join(f'{x:.4g}' for x in row['per_seed'])}, x{row['scale']:g} "
-                        f"step; {seconds:.0f} s)",
-                        flush=True,
-                    )
+                    _run_candidate(rows, scene, method, change, TRUNCATED, args, out)
+                a = adoption(rows, scene, method)
+                if a is not None and a["proposed"]:  # confirm at full length (module docstring)
+                    for change in ({}, a["best"]["change"]):
+                        _run_candidate(rows, scene, method, change, FULL, args, out)
     except UserError as e:  # a user mistake (bad path, ...) as one line
         p.exit(2, f"{PROG}: error: {user_message(e)}\n")
     _print_summary(rows, args)
     return 0
+
+
+def _run_candidate(
+    rows: list[dict], scene: str, method: str, change: dict, length: str, args, out: Path
+) -> None:
+    """Trains and scores one candidate unless an earlier call did (appends its row, rewrites
+    ``out``)."""
+    key = (scene, method, change, length)
+    if any((r["scene"], r["method"], r["change"], r.get("length", TRUNCATED)) == key for r in rows):
+        return
+    tail = "" if length == TRUNCATED else "-full"
+    run = Path(args.runs) / f"{scene}-{method}-{_slug(change)}{tail}"
+    dirs, seconds = train(scene, method, change, args, run, length)
+    row = {"scene": scene, "method": method, "change": change, "length": length}
+    row.update(seconds=seconds, **score_runs(dirs, args.inits, args.device))
+    rows.append(row)
+    _write(out, args, rows)
+    print(
+        f"{scene} {method} {change or 'own setting'} ({length}): score {row['score']:.4g} "
+        f"(per seed {', '.join(f'{x:.4g}' for x in row['per_seed'])}, x{row['scale']:g} step; "
+        f"{seconds:.0f} s)",
+        flush=True,
+    )
 
 
 def _print_summary(rows: list[dict], args) -> None:
@@ -319,16 +352,20 @@ def _print_summary(rows: list[dict], args) -> None:
             if a is None:
                 continue
             print(f"\n{scene} {method}: sorted by score (rad^2, lower is better)")
-            for r in sorted(
-                (r for r in rows if (r["scene"], r["method"]) == (scene, method)),
-                key=lambda r: r["score"],
-            ):
-                print(f"  {r['score']:.4g}  {r['change'] or 'own setting'}")
-            what = "the best" if a["adopt"] else "its own"
-            done = "" if a["complete"] else " (search incomplete: nothing adopted yet)"
-            print(
-                f"  best {a['best']['change'] or 'own setting'}: adopt {what} setting{done} (rule: {ADOPT_RULE})"
-            )
+            mine = [r for r in rows if (r["scene"], r["method"]) == (scene, method)]
+            for r in sorted(mine, key=lambda r: (r.get("length", TRUNCATED), r["score"])):
+                print(
+                    f"  {r['score']:.4g}  {r['change'] or 'own setting'} ({r.get('length', TRUNCATED)})"
+                )
+            if not a["complete"]:
+                verdict = "search incomplete: nothing proposed yet"
+            elif not a["proposed"]:
+                verdict = "the own setting kept: no candidate passes the rule"
+            elif a["confirm"] is None:
+                verdict = f"{a['best']['change']} proposed; its full-length confirmation pending"
+            else:
+                verdict = f"{a['best']['change']} {'adopted' if a['confirm'] else 'not confirmed at full length: the own setting kept'}"
+            print(f"  {verdict} (rule: {ADOPT_RULE})")
 
 
 def _slug(change: dict) -> str:

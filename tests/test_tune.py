@@ -75,7 +75,7 @@ def test_one_adoption_rule_for_every_method(tool):
     assert not tool.adopted({**better, "score": float("inf")}, own)
 
 
-def test_only_a_complete_search_adopts(tool):
+def test_a_complete_search_proposes_and_only_full_length_confirms(tool):
     rows = [
         {
             "scene": "reacher",
@@ -86,11 +86,24 @@ def test_only_a_complete_search_adopts(tool):
         }
         for k, c in enumerate(tool.candidates("reacher", "td3"))
     ]
-    full = tool.adoption(rows, "reacher", "td3")
-    assert full["complete"] and full["adopt"] and full["best"] is rows[-1]
+    best = rows[-1]["change"]
+    a = tool.adoption(rows, "reacher", "td3")
+    assert a["complete"] and a["proposed"] and a["best"] is rows[-1]
+    assert a["confirm"] is None and a["adopt"] == {}  # proposed, not yet confirmed
     part = tool.adoption(rows[:-1], "reacher", "td3")
-    assert not part["complete"] and not part["adopt"]
+    assert not part["complete"] and not part["proposed"] and part["adopt"] == {}
     assert tool.adoption(rows[1:], "reacher", "td3") is None  # the own setting not scored yet
+
+    def full(change, score):
+        return {"scene": "reacher", "method": "td3", "change": change, "length": "full",
+                "score": score, "per_seed": [score - 0.01, score + 0.01]}  # fmt: skip
+
+    kept = tool.adoption([*rows, full({}, 0.2), full(best, 0.195)], "reacher", "td3")
+    assert kept["confirm"] is False and kept["adopt"] == {}  # 0.005 < half the 0.02 spread
+    won = tool.adoption([*rows, full({}, 0.2), full(best, 0.1)], "reacher", "td3")
+    assert won["confirm"] is True and won["adopt"] == best
+    # full-length rows never enter the truncated search's ranking
+    assert tool.adoption([*rows, full({}, 0.0)], "reacher", "td3")["best"] is rows[-1]
 
 
 @pytest.mark.slow
@@ -102,7 +115,12 @@ def test_a_tiny_search_scores_every_candidate_and_resumes_without_retraining(
             "--inits", "1", "--out", str(out), "--runs", str(tmp_path / "runs")]  # fmt: skip
     assert tool.main(argv) == 0
     rows = json.loads(out.read_text())["rows"]
-    assert [r["change"] for r in rows] == tool.candidates("reacher", "ours")
+    search = [r for r in rows if r["length"] == "truncated"]
+    assert [r["change"] for r in search] == tool.candidates("reacher", "ours")
+    a = tool.adoption(rows, "reacher", "ours")
+    full = [r["change"] for r in rows if r["length"] == "full"]
+    assert full == ([{}, a["best"]["change"]] if a["proposed"] else [])
+    assert (a["confirm"] is None) == (not a["proposed"])  # a proposal is confirmed in the same call
     assert all(len(r["per_seed"]) == 2 and r["score"] > 0 for r in rows)
     capsys.readouterr()
     assert tool.main(argv) == 0  # every candidate scored: nothing trains again
