@@ -307,29 +307,17 @@ def runs_of_reproduce(out: Path, scene: str, methods: list[str] | None) -> dict[
 
 def plot_budget(result: dict[str, Any], path: Path, title: str) -> Path:
     """Error against meta-test steps per method: the best step size at each budget (solid), the
-    chosen budget (a ring), the untrained policies (dotted); log-log, MSE in rad^2."""
-    from warp_critic.reproduce.experiments.settings import METHOD_LABELS
-    from warp_critic.reproduce.report.plots import COLORS, figure, save
+    chosen budget (a ring), the untrained policies (dotted); log-log, MSE in rad^2
+    (:func:`~warp_critic.reproduce.report.budget.plot_curves`)."""
+    from warp_critic.reproduce.report.budget import plot_curves
 
-    fig = figure(6.5, 4.2)
-    ax = fig.subplots()
-    for m, sw in result["sweep"].items():
-        env = envelope(numeric_keys(sw["curve"]))
-        ns = sorted(env)
-        colour = COLORS.get(m)
-        label = METHOD_LABELS.get(m, m)
-        ax.plot(ns, [env[n] for n in ns], "o-", color=colour, label=label)
-        ax.axhline(sw["untrained"], color=colour, ls=":", lw=1)
-        c = result["chosen"][m]
-        ax.plot([c["steps"]], [c["mse_train"]], "o", ms=13, mfc="none", color=colour)
-    ax.plot([], [], ":", color="grey", label="untrained policies")
-    ax.plot([], [], "o", ms=13, mfc="none", color="grey", label="chosen (step size, N)")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel(
-        "critic-gradient steps per fresh policy at meta-test (N; best step size at each N)"
-    )
-    ax.set_ylabel("final MSE on the training goals (rad$^2$)")
-    ax.set_title(title)
-    ax.legend(fontsize=8)
-    return save(fig, path)
+    per = {
+        m: {
+            **result["chosen"][m],
+            "curve": envelope(numeric_keys(sw["curve"])),
+            "untrained": sw["untrained"],
+        }
+        for m, sw in result["sweep"].items()
+    }
+    xlabel = "critic-gradient steps per fresh policy at meta-test (N; best step size at each N)"
+    return plot_curves(per, path, title, xlabel)

@@ -225,8 +225,10 @@ def needed(rc: ReproduceConfig, stages: dict[str, Stage]) -> list[list[str]]:
             for name in own + [n for n, st in stages.items() if _part_of(st) == group]:
                 first += list(stages[name].depends)
                 second.append(name)
-    # each stage once: --beyond with --only beyond-maps names that stage twice
-    return [list(dict.fromkeys(first)), list(dict.fromkeys(second))]
+    # each stage once: --beyond with --only beyond-maps names that stage twice, and --only
+    # budget,budget-tables-heldout a choice both as a stage of its group and as what one reads
+    first = list(dict.fromkeys(first))
+    return [first, [n for n in dict.fromkeys(second) if n not in first]]
 
 
 def _part_of(st: Stage) -> str | None:
