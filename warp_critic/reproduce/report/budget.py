@@ -228,8 +228,7 @@ def plot(computed: dict, figs: Path) -> list[tuple[str, Path, str]]:
             curves,
             figs / f"budget_{scene}.png",
             title,
-            "critic-gradient steps per fresh policy "
-            "at meta-test (N; each method at its chosen step size)",
+            "meta-test critic-gradient steps N (at each method's chosen step size)",
         )
         out.append(
             (
