@@ -200,8 +200,8 @@ def test_the_report_pools_the_held_out_seeds_and_judges_both_comparisons(tmp_pat
     assert t["budgets"]["ours-at-ddpg"] == {"steps": 30, "scale": 0.1}
     verdicts = {x["claim"]: x["verdict"] for x in c["claims"]}
     assert len(verdicts) == 2 * 3 + 2 * 3  # two comparisons per table and per map
-    own = [v for k, v in verdicts.items() if "at its own budget below" in k]
-    at = [v for k, v in verdicts.items() if "baseline's own number of steps" in k]
+    own = [v for k, v in verdicts.items() if "own meta-test budget: ours below every" in k]
+    at = [v for k, v in verdicts.items() if "own number of meta-test steps: ours below" in k]
     assert set(own) == {"met"} and set(at) == {"not met"}  # ours' 0.5 at 30 steps > DDPG's 0.1
     flipped = {x["claim"]: x["verdict"] for x in rb.compute(_records(at_ddpg=0.05))["claims"]}
     assert set(flipped.values()) == {"met"}

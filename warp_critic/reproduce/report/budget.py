@@ -120,7 +120,7 @@ def _tables(seeds: list[int], base: list[str], per: list[dict], budgets: dict) -
     for table, t in pooled.items():
         rows = t["rows"]
         cells = {row: [c["mean"] for c in v] for row, v in rows.items()}
-        name = f"{TITLES[table]} ({_where(seeds)}, each method at its own meta-test budget)"
+        name = f"{TITLES[table]} ({_where(seeds)})"
         claims += _claims(name, cells, base, len(t["values"]), "column")
     return {"seeds": seeds, "baselines": base, "budgets": budgets, **pooled, "claims": claims}
 
@@ -140,7 +140,7 @@ def _maps(seeds: list[int], base: list[str], per: list[dict], budgets: dict) -> 
             cells[k][row] = np.ravel(pm[k]["ours"]).tolist()
     claims = []
     for k in KINDS:
-        name = f"{MAP_TITLES[k]} ({_where(seeds)}, each method at its own meta-test budget)"
+        name = f"{MAP_TITLES[k]} ({_where(seeds)})"
         claims += _claims(name, cells[k], base, len(cells[k]["ours"]), "cell")
     return {
         "seeds": seeds,
@@ -161,9 +161,9 @@ def _claims(name: str, cells: dict, base: list[str], n: int, unit: str) -> list[
     pairs = sum(map_verdict(cells[at_row(m)], {m: cells[m]})["below_all"] for m in base)
     out = []
     for what, below, total, of in (
-        ("ours at its own budget below every baseline at its own", own, n, f"{unit}s"),
+        ("each method at its own meta-test budget: ours below every baseline", own, n, f"{unit}s"),
         (
-            "ours below each baseline at the baseline's own number of steps",
+            "at each baseline's own number of meta-test steps: ours below that baseline",
             pairs,
             n * len(base),
             f"({unit}, baseline) pairs",
