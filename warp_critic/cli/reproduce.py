@@ -50,8 +50,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         default=None,
         metavar="STAGE,...",
         help=f"run only these stages (comma-separated: {', '.join(STAGES)}, or one meta-training such as "
-        "metatrain-kuka-ours, or beyond-maps / beyond-tables); maps and tables also run the "
-        "meta-training they read (skipped when complete)",
+        "metatrain-kuka-ours, or beyond-maps / beyond-tables, or each method's own meta-test "
+        "budget: budget (the choices), budget-tables-heldout, budget-maps-heldout); maps and "
+        "tables also run the meta-training they read (skipped when complete)",
     )
     A(
         "--quick",
@@ -63,7 +64,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="also run the recipes beyond the paper (stage group beyond: dynamics-randomised "
         "meta-training, evaluated on the paper's maps and tables next to the nominal critic; "
-        "reported apart from the reproduction); --only beyond runs just them",
+        "reported apart from the reproduction); --only beyond runs just them. Also each "
+        "method's own meta-test budget (chosen on its training goals, then the held-out tables "
+        "and maps at it: hours at 300 steps, so not in a plain run)",
     )
     A(
         "--baselines",

@@ -5,9 +5,13 @@ The paper's Algorithm 3 trains a fresh policy on the learned critic "while not d
 tables give every method's fresh policies the same ``inner_steps`` (3) updates, ours' meta-training
 regime. This sweep makes the "while not done" visible and gives every method its own best budget:
 
+The choice and the sweep are :mod:`warp_critic.reproduce.experiments.budget`'s (``reproduce
+--beyond`` runs them as stages); this module is the standalone ``warp-critic budget`` command's
+driver, on the meta-trainings of a reproduce folder:
+
 1. **Choosing** (:func:`sweep_method`): for every method, every meta-trained seed and every step-size
    scale ``s`` (the run's own meta-test ``alpha`` times ``s``), fresh policies on the run's own
-   training goals (``inits`` initialisations per goal, drawn from :data:`CHOOSE_SEED`, a seed that
+   training goals (``inits`` initialisations per goal, drawn from :data:`CHOOSE_BUDGET_SEED`, a seed that
    draws nothing else: :mod:`warp_critic.evaluation.seed_uses`) descend the critic for
    ``max(budgets)`` updates; the error is read after every budget ``N``. The curve is the mean MSE
    over the joints (rad^2) over seeds x goals x inits, per ``(s, N)``.
@@ -34,16 +38,20 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from warp_critic.core.errors import FieldError, UserError
+from warp_critic.core.errors import FieldError
 from warp_critic.evaluation.seed_uses import CHOOSE_BUDGET_SEED, chose
+from warp_critic.reproduce.experiments.budget import (
+    ALPHA_SCALES,
+    BUDGETS,
+    best_scale_at,
+    choose,
+    envelope,
+    mean_mse,
+    numeric_keys,
+    sweep,
+)
 
 RESULT_KIND = "warp-critic/metatest-budget-v1"
-#: critic-gradient steps per fresh policy read by the sweep (the report's tables use 3)
-BUDGETS = (1, 3, 10, 30, 100, 300)
-#: multiples of each run's own meta-test step size (half-decades around it)
-ALPHA_SCALES = (0.1, 0.316, 1.0, 3.16, 10.0)
 
 
 @dataclass
@@ -112,35 +120,6 @@ class BudgetConfig:
         return d
 
 
-# ------------------------------------------------------------------------------------------------
-# the choice (pure)
-# ------------------------------------------------------------------------------------------------
-
-
-def choose(curve: dict[float, dict[int, float]]) -> tuple[float, int, float]:
-    """``(scale, N, error)`` of the lowest finite error of ``curve`` (``{scale: {N: error}}``);
-    ties: fewer steps, then the smaller scale. Raises :class:`UserError` when every cell diverged."""
-    cells = [
-        (err, n, s) for s, row in curve.items() for n, err in row.items() if math.isfinite(err)
-    ]
-    if not cells:
-        raise UserError("every step size and budget diverged: no budget to choose")
-    err, n, s = min(cells)
-    return float(s), int(n), float(err)
-
-
-def best_scale_at(curve: dict[float, dict[int, float]], n: int) -> tuple[float, float]:
-    """``(scale, error)`` of the lowest finite error at budget ``n`` (ties: the smaller scale)."""
-    scale, _, err = choose({s: {n: row[n]} for s, row in curve.items() if n in row})
-    return scale, err
-
-
-def envelope(curve: dict[float, dict[int, float]]) -> dict[int, float]:
-    """Per budget ``N`` the lowest error over the step sizes (``inf`` when all diverged)."""
-    ns = sorted({n for row in curve.values() for n in row})
-    return {n: min((row.get(n, math.inf) for row in curve.values()), default=math.inf) for n in ns}
-
-
 def wanted(chosen: dict[str, dict], curves: dict[str, dict]) -> dict[str, list[tuple[float, int]]]:
     """``method -> [(scale, N)]`` the reporting goals are scored at: each method's own choice, and
     ours at every other method's chosen ``N`` (with ours' best scale there)."""
@@ -158,51 +137,18 @@ def wanted(chosen: dict[str, dict], curves: dict[str, dict]) -> dict[str, list[t
 # ------------------------------------------------------------------------------------------------
 
 
-def _mse(errs: list[np.ndarray], dof: int) -> float:
-    """Mean over the pooled worlds of ``||q_T - g||^2 / dof`` (``inf`` if any diverged)."""
-    v = np.concatenate([e.ravel() for e in errs]) / dof
-    return float(v.mean()) if np.isfinite(v).all() else math.inf
-
-
 def sweep_method(cfg: BudgetConfig, method: str) -> dict[str, Any]:
-    """Step 1 of the module docstring for one method: ``{"curve": {scale: {N: MSE}}, "per_seed":
-    {scale: {N: [MSE per seed]}}, "untrained": MSE, "diverged", "seconds"}`` (MSE in rad^2)."""
-    from warp_critic.physics.scene import Variant
-    from warp_critic.reproduce.experiments.evaluate import Job, evaluate
-    from warp_critic.reproduce.experiments.generalize import train_goals_and_limits
-
-    t = time.perf_counter()
-    dirs = [str(d) for d in cfg.runs[method]]
-    jobs = []
-    for rd in dirs:
-        _, goals, _, _ = train_goals_and_limits(rd)
-        jobs += [Job((rd, s), rd, goals, Variant(), alpha_scale=s) for s in cfg.alpha_scales]
-    r = evaluate(
-        jobs,
+    """Step 1 of the module docstring for one method
+    (:func:`~warp_critic.reproduce.experiments.budget.sweep`)."""
+    return sweep(
+        [str(d) for d in cfg.runs[method]],
+        budgets=list(cfg.budgets),
+        scales=list(cfg.alpha_scales),
         inits=cfg.inits,
-        steps=max(cfg.budgets),
         seed=cfg.choose_seed,
         device=cfg.device,
         max_worlds=cfg.max_worlds,
-        progress=False,
-        at=tuple(cfg.budgets),
     )
-    dof = r["dof"]
-    curve: dict[float, dict[int, float]] = {}
-    per_seed: dict[float, dict[int, list[float]]] = {}
-    for s in cfg.alpha_scales:
-        idx = [k for k, j in enumerate(jobs) if j.alpha_scale == s]
-        curve[s] = {n: _mse([r["errors_at"][n][k] for k in idx], dof) for n in cfg.budgets}
-        per_seed[s] = {n: [_mse([r["errors_at"][n][k]], dof) for k in idx] for n in cfg.budgets}
-    return {
-        "curve": curve,
-        "per_seed": per_seed,
-        "untrained": _mse([r["before"][k] for k in range(len(dirs))], dof),
-        "alphas": r["alphas"],
-        "diverged": r["diverged"],
-        "worlds": r["worlds"],
-        "seconds": time.perf_counter() - t,
-    }
 
 
 def report_method(
@@ -249,9 +195,9 @@ def report_method(
                     "scale": s,
                     "steps": n,
                     "std": std,
-                    "mse_mean": _mse([r["errors_at"][n][k] for k in idx], r["dof"]),
-                    "mse_per_seed": [_mse([r["errors_at"][n][k]], r["dof"]) for k in idx],
-                    "untrained": _mse([r["before"][k] for k in idx], r["dof"]),
+                    "mse_mean": mean_mse([r["errors_at"][n][k] for k in idx], r["dof"]),
+                    "mse_per_seed": [mean_mse([r["errors_at"][n][k]], r["dof"]) for k in idx],
+                    "untrained": mean_mse([r["before"][k] for k in idx], r["dof"]),
                 }
             )
     return {"cells": cells, "seconds": time.perf_counter() - t}
@@ -260,11 +206,6 @@ def report_method(
 # ------------------------------------------------------------------------------------------------
 # the resumable driver
 # ------------------------------------------------------------------------------------------------
-
-
-def numeric_keys(curve: dict) -> dict[float, dict[int, Any]]:
-    """JSON's string keys back to ``{scale: {N: value}}``."""
-    return {float(s): {int(n): v for n, v in row.items()} for s, row in curve.items()}
 
 
 def run_budget(
@@ -366,29 +307,17 @@ def runs_of_reproduce(out: Path, scene: str, methods: list[str] | None) -> dict[
 
 def plot_budget(result: dict[str, Any], path: Path, title: str) -> Path:
     """Error against meta-test steps per method: the best step size at each budget (solid), the
-    chosen budget (a ring), the untrained policies (dotted); log-log, MSE in rad^2."""
-    from warp_critic.reproduce.experiments.settings import METHOD_LABELS
-    from warp_critic.reproduce.report.plots import COLORS, figure, save
+    chosen budget (a ring), the untrained policies (dotted); log-log, MSE in rad^2
+    (:func:`~warp_critic.reproduce.report.budget.plot_curves`)."""
+    from warp_critic.reproduce.report.budget import plot_curves
 
-    fig = figure(6.5, 4.2)
-    ax = fig.subplots()
-    for m, sw in result["sweep"].items():
-        env = envelope(numeric_keys(sw["curve"]))
-        ns = sorted(env)
-        colour = COLORS.get(m)
-        label = METHOD_LABELS.get(m, m)
-        ax.plot(ns, [env[n] for n in ns], "o-", color=colour, label=label)
-        ax.axhline(sw["untrained"], color=colour, ls=":", lw=1)
-        c = result["chosen"][m]
-        ax.plot([c["steps"]], [c["mse_train"]], "o", ms=13, mfc="none", color=colour)
-    ax.plot([], [], ":", color="grey", label="untrained policies")
-    ax.plot([], [], "o", ms=13, mfc="none", color="grey", label="chosen (step size, N)")
-    ax.set_xscale("log")
-    ax.set_yscale("log")
-    ax.set_xlabel(
-        "critic-gradient steps per fresh policy at meta-test (N; best step size at each N)"
-    )
-    ax.set_ylabel("final MSE on the training goals (rad$^2$)")
-    ax.set_title(title)
-    ax.legend(fontsize=8)
-    return save(fig, path)
+    per = {
+        m: {
+            **result["chosen"][m],
+            "curve": envelope(numeric_keys(sw["curve"])),
+            "untrained": sw["untrained"],
+        }
+        for m, sw in result["sweep"].items()
+    }
+    xlabel = "critic-gradient steps per fresh policy at meta-test (N; best step size at each N)"
+    return plot_curves(per, path, title, xlabel)

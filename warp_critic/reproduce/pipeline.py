@@ -40,7 +40,7 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
     device = resolve_device(rc.device)
     runner = Runner(out, stage_problem)
     t0 = time.perf_counter()
-    stages = plan(settings, beyond=rc.plans_beyond, extra=rc.extra)
+    stages = plan(settings, rc.plans_beyond, rc.extra, rc.plans_budget)
     call = Call(out, rc.command, rc.selected(), device)  # the folder's ledger
     waves = needed(rc, stages)
     todo = pending(stages, waves, runner)  # a damaged stage record refuses the call here

@@ -29,12 +29,12 @@ over the Adam learning rates ``reach_lrs``).
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from warp_critic.core.errors import UserError
 from warp_critic.physics.link_changes import parse_changes
 from warp_critic.physics.scene import Variant
 from warp_critic.reproduce.experiments.evaluate import (
@@ -107,16 +107,21 @@ def run_tables_stage(
     device: str,
     progress: bool = True,
     only: list[str] | None = None,
+    steps: int | None = None,
+    scales: dict[str, float] | None = None,
 ) -> dict:
     """``runs``: method (a row of the tables: ours, the baselines, or a recipe beyond the paper) ->
     per-seed run directories (KUKA); ``runs["ours"]`` sets the scene, goals and policy updates.
-    ``only``: the rows evaluated (default: every one of ``runs``)."""
+    ``only``: the rows evaluated (default: every one of ``runs``). ``steps``: the policy updates
+    of every row (default: ours' meta-test's, :func:`default_steps`); ``scales``: row -> its step
+    size as a multiple of its run's own (default 1; a meta-test budget,
+    :mod:`~warp_critic.reproduce.experiments.budget`)."""
     import json
 
     first = str(runs["ours"][0])
     runs = {m: runs[m] for m in (only if only is not None else runs)}
     scene, train_goals, lo, hi = train_goals_and_limits(first)
-    steps = default_steps(first)
+    steps = int(steps) if steps is not None else default_steps(first)
     train_mass = round(float(scene.world_builder().body_mass[scene.ee_body]), 6)
     columns = {
         "table1": [float(x) for x in s["stds"]],
@@ -141,7 +146,7 @@ def run_tables_stage(
         s["goal_noise"],
         s["seed"],
     )
-    jobs, goals_used = _table_jobs(s, columns, runs, (train_goals, lo, hi), dyn_goals)
+    jobs, goals_used = _table_jobs(s, columns, runs, (train_goals, lo, hi), dyn_goals, scales)
     r = evaluate(
         jobs,
         inits=int(s["inits"]),
@@ -186,6 +191,7 @@ def run_tables_stage(
         "dof": r["dof"],
         "horizon": r["horizon"],
         "policy_updates": steps,
+        **({"alpha_scales": dict(scales)} if scales else {}),
         "alphas": {relpath(k, d.parent): v for k, v in r["alphas"].items()},
         "worlds": r["worlds"],
         "batches": r["batches"],
@@ -195,9 +201,12 @@ def run_tables_stage(
     }
 
 
-def _table_jobs(s: dict, columns: dict, runs: dict, train: tuple, dyn_goals) -> tuple[list, dict]:
+def _table_jobs(
+    s: dict, columns: dict, runs: dict, train: tuple, dyn_goals, scales: dict | None = None
+) -> tuple[list, dict]:
     """Every (table, column, method, seed) job of the tables, and the goals of each column
-    (``table/column`` -> goals). ``train``: the training goals and the joint limits (rad)."""
+    (``table/column`` -> goals). ``train``: the training goals and the joint limits (rad);
+    ``scales``: method -> its step-size multiple (default 1)."""
     train_goals, lo, hi = train
     jobs, goals_used = [], {}
     for table, values in columns.items():
@@ -220,7 +229,8 @@ def _table_jobs(s: dict, columns: dict, runs: dict, train: tuple, dyn_goals) -> 
             goals_used[f"{table}/{ci}"] = goals.tolist()
             for m in runs:
                 for si, rd in enumerate(runs[m]):
-                    jobs.append(Job((table, ci, m, si), str(rd), goals, variant))
+                    scale = float((scales or {}).get(m, 1.0))
+                    jobs.append(Job((table, ci, m, si), str(rd), goals, variant, scale))
     return jobs, goals_used
 
 
@@ -268,9 +278,12 @@ def run_maps_stage(
     progress: bool = True,
     floors_from: str | None = None,
     only: list[str] | None = None,
+    steps: int | None = None,
+    scales: dict[str, float] | None = None,
 ) -> dict:
     """``runs``: method (ours, the baselines, or a recipe) -> per-seed run directories (reacher);
-    ``only``: the rows evaluated (default: every one of ``runs``; ours' runs set the grids).
+    ``only``: the rows evaluated (default: every one of ``runs``; ours' runs set the grids);
+    ``steps``, ``scales``: the meta-test budget, as :func:`run_tables_stage`'s.
 
     ``floors_from``: a complete maps stage directory next to ``d`` that computed the reachability
     floors of the same grids from the same nominal runs (:func:`~warp_critic.reproduce.experiments.units.paper_maps_floors`); its
@@ -280,7 +293,7 @@ def run_maps_stage(
     first = str(runs["ours"][0])
     runs = {m: runs[m] for m in (only if only is not None else runs)}
     scene, train_goals, lo, hi = train_goals_and_limits(first)
-    steps = default_steps(first)
+    steps = int(steps) if steps is not None else default_steps(first)
     n = int(s["grid"])
     grid, (ax0, ax1) = goal_grid(lo, hi, n, float(s["limit_fraction"]))
     masses = [float(x) for x in s["masses"]]
@@ -290,21 +303,17 @@ def run_maps_stage(
         "mass": [(a, b) for a in masses for b in masses],  # row-major: link 1 major
         "length": [(a, b) for a in lengths for b in lengths],
     }
-
-    def variant(kind: str, a: float, b: float) -> Variant:
-        if kind == "mass":
-            return Variant(
-                changes=parse_changes(f"{links[0]}.mass={a!r}:keep; {links[1]}.mass={b!r}:keep")
-            )
-        return Variant(changes=parse_changes(f"{links[0]}.stretch={a!r}; {links[1]}.stretch={b!r}"))
-
+    variant = partial(_map_variant, links)
     jobs = []
     for m in runs:
+        x = float((scales or {}).get(m, 1.0))  # the row's step-size multiple
         for si, rd in enumerate(runs[m]):
-            jobs.append(Job(("goals", 0, m, si), str(rd), grid, Variant()))
+            jobs.append(Job(("goals", 0, m, si), str(rd), grid, Variant(), x))
             for kind, values in pairs.items():
                 for ci, (a, b) in enumerate(values):
-                    jobs.append(Job((kind, ci, m, si), str(rd), train_goals, variant(kind, a, b)))
+                    jobs.append(
+                        Job((kind, ci, m, si), str(rd), train_goals, variant(kind, a, b), x)
+                    )
     r = evaluate(
         jobs,
         inits=int(s["inits"]),
@@ -339,6 +348,7 @@ def run_maps_stage(
         "dof": dof,
         "horizon": r["horizon"],
         "policy_updates": steps,
+        **({"alpha_scales": dict(scales)} if scales else {}),
         "diverged": r["diverged"],
         "tip_offset": [float(x) for x in scene.tip_offset],
         "raw_file": "errors.json",
@@ -346,19 +356,28 @@ def run_maps_stage(
         "mass": {},
         "length": {},
     }
-    if int(s["reach_iterations"]) > 0 and floors_from is not None:
-        from warp_critic.reproduce.engine.stages import read_stage
+    if int(s["reach_iterations"]) > 0:
+        from warp_critic.reproduce.experiments.reach import maps_floor, taken_floors
 
-        done = (read_stage(d.parent / floors_from) or {}).get("result", {})
-        keys = ("reach_floor", "reach_iterations", "reach_lrs")
-        if not all(k in done for k in keys):
-            raise UserError(f"{d.parent / floors_from}: no reachability floors to take")
-        out.update({k: done[k] for k in keys}, reach_floor_from=floors_from)
-    elif int(s["reach_iterations"]) > 0:
-        out.update(_maps_floor(first, s, grid.view(n, n, 2), train_goals, pairs, variant, device))
+        if floors_from is not None:
+            out.update(taken_floors(d.parent, floors_from))
+        else:
+            out.update(
+                maps_floor(first, s, grid.view(n, n, 2), train_goals, pairs, variant, device)
+            )
     for m in runs:
         _map_results(out, m, jobs, r["errors"], pairs, n, dof)
     return out
+
+
+def _map_variant(links: list[str], kind: str, a: float, b: float) -> Variant:
+    """The maps' dynamics variant of one 2-D cell: ``kind`` mass SETS the masses (kg) of the two
+    ``links`` at their centres of mass, inertia kept; length stretches them by ``a``, ``b``."""
+    if kind == "mass":
+        return Variant(
+            changes=parse_changes(f"{links[0]}.mass={a!r}:keep; {links[1]}.mass={b!r}:keep")
+        )
+    return Variant(changes=parse_changes(f"{links[0]}.stretch={a!r}; {links[1]}.stretch={b!r}"))
 
 
 def _map_results(out: dict, m: str, jobs: list, errors: list, pairs: dict, n: int, dof: int):
@@ -374,27 +393,3 @@ def _map_results(out: dict, m: str, jobs: list, errors: list, pairs: dict, n: in
             errs = [errors[k] for k, j in enumerate(jobs) if j.key[:3] == (kind, ci, m)]
             cells.append({"value": list(v), **pool_errors(errs, dof)})
         out[kind][m] = cells
-
-
-def _maps_floor(
-    run_dir: str, s: dict, grid, train_goals, pairs: dict, variant, device: str
-) -> dict:
-    """The open-loop reachability floor (MSE over the joints) of every goal of the goal grid ``(n, n,
-    dof)`` and of every cell of the 2-D maps (mean over the training goals): what the best open-loop
-    torques within the policy's bounds and horizon reach from home
-    (:func:`~warp_critic.reproduce.experiments.reach.best_open_loop_floor`)."""
-    from warp_critic.reproduce.experiments.reach import best_open_loop_floor
-
-    its, lrs = int(s["reach_iterations"]), [float(x) for x in s["reach_lrs"]]
-
-    def floor(variants: list, goals) -> np.ndarray:
-        dof = goals.shape[1]
-        return (
-            best_open_loop_floor(run_dir, variants, goals, iterations=its, lrs=lrs, device=device)
-            / dof
-        )
-
-    out = {"goals": floor([Variant()], grid.flatten(0, 1))[0].reshape(grid.shape[:2]).tolist()}
-    for kind, values in pairs.items():
-        out[kind] = floor([variant(kind, a, b) for a, b in values], train_goals).mean(1).tolist()
-    return {"reach_floor": out, "reach_iterations": its, "reach_lrs": lrs}

@@ -9,7 +9,9 @@ seeds (:data:`~warp_critic.evaluation.seed_uses.HELD_OUT_SEEDS`): ``tables-heldo
 ``maps-heldout`` on the first, ``tables-heldout-<seed>`` / ``maps-heldout-<seed>`` on the others,
 each also ``by`` an extra baseline (``td3-tables-heldout-1010``) or by ours at the baselines'
 environment steps (:data:`EQUAL_STEPS`: ``metatrain-kuka-ours-equal-steps``,
-``equal-steps-tables-heldout``).
+``equal-steps-tables-heldout``). Each method's own meta-test budget (:data:`BUDGET`,
+:mod:`~warp_critic.reproduce.experiments.budget`): chosen by ``budget-<robot>-<method>``, reported
+by ``budget-<method>-tables-heldout[-<seed>]`` / ``budget-<method>-maps-heldout[-<seed>]``.
 """
 
 from __future__ import annotations
@@ -23,6 +25,8 @@ BEYOND = "beyond"
 HELDOUT = "heldout"
 #: ours meta-trained on the baselines' environment steps (the equal-budget rows)
 EQUAL_STEPS = "equal-steps"
+#: each method's own meta-test budget: its choice, and the held-out tables and maps at it
+BUDGET = "budget"
 
 
 def stage_name(
@@ -34,6 +38,7 @@ def stage_name(
     by: str | None = None,
     heldout: bool | int = False,
     equal_steps: bool = False,
+    budget: bool = False,
 ) -> str:
     """The name of a stage of ``kind`` (toy, landscape, metatrain, maps, tables).
 
@@ -41,14 +46,21 @@ def stage_name(
     paper (``equal_steps``: ours at the baselines' environment steps); an evaluation (maps, tables) is
     the paper's, or ``by`` an extra baseline, :data:`BEYOND` or :data:`EQUAL_STEPS`; ``heldout``: on
     a held-out goal seed (``True``: the first; a seed: that one, named by it unless the first).
+    ``kind`` :data:`BUDGET` names a robot and a method (the choice of its meta-test budget);
+    ``budget``: an evaluation at the meta-test budget of the method ``by`` (no ``by``: the
+    ``--only`` group of them all).
     """
+    if kind == BUDGET:
+        if scene is None or method is None:
+            raise ValueError("a budget stage names a robot and a method")
+        return "-".join((kind, scene, method))
     if kind == "metatrain":
         if scene is None or (method is None) == (recipe is None):
             raise ValueError("a meta-training stage names a robot and a method or a recipe")
         if recipe is not None:
             return "-".join((BEYOND, kind, scene, recipe))
         return "-".join((kind, scene, str(method)) + ((EQUAL_STEPS,) if equal_steps else ()))
-    parts = ([by] if by else []) + [kind]
+    parts = ([BUDGET] if budget else []) + ([by] if by else []) + [kind]
     if heldout is not False:
         from warp_critic.evaluation.seed_uses import HELD_OUT_SEEDS
 
@@ -80,6 +92,8 @@ class Outputs:
     labels: Mapping[str, str] | None = None
     #: the ``--only`` group it runs with besides its own name (the held-out seeds after the first)
     part_of: str | None = None
+    #: an evaluation at this method's chosen meta-test budget (its ``budget-*`` stage read at run time)
+    budget_of: str | None = None
 
 
-__all__ = ["BEYOND", "EQUAL_STEPS", "HELDOUT", "Outputs", "is_beyond", "stage_name"]
+__all__ = ["BEYOND", "BUDGET", "EQUAL_STEPS", "HELDOUT", "Outputs", "is_beyond", "stage_name"]

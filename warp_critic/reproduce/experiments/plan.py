@@ -16,6 +16,7 @@ from pathlib import Path
 from warp_critic.core.errors import FieldError, UserError
 from warp_critic.core.runtime import MAX_SEEDS
 from warp_critic.reproduce.engine.stage import Stage
+from warp_critic.reproduce.experiments.budget import BUDGET_GROUPS, plan_budget
 from warp_critic.reproduce.experiments.extra_baselines import (
     EVALUATIONS,
     check_baselines,
@@ -63,13 +64,14 @@ class ReproduceConfig:
                 "seeds", f"{self.seeds} seeds: at most {MAX_SEEDS} train in one process"
             )
         extra = self.extra
-        subs = metatrain_names(extra) + list(BEYOND_EVALS)
+        subs = metatrain_names(extra) + list(BEYOND_EVALS) + list(BUDGET_GROUPS)
         for s in self.only or []:
             if s not in STAGES and s not in subs and s != BEYOND:
                 raise FieldError(
                     "only",
                     f"unknown stage {s!r} (stages: {', '.join(STAGES)}, {BEYOND}, "
-                    f"{', '.join(BEYOND_EVALS)}; one meta-training: {', '.join(metatrain_names(extra))})",
+                    f"{', '.join(BEYOND_EVALS)}, {', '.join(BUDGET_GROUPS)}; one meta-training: "
+                    f"{', '.join(metatrain_names(extra))})",
                 )
         if self.only is not None and not self.only:
             raise UserError(f"--only: give one or more of {', '.join(STAGES)}")
@@ -94,20 +96,28 @@ class ReproduceConfig:
         # --beyond adds the group to a whole call; with --only the call runs what its names need
         only = self.only or []
         extra = [BEYOND] if BEYOND in only or (self.beyond and self.only is None) else []
-        if self.only is None:
-            return list(STAGES) + selected_extra(list(STAGES), self.extra) + extra
+        if self.only is None:  # --beyond also runs each method's own meta-test budget
+            budget = list(BUDGET_GROUPS) if self.beyond else []
+            return list(STAGES) + selected_extra(list(STAGES), self.extra) + extra + budget
         singles = [s for s in metatrain_names(self.extra) if s in self.only]
         if "metatrain" in self.only:
             singles = [s for s in singles if is_beyond(s)]  # the paper's are in the group
         if BEYOND not in self.only:  # one of the beyond evaluations alone (with what it reads)
             singles += [s for s in BEYOND_EVALS if s in self.only]
         groups = [s for s in STAGES if s in self.only]
-        return groups + selected_extra(groups, self.extra) + singles + extra
+        budget = [s for s in BUDGET_GROUPS if s in self.only]
+        return groups + selected_extra(groups, self.extra) + singles + extra + budget
 
     @property
     def plans_beyond(self) -> bool:
         """Whether this call's plan holds the stages beyond the paper."""
         return any(is_beyond(s) for s in self.selected())
+
+    @property
+    def plans_budget(self) -> bool:
+        """Whether this call's plan holds each method's meta-test budget stages (``--beyond``, or
+        one of :data:`~warp_critic.reproduce.experiments.budget.BUDGET_GROUPS` in ``--only``)."""
+        return any(s in BUDGET_GROUPS for s in self.selected())
 
 
 #: the beyond group's evaluations, each also accepted alone by ``--only``
@@ -133,10 +143,13 @@ def scene_hashes() -> dict[str, str]:
     return {s: load_scene(scene_file(s)).content_hash for s in SCENES}
 
 
-def plan(settings: dict, beyond: bool = False, extra: tuple[str, ...] = ()) -> dict[str, Stage]:
+def plan(
+    settings: dict, beyond: bool = False, extra: tuple[str, ...] = (), budget: bool = False
+) -> dict[str, Stage]:
     """Every stage (sub-stage) of ``settings``, by name; with ``beyond``, also the recipes beyond
     the paper (:func:`plan_beyond`); with ``extra``, the stages of those baselines
-    (:func:`~warp_critic.reproduce.experiments.extra_baselines.plan_extra`)."""
+    (:func:`~warp_critic.reproduce.experiments.extra_baselines.plan_extra`); with ``budget``, each
+    method's own meta-test budget (:func:`~warp_critic.reproduce.experiments.budget.plan_budget`)."""
     hashes = scene_hashes()
     p: dict[str, Stage] = {}
     p["toy"] = Stage("toy", "toy", settings["toy"], {}, stage_hash("toy", settings["toy"]))
@@ -154,6 +167,8 @@ def plan(settings: dict, beyond: bool = False, extra: tuple[str, ...] = ()) -> d
     plan_heldout(settings, p, hashes, extra)
     if beyond:
         plan_beyond(settings, p, hashes)
+    if budget:
+        plan_budget(settings, p, extra)
     return p
 
 
@@ -206,11 +221,14 @@ def needed(rc: ReproduceConfig, stages: dict[str, Stage]) -> list[list[str]]:
                 first += list(stages[ev].depends)
                 second.append(ev)
         else:  # an evaluation, and the stages that run with it (the other held-out seeds)
-            for name in [group] + [n for n, st in stages.items() if _part_of(st) == group]:
+            own = [group] if group in stages else []  # a budget group is no stage of its own
+            for name in own + [n for n, st in stages.items() if _part_of(st) == group]:
                 first += list(stages[name].depends)
                 second.append(name)
-    # each stage once: --beyond with --only beyond-maps names that stage twice
-    return [list(dict.fromkeys(first)), list(dict.fromkeys(second))]
+    # each stage once: --beyond with --only beyond-maps names that stage twice, and --only
+    # budget,budget-tables-heldout a choice both as a stage of its group and as what one reads
+    first = list(dict.fromkeys(first))
+    return [first, [n for n in dict.fromkeys(second) if n not in first]]
 
 
 def _part_of(st: Stage) -> str | None:

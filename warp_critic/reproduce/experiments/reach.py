@@ -13,11 +13,13 @@ hard, not that the critic failed.
 from __future__ import annotations
 
 from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import torch
 
-from warp_critic.core.errors import DivergenceError
+from warp_critic.core.errors import DivergenceError, UserError
+from warp_critic.physics.scene import Variant
 
 
 def open_loop_floor(
@@ -128,3 +130,36 @@ def _backtrack(opt: torch.optim.Adam, u: torch.Tensor, best_u: torch.Tensor, bad
         u[:, bad] = 0.5 * best_u[:, bad]
         for key in ("exp_avg", "exp_avg_sq"):
             opt.state[u][key][:, bad] = 0.0
+
+
+def maps_floor(run_dir: str, s: dict, grid, train_goals, pairs: dict, variant, device: str) -> dict:
+    """The open-loop reachability floor (MSE over the joints) of every goal of the goal grid ``(n, n,
+    dof)`` and of every cell of the 2-D maps (mean over the training goals): what the best open-loop
+    torques within the policy's bounds and horizon reach from home (:func:`best_open_loop_floor`).
+    The maps stage's (:func:`~warp_critic.reproduce.experiments.generalize.run_maps_stage`)."""
+    its, lrs = int(s["reach_iterations"]), [float(x) for x in s["reach_lrs"]]
+
+    def floor(variants: list, goals) -> np.ndarray:
+        dof = goals.shape[1]
+        return (
+            best_open_loop_floor(run_dir, variants, goals, iterations=its, lrs=lrs, device=device)
+            / dof
+        )
+
+    out = {"goals": floor([Variant()], grid.flatten(0, 1))[0].reshape(grid.shape[:2]).tolist()}
+    for kind, values in pairs.items():
+        out[kind] = floor([variant(kind, a, b) for a, b in values], train_goals).mean(1).tolist()
+    return {"reach_floor": out, "reach_iterations": its, "reach_lrs": lrs}
+
+
+def taken_floors(root: Path, floors_from: str) -> dict:
+    """The reachability floors of the complete maps stage ``root/floors_from`` (the same grids and
+    nominal runs: :func:`~warp_critic.reproduce.experiments.units.paper_maps_floors`), to take
+    instead of computing them again, with ``reach_floor_from`` naming it."""
+    from warp_critic.reproduce.engine.stages import read_stage
+
+    done = (read_stage(root / floors_from) or {}).get("result", {})
+    keys = ("reach_floor", "reach_iterations", "reach_lrs")
+    if not all(k in done for k in keys):
+        raise UserError(f"{root / floors_from}: no reachability floors to take")
+    return {**{k: done[k] for k in keys}, "reach_floor_from": floors_from}

@@ -19,6 +19,7 @@ RESULT_KEYS: dict[str, dict[str, type | tuple[type, ...]]] = {
     "metatrain": {"seeds": dict, "iterations": int, "env_steps_per_iteration": int},
     "maps": {"axis_q1": list, "axis_q2": list, "goals": dict, "mass": dict, "length": dict},
     "tables": {"columns": dict, "cells": list, "dof": int},
+    "budget": {"curve": dict, "chosen": dict, "untrained": float, "method": str},
 }
 
 

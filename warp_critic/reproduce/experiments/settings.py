@@ -26,6 +26,10 @@ Paper settings (non-quick):
   ``reach_lrs``; 0 = none).
 * ``tables``: also two stress tables (added tip mass, stretched link 7) with their open-loop
   reachability floors (``reach_iterations`` Adam steps; 0 = none).
+* ``budget`` (with ``--beyond``): each method's meta-test budget, chosen on its training goals over
+  ``steps`` x ``alpha_scales`` (``inits`` initialisations per goal from goal seed ``seed``, which
+  chooses nothing else), then the held-out tables and maps at it
+  (:mod:`~warp_critic.reproduce.experiments.budget`).
 """
 
 from __future__ import annotations
@@ -37,7 +41,7 @@ from typing import Any
 
 from warp_critic.core.errors import FieldError
 from warp_critic.evaluation.presets import preset
-from warp_critic.evaluation.seed_uses import HELD_OUT_SEEDS
+from warp_critic.evaluation.seed_uses import CHOOSE_BUDGET_SEED, HELD_OUT_SEEDS
 from warp_critic.methods import method, methods
 from warp_critic.reproduce.experiments.naming import BEYOND, stage_name
 from warp_critic.reproduce.experiments.recipes import RECIPES
@@ -92,6 +96,12 @@ TUNED: dict[str, dict[str, dict[str, float]]] = {
     "reacher": {"ddpg": {"actor_lr": 1e-3}, "meta-critic": {"updates_per_iteration": 100}},
     "kuka": {"meta-critic": {"updates_per_iteration": 100}},
 }
+
+
+#: the meta-test budgets swept: critic-gradient steps per fresh policy (the tables' default is 3),
+#: read on one descent, at each multiple of the run's own meta-test step size (half-decades)
+BUDGET_STEPS = (1, 3, 10, 30, 100, 300)
+BUDGET_SCALES = (0.1, 0.316, 1.0, 3.16, 10.0)
 
 
 def _metatrain(quick: bool, seeds: list[int], extra: tuple[str, ...] = ()) -> dict:
@@ -221,6 +231,13 @@ def default_settings(quick: bool, seeds: int, extra: tuple[str, ...] = ()) -> di
             "equal_step_iterations": dict(EQUAL_STEP_ITERATIONS),
         },
         BEYOND: _beyond(quick),
+        "budget": {
+            "steps": list(BUDGET_STEPS),
+            "alpha_scales": list(BUDGET_SCALES),
+            "inits": 5,
+            "seed": CHOOSE_BUDGET_SEED,
+            "max_worlds": 4096,
+        },
         "tables": {
             "stds": [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0],
             "masses": [float(m) for m in range(10)],
@@ -272,6 +289,7 @@ def _quick(s: dict) -> None:
         reach_iterations=1,
     )
     s["heldout"].update(seeds=[HELD_OUT_SEEDS[0]], equal_step_iterations={"kuka": 3})
+    s["budget"].update(steps=[1, 3], alpha_scales=[0.316, 1.0], inits=1)
     s["maps"].update(
         grid=4,
         masses=[0.5, 1.0, 2.0],

@@ -21,6 +21,7 @@ STAGE_FUNCTIONS = {
     "metatrain": "warp_critic.reproduce.experiments.metatrain:run_metatrain_stage",
     "maps": "warp_critic.reproduce.experiments.generalize:run_maps_stage",
     "tables": "warp_critic.reproduce.experiments.generalize:run_tables_stage",
+    "budget": "warp_critic.reproduce.experiments.budget:run_budget_stage",
 }
 
 
@@ -40,6 +41,14 @@ def make_unit(st: Stage, settings: dict, device: str, progress: bool, out: Path)
             "device": device,
             "progress": progress,
         }
+    elif group == "budget":  # one method's choice: its meta-training's runs
+        kwargs = {"s": st.settings, "runs": evaluated_runs(st, out)}
+        kwargs.update(device=device, progress=progress)
+    elif o.budget_of is not None:  # maps / tables at a method's chosen meta-test budget
+        from warp_critic.reproduce.experiments.budget import reporting_kwargs
+
+        kwargs = {"s": st.settings, **reporting_kwargs(st, out), "device": device}
+        kwargs["progress"] = progress
     else:  # maps / tables read the complete meta-training directories of their robot
         kwargs = {
             "s": st.settings,

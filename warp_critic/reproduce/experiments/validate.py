@@ -221,6 +221,7 @@ def check_all(settings: dict, defaults: dict) -> None:
     check_maps(settings["maps"])
     check_beyond(settings["beyond"], settings["metatrain"]["seeds"])
     check_heldout(settings["heldout"], settings["tables"], settings["maps"])
+    check_budget(settings["budget"], settings)
 
 
 def check_heldout(h: dict, tables: dict, maps: dict) -> None:
@@ -250,6 +251,34 @@ def check_heldout(h: dict, tables: dict, maps: dict) -> None:
             )
     for robot, n in h["equal_step_iterations"].items():
         number(f"heldout.equal_step_iterations.{robot}", n, lo=1, hi=10**7, integer=True)
+
+
+def check_budget(b: dict, settings: dict) -> None:
+    """Each method's meta-test budget: distinct positive step counts, positive step-size multiples,
+    and a choosing goal seed that chose nothing else and draws no goal a table or map reports on."""
+    from warp_critic.evaluation.seed_uses import CHOOSE_BUDGET_SEED, chose
+
+    steps, scales = b["steps"], b["alpha_scales"]
+    numbers("budget.steps", steps, lo=1, hi=10**5, integer=True)
+    if len(set(steps)) != len(steps):
+        raise bad("budget.steps", steps, "a step count is given twice")
+    numbers("budget.alpha_scales", scales, lo=0, open_lo=True, hi=1e6)
+    if len(set(scales)) != len(scales):
+        raise bad("budget.alpha_scales", scales, "a step-size multiple is given twice")
+    number("budget.inits", b["inits"], lo=1, hi=10**6, integer=True)
+    number("budget.max_worlds", b["max_worlds"], lo=1, hi=10**8, integer=True)
+    seed = b["seed"]
+    number("budget.seed", seed, lo=0, hi=2**32 - 1, integer=True)
+    if seed != CHOOSE_BUDGET_SEED and chose(seed):
+        raise bad("budget.seed", seed, f"goal seed {seed} chose another setting (seed_uses.py)")
+    columns = len(settings["tables"]["stds"])  # a reporting seed s draws s .. s + columns - 1
+    reporting = [
+        *settings["heldout"]["seeds"],
+        settings["tables"]["seed"],
+        settings["maps"]["seed"],
+    ]
+    if any(int(r) <= seed < int(r) + columns for r in reporting):
+        raise bad("budget.seed", seed, "draws the goals a table or map reports on; use another")
 
 
 def check_beyond(b: dict, seeds: list) -> None:

@@ -25,6 +25,7 @@ from warp_critic.reproduce.experiments.settings import SCENES, STAGES
 from warp_critic.reproduce.report import paper as rp
 from warp_critic.reproduce.report.analyses import landscape_section, toy_section
 from warp_critic.reproduce.report.beyond import beyond_section
+from warp_critic.reproduce.report.budget import budget_section
 from warp_critic.reproduce.report.draft import Draft, rel
 from warp_critic.reproduce.report.heldout import heldout_section
 from warp_critic.reproduce.report.maps import maps_section
@@ -40,6 +41,7 @@ SECTIONS = (
     maps_section,
     tables_section,
     heldout_section,
+    budget_section,
     beyond_section,
 )
 
