@@ -86,10 +86,10 @@ def own_setting(scene: str, method: str) -> dict[str, Any]:
     """The method's training values as ``reproduce`` sets them, without any earlier adoption
     (``settings.TUNED``): its published setting (a baseline) or its scene preset (ours)."""
     from warp_critic.evaluation.presets import preset
-    from warp_critic.reproduce.experiments.settings import TUNED, default_settings
+    from warp_critic.reproduce.experiments.settings import OURS_PRESETS, TUNED, default_settings
 
     values = dict(default_settings(False, 1, extra=_extra(method))["metatrain"][scene][method])
-    published = preset(method) if method != "ours" else {}
+    published = preset(OURS_PRESETS[scene] if method == "ours" else method)
     for key in TUNED.get(scene, {}).get(method, {}):
         if key in published:
             values[key] = published[key]

@@ -146,3 +146,19 @@ def test_bad_input_is_one_line_exit_2(tool, argv, words, capsys):
     assert e.value.code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and words in err, err
+
+
+def test_an_adoption_for_ours_reaches_reproduce_and_the_search_undoes_it(tool, monkeypatch):
+    """``TUNED`` may name ours too (one procedure for all): reproduce trains ours with the change,
+    the task fields the baselines share stay ours' preset's, and the search starts from the preset."""
+    from warp_critic.reproduce.experiments import settings
+
+    before = settings.default_settings(False, 1)["metatrain"]["kuka"]
+    monkeypatch.setitem(settings.TUNED, "kuka", {**settings.TUNED["kuka"], "ours": {"lr": 1e-3}})
+    after = settings.default_settings(False, 1)["metatrain"]["kuka"]
+    assert before["ours"]["lr"] == 3e-3 and after["ours"]["lr"] == 1e-3
+    assert {k: v for k, v in after["ours"].items() if k != "lr"} == {
+        k: v for k, v in before["ours"].items() if k != "lr"
+    }
+    assert after["ddpg"] == before["ddpg"]
+    assert tool.own_setting("kuka", "ours")["lr"] == 3e-3
