@@ -287,6 +287,10 @@ def main(argv=None) -> int:
         "--inits", type=int, default=5, help="fresh policies per training goal in the score"
     )
     p.add_argument("--device", default="cpu")
+    p.add_argument("--markdown", help="also write the summary (markdown tables) to this file")
+    p.add_argument(
+        "--summary-only", action="store_true", help="train nothing: summarise the rows in --out"
+    )
     p.add_argument("--out", default="runs/tune-uniform/tune.json")
     p.add_argument(
         "--runs", default="runs/tune-uniform", help="where the candidates' runs (checkpoints) go"
@@ -308,7 +312,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     try:
         rows = _done_rows(out, args)
-        for scene in args.scenes:
+        for scene in args.scenes if not args.summary_only else ():
             for method in args.methods:
                 for change in candidates(scene, method):
                     _run_candidate(rows, scene, method, change, TRUNCATED, args, out)
@@ -318,7 +322,10 @@ def main(argv=None) -> int:
                         _run_candidate(rows, scene, method, change, FULL, args, out)
     except UserError as e:  # a user mistake (bad path, ...) as one line
         p.exit(2, f"{PROG}: error: {user_message(e)}\n")
-    _print_summary(rows, args)
+    text = "\n".join(summary_markdown(rows, args.scenes, args.methods))
+    print(f"\n{text}\nRule: {ADOPT_RULE}.")
+    if args.markdown:
+        Path(args.markdown).write_text(text + "\n")
     return 0
 
 
@@ -345,27 +352,46 @@ def _run_candidate(
     )
 
 
-def _print_summary(rows: list[dict], args) -> None:
-    for scene in args.scenes:
-        for method in args.methods:
+def summary_markdown(rows: list[dict], scenes: list[str], methods: list[str]) -> list[str]:
+    """Per scene and method: every scored candidate (score, per-seed scores, the step-size scale
+    the score is at, training seconds) and what the rule decides, as markdown lines."""
+    out = []
+    for scene in scenes:
+        for method in methods:
             a = adoption(rows, scene, method)
             if a is None:
                 continue
-            print(f"\n{scene} {method}: sorted by score (rad^2, lower is better)")
+            out += [
+                f"### {scene}, {method}",
+                "",
+                "| candidate | training | score (MSE, rad^2) | per seed | step size | seconds |",
+                "|---|---|---|---|---|---|",
+            ]
             mine = [r for r in rows if (r["scene"], r["method"]) == (scene, method)]
-            for r in sorted(mine, key=lambda r: (r.get("length", TRUNCATED), r["score"])):
-                print(
-                    f"  {r['score']:.4g}  {r['change'] or 'own setting'} ({r.get('length', TRUNCATED)})"
+            for r in sorted(
+                mine, key=lambda r: (r.get("length", TRUNCATED) != TRUNCATED, _score(r))
+            ):
+                change = ", ".join(f"{k} {v:g}" for k, v in r["change"].items()) or "own setting"
+                seeds = ", ".join(f"{x:.4g}" for x in r["per_seed"])
+                out.append(
+                    f"| {change} | {r.get('length', TRUNCATED)} | {r['score']:.4g} | {seeds} | "
+                    f"x{r['scale']:g} | {r['seconds']:.0f} |"
                 )
-            if not a["complete"]:
-                verdict = "search incomplete: nothing proposed yet"
-            elif not a["proposed"]:
-                verdict = "the own setting kept: no candidate passes the rule"
-            elif a["confirm"] is None:
-                verdict = f"{a['best']['change']} proposed; its full-length confirmation pending"
-            else:
-                verdict = f"{a['best']['change']} {'adopted' if a['confirm'] else 'not confirmed at full length: the own setting kept'}"
-            print(f"  {verdict} (rule: {ADOPT_RULE})")
+            out += ["", _verdict(a), ""]
+    return out
+
+
+def _verdict(a: dict) -> str:
+    best = ", ".join(f"{k} {v:g}" for k, v in a["best"]["change"].items())
+    if not a["complete"]:
+        return "Search incomplete: nothing proposed yet."
+    if not a["proposed"]:
+        return "The own setting is kept: no candidate passes the rule."
+    if a["confirm"] is None:
+        return f"Proposed: {best}; its full-length confirmation is pending."
+    if a["confirm"]:
+        return f"Adopted: {best} (it passes the rule at full length too)."
+    return f"Not adopted: {best} passes the rule truncated, not at full length; the own setting is kept."
 
 
 def _slug(change: dict) -> str:

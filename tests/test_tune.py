@@ -124,8 +124,13 @@ def test_a_tiny_search_scores_every_candidate_and_resumes_without_retraining(
     assert all(len(r["per_seed"]) == 2 and r["score"] > 0 for r in rows)
     capsys.readouterr()
     assert tool.main(argv) == 0  # every candidate scored: nothing trains again
-    assert "score" not in capsys.readouterr().out.split("sorted by score")[0]
+    assert "(truncated): score" not in capsys.readouterr().out  # no candidate line: none trained
     assert json.loads(out.read_text())["rows"] == rows
+    md = tmp_path / "tune.md"
+    assert tool.main([*argv, "--summary-only", "--markdown", str(md)]) == 0
+    text = md.read_text()
+    assert text.startswith("### reacher, ours") and text.count("| truncated |") == 7
+    assert tool._verdict(a) in text
     with pytest.raises(SystemExit) as e:  # another procedure's file is refused, not mixed in
         tool.main([*argv[:2], "800", *argv[3:]])
     assert e.value.code == 2
