@@ -1,6 +1,6 @@
-"""Markdown of the KUKA tables: the paper's rows, ours, each baseline twice (all seeds; seeds that
-solved the training task), the untrained policies and, for the stress tables, the open-loop
-reachability floor."""
+"""The report's KUKA tables section, a pure compute and render: the paper's rows, ours, each
+baseline twice (all seeds; seeds that solved the training task), the untrained policies and, for
+the stress tables, the open-loop reachability floor."""
 
 from __future__ import annotations
 
