@@ -71,6 +71,7 @@ def _training_rows(recs) -> tuple[list[dict], dict]:
 
 
 def _training_lines(rows: list[dict]) -> list[str]:
+    """The training-cost table from :func:`_training_rows`' rows (seconds of wall time)."""
     lines = [
         "| robot | critic | changed from the nominal preset | iterations | training time (s) | final training "
         "error (rad^2, mean over seeds) |",
@@ -147,6 +148,7 @@ def _maps(res: dict, targets: list, out: dict) -> dict:
 
 
 def _maps_lines(v: dict) -> list[str]:
+    """The maps' shares table from :func:`_maps`' view."""
     within, past = v["bent"]
     lines = [
         "| critic | goal grid below 0.05 | of it: elbow within 90 deg "
@@ -207,6 +209,7 @@ def _tables(res: dict, targets: list, out: dict) -> list[dict]:
 
 
 def _tables_lines(views: list[dict]) -> list[str]:
+    """Table 1 and the stress tables (MSE, rad^2) from :func:`_tables`' views."""
     lines: list[str] = []
     for v in views:
         values = v["values"]

@@ -133,6 +133,7 @@ def maps_render(v: dict | None) -> list[str]:
 
 
 def _goal_figure(inp: Inputs, png, gm: dict, frac: dict) -> dict:
+    """Figure 4's entry: the lowest grid mean and ours' share below 0.05 MSE."""
     best = min(gm, key=gm.__getitem__)
     return inp.figure(
         "Figure 4: reacher new goals",
@@ -165,6 +166,7 @@ def _goal_claim(M: dict, gm: dict, frac: dict, claims: list[dict]) -> dict:
 
 
 def _dynamics_figure(inp: Inputs, fig_no: int, kind: str, png, grid_means: dict) -> dict:
+    """Figure 5 (``kind`` mass) or 6 (length)'s entry: each row's grid mean MSE (rad^2)."""
     return inp.figure(
         f"Figure {fig_no}: reacher {kind}",
         png,
