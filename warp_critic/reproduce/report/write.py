@@ -228,7 +228,7 @@ def stages_of(plan: dict[str, Stage], recs) -> dict:
 
 def stage_rows(plan: dict[str, Stage], recs) -> list[dict]:
     """The stage table's rows: every stage of the plan, with its record's times where complete
-    (``train``: one seed's training time of a meta-training stage, else ``None``)."""
+    (``train_seconds``: one seed's training time of a meta-training stage, s, else ``None``)."""
     rows: list[dict] = []
     for name, st in plan.items():
         r = recs.get(name)
@@ -242,7 +242,7 @@ def stage_rows(plan: dict[str, Stage], recs) -> list[dict]:
                 "dir": r.dir.name,
                 "status": "ran" if r.ran else "complete, skipped",
                 "seconds": r.data["seconds"],
-                "train": next(iter(per_seed.values()))["seconds"] if per_seed else None,
+                "train_seconds": next(iter(per_seed.values()))["seconds"] if per_seed else None,
             }
         )
     return rows
@@ -264,7 +264,7 @@ def _stage_table(rows: list[dict]) -> list[str]:
         if r["status"] == "not run":
             md.append(f"| {r['name']} | `{r['dir']}` | not run | — | — |")
             continue
-        train = f"{r['train']:.1f}" if r["train"] is not None else "—"
+        train = f"{r['train_seconds']:.1f}" if r["train_seconds"] is not None else "—"
         md.append(f"| {r['name']} | `{r['dir']}` | {r['status']} | {r['seconds']:.1f} | {train} |")
     md.append("")
     return md
