@@ -189,10 +189,10 @@ def _records(at_ddpg: float) -> dict:
 
 def test_the_report_pools_the_held_out_seeds_and_judges_both_comparisons(tmp_path):
     c = rb.compute(_records(at_ddpg=0.5))
-    json.dumps(c)  # JSON-able, for results.json
+    assert json.loads(json.dumps(c)) == c  # JSON-able and unchanged by results.json's round trip
     assert list(c["choice"]) == ["kuka"] and list(c["choice"]["kuka"]) == ["ours", "ddpg", "td3"]
     assert c["choice"]["kuka"]["ddpg"]["steps"] == 30
-    assert c["choice"]["kuka"]["ddpg"]["at_scale"] == {3: 2.0, 30: 0.05}
+    assert c["choice"]["kuka"]["ddpg"]["at_scale"] == {"3": 2.0, "30": 0.05}
     t = c["tables"]
     assert t["seeds"] == [1000, 1010] and t["baselines"] == ["ddpg"]  # TD3 reported nowhere
     cell = t["table1"]["rows"]["ours"][0]
@@ -205,7 +205,8 @@ def test_the_report_pools_the_held_out_seeds_and_judges_both_comparisons(tmp_pat
     assert set(own) == {"met"} and set(at) == {"not met"}  # ours' 0.5 at 30 steps > DDPG's 0.1
     flipped = {x["claim"]: x["verdict"] for x in rb.compute(_records(at_ddpg=0.05))["claims"]}
     assert set(flipped.values()) == {"met"}
-    md = "\n".join(rb.render(c))
+    md = "\n".join(rb.render(json.loads(json.dumps(c))))  # as results.json gives it back
+    assert md == "\n".join(rb.render(c))
     assert "| DDPG | 30 | 0.1 | 0.05 | 0.3 | 2 | 0.05 |" in md
     assert "| ours at DDPG's steps (30 steps, x0.1) | 0.525 [" in md
     assert "### Figures 4-6 at the chosen budgets, held-out goal seeds 1000, 1010" in md
@@ -220,6 +221,7 @@ def test_only_the_sections_of_complete_stages_appear():
     assert c["tables"] is None and c["maps"] is None and c["claims"] == []
     assert "Tables 1-3 at the chosen budgets: not run" in "\n".join(rb.render(c))
     assert rb.compute({})["choice"] == {}
+    assert rb.budget_render(None) == []  # no budget stage: no section (the report unchanged)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -17,7 +17,16 @@ from warp_critic.cli.main import main
 # one worker runs this module: the in-process and the Ray reproduce outputs, made once
 pytestmark = pytest.mark.xdist_group("test_executors")
 
-VOLATILE = ("seconds", "wall", "finished", "written", "command", "seconds_this_call", "ledger")
+VOLATILE = (
+    "seconds",
+    "train_seconds",
+    "wall",
+    "finished",
+    "written",
+    "command",
+    "seconds_this_call",
+    "ledger",
+)
 
 
 def numbers(out: Path) -> dict:

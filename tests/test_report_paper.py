@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import pytest
 
+from warp_critic.reproduce.experiments.settings import METHOD_LABELS
 from warp_critic.reproduce.report import paper as rp
 
 
@@ -52,13 +54,28 @@ def test_solved_cell_pools_only_solved_seeds():
 def test_sample_efficiency_verdict_is_computed():
     fast = _Rec(_result({"0": [1.0] + [0.02] * 40, "1": [1.0] + [0.02] * 40}))
     slow = _Rec(_result({"0": [1.0, 0.5, 0.2] + [0.02] * 40, "1": [1.0, 0.5, 0.2] + [0.02] * 40}))
-    _, data = rp.steps_table({"ours": fast, "ddpg": slow})
-    assert rp.sample_efficiency_verdict(data)[0] == "met"
-    _, data = rp.steps_table({"ours": slow, "ddpg": fast})
-    assert rp.sample_efficiency_verdict(data)[0] == "not met"
+
+    def levels(got: dict) -> dict:
+        return {m: rp.steps_to_levels(r.data["result"]) for m, r in got.items()}
+
+    assert rp.sample_efficiency_verdict(levels({"ours": fast, "ddpg": slow}))[0] == "met"
+    assert rp.sample_efficiency_verdict(levels({"ours": slow, "ddpg": fast}))[0] == "not met"
     flat = _Rec(_result({"0": [1.0, 1.0]}))
-    _, data = rp.steps_table({"ours": flat, "ddpg": flat})
-    assert rp.sample_efficiency_verdict(data)[0] == "not comparable"
+    assert rp.sample_efficiency_verdict(levels({"ours": flat, "ddpg": flat}))[0] == "not comparable"
+
+
+def test_steps_lines_render_the_levels_as_results_json_keys_them():
+    fast = _Rec(_result({"0": [1.0] + [0.02] * 40, "1": [1.0] + [0.02] * 40}))
+    flat = _Rec(_result({"0": [1.0, 1.0], "1": [1.0, 1.0]}))
+    levels = {
+        m: {str(k): v for k, v in rp.steps_to_levels(r.data["result"]).items()}
+        for m, r in (("ours", fast), ("ddpg", flat))
+    }
+    lines = rp.steps_lines(json.loads(json.dumps(levels)))
+    assert len(lines) == 2 + 2 * len(rp.LEVELS)
+    ours, ddpg = METHOD_LABELS["ours"], METHOD_LABELS["ddpg"]
+    assert lines[2].startswith(f"| {ours} | 0.3 | 400 [400, 400] | 0 of 2 |")
+    assert lines[-1] == f"| {ddpg} | 0.03 | — | 2 of 2 | — |"
 
 
 def test_error_at_budget_reads_the_curve_at_equal_steps():

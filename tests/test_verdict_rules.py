@@ -3,13 +3,21 @@ data where the earlier, more lenient rule said "met" and the rule now applied sa
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from warp_critic.evaluation.paper import PAPER_TABLE2
 from warp_critic.reproduce.report import paper as rp
 from warp_critic.reproduce.report import rules
-from warp_critic.reproduce.report.tables import BASELINE_MARK, MARK, table_markdown
+from warp_critic.reproduce.report.tables import (
+    BASELINE_MARK,
+    MARK,
+    table_findings,
+    table_lines,
+    table_numbers,
+)
 from warp_critic.reproduce.report.training import budget_sentence
 
 
@@ -53,15 +61,15 @@ def test_maps_rule_needs_the_share_below_005_not_only_the_lowest_mean():
     base = np.full(9, 0.35)
     base[0] = 0.005  # a baseline below ours in one cell
     M = _maps(ours, base)
-    _, g = rp.grid_summary(M, "mass", {})
+    g, rows = rp.grid_summary(M, "mass", {})
     means = g["means"]
-    ours_label = next(r.label for r in g["rows"] if r.method == "ours")
+    ours_label = next(r.label for r in rows if r.method == "ours")
     ours_mean = means[ours_label]
     # the earlier Figures 5-6 rule: ours has the lowest grid mean -> met
     assert all(ours_mean < v for k, v in means.items() if k != ours_label)
     cells = {
         r.label: [c[0] for c in r.values]
-        for r in g["rows"]
+        for r in rows
         if all(c is not None for c in r.values)  # no solved rows: no seed flags given
     }
     ours_cells = cells.pop(ours_label)
@@ -105,7 +113,9 @@ def _tables(ours: list[float]) -> dict:
 def test_table_rules_judge_the_comparison_by_share_and_the_values_within_the_printed_std():
     ours = [0.15] + [0.05] * 9  # below both baselines everywhere, 2.3x the paper at 0 kg
     solved = {"ddpg": [True, True], "meta-critic": [True, False]}
-    lines, _, summary, wins = table_markdown("table2", _tables(ours), "x/stage.json", solved)
+    view, _, wins = table_numbers("table2", _tables(ours), "x/stage.json", solved)
+    view = json.loads(json.dumps(view))  # render reads it back from results.json
+    lines, summary = table_lines(view), table_findings(view)
     (wa, ca), (ws, cs) = wins["all"], wins["solved"]
     assert wa == ca == 10 and ws == cs == 10
     assert wins["paper"] == (9, 10)
@@ -138,7 +148,7 @@ def test_steps_rule_needs_the_running_mean_to_stay_below_the_level():
         for m, c in (("ours", ours), ("ddpg", base))
     }
     assert all(first["ours"][lv] < first["ddpg"][lv] for lv in rp.LEVELS)
-    _, data = rp.steps_table(got)
+    data = {m: rp.steps_to_levels(r.data["result"]) for m, r in got.items()}
     assert data["ours"][0.03]["never"] == 2 and data["ddpg"][0.03]["never"] == 0
     verdict, text = rp.sample_efficiency_verdict(data)
     assert verdict == "not met" and "ours first at 0 of 3 levels" in text

@@ -4,7 +4,7 @@ with every method at its own budget and ours also at each baseline's number of s
 
 Three pure parts: :func:`compute` (stage records -> a JSON-able dict for ``results.json``, the
 claims included), :func:`plot` (that dict -> the curve figures, one per robot) and :func:`render`
-(that dict -> markdown lines). :func:`budget_section` joins them for
+(that dict -> markdown lines). :func:`budget_compute` and :func:`budget_render` are its section for
 :mod:`~warp_critic.reproduce.report.write`. The pooling over seeds and the 95% intervals are the
 held-out section's (:func:`~warp_critic.reproduce.report.heldout.pool_tables`,
 :func:`~warp_critic.reproduce.report.heldout.pool_maps`); the verdicts its comparative rule
@@ -32,9 +32,9 @@ from warp_critic.reproduce.engine.stages import StageRecord
 from warp_critic.reproduce.experiments.budget import at_row, envelope, numeric_keys
 from warp_critic.reproduce.experiments.naming import BUDGET, stage_name
 from warp_critic.reproduce.experiments.settings import ALL_METHODS, METHOD_LABELS, SCENES
-from warp_critic.reproduce.report.draft import Draft, fmt
 from warp_critic.reproduce.report.heldout import COLUMN, TITLES, pool_maps, pool_tables
 from warp_critic.reproduce.report.rules import COMPARE_SHARE, compare_verdict, map_verdict
+from warp_critic.reproduce.report.section import Inputs, fmt, part
 
 Recs = Mapping[str, StageRecord | None]
 KINDS = ("goals", "mass", "length")
@@ -57,7 +57,7 @@ MAP_TITLES = {
 
 def compute(recs: Recs, seeds: tuple[int, ...] = HELD_OUT_SEEDS) -> dict[str, Any]:
     """``{"choice": robot -> method -> {"scale", "steps", "mse_train", "untrained", "at_scale":
-    {N: MSE at the chosen scale}, "envelope": {N: best MSE}, "stage"}, "tables", "maps", "claims"}``
+    {"N": MSE at the chosen scale}, "envelope": {"N": best MSE}, "stage"}, "tables", "maps", "claims"}``
     from the complete ``budget-*`` stages of ``recs`` (stage name -> record); MSE in rad^2.
     ``tables`` / ``maps`` are ``None`` until ours' reporting stage is complete on a seed."""
     choice: dict[str, dict] = {}
@@ -71,8 +71,9 @@ def compute(recs: Recs, seeds: tuple[int, ...] = HELD_OUT_SEEDS) -> dict[str, An
             choice.setdefault(scene, {})[m] = {
                 **c,
                 "untrained": r["untrained"],
-                "at_scale": curve[float(c["scale"])],
-                "envelope": envelope(curve),
+                # keys as results.json gives them back (strings), so the view round-trips unchanged
+                "at_scale": {str(n): v for n, v in curve[float(c["scale"])].items()},
+                "envelope": {str(n): v for n, v in envelope(curve).items()},
                 "stage": rec.dir.name,
             }
     out: dict[str, Any] = {"choice": choice, "tables": None, "maps": None, "claims": []}
@@ -200,9 +201,9 @@ def plot_curves(per: dict[str, dict], path: Path, title: str, xlabel: str) -> Pa
     fig = figure(6.5, 4.2)
     ax = fig.subplots()
     for m, c in per.items():
-        ns = sorted(int(n) for n in c["curve"])
+        points = sorted((int(n), v) for n, v in c["curve"].items())
         colour = COLORS.get(m)
-        ys = [c["curve"][n] for n in ns]
+        ns, ys = [n for n, _ in points], [v for _, v in points]
         ax.plot(ns, ys, "o-", color=colour, label=METHOD_LABELS.get(m, m))
         ax.axhline(c["untrained"], color=colour, ls=":", lw=1)
         ax.plot([c["steps"]], [c["mse_train"]], "o", ms=13, mfc="none", color=colour)
@@ -282,7 +283,7 @@ def render(computed: dict) -> list[str]:
         ]
         md += ["|---" * (6 + len(ns)) + "|"]
         for m, c in per.items():
-            curve = " | ".join(fmt(c["at_scale"].get(n, float("nan"))) for n in ns)
+            curve = " | ".join(fmt(c["at_scale"].get(str(n), float("nan"))) for n in ns)
             md.append(
                 f"| {METHOD_LABELS.get(m, m)} | {c['steps']} | {c['scale']:g} | "
                 f"{fmt(c['mse_train'])} | {fmt(c['untrained'])} | {curve} | `{c['stage']}` |"
@@ -326,16 +327,19 @@ def _render_maps(m: dict | None) -> list[str]:
     return md + [""]
 
 
-def budget_section(d: Draft) -> None:
-    """:func:`compute`, :func:`plot` and :func:`render` into the report being written (nothing
-    when no ``budget-*`` stage is complete)."""
-    computed = compute(d.recs)
+def budget_compute(inp: Inputs) -> dict:
+    """The section's part of ``results.json`` (:func:`compute`; the curve figures written by
+    :func:`plot`); its view is ``None`` when no ``budget-*`` stage is complete."""
+    computed = compute(inp.recs)
     if not computed["choice"]:
-        return
-    d.results["budget"] = computed
-    d.figures += plot(computed, d.figs)
-    d.md += render(computed)
-    d.claims += computed["claims"]
+        return part(None)
+    figures = [inp.figure(t, png, s) for t, png, s in plot(computed, inp.figures_dir)]
+    return part(computed, results={"budget": computed}, claims=computed["claims"], figures=figures)
 
 
-__all__ = ["budget_section", "compute", "plot", "plot_curves", "render"]
+def budget_render(view: dict | None) -> list[str]:
+    """The section's markdown (:func:`render`); nothing when no budget stage is complete."""
+    return [] if view is None else render(view)
+
+
+__all__ = ["budget_compute", "budget_render", "compute", "plot", "plot_curves", "render"]

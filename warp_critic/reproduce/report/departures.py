@@ -3,6 +3,8 @@ prints next to each table and figure of that robot (read from the stage records 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 from warp_critic.reproduce.experiments.naming import stage_name
 from warp_critic.reproduce.experiments.settings import METHOD_LABELS, TUNED
 
@@ -67,11 +69,16 @@ def departures(scene: str, values: dict, gravity: float | None) -> list[str]:
     return out
 
 
-def departures_line(scene: str, recs: dict) -> str:
-    """The report's sentence for ``scene`` (``recs``: the stage records by name)."""
+def departures_of(scene: str, recs: Mapping) -> list[str]:
+    """What differs from the paper's text in ``scene``'s runs (``recs``: the stage records by
+    name), read from ours' meta-training record and the scene."""
     rec = recs.get(stage_name("metatrain", scene, "ours"))
     values = rec.data.get("settings", {}).get("values", {}) if rec is not None else {}
-    items = departures(scene, values, scene_gravity(scene))
+    return departures(scene, values, scene_gravity(scene))
+
+
+def departures_line(scene: str, items: list[str]) -> str:
+    """The report's sentence for ``scene`` from :func:`departures_of`'s ``items``."""
     if not items:
         return f"Settings that differ from the paper's text ({scene}): none stated."
     return f"Settings that differ from the paper's text ({scene}): " + "; ".join(items) + "."

@@ -14,7 +14,8 @@ critic is trained once per training seed and each goal seed draws new goals and 
 the interval says how much the number would move under other seeds of either kind.
 
 The computations (:func:`pool_tables`, :func:`pool_maps`, :func:`judge_tables`,
-:func:`judge_maps`) are pure functions of the stage results; :func:`heldout_section` renders them.
+:func:`judge_maps`) are pure functions of the stage results; the report's section
+(:mod:`~warp_critic.reproduce.report.heldout_section`) gathers and renders them.
 """
 
 from __future__ import annotations
@@ -23,9 +24,7 @@ import numpy as np
 
 from warp_critic.evaluation.paper import PAPER_TABLE1, PAPER_TABLE2, PAPER_TABLE3
 from warp_critic.reproduce.experiments.heldout import EQUAL_STEPS_ROW
-from warp_critic.reproduce.experiments.naming import stage_name
 from warp_critic.reproduce.experiments.settings import METHOD_LABELS, METHODS, present
-from warp_critic.reproduce.report.draft import Draft, fmt
 from warp_critic.reproduce.report.rules import (
     COMPARE_RULE,
     PAPER_VALUE_RULE,
@@ -35,6 +34,7 @@ from warp_critic.reproduce.report.rules import (
     paper_value_verdict,
     table_verdict,
 )
+from warp_critic.reproduce.report.section import fmt
 
 #: bootstrap resamples per interval, and the generator's seed (the report regenerates identically)
 RESAMPLES = 2000
@@ -228,7 +228,7 @@ def judge_maps(pooled: dict, seeds: list[int]) -> tuple[list[dict], dict]:
         rows = [m for m in base if m in cells] + [
             f"{m}:solved" for m in base if f"{m}:solved" in cells
         ]
-        v = map_verdict(cells["ours"], {_label(m): cells[m] for m in rows})
+        v = map_verdict(cells["ours"], {row_label(m): cells[m] for m in rows})
         verdict, share = compare_verdict(v["below_all"], v["cells"])
         v["verdict"], v["rule"] = verdict, "comparative"
         verdicts[kind] = v
@@ -249,140 +249,25 @@ def judge_maps(pooled: dict, seeds: list[int]) -> tuple[list[dict], dict]:
 
 def _grid_means(pooled: dict, kind: str) -> str:
     return "grid mean MSE [95% interval]: " + ", ".join(
-        f"{METHOD_LABELS[m]} {_ci(c)}" for m, c in pooled["grid_mean"][kind].items()
+        f"{METHOD_LABELS[m]} {ci_text(c)}" for m, c in pooled["grid_mean"][kind].items()
     )
 
 
-def _ci(c: dict) -> str:
+def ci_text(c: dict) -> str:
     return f"{fmt(c['mean'])} [{fmt(c['lo'])}, {fmt(c['hi'])}]"
 
 
-def _label(row: str) -> str:
+def row_label(row: str) -> str:
     if row == EQUAL_STEPS_ROW:
         return f"{METHOD_LABELS['ours']}, trained on the baselines' environment steps"
     m, _, solved = row.partition(":")
     return METHOD_LABELS.get(m, m) + (", seeds that solved training" if solved else "")
 
 
-def heldout_records(d: Draft, group: str) -> tuple[list[int], list[dict]]:
-    """The held-out seeds whose ``group`` stage (tables or maps) is complete, and their results
-    (the extra rows merged in), in seed order."""
-    from warp_critic.evaluation.seed_uses import HELD_OUT_SEEDS
-
-    seeds, results = [], []
-    for seed in HELD_OUT_SEEDS:
-        rec = d.recs.get(stage_name(group, heldout=seed))
-        if rec is not None:
-            seeds.append(seed)
-            results.append(rec.data["result"])
-    return seeds, results
-
-
-def judged_on_heldout(d: Draft, group: str) -> bool:
-    """Whether the claims of ``group`` (tables, maps) are judged on the held-out seeds (some
-    held-out stage of it is complete): the seed-1 section then shows its numbers, unjudged."""
-    return bool(heldout_records(d, group)[0])
-
-
-def heldout_section(d: Draft) -> None:
-    """The pooled held-out tables and maps with their intervals, and their claims."""
-    d.md += ["## The claims on the held-out goal seeds (Tables 1-3, Figures 4-6)", ""]
-    seeds, tables = heldout_records(d, "tables")
-    mseeds, maps = heldout_records(d, "maps")
-    if not tables and not maps:
-        d.md += ["Not run (stages `tables-heldout`, `maps-heldout`).", ""]
-        return
-    d.md += [
-        "Goal seed 1 chose ours' settings, so the claims of Tables 1-3 and Figures 4-6 are judged "
-        "here, on goal seeds that chose nothing (`warp_critic/evaluation/seed_uses.py`). Each "
-        "number is the mean over the meta-training seeds x held-out goal seeds; in brackets its "
-        f"95% crossed-bootstrap interval ({RESAMPLES} resamples of both kinds of seed; "
-        "`warp_critic/reproduce/report/heldout.py`). Every method gets the same "
-        "critic-gradient steps as on seed 1 (the meta-test budget of each method is in "
-        "`docs/paper/budget/`).",
-        "",
-    ]
-    out = d.results.setdefault("heldout", {})
-    budget = equal_steps_line(d)
-    if budget:
-        d.md += [budget, ""]
-    if tables:
-        pooled = pool_tables(tables, d.solved.get("kuka", {}))
-        out["tables"] = {"seeds": seeds, **pooled}
-        _tables_markdown(d, pooled, seeds)
-        d.claims += judge_tables(pooled, seeds)
-    if maps:
-        pm = pool_maps(maps, d.solved.get("reacher", {}))
-        claims, verdicts = judge_maps(pm, mseeds)
-        out["maps"] = {
-            "seeds": mseeds,
-            "grid_mean": pm["grid_mean"],
-            "goals_fraction_below_0.05": pm["goals_fraction_below_0.05"],
-            "verdicts": verdicts,
-        }
-        d.md += [f"### Figures 4-6, held-out goal seeds {', '.join(map(str, mseeds))}", ""]
-        d.md += ["| grid mean MSE [95% interval] | goal grid | mass grid | length grid |"]
-        d.md += ["|---|---|---|---|"]
-        for m in pm["grid_mean"]["goals"]:
-            cells = [pm["grid_mean"][k].get(m) for k in ("goals", "mass", "length")]
-            d.md.append(
-                f"| {_label(m)} | " + " | ".join(_ci(c) if c else "—" for c in cells) + " |"
-            )
-        d.md.append("")
-        d.claims += claims
-
-
-def equal_steps_line(d: Draft) -> str | None:
-    """The sentence on ours' meta-training at the baselines' environment steps (``None``: not
-    run), its numbers read from the meta-training stages' records."""
-    from warp_critic.reproduce.experiments.settings import SCENES
-
-    lines = []
-    for scene in SCENES:
-        eq = d.recs.get(stage_name("metatrain", scene, "ours", equal_steps=True))
-        if eq is None:
-            continue
-        r = eq.data["result"]
-        steps = r["iterations"] * r["env_steps_per_iteration"]
-        other = {}
-        for m in METHODS:
-            rec = d.recs.get(stage_name("metatrain", scene, m))
-            if rec is not None:
-                res = rec.data["result"]
-                other[m] = res["iterations"] * res["env_steps_per_iteration"]
-        lines.append(
-            f"Equal budgets ({scene}): the row '{_label(EQUAL_STEPS_ROW)}' is ours meta-trained "
-            f"anew, with its settings, for {r['iterations']} iterations x "
-            f"{r['env_steps_per_iteration']} environment steps = {steps:,} steps (its learning-rate "
-            "schedule over those iterations; stage "
-            f"`{eq.dir.name}`); the full run: "
-            + ", ".join(f"{METHOD_LABELS[m]} {v:,}" for m, v in other.items())
-            + " steps."
-        )
-    return " ".join(lines) or None
-
-
-def _tables_markdown(d: Draft, pooled: dict, seeds: list[int]) -> None:
-    for table, t in pooled.items():
-        d.md += [f"### {TITLES[table]}, held-out goal seeds {', '.join(map(str, seeds))}", ""]
-        d.md += ["| Method | " + " | ".join(f"{COLUMN[table]}={v:g}" for v in t["values"]) + " |"]
-        d.md += ["|---" * (len(t["values"]) + 1) + "|"]
-        d.md += [
-            "| untrained policies (no update) | "
-            + " | ".join(fmt(u) for u in t["untrained"])
-            + " |"
-        ]
-        for row, cells in t["rows"].items():
-            d.md.append(f"| {_label(row)} | " + " | ".join(_ci(c) for c in cells) + " |")
-        d.md.append("")
-
-
 __all__ = [
     "crossed_interval",
-    "heldout_section",
     "judge_maps",
     "judge_tables",
-    "judged_on_heldout",
     "pool_maps",
     "pool_tables",
 ]

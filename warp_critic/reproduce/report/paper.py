@@ -107,16 +107,14 @@ def per_iteration(res: dict) -> dict:
     return {**res, "env_steps_per_iteration": 1}
 
 
-def steps_table(got: dict) -> tuple[list[str], dict]:
-    """Markdown rows of the steps-to-level table of one robot and its numbers."""
+def steps_lines(levels: dict[str, dict]) -> list[str]:
+    """Markdown rows of one robot's steps-to-level table: ``levels`` is method -> level (a number
+    or its string, as ``results.json`` keys it) -> :func:`steps_to_levels`'s entry."""
     lines = [
         "| method | level (rad^2) | env steps to reach: mean [min, max] | seeds never reaching | wall time to reach (s): mean [min, max] |",
         "|---|---|---|---|---|",
     ]
-    data = {}
-    for m, rec in got.items():
-        t = steps_to_levels(rec.data["result"])
-        data[m] = t
+    for m, t in levels.items():
         for level, v in t.items():
             st = (
                 f"{np.mean(v['steps']):.3g} [{min(v['steps']):.3g}, {max(v['steps']):.3g}]"
@@ -129,9 +127,9 @@ def steps_table(got: dict) -> tuple[list[str], dict]:
                 else "—"
             )
             lines.append(
-                f"| {METHOD_LABELS[m]} | {level:g} | {st} | {v['never']} of {v['seeds']} | {wt} |"
+                f"| {METHOD_LABELS[m]} | {float(level):g} | {st} | {v['never']} of {v['seeds']} | {wt} |"
             )
-    return lines, data
+    return lines
 
 
 def sample_efficiency_verdict(
@@ -269,9 +267,10 @@ def plot_grid_2d(path: Path, M: dict, kind: str, figure) -> None:
     fig.savefig(path, dpi=90)
 
 
-def grid_summary(M: dict, kind: str, solved: dict[str, list[bool]]) -> tuple[list[str], dict]:
-    """Markdown rows: mean MSE over the 2-D grid per method (two rows per baseline) and the
-    trained pair's cell; plus the numbers."""
+def grid_summary(M: dict, kind: str, solved: dict[str, list[bool]]) -> tuple[dict, list[Row]]:
+    """The numbers of a 2-D grid's table (:func:`grid_lines`): its size ``n`` and per row (two per
+    baseline) its ``label``, ``method``, mean MSE over the grid, MSE at the trained pair and worst
+    cell (``None`` where a cell is missing), with ``means`` (label -> mean); and the rows."""
     values = M["masses"] if kind == "mass" else M["lengths"]
     trained = M["trained_mass"] if kind == "mass" else M["trained_length"]
     n = len(values)
@@ -279,16 +278,38 @@ def grid_summary(M: dict, kind: str, solved: dict[str, list[bool]]) -> tuple[lis
     k = ti[0] * n + ti[1]
     cells = M[kind]
     rows = method_rows(lambda ci, m: cells[m][ci], n * n, solved, None, present(cells))
+    out: list[dict] = []
+    means = {}
+    for label, m, vals, _solved in rows:
+        if any(v is None for v in vals):
+            out.append({"label": label, "method": m, "mean": None})
+            continue
+        mu = [v[0] for v in vals]
+        means[label] = float(np.mean(mu))
+        out.append(
+            {
+                "label": label,
+                "method": m,
+                "mean": means[label],
+                "at_trained": mu[k],
+                "worst": max(mu),
+            }
+        )
+    return {"n": n, "rows": out, "means": means}, rows
+
+
+def grid_lines(kind: str, g: dict) -> list[str]:
+    """Markdown rows of :func:`grid_summary`'s numbers ``g`` for ``kind`` (mass, length)."""
+    n = g["n"]
     lines = [
         f"| {kind} grid ({n} x {n}) | mean MSE over the grid | MSE at the trained pair | worst cell |",
         "|---|---|---|---|",
     ]
-    means = {}
-    for label, _m, vals, _solved in rows:
-        if any(v is None for v in vals):
-            lines.append(f"| {label} | — | — | — |")
+    for r in g["rows"]:
+        if r["mean"] is None:
+            lines.append(f"| {r['label']} | — | — | — |")
             continue
-        mu = [v[0] for v in vals]
-        means[label] = float(np.mean(mu))
-        lines.append(f"| {label} | {_fmt(np.mean(mu))} | {_fmt(mu[k])} | {_fmt(max(mu))} |")
-    return lines, {"rows": rows, "means": means}
+        lines.append(
+            f"| {r['label']} | {_fmt(r['mean'])} | {_fmt(r['at_trained'])} | {_fmt(r['worst'])} |"
+        )
+    return lines

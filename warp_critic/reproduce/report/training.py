@@ -9,97 +9,122 @@ from warp_critic.reproduce.engine.stages import STAGE_FILE
 from warp_critic.reproduce.experiments.naming import stage_name
 from warp_critic.reproduce.experiments.settings import ALL_METHODS, METHOD_LABELS, METHODS, SCENES
 from warp_critic.reproduce.report import paper as rp
-from warp_critic.reproduce.report.departures import departures_line
-from warp_critic.reproduce.report.draft import Draft, fmt
+from warp_critic.reproduce.report.departures import departures_line, departures_of
 from warp_critic.reproduce.report.plots import plot_metatrain
 from warp_critic.reproduce.report.rules import SPREAD_RULE, WINDOW, steps_rule
+from warp_critic.reproduce.report.section import Inputs, fmt, part
 
 
-def metatrain_section(d: Draft) -> None:
-    """Figure 3: meta-training of the three methods on both robots."""
-    d.md += ["## Figure 3: meta-training (reacher, KUKA)", ""]
+def metatrain_compute(inp: Inputs) -> dict:
+    """Figure 3: meta-training of the methods on both robots; plots each robot's curves."""
+    views: list[dict] = []
+    results: dict = {}
+    claims: list[dict] = []
+    figures: list[dict] = []
     for scene in SCENES:
         got = {
             m: rec
             for m in ALL_METHODS
-            if (rec := d.recs.get(stage_name("metatrain", scene, m))) is not None
+            if (rec := inp.recs.get(stage_name("metatrain", scene, m))) is not None
         }
         if not got:
-            d.md += [f"{scene}: not run (stage `metatrain`).", ""]
+            views.append({"scene": scene, "run": False})
             continue
-        png = d.figs / f"fig3_metatrain_{scene}.png"
+        png = inp.figures_dir / f"fig3_metatrain_{scene}.png"
         summary = plot_metatrain(png, scene, got)
-        _curves_table(d, scene, got, summary)
-        lines, levels = rp.steps_table(got)
+        view = _curves(inp, scene, got, summary, results)
+        levels = {m: rec_levels(got[m].data["result"]) for m in got}
         budget = min(s["env_steps"] for s in summary.values())
         at_budget = {m: rp.error_at_budget(got[m].data["result"], budget) for m in got}
-        d.md += (
-            [
-                f"Environment steps and wall time to reach each training-error level (rad^2, summed over "
-                f"the joints) and stay there: the first iteration after which the running mean over "
-                f"{WINDOW} iterations stays at or below it to the end of the run; mean [min, max] over "
-                f"the seeds that reach it. "
-                f"Training error at the common budget of {budget:.3g} steps (the running mean over the "
-                f"{WINDOW} iterations up to it), mean(std) over seeds: "
-                + ", ".join(
-                    f"{METHOD_LABELS[m]} {fmt(float(np.mean(v)))}({fmt(float(np.std(v)))})"
-                    for m, v in at_budget.items()
-                )
-                + ".",
-                "",
-            ]
-            + lines
-            + [""]
-        )
-        d.results["metatrain"][f"{scene}/steps_to_levels"] = {
-            m: {str(k): v for k, v in lv.items()} for m, lv in levels.items()
-        }
-        d.results["metatrain"][f"{scene}/error_at_budget"] = {"budget": budget, **at_budget}
-        _scene_claims(d, scene, got, summary, levels, at_budget, budget, png)
+        results[f"{scene}/steps_to_levels"] = levels
+        results[f"{scene}/error_at_budget"] = {"budget": budget} | at_budget
+        views.append({**view, "levels": levels, "budget": budget, "at_budget": at_budget})
+        scene_claims, sentence = _scene_claims(scene, got, summary, levels, at_budget, budget)
+        claims += scene_claims
+        figures.append(inp.figure(f"Figure 3: meta-training {scene}", png, sentence))
+    return part(views, results={"metatrain": results}, claims=claims, figures=figures)
 
 
-def _curves_table(d: Draft, scene: str, got: dict, summary: dict) -> None:
-    """The robot's table of iterations, steps and final errors per method, into ``d``."""
-    md, results = d.md, d.results
-    md += [
-        f"### {scene}",
-        "",
-        departures_line(scene, d.recs),
-        "",
-        "| method | iterations | env steps | env steps counted | final training error ||q_T-g||^2 (mean of the last 10% iterations), mean(std) over seeds | first iteration |",
-        "|---|---|---|---|---|---|",
-    ]
+def rec_levels(res: dict) -> dict[str, dict]:
+    """:func:`~.paper.steps_to_levels` of a stage result, keyed by the level's string."""
+    return {str(k): v for k, v in rp.steps_to_levels(res).items()}
+
+
+def _curves(inp: Inputs, scene: str, got: dict, summary: dict, results: dict) -> dict:
+    """The robot's iterations, steps and final errors per method (its view), and their
+    ``metatrain`` entries of ``results.json`` (into ``results``)."""
+    rows = []
     for m, s in summary.items():
         res = got[m].data["result"]
-        md.append(
-            f"| {METHOD_LABELS[m]} | {s['iterations']} | {s['env_steps']} | {res['env_steps_counted']} | "
-            f"{fmt(s['final_mean'])}({fmt(s['final_std'])}) | {fmt(s['first_mean'])} |"
-        )
-        results["metatrain"][f"{scene}/{m}"] = {
+        rows.append({"method": m, **s, "env_steps_counted": res["env_steps_counted"]})
+        results[f"{scene}/{m}"] = {
             **s,
             "file": f"{got[m].dir.name}/{STAGE_FILE}",
             "runs": [
                 f"{got[m].dir.name}/{v['run_dir']}/metrics.jsonl" for v in res["seeds"].values()
             ],
         }
-    md.append("")
+    aux: dict | None = None
     if "meta-critic" in got:
-        alive = aux_alive_of(got["meta-critic"])
-        bases = aux_alive_bases_of(got["meta-critic"])
-        results["metatrain"][f"{scene}/meta-critic"]["aux_alive"] = alive
-        results["metatrain"][f"{scene}/meta-critic"]["aux_alive_basis"] = bases
-        md += [aux_alive_sentence(alive, bases), ""]
+        alive, basis = aux_alive_of(got["meta-critic"]), aux_alive_bases_of(got["meta-critic"])
+        results[f"{scene}/meta-critic"]["aux_alive"] = alive
+        results[f"{scene}/meta-critic"]["aux_alive_basis"] = basis
+        aux = {"alive": alive, "basis": basis}
+    view = {"scene": scene, "run": True, "departures": departures_of(scene, inp.recs)}
+    return {**view, "rows": rows, "aux": aux}
+
+
+def metatrain_render(views: list[dict]) -> list[str]:
+    """The Figure 3 section's lines (``views``: :func:`metatrain_compute`'s, one per robot)."""
+    md = ["## Figure 3: meta-training (reacher, KUKA)", ""]
+    for v in views:
+        if not v["run"]:
+            md += [f"{v['scene']}: not run (stage `metatrain`).", ""]
+            continue
+        md += [
+            f"### {v['scene']}",
+            "",
+            departures_line(v["scene"], v["departures"]),
+            "",
+            "| method | iterations | env steps | env steps counted | final training error ||q_T-g||^2 (mean of the last 10% iterations), mean(std) over seeds | first iteration |",
+            "|---|---|---|---|---|---|",
+        ]
+        md += [
+            f"| {METHOD_LABELS[r['method']]} | {r['iterations']} | {r['env_steps']} | "
+            f"{r['env_steps_counted']} | {fmt(r['final_mean'])}({fmt(r['final_std'])}) | "
+            f"{fmt(r['first_mean'])} |"
+            for r in v["rows"]
+        ] + [""]
+        if v["aux"] is not None:
+            md += [aux_alive_sentence(v["aux"]["alive"], v["aux"]["basis"]), ""]
+        md += [
+            f"Environment steps and wall time to reach each training-error level (rad^2, summed over "
+            f"the joints) and stay there: the first iteration after which the running mean over "
+            f"{WINDOW} iterations stays at or below it to the end of the run; mean [min, max] over "
+            f"the seeds that reach it. "
+            f"Training error at the common budget of {v['budget']:.3g} steps (the running mean over the "
+            f"{WINDOW} iterations up to it), mean(std) over seeds: "
+            + ", ".join(
+                f"{METHOD_LABELS[m]} {fmt(float(np.mean(e)))}({fmt(float(np.std(e)))})"
+                for m, e in v["at_budget"].items()
+            )
+            + ".",
+            "",
+        ]
+        md += rp.steps_lines(v["levels"]) + [""]
+    return md
 
 
 def _scene_claims(
-    d: Draft, scene: str, got: dict, summary: dict, levels: dict, at_budget: dict, budget, png
-) -> None:
+    scene: str, got: dict, summary: dict, levels: dict, at_budget: dict, budget
+) -> tuple[list[dict], str]:
     """The robot's sample-efficiency and seed-sensitivity claims, and Figure 3's sentence."""
     # the paper's claims compare ours with the paper's baselines (an extra one is shown only)
     claimed = [m for m in got if m in METHODS]
     within = {m: rp.steps_to_levels(got[m].data["result"], budget) for m in claimed}
     verdict, measured = rp.sample_efficiency_verdict(
-        {m: v for m, v in levels.items() if m in METHODS}, within
+        {m: {float(k): e for k, e in v.items()} for m, v in levels.items() if m in METHODS},
+        within,
     )
     # the paper's text: "fewer iterations"; environment steps as a second row
     iters = {m: rp.per_iteration(got[m].data["result"]) for m in claimed}
@@ -110,7 +135,7 @@ def _scene_claims(
         unit="iterations",
     )
     its = {m: s["iterations"] for m, s in summary.items() if m in METHODS}
-    d.claims.append(
+    claims = [
         {
             "claim": f"Figure 3 ({scene}): ours solves training in fewer iterations",
             "paper": "training curves over iterations; ours falls fastest",
@@ -120,9 +145,7 @@ def _scene_claims(
             + " ("
             + ", ".join(f"{METHOD_LABELS[m]} {v}" for m, v in its.items())
             + f"). {steps_rule('iterations')}",
-        }
-    )
-    d.claims.append(
+        },
         {
             "claim": f"Figure 3 ({scene}): ours solves training in fewer environment steps",
             "paper": "training curves over iterations; ours falls fastest (read in env steps)",
@@ -132,31 +155,29 @@ def _scene_claims(
                 {m: s["env_steps"] for m, s in summary.items() if m in METHODS}
             )
             + f" {steps_rule('env steps')}",
+        },
+    ]
+    spread: dict[str, float] = {m: float(np.std(v)) for m, v in at_budget.items() if m in METHODS}
+    if "ours" not in spread or len(spread) <= 1:
+        return claims, f"Figure 3 ({scene}): training curves of the methods that ran."
+    least = min(spread, key=spread.__getitem__)
+    claims.append(
+        {
+            "claim": f"Figure 3 ({scene}): ours is the least sensitive to the seed",
+            "paper": "narrowest band over seeds",
+            "ours": f"std over seeds of the training error ({WINDOW}-iteration running "
+            f"mean) at {budget:.3g} steps: "
+            + ", ".join(f"{METHOD_LABELS[m]} {fmt(v)}" for m, v in spread.items()),
+            "verdict": "met" if least == "ours" else "not met",
+            "reason": f"smallest spread: {METHOD_LABELS[least]}. {SPREAD_RULE}",
         }
     )
-    spread: dict[str, float] = {m: float(np.std(v)) for m, v in at_budget.items() if m in METHODS}
-    if "ours" in spread and len(spread) > 1:
-        least = min(spread, key=spread.__getitem__)
-        d.claims.append(
-            {
-                "claim": f"Figure 3 ({scene}): ours is the least sensitive to the seed",
-                "paper": "narrowest band over seeds",
-                "ours": f"std over seeds of the training error ({WINDOW}-iteration running "
-                f"mean) at {budget:.3g} steps: "
-                + ", ".join(f"{METHOD_LABELS[m]} {fmt(v)}" for m, v in spread.items()),
-                "verdict": "met" if least == "ours" else "not met",
-                "reason": f"smallest spread: {METHOD_LABELS[least]}. {SPREAD_RULE}",
-            }
-        )
-        sentence = (
-            f"Figure 3 ({scene}): training error vs iterations and environment steps. At the common "
-            f"budget of {budget:.3g} steps the lowest mean error is "
-            f"{METHOD_LABELS[min(at_budget, key=lambda m: np.mean(at_budget[m]))]}'s and the smallest "
-            f"spread over seeds {METHOD_LABELS[least]}'s; fewer iterations: {it_verdict}; fewer env steps: {verdict}."
-        )
-    else:
-        sentence = f"Figure 3 ({scene}): training curves of the methods that ran."
-    d.figures.append((f"Figure 3: meta-training {scene}", png, sentence))
+    return claims, (
+        f"Figure 3 ({scene}): training error vs iterations and environment steps. At the common "
+        f"budget of {budget:.3g} steps the lowest mean error is "
+        f"{METHOD_LABELS[min(at_budget, key=lambda m: np.mean(at_budget[m]))]}'s and the smallest "
+        f"spread over seeds {METHOD_LABELS[least]}'s; fewer iterations: {it_verdict}; fewer env steps: {verdict}."
+    )
 
 
 def budget_sentence(env_steps: dict[str, int]) -> str:

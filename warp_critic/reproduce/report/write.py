@@ -2,9 +2,15 @@
 
 Every number comes from a stage's ``stage.json`` (or a file it names); nothing is typed in. The
 paper's values come from :data:`warp_critic.evaluation.paper.PAPER_TABLES`. The report covers
-every stage of the current settings that is complete, whether it ran in this call or earlier. The
-sections live in :mod:`~warp_critic.reproduce.report.analyses`, :mod:`~warp_critic.reproduce.report.training`, :mod:`~warp_critic.reproduce.report.maps` and
-:mod:`~warp_critic.reproduce.report.tables`; they share one :class:`~warp_critic.reproduce.report.draft.Draft`.
+every stage of the current settings that is complete, whether it ran in this call or earlier.
+
+:func:`write_report` computes every section of :data:`SECTIONS` (a
+:class:`~warp_critic.reproduce.report.section.Section`: ``compute(Inputs) -> dict`` and
+``render(view) -> list[str]``, the contract in :mod:`~warp_critic.reproduce.report.section`) into
+one results dict, writes ``results.json``, and renders ``REPORT.md`` below its header from
+``json.loads`` of the very text it wrote (:func:`render_report`), so the markdown shows only what
+``results.json`` holds. The header (command, device, seeds, versions, time, ledger) is written
+from the call, not from ``results.json``. A new section is one more entry in :data:`SECTIONS`.
 """
 
 from __future__ import annotations
@@ -23,26 +29,32 @@ from warp_critic.reproduce.experiments.extra_baselines import merge_rows
 from warp_critic.reproduce.experiments.naming import stage_name
 from warp_critic.reproduce.experiments.settings import SCENES, STAGES
 from warp_critic.reproduce.report import paper as rp
-from warp_critic.reproduce.report.analyses import landscape_section, toy_section
-from warp_critic.reproduce.report.beyond import beyond_section
-from warp_critic.reproduce.report.budget import budget_section
-from warp_critic.reproduce.report.draft import Draft, rel
-from warp_critic.reproduce.report.heldout import heldout_section
-from warp_critic.reproduce.report.maps import maps_section
-from warp_critic.reproduce.report.tables import tables_section
-from warp_critic.reproduce.report.training import metatrain_section
+from warp_critic.reproduce.report.analyses import (
+    landscape_compute,
+    landscape_render,
+    toy_compute,
+    toy_render,
+)
+from warp_critic.reproduce.report.beyond import beyond_compute, beyond_render
+from warp_critic.reproduce.report.budget import budget_compute, budget_render
+from warp_critic.reproduce.report.heldout_section import heldout_compute, heldout_render
+from warp_critic.reproduce.report.maps import maps_compute, maps_render
+from warp_critic.reproduce.report.section import Inputs, Section
+from warp_critic.reproduce.report.tables import tables_compute, tables_render
+from warp_critic.reproduce.report.training import metatrain_compute, metatrain_render
 from warp_critic.running.files import atomic_write_text
 
-#: The sections after the stage table, in the report's order (each appends to the :class:`Draft`).
-SECTIONS = (
-    toy_section,
-    landscape_section,
-    metatrain_section,
-    maps_section,
-    tables_section,
-    heldout_section,
-    budget_section,
-    beyond_section,
+#: The sections after the stage table, in the report's order (their views are ``results.json``'s
+#: ``sections.<name>``).
+SECTIONS: tuple[Section, ...] = (
+    Section("toy", toy_compute, toy_render),
+    Section("landscape", landscape_compute, landscape_render),
+    Section("metatrain", metatrain_compute, metatrain_render),
+    Section("maps", maps_compute, maps_render),
+    Section("tables", tables_compute, tables_render),
+    Section("heldout", heldout_compute, heldout_render),
+    Section("budget", budget_compute, budget_render),
+    Section("beyond", beyond_compute, beyond_render),
 )
 
 
@@ -100,40 +112,9 @@ def write_report(
     stage_compute = {r.dir.name: ledger.stage_compute(r) for r in recs.values() if r is not None}
     figs = out / "figures"
     figs.mkdir(exist_ok=True)
-    results: dict = {
-        "kind": "warp-critic/reproduce-results-v1",
-        "tables": [],
-        "metatrain": {},
-        "maps": None,
-        "toy": None,
-        "landscape": None,
-        "stages": {},
-    }
-    figures: list[tuple[str, Path, str]] = []  # (title, png, sentence)
     ver = versions()
     seeds = seeds_trained(plan)
-    md = _header(
-        config, device, seeds, ver, wall, ledger.header_line(book, stage_seconds, stage_compute)
-    )
-    claims_at = len(md)
-    claims: list[dict] = []  # filled by the sections below, rendered here
-    solved: dict[str, dict[str, list[bool]]] = {}  # robot -> baseline -> per seed
-    for scene in SCENES:
-        solved[scene] = {}
-        for m in rp.ALL_BASELINES:
-            rec = recs.get(stage_name("metatrain", scene, m))
-            if rec is not None:
-                solved[scene][m] = rp.solved_seeds(rec.data["result"], scene)
-    md += _stage_table(plan, recs, results)
-    d = Draft(out, figs, recs, config, solved, md, results, figures, claims)
-    for section in SECTIONS:
-        section(d)
-    md[claims_at:claims_at] = _claims_table(claims) + [""]
-    results["claims"] = claims
-    md += ["## Figures", ""]
-    for title, png, sentence in figures:
-        md += [f"### {title}", "", f"![{title}]({rel(png, out)})", "", sentence, ""]
-    results["figures"] = [{"title": t, "file": rel(p, out), "sentence": s} for t, p, s in figures]
+    results = compute_results(Inputs(recs, solved_of(recs), config.quick, out, figs), plan)
     results.update(
         command=config.command,
         device=device,
@@ -153,11 +134,67 @@ def write_report(
             ),
         },
     )
-    text = "\n".join(md) + "\n"
-    atomic_write_text(out / "results.json", json.dumps(results, indent=1) + "\n")
+    results["sections"] = results.pop("sections")  # the views last, after the numbers
+    written = json.dumps(results, indent=1) + "\n"
+    atomic_write_text(out / "results.json", written)
+    md = _header(
+        config, device, seeds, ver, wall, ledger.header_line(book, stage_seconds, stage_compute)
+    )
+    loaded = json.loads(written)  # the markdown shows what results.json holds, nothing else
+    text = "\n".join(md) + "\n" + render_report(loaded)
     atomic_write_text(out / "REPORT.md", text)
-    write_recording(out / "report.rrd", text, figures)
+    write_recording(out / "report.rrd", text, out, loaded["figures"])
     return out / "REPORT.md"
+
+
+def solved_of(recs: dict) -> dict[str, dict[str, list[bool]]]:
+    """Robot -> baseline -> per seed, whether it solved the training task."""
+    solved: dict[str, dict[str, list[bool]]] = {}
+    for scene in SCENES:
+        solved[scene] = {}
+        for m in rp.ALL_BASELINES:
+            rec = recs.get(stage_name("metatrain", scene, m))
+            if rec is not None:
+                solved[scene][m] = rp.solved_seeds(rec.data["result"], scene)
+    return solved
+
+
+def compute_results(inp: Inputs, plan: dict[str, Stage]) -> dict:
+    """The results dict of every section (:data:`SECTIONS`) and the stage table, with their
+    claims, figures and views (``sections``); writes the figures into ``inp.figures_dir``."""
+    results: dict = {
+        "kind": "warp-critic/reproduce-results-v1",
+        "tables": [],
+        "metatrain": {},
+        "maps": None,
+        "toy": None,
+        "landscape": None,
+        "stages": stages_of(plan, inp.recs),
+    }
+    views: dict = {"stages": stage_rows(plan, inp.recs)}
+    claims: list[dict] = []
+    figures: list[dict] = []
+    for section in SECTIONS:
+        got = section.compute(inp)
+        results.update(got["results"])
+        claims += got["claims"]
+        figures += got["figures"]
+        views[section.name] = got["view"]
+    return results | {"claims": claims, "figures": figures, "sections": views}
+
+
+def render_report(results: dict) -> str:
+    """``REPORT.md`` below its header from ``results`` (``results.json`` as loaded): the claims
+    table, the stage table, every section of :data:`SECTIONS` and the figures."""
+    views = results["sections"]
+    md = _claims_table(results["claims"]) + [""] + _stage_table(views["stages"])
+    for section in SECTIONS:
+        md += section.render(views[section.name])
+    md += ["## Figures", ""]
+    for f in results["figures"]:
+        title = f["title"]
+        md += [f"### {title}", "", f"![{title}]({f['file']})", "", f["sentence"], ""]
+    return "\n".join(md) + "\n"
 
 
 def _header(config, device: str, seeds: list[int], ver: dict, wall: float, book: str) -> list[str]:
@@ -176,9 +213,45 @@ def _header(config, device: str, seeds: list[int], ver: dict, wall: float, book:
     ]
 
 
-def _stage_table(plan: dict[str, Stage], recs: dict, results: dict) -> list[str]:
-    """The "Stages" section's lines: each stage of the plan, run, skipped or not run; fills
-    ``results["stages"]``."""
+def stages_of(plan: dict[str, Stage], recs) -> dict:
+    """``results.json``'s ``stages``: each complete stage's folder, record, wall time and whether
+    it ran in this call."""
+    return {
+        name: {
+            "dir": r.dir.name,
+            "file": f"{r.dir.name}/{STAGE_FILE}",
+            "seconds": r.data["seconds"],
+            "ran_this_call": r.ran,
+        }
+        for name in plan
+        if (r := recs.get(name)) is not None
+    }
+
+
+def stage_rows(plan: dict[str, Stage], recs) -> list[dict]:
+    """The stage table's rows: every stage of the plan, with its record's times where complete
+    (``train_seconds``: one seed's training time of a meta-training stage, s, else ``None``)."""
+    rows: list[dict] = []
+    for name, st in plan.items():
+        r = recs.get(name)
+        if r is None:
+            rows.append({"name": name, "dir": st.dir_name, "status": "not run"})
+            continue
+        per_seed = r.data["result"].get("seeds") if r.group == "metatrain" else None
+        rows.append(
+            {
+                "name": name,
+                "dir": r.dir.name,
+                "status": "ran" if r.ran else "complete, skipped",
+                "seconds": r.data["seconds"],
+                "train_seconds": next(iter(per_seed.values()))["seconds"] if per_seed else None,
+            }
+        )
+    return rows
+
+
+def _stage_table(rows: list[dict]) -> list[str]:
+    """The "Stages" section's lines from :func:`stage_rows`'s rows."""
     md = [
         "## Stages",
         "",
@@ -189,21 +262,12 @@ def _stage_table(plan: dict[str, Stage], recs: dict, results: dict) -> list[str]
         "| stage | directory | this call | wall time (s) | training time, all calls (s) |",
         "|---|---|---|---|---|",
     ]
-    for name, st in plan.items():
-        r = recs.get(name)
-        if r is None:
-            md.append(f"| {name} | `{st.dir_name}` | not run | — | — |")
+    for r in rows:
+        if r["status"] == "not run":
+            md.append(f"| {r['name']} | `{r['dir']}` | not run | — | — |")
             continue
-        status = "ran" if r.ran else "complete, skipped"
-        per_seed = r.data["result"].get("seeds") if r.group == "metatrain" else None
-        train = f"{next(iter(per_seed.values()))['seconds']:.1f}" if per_seed else "—"
-        md.append(f"| {name} | `{r.dir.name}` | {status} | {r.data['seconds']:.1f} | {train} |")
-        results["stages"][name] = {
-            "dir": r.dir.name,
-            "file": f"{r.dir.name}/{STAGE_FILE}",
-            "seconds": r.data["seconds"],
-            "ran_this_call": r.ran,
-        }
+        train = f"{r['train_seconds']:.1f}" if r["train_seconds"] is not None else "—"
+        md.append(f"| {r['name']} | `{r['dir']}` | {r['status']} | {r['seconds']:.1f} | {train} |")
     md.append("")
     return md
 
@@ -229,14 +293,16 @@ def seeds_trained(plan: dict[str, Stage]) -> list[int]:
     return next(list(st.settings["seeds"]) for st in plan.values() if st.kind == "metatrain")
 
 
-def write_recording(path: Path, text: str, figures: list[tuple[str, Path, str]]) -> None:
+def write_recording(path: Path, text: str, out: Path, figures: list[dict]) -> None:
+    """``report.rrd``: ``REPORT.md``'s text and each figure of ``figures`` (``results.json``'s
+    entries, files relative to ``out``) with its sentence."""
     import rerun.blueprint as rrb
     from matplotlib.image import imread
 
     from warp_critic.running.recording import Recorder
 
-    names = [f"figures/{Path(p).stem}" for _, p, _ in figures]
-    views = [rrb.Spatial2DView(origin=n, name=t) for n, (t, _, _) in zip(names, figures)]
+    names = [f"figures/{Path(f['file']).stem}" for f in figures]
+    views = [rrb.Spatial2DView(origin=n, name=f["title"]) for n, f in zip(names, figures)]
     blueprint = rrb.Blueprint(
         rrb.Tabs(
             rrb.TextDocumentView(origin="report", name="REPORT.md"),
@@ -247,15 +313,15 @@ def write_recording(path: Path, text: str, figures: list[tuple[str, Path, str]])
     rec = Recorder(tmp, application_id="warp-critic-reproduce", blueprint=blueprint)
     try:
         rec.text("report", text)
-        for n, (_, p, s) in zip(names, figures):
-            img = imread(p)
+        for n, f in zip(names, figures):
+            img = imread(out / f["file"])
             if img.dtype != np.uint8:
                 img = (np.clip(img, 0, 1) * 255).astype(np.uint8)
             rec.image(n, img[..., :3], static=True)
-            rec.text(f"{n}/caption", s)
+            rec.text(f"{n}/caption", f["sentence"])
     finally:
         rec.close()
     tmp.replace(path)
 
 
-__all__ = ["write_report", "seeds_trained", "STAGES"]
+__all__ = ["write_report", "render_report", "seeds_trained", "SECTIONS", "STAGES"]
