@@ -1,5 +1,5 @@
 """The report is rendered from ``results.json`` alone: the committed ``docs/paper/results.json``
-renders the committed ``docs/paper/REPORT.md`` below its header byte for byte, and every section's
+renders the committed ``docs/paper/REPORT.md``, header included, byte for byte, and every section's
 render is pure (the same text twice from one dict, its input untouched, no file opened, a changed
 number shows).
 
@@ -20,9 +20,6 @@ from conftest import ROOT
 from warp_critic.reproduce.report.write import SECTIONS, render_report
 
 PAPER = ROOT / "docs" / "paper"
-#: ``REPORT.md``'s header (title, command, device, versions, time, ledger, blank lines): written
-#: from the call, not from ``results.json``
-HEADER_LINES = 8
 
 
 @pytest.fixture(scope="module")
@@ -50,16 +47,24 @@ def _no_files(monkeypatch) -> None:
 
 def test_the_committed_results_render_the_committed_report(results):
     report = (PAPER / "REPORT.md").read_text(encoding="utf-8")
-    body = report.split("\n", HEADER_LINES)[HEADER_LINES]
-    assert body.startswith("## The paper's claims")
+    assert report.startswith("# Reproduction: Model Based Meta Learning of Critics")
     rendered = render_report(results)
-    if rendered != body:  # name the first line that differs, not a 500-line diff
-        got, want = rendered.splitlines(), body.splitlines()
+    if rendered != report:  # name the first line that differs, not a 500-line diff
+        got, want = rendered.splitlines(), report.splitlines()
         i = next((i for i, (a, b) in enumerate(zip(got, want)) if a != b), min(len(got), len(want)))
         raise AssertionError(
-            f"REPORT.md line {i + 1 + HEADER_LINES}: rendered {got[i : i + 1]!r}, committed "
+            f"REPORT.md line {i + 1}: rendered {got[i : i + 1]!r}, committed "
             f"{want[i : i + 1]!r} (regenerate docs/paper: reproduce, then copy results.json)"
         )
+
+
+def test_the_header_is_rendered_from_results_too(results):
+    changed = copy.deepcopy(results)
+    changed["call"]["seconds"] = 12345.6
+    changed["ledger"]["calls"] = 99
+    head = render_report(changed).split("\n", 8)[:8]
+    assert "- written " + results["call"]["written"] + "; this call took 12345.6 s" in head
+    assert any(line.startswith("- ledger (`ledger.jsonl`): 99 call(s)") for line in head)
 
 
 def test_every_section_has_its_view_in_results(results):

@@ -175,32 +175,61 @@ def stage_compute(rec) -> float:
     return max(float(rec.data["seconds"]), trained)
 
 
+def numbers(
+    s: dict, stage_seconds: dict[str, float], compute: dict[str, float] | None = None
+) -> dict:
+    """What the report states of the ledger (``results.json``'s ``ledger``): :func:`summary`'s
+    ``s`` with the report's stage times (``stage_seconds``: stage directory, or name for records
+    without one -> seconds) and, with ``compute`` (the same keys, :func:`stage_compute`), the
+    compute of the stages carried in (``carried_compute_seconds``; ``None`` without it)."""
+    before = [n for n in stage_seconds if n not in s["stages_run"]]
+    return {
+        "file": LEDGER,
+        "calls": s["calls"],
+        "unfinished": s["unfinished"],
+        "wall_seconds": s["wall"],
+        "first_start": s["first"],
+        "last_end": s["last"],
+        "stages": len(stage_seconds),
+        "stage_seconds_sum": sum(stage_seconds.values()),
+        "stages_before_ledger": before,
+        "before_seconds": sum(stage_seconds[n] for n in before),
+        "carried_compute_seconds": None
+        if compute is None
+        else sum(compute.get(n, stage_seconds[n]) for n in before),
+    }
+
+
 def header_line(
     s: dict, stage_seconds: dict[str, float], compute: dict[str, float] | None = None
 ) -> str:
     """The report header's line: the ledger's total wall time and the sum of the stage times
-    (``stage_seconds``: stage directory, or name for records without one -> seconds); ``compute``
-    (the same keys, :func:`stage_compute`) adds the compute of the stages carried in."""
-    before = [n for n in stage_seconds if n not in s["stages_run"]]
+    (:func:`numbers`'s arguments); ``compute`` adds the compute of the stages carried in."""
+    return header_line_of(numbers(s, stage_seconds, compute))
+
+
+def header_line_of(n: dict) -> str:
+    """:func:`header_line` from :func:`numbers`' dict (as ``results.json`` holds it)."""
+    wall, total, before = n["wall_seconds"], n["stage_seconds_sum"], n["stages_before_ledger"]
     line = (
-        f"- ledger (`{LEDGER}`): {s['calls']} call(s) on this folder"
-        + (f" ({s['unfinished']} without an end)" if s["unfinished"] else "")
-        + (f", {s['first']} to {s['last']}" if s["first"] else "")
-        + f"; total wall time {s['wall']:.0f} s ({s['wall'] / 3600:.1f} h); sum of the report's "
-        f"{len(stage_seconds)} stage times {sum(stage_seconds.values()):.0f} s "
-        f"({sum(stage_seconds.values()) / 3600:.1f} h; each stage's time is its completing call's)"
+        f"- ledger (`{n['file']}`): {n['calls']} call(s) on this folder"
+        + (f" ({n['unfinished']} without an end)" if n["unfinished"] else "")
+        + (f", {n['first_start']} to {n['last_end']}" if n["first_start"] else "")
+        + f"; total wall time {wall:.0f} s ({wall / 3600:.1f} h); sum of the report's "
+        f"{n['stages']} stage times {total:.0f} s "
+        f"({total / 3600:.1f} h; each stage's time is its completing call's)"
     )
     if before:  # carried in (``tools/carry_stages.py restore``) or run before the ledger existed
         line += (
             f"; {len(before)} of these stages were completed by no call of this ledger (carried in "
-            f"with their records; their times {sum(stage_seconds[n] for n in before):.0f} s are in "
+            f"with their records; their times {n['before_seconds']:.0f} s are in "
             f"the sum, not in the ledger's total): {', '.join(sorted(before))}"
         )
-        if compute:
-            carried = sum(compute.get(n, stage_seconds[n]) for n in before)
+        carried = n["carried_compute_seconds"]
+        if carried is not None:
             line += (
                 f". Their compute, each the larger of its record's time and its iteration times "
                 f"over all calls: {carried:.0f} s ({carried / 3600:.1f} h), which the ledger's "
-                f"{s['wall'] / 3600:.1f} h of wall time does not include"
+                f"{wall / 3600:.1f} h of wall time does not include"
             )
     return line

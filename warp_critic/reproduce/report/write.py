@@ -7,10 +7,10 @@ every stage of the current settings that is complete, whether it ran in this cal
 :func:`write_report` computes every section of :data:`SECTIONS` (a
 :class:`~warp_critic.reproduce.report.section.Section`: ``compute(Inputs) -> dict`` and
 ``render(view) -> list[str]``, the contract in :mod:`~warp_critic.reproduce.report.section`) into
-one results dict, writes ``results.json``, and renders ``REPORT.md`` below its header from
-``json.loads`` of the very text it wrote (:func:`render_report`), so the markdown shows only what
-``results.json`` holds. The header (command, device, seeds, versions, time, ledger) is written
-from the call, not from ``results.json``. A new section is one more entry in :data:`SECTIONS`.
+one results dict, writes ``results.json``, and renders the whole of ``REPORT.md`` -- its header
+(command, device, seeds, versions, time, ledger) too -- from ``json.loads`` of the very text it
+wrote (:func:`render_report`), so the markdown shows only what ``results.json`` holds. A new
+section is one more entry in :data:`SECTIONS`.
 """
 
 from __future__ import annotations
@@ -121,27 +121,14 @@ def write_report(
         seeds=seeds,
         quick=config.quick,
         versions=ver,
-        ledger={
-            "file": ledger.LEDGER,
-            "calls": book["calls"],
-            "wall_seconds": book["wall"],
-            "first_start": book["first"],
-            "last_end": book["last"],
-            "stage_seconds_sum": sum(stage_seconds.values()),
-            "stages_before_ledger": [n for n in stage_seconds if n not in book["stages_run"]],
-            "carried_compute_seconds": sum(
-                stage_compute[n] for n in stage_seconds if n not in book["stages_run"]
-            ),
-        },
+        call={"written": time.strftime("%Y-%m-%d %H:%M:%S"), "seconds": wall},
+        ledger=ledger.numbers(book, stage_seconds, stage_compute),
     )
     results["sections"] = results.pop("sections")  # the views last, after the numbers
     written = json.dumps(results, indent=1) + "\n"
     atomic_write_text(out / "results.json", written)
-    md = _header(
-        config, device, seeds, ver, wall, ledger.header_line(book, stage_seconds, stage_compute)
-    )
     loaded = json.loads(written)  # the markdown shows what results.json holds, nothing else
-    text = "\n".join(md) + "\n" + render_report(loaded)
+    text = render_report(loaded)
     atomic_write_text(out / "REPORT.md", text)
     write_recording(out / "report.rrd", text, out, loaded["figures"])
     return out / "REPORT.md"
@@ -187,7 +174,12 @@ def render_report(results: dict) -> str:
     """``REPORT.md`` below its header from ``results`` (``results.json`` as loaded): the claims
     table, the stage table, every section of :data:`SECTIONS` and the figures."""
     views = results["sections"]
-    md = _claims_table(results["claims"]) + [""] + _stage_table(views["stages"])
+    md = (
+        header_lines(results)
+        + _claims_table(results["claims"])
+        + [""]
+        + _stage_table(views["stages"])
+    )
     for section in SECTIONS:
         md += section.render(views[section.name])
     md += ["## Figures", ""]
@@ -197,18 +189,25 @@ def render_report(results: dict) -> str:
     return "\n".join(md) + "\n"
 
 
-def _header(config, device: str, seeds: list[int], ver: dict, wall: float, book: str) -> list[str]:
-    """The report's title and header lines: command, device, seeds, versions, time, ledger."""
+def header_lines(results: dict) -> list[str]:
+    """The report's title and header lines from ``results``: command, device, seeds, versions,
+    when it was written and how long the call took, the ledger."""
+    ver, seeds, call = results["versions"], results["seeds"], results["call"]
+    setting = (
+        "QUICK settings (plumbing check, not the paper setting)"
+        if results["quick"]
+        else "paper settings, except where a section states the settings that differ from the paper text"
+    )
     return [
         "# Reproduction: Model Based Meta Learning of Critics for Policy Gradients (ICML 2022)",
         "",
-        f"- command: `{config.command}`",
-        f"- device: {device}; seeds: {len(seeds)} ({', '.join(map(str, seeds))}); "
-        f"{'QUICK settings (plumbing check, not the paper setting)' if config.quick else 'paper settings, except where a section states the settings that differ from the paper text'}",
+        f"- command: `{results['command']}`",
+        f"- device: {results['device']}; seeds: {len(seeds)} ({', '.join(map(str, seeds))}); "
+        + setting,
         f"- versions: python {ver['python']}, warp {ver['warp']}, newton {ver['newton']}, torch {ver['torch']} "
         f"({ver['platform']})",
-        f"- written {time.strftime('%Y-%m-%d %H:%M:%S')}; this call took {wall:.1f} s",
-        book,
+        f"- written {call['written']}; this call took {call['seconds']:.1f} s",
+        ledger.header_line_of(results["ledger"]),
         "",
     ]
 
