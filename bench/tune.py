@@ -164,7 +164,7 @@ def train(
     environment steps or (``length`` :data:`FULL`) the method's reproduce iterations; returns its
     seeds' run dirs and the seconds it took."""
     from warp_critic.methods import method as method_of
-    from warp_critic.reproduce.experiments.metatrain import make_config
+    from warp_critic.reproduce.experiments.metatrain import clear_unstarted, make_config
 
     values = {**own_setting(scene, method), **change}
     iterations = iterations_for(scene, method, values, args.train_steps)
@@ -176,7 +176,8 @@ def train(
         values.update(
             worlds_per_goal=1, horizon=5, critic_hidden=min(values.get("critic_hidden") or 400, 16)
         )
-    resume = all((run / f"seed{s}" / "checkpoint.pt").is_file() for s in args.seeds)
+    # a run stopped before its first checkpoint starts again; one with checkpoints resumes
+    resume = clear_unstarted(run, list(args.seeds))
     cfg = make_config(scene, method, values, list(args.seeds), run, args.device, resume)
     t0 = time.perf_counter()
     result = method_of(method).train(cfg, progress=False, record=False)

@@ -167,3 +167,18 @@ def test_an_adoption_for_ours_reaches_reproduce_and_the_search_undoes_it(tool, m
     }
     assert after["ddpg"] == before["ddpg"]
     assert tool.own_setting("kuka", "ours")["lr"] == 3e-3
+
+
+@pytest.mark.slow
+def test_a_candidate_stopped_before_its_first_checkpoint_starts_again(tool, tmp_path):
+    """A search killed mid-candidate leaves seed folders without a checkpoint: the next call
+    trains that candidate from the start instead of refusing the folder."""
+    argv = ["--tiny", "--train-steps", "400", "--scenes", "reacher", "--methods", "ours",
+            "--inits", "1", "--out", str(tmp_path / "tune.json"), "--runs", str(tmp_path / "runs")]  # fmt: skip
+    for s in tool.SEEDS:
+        seed = tmp_path / "runs" / "reacher-ours-own" / f"seed{s}"
+        seed.mkdir(parents=True)
+        (seed / "metrics.jsonl").write_text('{"iteration": 0}\n')  # a started run, no checkpoint
+    assert tool.main(argv) == 0
+    rows = json.loads((tmp_path / "tune.json").read_text())["rows"]
+    assert rows[0]["change"] == {} and rows[0]["score"] > 0

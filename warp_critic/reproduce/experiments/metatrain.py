@@ -72,7 +72,7 @@ def make_config(
     )
 
 
-def _clear_unstarted(run: Path, seeds: list[int]) -> bool:
+def clear_unstarted(run: Path, seeds: list[int]) -> bool:
     """Remove seed directories of this stage that hold no checkpoint (a run killed before its first
     checkpoint); returns whether every seed has a checkpoint (resume) -- none may be half-way."""
     have = [(run / f"seed{s}" / "checkpoint.pt").is_file() for s in seeds]
@@ -107,7 +107,7 @@ def run_metatrain_stage(
     from warp_critic.running.config import filled
 
     run = d / "run"
-    resume = _clear_unstarted(run, seeds)
+    resume = clear_unstarted(run, seeds)
     values = dict(values)
     identify = values.pop("identify", None)  # a recipe's model identifier, after training
     record = True
