@@ -6,9 +6,11 @@ from __future__ import annotations
 import json
 
 import pytest
+from conftest import ROOT
 from helpers import load_tool
 
 METHODS = ("ours", "ddpg", "meta-critic", "td3")
+TUNING = ROOT / "docs" / "paper" / "tuning"
 
 
 @pytest.fixture(scope="module")
@@ -182,3 +184,55 @@ def test_a_candidate_stopped_before_its_first_checkpoint_starts_again(tool, tmp_
     assert tool.main(argv) == 0
     rows = json.loads((tmp_path / "tune.json").read_text())["rows"]
     assert rows[0]["change"] == {} and rows[0]["score"] > 0
+
+
+def _earlier_search_adoptions() -> dict:
+    """What the earlier baselines-only search (``bench/tune_baselines.py``, one-at-a-time, its
+    rows in ``docs/paper/tuning/{tune,reacher}.json``) adopts: scene -> method -> change."""
+    tool = load_tool("tune_baselines", "bench")
+    expected: dict = {}
+    for f in sorted(TUNING.glob("*.json")):
+        data = json.loads(f.read_text())
+        if data.get("args", {}).get("design") != "one-at-a-time":
+            continue
+        for scene, method in sorted({(r["scene"], r["method"]) for r in data["rows"]}):
+            mine = sorted(
+                (r for r in data["rows"] if (r["scene"], r["method"]) == (scene, method)),
+                key=lambda r: r["score"],
+            )
+            if not all(any(r["setting"] == d for r in mine) for d in tool.one_at_a_time(method)):
+                continue  # incomplete: nothing may be adopted from it
+            published = next(r for r in mine if r["setting"] == tool.PUBLISHED)
+            if tool.adopted(mine[0], published):
+                change = {k: v for k, v in mine[0]["setting"].items() if v != tool.PUBLISHED.get(k)}
+                if "updates_per_iteration" in change:  # the search's unit: x the horizon
+                    change["updates_per_iteration"] = round(
+                        change["updates_per_iteration"] * tool.horizon_of(scene, method)
+                    )
+                expected.setdefault(scene, {})[method] = change
+    return expected
+
+
+def test_reproduce_adopts_exactly_what_the_committed_searches_decide(tool):
+    """``settings.TUNED`` against the committed searches: where the one procedure for all four
+    methods (``docs/paper/tuning/uniform-*.json``) has decided (complete, and a proposal confirmed
+    or refused at full length), its decision; elsewhere the earlier baselines-only search's."""
+    from warp_critic.reproduce.experiments.settings import TUNED
+
+    expected = _earlier_search_adoptions()
+    assert expected, "the earlier search's rows are missing"
+    decided = 0
+    for f in sorted(TUNING.glob("uniform-*.json")):
+        rows = json.loads(f.read_text())["rows"]
+        for scene, method in sorted({(r["scene"], r["method"]) for r in rows}):
+            a = tool.adoption(rows, scene, method)
+            if a is None or not a["complete"] or (a["proposed"] and a["confirm"] is None):
+                continue  # undecided: the earlier search's adoption (if any) stands
+            decided += 1
+            if a["adopt"]:
+                expected.setdefault(scene, {})[method] = a["adopt"]
+            else:
+                expected.get(scene, {}).pop(method, None)
+    expected = {scene: per for scene, per in expected.items() if per}
+    assert decided >= 1, "no decided search committed"
+    assert TUNED == expected
