@@ -24,7 +24,7 @@ class SeedUse:
 
 #: the goal seed that chooses each method's meta-test budget (:mod:`warp_critic.reproduce.budget`)
 CHOOSE_BUDGET_SEED = 2000
-#: the goal seed that scores every method's tuning candidates (``bench/tune.py``)
+#: the goal seed that scores every method's tuning candidates (the repository's ``bench/tune.py``)
 TUNE_SEED = 3000
 
 SEED_USES: tuple[SeedUse, ...] = (
@@ -57,7 +57,7 @@ SEED_USES: tuple[SeedUse, ...] = (
         "chose",
         "every method's hyper-parameters (one tuning procedure for all): the initialisations of "
         "the fresh policies that score each candidate on its run's training goals",
-        "bench/tune.py TUNE_SEED",
+        "the tuning search of docs/paper/README.md (\"The tuning searches\"); seed_uses.TUNE_SEED",
     ),
     SeedUse(
         1,
