@@ -57,7 +57,7 @@ SEED_USES: tuple[SeedUse, ...] = (
         "chose",
         "every method's hyper-parameters (one tuning procedure for all): the initialisations of "
         "the fresh policies that score each candidate on its run's training goals",
-        "the tuning search of docs/paper/README.md (\"The tuning searches\"); seed_uses.TUNE_SEED",
+        'the tuning search of docs/paper/README.md ("The tuning searches"); seed_uses.TUNE_SEED',
     ),
     SeedUse(
         1,
