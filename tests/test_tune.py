@@ -236,3 +236,42 @@ def test_reproduce_adopts_exactly_what_the_committed_searches_decide(tool):
     expected = {scene: per for scene, per in expected.items() if per}
     assert decided >= 1, "no decided search committed"
     assert TUNED == expected
+
+
+@pytest.mark.parametrize("scene", ["reacher", "kuka"])
+def test_a_confirmation_trains_for_the_methods_whole_reproduce_run(
+    tool, scene, tmp_path, monkeypatch
+):
+    """Truncated: the search's environment steps; full: exactly the iterations reproduce trains
+    the method for (ours 400 / 3000, a baseline 1600 / 1500), with the candidate's change."""
+    import dataclasses
+    from types import SimpleNamespace
+
+    import warp_critic.methods as registry
+    from warp_critic.reproduce.experiments.settings import default_settings
+
+    seen = []
+
+    def fake_train(cfg, progress, record):
+        seen.append(cfg)
+        return SimpleNamespace(
+            seeds=[SimpleNamespace(run_dir=str(tmp_path / f"seed{s}")) for s in cfg.seeds]
+        )
+
+    args = SimpleNamespace(train_steps=tool.TRAIN_STEPS, tiny=False, seeds=[100, 101], device="cpu")
+    real = registry.method
+    monkeypatch.setattr(
+        registry, "method", lambda m: dataclasses.replace(real(m), train=fake_train)
+    )
+    for m in ("ours", "ddpg"):
+        reproduce = default_settings(False, 1)["metatrain"][scene][m]["iterations"]
+        change = tool.candidates(scene, m)[1]
+        for length, want in (
+            (tool.TRUNCATED, {"ours": 100, "ddpg": 400}[m]),
+            (tool.FULL, reproduce),
+        ):
+            tool.train(scene, m, change, args, tmp_path / f"{m}-{length}", length)
+            cfg = seen[-1]
+            assert cfg.iterations == want and cfg.seeds == [100, 101], (m, length)
+            ((key, value),) = change.items()
+            assert getattr(cfg, key) == value
