@@ -275,3 +275,15 @@ def test_a_confirmation_trains_for_the_methods_whole_reproduce_run(
             assert cfg.iterations == want and cfg.seeds == [100, 101], (m, length)
             ((key, value),) = change.items()
             assert getattr(cfg, key) == value
+
+
+def test_the_committed_summaries_are_the_tools_rendering_of_the_committed_rows(tool):
+    """``docs/paper/tuning/uniform-ROBOT.md`` is ``--summary-only --markdown`` of its JSON: the
+    tables and verdicts cannot drift from the rows."""
+    files = sorted(TUNING.glob("uniform-*.json"))
+    assert files
+    for f in files:
+        rows = json.loads(f.read_text())["rows"]
+        scenes = sorted({r["scene"] for r in rows})
+        text = "\n".join(tool.summary_markdown(rows, scenes, list(METHODS))) + "\n"
+        assert f.with_suffix(".md").read_text() == text, f.name
