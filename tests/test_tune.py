@@ -299,3 +299,29 @@ def test_the_committed_summaries_are_the_tools_rendering_of_the_committed_rows(t
         scenes = sorted({r["scene"] for r in rows})
         text = "\n".join(tool.summary_markdown(rows, scenes, list(METHODS))) + "\n"
         assert f.with_suffix(".md").read_text() == text, f.name
+
+
+def test_the_summary_says_what_the_rule_decided(tool):
+    def row(change, score, length="truncated"):
+        return {"scene": "kuka", "method": "ddpg", "change": change, "length": length,
+                "score": score, "per_seed": [score - 0.01, score + 0.01], "scale": 1.0, "seconds": 1.0}  # fmt: skip
+
+    search = [row(c, 0.5 - 0.05 * k) for k, c in enumerate(tool.candidates("kuka", "ddpg"))]
+    best = search[-1]["change"]
+    ((key, value),) = best.items()
+
+    def verdict(rows):
+        return "\n".join(tool.summary_markdown(rows, ["kuka"], ["ddpg"])).splitlines()[-1]
+
+    assert verdict(search[:3]) == "Search incomplete: nothing proposed yet."
+    assert verdict(search) == f"Proposed: {key} {value:g}; its full-length confirmation is pending."
+    refused = [*search, row({}, 0.2, "full"), row(best, 0.199, "full")]
+    assert verdict(refused).startswith(f"Not adopted: {key} {value:g} passes the rule truncated")
+    confirmed = [*search, row({}, 0.2, "full"), row(best, 0.1, "full")]
+    assert (
+        verdict(confirmed) == f"Adopted: {key} {value:g} (it passes the rule at full length too)."
+    )
+    kept = [row(c, 0.5 + 0.05 * k) for k, c in enumerate(tool.candidates("kuka", "ddpg"))]
+    assert verdict(kept) == "The own setting is kept: no candidate passes the rule."
+    table = tool.summary_markdown(confirmed, ["kuka"], ["ddpg"])
+    assert sum("| full |" in line for line in table) == 2  # the confirmation rows are listed too
