@@ -288,6 +288,12 @@ def main(argv=None) -> int:
         "--inits", type=int, default=5, help="fresh policies per training goal in the score"
     )
     p.add_argument("--device", default="cpu")
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        help="candidates trained at once, each in its own process (one core each on the CPU)",
+    )
     p.add_argument("--markdown", help="also write the summary (markdown tables) to this file")
     p.add_argument(
         "--summary-only", action="store_true", help="train nothing: summarise the rows in --out"
@@ -306,21 +312,15 @@ def main(argv=None) -> int:
     for m in args.methods:
         if m not in ALL_METHODS:
             p.error(f"--methods: unknown method {m!r} ({', '.join(ALL_METHODS)})")
-    if args.train_steps < 1 or args.inits < 1 or not args.seeds:
-        p.error("--train-steps and --inits at least 1, and at least one seed")
+    if args.train_steps < 1 or args.inits < 1 or args.jobs < 1 or not args.seeds:
+        p.error("--train-steps, --inits and --jobs at least 1, and at least one seed")
     if any(s < 5 for s in args.seeds):
         p.error("--seeds: use seeds other than the reported 0-4")
     out = Path(args.out)
     try:
         rows = _done_rows(out, args)
-        for scene in args.scenes if not args.summary_only else ():
-            for method in args.methods:
-                for change in candidates(scene, method):
-                    _run_candidate(rows, scene, method, change, TRUNCATED, args, out)
-                a = adoption(rows, scene, method)
-                if a is not None and a["proposed"]:  # confirm at full length (module docstring)
-                    for change in ({}, a["best"]["change"]):
-                        _run_candidate(rows, scene, method, change, FULL, args, out)
+        if not args.summary_only:
+            _search(rows, args, out)
     except UserError as e:  # a user mistake (bad path, ...) as one line
         p.exit(2, f"{PROG}: error: {user_message(e)}\n")
     text = "\n".join(summary_markdown(rows, args.scenes, args.methods))
@@ -330,25 +330,79 @@ def main(argv=None) -> int:
     return 0
 
 
-def _run_candidate(
-    rows: list[dict], scene: str, method: str, change: dict, length: str, args, out: Path
-) -> None:
-    """Trains and scores one candidate unless an earlier call did (appends its row, rewrites
-    ``out``)."""
-    key = (scene, method, change, length)
-    if any((r["scene"], r["method"], r["change"], r.get("length", TRUNCATED)) == key for r in rows):
-        return
+def pending(rows: list[dict], scenes: list[str], methods: list[str]) -> list[tuple]:
+    """The candidates that can train now, in order, as ``(scene, method, change, length)``: every
+    unscored candidate of each search, and for a method whose complete search proposes a change,
+    the unscored full-length runs of its own setting and of the proposal."""
+    done = {
+        (r["scene"], r["method"], json.dumps(r["change"]), r.get("length", TRUNCATED)) for r in rows
+    }
+    out = []
+    for scene in scenes:
+        for method in methods:
+            wanted = [(c, TRUNCATED) for c in candidates(scene, method)]
+            a = adoption(rows, scene, method)
+            if a is not None and a["proposed"]:  # confirm at full length (module docstring)
+                wanted += [({}, FULL), (a["best"]["change"], FULL)]
+            out += [
+                (scene, method, c, length)
+                for c, length in wanted
+                if (scene, method, json.dumps(c), length) not in done
+            ]
+    return out
+
+
+def _task(scene: str, method: str, change: dict, length: str, args) -> dict:
+    """Trains and scores one candidate (in a worker process with ``--jobs`` > 1): its row."""
     tail = "" if length == TRUNCATED else "-full"
     run = Path(args.runs) / f"{scene}-{method}-{_slug(change)}{tail}"
     dirs, seconds = train(scene, method, change, args, run, length)
     row = {"scene": scene, "method": method, "change": change, "length": length}
     row.update(seconds=seconds, **score_runs(dirs, args.inits, args.device))
+    return row
+
+
+def _search(rows: list[dict], args, out: Path) -> None:
+    """Trains every :func:`pending` candidate, ``--jobs`` at once, until none is left (a
+    confirmation becomes pending when its search completes); each row is written to ``out`` as it
+    comes."""
+    import concurrent.futures as cf
+    import multiprocessing
+
+    if args.jobs == 1:
+        while todo := pending(rows, args.scenes, args.methods):
+            _done(rows, _task(*todo[0], args), args, out)
+        return
+    sys.path.insert(0, str(Path(__file__).resolve().parent))  # spawned workers import this file
+    spawn = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(args.jobs, mp_context=spawn) as pool:
+        running: dict = {}
+        try:
+            while True:
+                busy = set(running.values())
+                for task in pending(rows, args.scenes, args.methods):
+                    key = json.dumps(task)
+                    if len(running) < args.jobs and key not in busy:
+                        running[pool.submit(_task, *task, args)] = key
+                        busy.add(key)
+                if not running:
+                    return
+                finished, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+                for f in finished:
+                    running.pop(f)
+                    _done(rows, f.result(), args, out)
+        except BaseException:
+            pool.shutdown(cancel_futures=True)  # the queued ones; the running ones end with it
+            raise
+
+
+def _done(rows: list[dict], row: dict, args, out: Path) -> None:
     rows.append(row)
     _write(out, args, rows)
     print(
-        f"{scene} {method} {change or 'own setting'} ({length}): score {row['score']:.4g} "
-        f"(per seed {', '.join(f'{x:.4g}' for x in row['per_seed'])}, x{row['scale']:g} step; "
-        f"{seconds:.0f} s)",
+        f"{row['scene']} {row['method']} {row['change'] or 'own setting'} ({row['length']}): "
+        f"score {row['score']:.4g} (per seed {', '.join(f'{x:.4g}' for x in row['per_seed'])}, "
+        f"x{row['scale']:g} step; {row['seconds']:.0f} s)",
         flush=True,
     )
 

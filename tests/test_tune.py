@@ -145,6 +145,7 @@ def test_a_tiny_search_scores_every_candidate_and_resumes_without_retraining(
         (["--seeds", "0,100"], "other than the reported"),
         (["--methods", "ppo"], "unknown method"),
         (["--inits", "0"], "at least 1"),
+        (["--jobs", "0"], "--jobs at least 1"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(tool, argv, words, capsys):
@@ -325,3 +326,20 @@ def test_the_summary_says_what_the_rule_decided(tool):
     assert verdict(kept) == "The own setting is kept: no candidate passes the rule."
     table = tool.summary_markdown(confirmed, ["kuka"], ["ddpg"])
     assert sum("| full |" in line for line in table) == 2  # the confirmation rows are listed too
+
+
+@pytest.mark.slow
+@pytest.mark.subprocess
+def test_jobs_train_candidates_in_parallel_to_the_same_rows(tool, tmp_path):
+    """``--jobs 2`` (worker processes) scores every candidate, confirmations included, exactly as
+    one process does: each candidate is seeded on its own."""
+    rows = {}
+    for jobs in (1, 2):
+        out = tmp_path / f"jobs{jobs}.json"
+        argv = ["--tiny", "--train-steps", "400", "--scenes", "reacher", "--methods", "ours",
+                "--inits", "1", "--jobs", str(jobs), "--out", str(out),
+                "--runs", str(tmp_path / f"runs{jobs}")]  # fmt: skip
+        assert tool.main(argv) == 0
+        got = json.loads(out.read_text())["rows"]
+        rows[jobs] = {(json.dumps(r["change"]), r["length"]): r["per_seed"] for r in got}
+    assert len(rows[1]) >= 7 and rows[2] == rows[1]
