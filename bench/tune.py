@@ -32,13 +32,16 @@ search gives each method exactly the same one, scene by scene:
 Every scored candidate is a row of ``--out`` (JSON, rewritten after each), so the search resumes:
 a rerun keeps the rows already scored (same scene, method, change, steps, seeds, inits) and
 continues an interrupted training from its last checkpoint (every quarter of the run), kept in
-``--runs``. Prints one line per candidate and, per scene and method, the candidates sorted by
-score and whether the best is adopted.
+``--runs``. ``--jobs N`` trains N candidates at once, each in its own process (the same rows: every
+candidate is seeded on its own). Prints one line per candidate and, per scene and method, the
+candidates sorted by score and what the rule decides (``--markdown FILE`` writes that summary).
 
 Usage::
 
-    nice python bench/tune.py --scenes reacher,kuka --out docs/paper/tuning/uniform.json \
-        --runs runs/tune-uniform
+    nice python bench/tune.py --scenes reacher --out docs/paper/tuning/uniform-reacher.json \
+        --runs runs/tune-uniform --jobs 2
+    python bench/tune.py --summary-only --scenes reacher --out docs/paper/tuning/uniform-reacher.json \
+        --markdown docs/paper/tuning/uniform-reacher.md
 """
 
 from __future__ import annotations
