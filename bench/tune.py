@@ -299,6 +299,12 @@ def main(argv=None) -> int:
     )
     p.add_argument("--markdown", help="also write the summary (markdown tables) to this file")
     p.add_argument(
+        "--candidate",
+        help='train and score only this candidate, \'[change, "truncated"|"full"]\' as JSON, of '
+        "the one --scenes and --methods, and write its row to --row-out (how --jobs runs one)",
+    )
+    p.add_argument("--row-out", help="with --candidate: where its row (JSON) goes")
+    p.add_argument(
         "--summary-only", action="store_true", help="train nothing: summarise the rows in --out"
     )
     p.add_argument("--out", default="runs/tune-uniform/tune.json")
@@ -319,6 +325,8 @@ def main(argv=None) -> int:
         p.error("--train-steps, --inits and --jobs at least 1, and at least one seed")
     if any(s < 5 for s in args.seeds):
         p.error("--seeds: use seeds other than the reported 0-4")
+    if args.candidate is not None:
+        return _one(p, args)
     out = Path(args.out)
     try:
         rows = _done_rows(out, args)
@@ -368,35 +376,69 @@ def _task(scene: str, method: str, change: dict, length: str, args) -> dict:
 def _search(rows: list[dict], args, out: Path) -> None:
     """Trains every :func:`pending` candidate, ``--jobs`` at once, until none is left (a
     confirmation becomes pending when its search completes); each row is written to ``out`` as it
-    comes."""
+    comes. With ``--jobs`` > 1 each candidate is this script in a child process (:func:`_child`)."""
     import concurrent.futures as cf
-    import multiprocessing
 
     if args.jobs == 1:
         while todo := pending(rows, args.scenes, args.methods):
             _done(rows, _task(*todo[0], args), args, out)
         return
-    sys.path.insert(0, str(Path(__file__).resolve().parent))  # spawned workers import this file
-    spawn = multiprocessing.get_context("spawn")
-    with cf.ProcessPoolExecutor(args.jobs, mp_context=spawn) as pool:
+    with cf.ThreadPoolExecutor(args.jobs) as pool:  # threads that only wait on their child
         running: dict = {}
-        try:
-            while True:
-                busy = set(running.values())
-                for task in pending(rows, args.scenes, args.methods):
-                    key = json.dumps(task)
-                    if len(running) < args.jobs and key not in busy:
-                        running[pool.submit(_task, *task, args)] = key
-                        busy.add(key)
-                if not running:
-                    return
-                finished, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
-                for f in finished:
-                    running.pop(f)
-                    _done(rows, f.result(), args, out)
-        except BaseException:
-            pool.shutdown(cancel_futures=True)  # the queued ones; the running ones end with it
-            raise
+        while True:
+            busy = set(running.values())
+            for task in pending(rows, args.scenes, args.methods):
+                key = json.dumps(task)
+                if len(running) < args.jobs and key not in busy:
+                    running[pool.submit(_child, task, args)] = key
+                    busy.add(key)
+            if not running:
+                return
+            finished, _ = cf.wait(running, return_when=cf.FIRST_COMPLETED)
+            for f in finished:
+                running.pop(f)
+                _done(rows, f.result(), args, out)
+
+
+def _one(p, args) -> int:
+    """``--candidate``: one candidate's row into ``--row-out``."""
+    try:
+        change, length = json.loads(args.candidate)
+        assert isinstance(change, dict) and length in (TRUNCATED, FULL)
+        assert len(args.scenes) == 1 and len(args.methods) == 1 and args.row_out
+    except (ValueError, TypeError, AssertionError):
+        p.error(
+            '--candidate: \'[change, "truncated"|"full"]\' for one --scenes and --methods, with --row-out'
+        )
+    try:
+        row = _task(args.scenes[0], args.methods[0], change, length, args)
+    except UserError as e:
+        p.exit(2, f"{PROG}: error: {user_message(e)}\n")
+    Path(args.row_out).write_text(json.dumps(row) + "\n")
+    return 0
+
+
+def _child(task: tuple, args) -> dict:
+    """Runs :func:`_task` for ``task`` as ``python bench/tune.py --candidate ...`` and returns its
+    row; a failed child raises :class:`UserError` with its last line of output."""
+    import subprocess
+    import tempfile
+
+    scene, method, change, length = task
+    with tempfile.TemporaryDirectory() as tmp:
+        row_file = Path(tmp) / "row.json"
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--scenes", scene, "--methods", method,
+               "--train-steps", str(args.train_steps), "--seeds", ",".join(map(str, args.seeds)),
+               "--inits", str(args.inits), "--device", args.device, "--runs", str(args.runs),
+               "--candidate", json.dumps([change, length]), "--row-out", str(row_file),
+               *(["--tiny"] if args.tiny else [])]  # fmt: skip
+        done = subprocess.run(cmd, capture_output=True, text=True)
+        if done.returncode != 0:
+            lines = (done.stderr or done.stdout).strip().splitlines() or ["no output"]
+            raise UserError(
+                f"candidate {scene} {method} {change or 'own setting'} ({length}): {lines[-1]}"
+            )
+        return json.loads(row_file.read_text())
 
 
 def _done(rows: list[dict], row: dict, args, out: Path) -> None:

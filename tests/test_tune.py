@@ -146,6 +146,8 @@ def test_a_tiny_search_scores_every_candidate_and_resumes_without_retraining(
         (["--methods", "ppo"], "unknown method"),
         (["--inits", "0"], "at least 1"),
         (["--jobs", "0"], "--jobs at least 1"),
+        (["--candidate", "nope"], "--candidate: "),
+        (["--candidate", '[{}, "truncated"]'], "with --row-out"),
     ],
 )
 def test_bad_input_is_one_line_exit_2(tool, argv, words, capsys):
