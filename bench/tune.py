@@ -188,27 +188,23 @@ def train(
 
 
 def score_runs(run_dirs: list[str], inits: int, device: str) -> dict[str, Any]:
-    """The candidate's score (module docstring): ``{"score", "per_seed", "scale", "by_scale"}``."""
-    from warp_critic.physics.scene import Variant
-    from warp_critic.reproduce.experiments.evaluate import Job, evaluate
-    from warp_critic.reproduce.experiments.generalize import train_goals_and_limits
+    """The candidate's score (module docstring): the meta-test budget sweep
+    (:func:`~warp_critic.reproduce.experiments.budget.sweep`) at the run's own number of policy
+    updates only, then :func:`pick`: ``{"score", "per_seed", "scale", "by_scale"}``."""
+    from warp_critic.reproduce.experiments.budget import sweep
+    from warp_critic.reproduce.experiments.evaluate import default_steps
 
-    jobs = []
-    for rd in run_dirs:
-        _, goals, _, _ = train_goals_and_limits(rd)
-        jobs += [Job((rd, s), rd, goals, Variant(), alpha_scale=s) for s in SCALES]
-    steps = int(json.loads((Path(run_dirs[0]) / "config.json").read_text()).get("inner_steps") or 3)
-    r = evaluate(jobs, inits=inits, steps=steps, seed=TUNE_SEED, device=device, progress=False)
-    dof = r["dof"]
-    by_scale: dict[str, list[float]] = {}
-    for s in SCALES:
-        per = []
-        for k, j in enumerate(jobs):
-            if j.alpha_scale == s:
-                e = r["errors"][k].ravel() / dof
-                per.append(float(e.mean()) if all(map(math.isfinite, e)) else math.inf)
-        by_scale[f"{s:g}"] = per
-    return pick(by_scale)
+    steps = default_steps(run_dirs[0])
+    r = sweep(
+        run_dirs,
+        budgets=[steps],
+        scales=list(SCALES),
+        inits=inits,
+        seed=TUNE_SEED,
+        device=device,
+        max_worlds=4096,
+    )
+    return pick({f"{s:g}": r["per_seed"][s][steps] for s in SCALES})
 
 
 def pick(by_scale: dict[str, list[float]]) -> dict[str, Any]:
@@ -527,13 +523,11 @@ def _procedure(args) -> dict:
 
 
 def _write(out: Path, args, rows: list[dict]) -> None:
+    from warp_critic.running.files import atomic_write_text
+
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp")
-    tmp.write_text(
-        json.dumps({"procedure": _procedure(args), "rule": ADOPT_RULE, "rows": rows}, indent=1)
-        + "\n"
-    )
-    tmp.replace(out)  # never a half-written file
+    data = {"procedure": _procedure(args), "rule": ADOPT_RULE, "rows": rows}
+    atomic_write_text(out, json.dumps(data, indent=1) + "\n")  # never a half-written file
 
 
 if __name__ == "__main__":
