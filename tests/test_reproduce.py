@@ -783,13 +783,14 @@ def test_ledger_total_wall_time_counts_every_call():
     assert s["calls"] == 2 and s["unfinished"] == 1
     assert s["wall"] == 3600 + 1200  # a call without an end counts to its last record
     assert s["first"] == "2026-12-01T10:00:00Z" and s["last"] == "2026-12-02T09:20:00Z"
-    line = ledger.header_line(s, {"toy": 5.0, "maps": 100.0, "tables": 50.0})
+    line = ledger.header_line_of(ledger.numbers(s, {"toy": 5.0, "maps": 100.0, "tables": 50.0}))
     assert "total wall time 4800 s" in line and "stage times 155 s" in line
     assert "(1 without an end)" in line
     assert "1 of these stages were completed by no call of this ledger" in line
     assert line.endswith("not in the ledger's total): tables")  # named, not only counted
     # a carried stage resumed over calls: its compute is its iteration times, not its last call's
-    line = ledger.header_line(s, {"toy": 5.0, "maps": 100.0, "tables": 50.0}, {"tables": 7200.0})
+    times = {"toy": 5.0, "maps": 100.0, "tables": 50.0}
+    line = ledger.header_line_of(ledger.numbers(s, times, {"tables": 7200.0}))
     assert "tables. Their compute" in line and ": 7200 s (2.0 h), which the ledger's 1.3 h" in line
 
     class _Rec:

@@ -200,16 +200,10 @@ def numbers(
     }
 
 
-def header_line(
-    s: dict, stage_seconds: dict[str, float], compute: dict[str, float] | None = None
-) -> str:
-    """The report header's line: the ledger's total wall time and the sum of the stage times
-    (:func:`numbers`'s arguments); ``compute`` adds the compute of the stages carried in."""
-    return header_line_of(numbers(s, stage_seconds, compute))
-
-
 def header_line_of(n: dict) -> str:
-    """:func:`header_line` from :func:`numbers`' dict (as ``results.json`` holds it)."""
+    """The report header's line from :func:`numbers`' dict (as ``results.json`` holds it): the
+    ledger's total wall time, the sum of the stage times and the stages carried in with their
+    compute."""
     wall, total, before = n["wall_seconds"], n["stage_seconds_sum"], n["stages_before_ledger"]
     line = (
         f"- ledger (`{n['file']}`): {n['calls']} call(s) on this folder"
