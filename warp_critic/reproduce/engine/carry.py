@@ -36,6 +36,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from warp_critic.core.errors import UserError
+from warp_critic.reproduce.engine.stage import PROGRESS
 from warp_critic.reproduce.engine.stages import (
     MARKER,
     PACKED,
@@ -151,7 +152,12 @@ def _copy_stage(src: Path, dst_parent: Path, slim: CarryRules | None, pack: bool
     try:
         for path in sorted(src.rglob("*")):
             rel = path.relative_to(src)
-            if path.is_dir() or path.name in SKIPPED_NAMES or path.suffix in SKIPPED_SUFFIXES:
+            if (
+                path.is_dir()
+                or path.name in SKIPPED_NAMES
+                or path.suffix in SKIPPED_SUFFIXES
+                or rel.parts[0] == PROGRESS
+            ):
                 continue
             target = tmp / rel
             target.parent.mkdir(parents=True, exist_ok=True)

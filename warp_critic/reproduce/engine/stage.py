@@ -13,6 +13,11 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+#: a stage's folder of resumable progress (``<stage dir>/progress``): what a stage keeps so that a
+#: killed call goes on where it was (a long meta-test's batches); the runner removes it once the
+#: stage is complete, and a carried or published stage never holds it
+PROGRESS = "progress"
+
 
 def dir_name(name: str, h: str) -> str:
     """The directory of the stage ``name`` whose settings hash to ``h``."""
@@ -35,4 +40,4 @@ class Stage:
         return dir_name(self.name, self.hash)
 
 
-__all__ = ["Stage", "dir_name"]
+__all__ = ["PROGRESS", "Stage", "dir_name"]

@@ -2,7 +2,9 @@
 
 A stage directory ``OUT/<name>-<hash>`` is complete when it holds ``stage.json`` (written atomically,
 after everything else): a complete stage is skipped. An incomplete one is re-entered: training stages
-resume their run directories (``resume=True``), the others recompute their files. A changed setting
+resume their run directories (``resume=True``), the meta-tests go on from the batches kept in their
+:data:`~warp_critic.reproduce.engine.stage.PROGRESS` folder (removed once the stage is complete), the
+others recompute their files. A changed setting
 changes the hash, so only the stages that depend on it run again, into new directories; old
 directories are never touched.
 
@@ -14,6 +16,7 @@ from __future__ import annotations
 
 import json
 import lzma
+import shutil
 import sys
 import time
 from collections.abc import Callable, Mapping
@@ -22,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from warp_critic.core.errors import FieldError, UserError
-from warp_critic.reproduce.engine.stage import dir_name
+from warp_critic.reproduce.engine.stage import PROGRESS, dir_name
 from warp_critic.running.files import atomic_write_text, check_output_dir
 from warp_critic.running.locks import LOCK, REPRODUCE_MARKER, FolderLock, check_not_owned
 
@@ -197,6 +200,7 @@ class Runner:
             "result": result,
         }
         atomic_write_text(d / STAGE_FILE, json.dumps(data, indent=1, default=_jsonable) + "\n")
+        shutil.rmtree(d / PROGRESS, ignore_errors=True)  # complete: its progress is the record now
         rec = StageRecord(group, name, d, data, ran=True, seconds_this_call=seconds)
         self.records[name] = rec
         self.done += 1

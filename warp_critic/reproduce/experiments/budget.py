@@ -33,7 +33,7 @@ import numpy as np
 
 from warp_critic.core.errors import UserError
 from warp_critic.evaluation.seed_uses import CHOOSE_BUDGET_SEED
-from warp_critic.reproduce.engine.stage import Stage
+from warp_critic.reproduce.engine.stage import PROGRESS, Stage
 from warp_critic.reproduce.experiments.naming import BUDGET, Outputs, stage_name
 from warp_critic.reproduce.experiments.settings import (
     BUDGET_SCALES,
@@ -130,6 +130,7 @@ def sweep(
     device: str,
     max_worlds: int,
     progress: bool = False,
+    resume: Path | None = None,
 ) -> dict[str, Any]:
     """Step 1 of the module docstring for one method's per-seed run directories ``dirs``:
     ``{"curve": {scale: {N: MSE}}, "per_seed": {scale: {N: [MSE per seed]}}, "untrained": MSE,
@@ -152,6 +153,7 @@ def sweep(
         max_worlds=max_worlds,
         progress=progress,
         at=tuple(budgets),
+        resume=resume,
     )
     dof = r["dof"]
     curve: dict[float, dict[int, float]] = {}
@@ -190,6 +192,7 @@ def run_budget_stage(
         device=device,
         max_worlds=int(s["max_worlds"]),
         progress=progress,
+        resume=d / PROGRESS,
     )
     scale, steps, err = choose(r["curve"])
     r["alphas"] = {relpath(k, d.parent): v for k, v in r["alphas"].items()}

@@ -34,6 +34,7 @@ from warp_critic.core.errors import UserError
 from warp_critic.learning.critic_inputs import rollout_data_of
 from warp_critic.physics.inertia import NominalInertia
 from warp_critic.physics.scene import Variant
+from warp_critic.reproduce.experiments.descent import BatchProgress, descend, fingerprint
 
 #: Task fields every run of one evaluation must share (they define the dynamics and the policy's scaling).
 SHARED_FIELDS = ("dt", "substeps", "gravity", "max_torque", "qd_scale")
@@ -89,18 +90,6 @@ class MultiCritic(torch.nn.Module):
             extra = {d.key: data[d.key][..., a:b, :] for d in rollout_data_of(c)}
             outs.append(c(*args, **extra))
         return torch.cat(outs, dim=-1)
-
-
-class PerWorldRate:
-    """A learning rate per world: ``rate * grad`` scales each world's (leading-dim) gradient."""
-
-    def __init__(self, rates: torch.Tensor):
-        self.rates = rates
-
-    def __mul__(self, grad: torch.Tensor) -> torch.Tensor:
-        return self.rates.view(-1, *[1] * (grad.dim() - 1)) * grad
-
-    __rmul__ = __mul__
 
 
 @dataclass
@@ -188,6 +177,8 @@ def evaluate(
     max_worlds: int = 4096,
     progress: bool = True,
     at: tuple[int, ...] = (),
+    resume: Path | None = None,
+    save_every: float = 300.0,
 ) -> dict:
     """Meta-test every job; returns ``{"errors": [(G, inits) final ||q_T-g||^2 per job], "before": [...],
     "dof", "horizon", "steps", "alphas": {run_dir: alpha}, "worlds", "batches", "diverged"}``
@@ -195,7 +186,11 @@ def evaluate(
 
     ``at``: policy-update counts (each in ``1..steps``) after which the errors are also kept, in
     ``"errors_at": {n: [(G, inits) per job]}`` -- one descent of ``steps`` updates read at several
-    budgets (a world that diverged by ``n`` is ``inf`` from ``n`` on)."""
+    budgets (a world that diverged by ``n`` is ``inf`` from ``n`` on).
+
+    ``resume``: a folder for this evaluation's progress (:mod:`.descent`): each batch done,
+    and every ``save_every`` seconds (wall) a running batch's policies, so that a call killed part
+    way goes on where it was, to the same numbers."""
     from warp_critic.physics.simulator import STANDARD_GRAVITY
     from warp_critic.running.loop import progress_bar
     from warp_critic.running.scenefile import find_run_scene
@@ -222,16 +217,30 @@ def evaluate(
     diverged = 0
     bar = progress_bar(len(groups), enabled=progress, desc="meta-test batches")
     try:
-        for group in groups:
-            sim, policy = _batch_model(
-                scene, [jobs[i] for i in group], inits, cfg0, gravity, device
-            )
-            critic, rate, goal, p = _batch_inputs(
-                [jobs[i] for i in group], runs, policy, inits, seed, inits_cache, sim.torch_device
-            )
-            err0, err, bad, err_at = _meta_test(
-                sim, policy, critic, rate, goal, p, horizon, steps, at
-            )
+        for b, group in enumerate(groups):
+            batch = [jobs[i] for i in group]
+            saved = None
+            if resume is not None:
+                settings = {"steps": steps, "inits": inits, "seed": int(seed), "horizon": horizon}
+                settings.update(at=sorted(int(n) for n in at), device=device)
+                saved = BatchProgress(resume, b, fingerprint(batch, runs, settings))
+            done = saved.finished() if saved is not None else None
+            if done is not None:
+                (err0, err, bad, err_at), alphas = done
+                for rd, alpha in alphas.items():
+                    runs[rd].alpha = alpha
+            else:
+                sim, policy = _batch_model(scene, batch, inits, cfg0, gravity, device)
+                critic, rate, goal, p = _batch_inputs(
+                    batch, runs, policy, inits, seed, inits_cache, sim.torch_device
+                )
+                err0, err, bad, err_at = descend(
+                    sim, policy, critic, rate, goal, p, horizon, steps, at, saved, save_every
+                )
+                if saved is not None:
+                    rds = {str(j.run_dir) for j in batch}  # each one's alpha set by _batch_inputs
+                    alphas = {rd: a for rd in rds if (a := runs[rd].alpha) is not None}
+                    saved.finish((err0, err, bad, err_at), alphas)
             diverged += bad
             _split(errors, group, jobs, inits, err)
             _split(before, group, jobs, inits, err0)
@@ -323,49 +332,6 @@ def _batch_inputs(group: list[Job], runs: dict, policy, inits: int, seed: int, i
     goal = torch.cat(goals).to(dev)
     p = {k: torch.cat([x[k] for x in params]).to(dev).requires_grad_(True) for k in params[0]}
     return MultiCritic(segments), torch.cat(rates).to(dev), goal, p
-
-
-def _meta_test(sim, policy, critic, rate, goal, p, horizon: int, steps: int, at=()):
-    """``steps`` policy updates with the critics from home; returns the final errors before and
-    after ``(W,)`` rad^2 (``inf`` where a world diverged), the number of diverged worlds and
-    ``{n: (W,) errors after n updates}`` for each ``n`` in ``at`` (one descent, read on the way)."""
-    from warp_critic.learning.inner import inner_update, policy_fn
-    from warp_critic.learning.losses import final_error
-    from warp_critic.learning.rollout import finite_worlds, rollout
-
-    q0, qd0 = sim.zeros(), sim.zeros()
-    untrained = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
-    err0 = final_error(untrained.q[-1], goal).detach().cpu().numpy()
-    ok0 = finite_worlds(untrained)
-    ok = ok0.clone()
-    err_at: dict[int, np.ndarray] = {}
-    done = 0
-    for stop in sorted({int(n) for n in at} | {int(steps)}):
-        p, trajs = inner_update(
-            critic,
-            policy,
-            p,
-            sim,
-            q0,
-            qd0,
-            goal,
-            horizon=horizon,
-            alpha=PerWorldRate(rate),
-            steps=stop - done,
-            create_graph=False,
-            check=False,
-        )
-        done = stop
-        after = rollout(sim, policy_fn(policy, p), q0, qd0, horizon, check=False)
-        err = final_error(after.q[-1], goal).detach().cpu().numpy()
-        ok &= finite_worlds(after)
-        for t in trajs:
-            ok &= finite_worlds(t)
-        err = np.where(ok.cpu().numpy(), err, np.inf)
-        if stop in at:
-            err_at[stop] = err
-    err0 = np.where(ok0.cpu().numpy(), err0, np.inf)
-    return err0, err, int((~ok).sum()), err_at
 
 
 def relpath(p, base: Path) -> str:

@@ -37,6 +37,7 @@ import torch
 
 from warp_critic.physics.link_changes import parse_changes
 from warp_critic.physics.scene import Variant
+from warp_critic.reproduce.engine.stage import PROGRESS
 from warp_critic.reproduce.experiments.evaluate import (
     Job,
     default_steps,
@@ -155,6 +156,7 @@ def run_tables_stage(
         device=device,
         max_worlds=int(s["max_worlds"]),
         progress=progress,
+        resume=d / PROGRESS,
     )
     raw = [
         {
@@ -322,6 +324,7 @@ def run_maps_stage(
         device=device,
         max_worlds=int(s["max_worlds"]),
         progress=progress,
+        resume=d / PROGRESS,
     )
     dof = r["dof"]
     raw = [

@@ -1,0 +1,133 @@
+"""A long batched meta-test goes on where a killed call left it, to the same numbers
+(``warp_critic/reproduce/experiments/descent.py``); a complete stage drops its progress and
+a carried stage never holds it."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from warp_critic.physics.scene import Variant
+from warp_critic.reproduce.experiments import descent
+from warp_critic.reproduce.experiments.evaluate import Job, evaluate
+
+GOALS = torch.tensor([[0.3, -0.2], [-1.0, 0.8], [0.6, 0.4]])
+
+
+def _jobs(run) -> list[Job]:
+    return [
+        Job("a", str(run), GOALS, Variant()),
+        Job("b", str(run), GOALS[:2], Variant(ee_mass=0.5), alpha_scale=3.0),
+        Job("c", str(run), GOALS, Variant(link_length=0.8)),
+    ]
+
+
+def _call(run, **kw):
+    args = dict(inits=2, steps=23, seed=4, device="cpu", progress=False, max_worlds=10)
+    return evaluate(_jobs(run), **{**args, **kw})
+
+
+def _same(r, ref) -> None:
+    for k in ("errors", "before"):
+        for a, b in zip(r[k], ref[k]):
+            np.testing.assert_array_equal(a, b)
+    for n in ref.get("errors_at", {}):
+        for a, b in zip(r["errors_at"][n], ref["errors_at"][n]):
+            np.testing.assert_array_equal(a, b)
+    assert r["alphas"] == ref["alphas"] and r["diverged"] == ref["diverged"]
+
+
+class Killed(Exception):
+    pass
+
+
+def _count_steps(monkeypatch, kill_after: int | None = None) -> list[int]:
+    """Patch the descent's step function to count the steps it takes (and raise after
+    ``kill_after`` chunks: a call killed part way)."""
+    from warp_critic.learning import inner
+
+    real, taken, chunks = inner.inner_update, [], [0]
+
+    def counted(*a, **kw):
+        if kill_after is not None and chunks[0] >= kill_after:
+            raise Killed
+        chunks[0] += 1
+        params, trajs = real(*a, **kw)
+        taken.append(len(trajs))
+        return params, trajs
+
+    monkeypatch.setattr(inner, "inner_update", counted)
+    return taken
+
+
+def test_a_killed_evaluation_resumes_to_the_same_numbers(finished_run, tmp_path, monkeypatch):
+    ref = _call(finished_run, at=(5, 12))
+    assert ref["batches"] == 2  # 12 worlds, 4 and 6, then 6: two batches of whole jobs
+    progress = tmp_path / "progress"
+    _count_steps(monkeypatch, kill_after=3)  # chunks of 5, 7 and 10 steps (stops at 5, 12, 23)
+    with pytest.raises(Killed):
+        _call(finished_run, at=(5, 12), resume=progress, save_every=0.0)
+    files = sorted(p.name for p in progress.iterdir())
+    assert files == ["batch-0-partial.pt"]  # batch 0 was part way: 22 of its 23 steps
+    monkeypatch.undo()
+    taken = _count_steps(monkeypatch)
+    r = _call(finished_run, at=(5, 12), resume=progress, save_every=0.0)
+    _same(r, ref)
+    assert sum(taken) == 2 * 23 - 22  # the 22 steps of batch 0 before the kill: not again
+    assert sorted(p.name for p in progress.iterdir()) == ["batch-0.pt", "batch-1.pt"]
+
+    taken.clear()
+    again = _call(finished_run, at=(5, 12), resume=progress)
+    _same(again, ref)
+    assert taken == []  # both batches done: read back, nothing descends
+
+
+def test_progress_of_other_inputs_is_not_used(finished_run, tmp_path, monkeypatch):
+    progress = tmp_path / "progress"
+    _call(finished_run, steps=4, resume=progress)
+    taken = _count_steps(monkeypatch)
+    other = _call(finished_run, steps=4, seed=5, resume=progress)  # other initial policies
+    assert sum(taken) == 2 * 4
+    monkeypatch.undo()
+    _same(other, _call(finished_run, steps=4, seed=5))
+    (progress / "batch-1.pt").write_bytes(b"torn")  # a file cut short: warned of, redone
+    taken = _count_steps(monkeypatch)
+    _same(_call(finished_run, steps=4, seed=5, resume=progress), other)
+    assert sum(taken) == 4
+
+
+def test_the_descent_holds_at_most_a_chunk_of_rollouts(finished_run, monkeypatch):
+    """Chunked descent: no call takes more than ``STEPS_PER_CHUNK`` steps, and the budgets read on
+    the way are exact (the steps are a function of the policies alone)."""
+    taken = _count_steps(monkeypatch)
+    r = _call(finished_run, at=(5, 12))
+    assert max(taken) <= descent.STEPS_PER_CHUNK and sum(taken) == 2 * 23
+    monkeypatch.undo()
+    for n in (5, 12):
+        alone = _call(finished_run, steps=n)
+        for a, b in zip(r["errors_at"][n], alone["errors"]):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_a_complete_stage_drops_its_progress_and_carry_skips_it(tmp_path):
+    from warp_critic.reproduce.engine import carry
+    from warp_critic.reproduce.engine.stage import PROGRESS
+    from warp_critic.reproduce.engine.stages import MARKER, Runner
+    from warp_critic.reproduce.experiments.records import CARRY
+
+    out = tmp_path / "out"
+    d = out / "toy-abc"
+    (d / PROGRESS).mkdir(parents=True)
+    (d / PROGRESS / "batch-0.pt").write_bytes(b"x")
+    (out / MARKER).write_text(json.dumps({"kind": "warp-critic/reproduce-output-v1"}) + "\n")
+    runner = Runner(out, CARRY.check, log=lambda line: None)
+    runner.finish("toy", "toy", "abc", {}, {"x": 1}, 1.0)
+    assert (d / "stage.json").is_file() and not (d / PROGRESS).exists()
+
+    (d / PROGRESS).mkdir()  # left by hand: still never carried
+    (d / PROGRESS / "batch-0.pt").write_bytes(b"x")
+    carry._copy_stage(d, tmp_path, slim=None, pack=True)
+    assert sorted(p.name for p in (tmp_path / d.name).iterdir()) == ["stage.json.xz"]
