@@ -235,22 +235,27 @@ def uniform_decisions(tool) -> tuple[dict, int]:
     return adopted, decided
 
 
+#: how the departures name the one procedure's search once :data:`TUNED` is derived from it
+UNIFORM_SEARCH = "the one tuning search of all four methods (docs/paper/tuning/uniform-*)"
+
+
 def test_reproduce_adopts_exactly_what_the_committed_searches_decide(tool):
     """``settings.TUNED`` against the committed searches. Until the one procedure for all four
     methods has decided all eight robot-method searches, the earlier baselines-only search's
     adoptions (the settings the published report ran); then exactly the one procedure's. Not one
     robot or method at a time: a change of ``TUNED`` changes the stages it reaches, and the
     reproduction runs again with all of them at once."""
-    from warp_critic.reproduce.experiments.settings import TUNED
+    from warp_critic.reproduce.experiments.settings import TUNED, TUNED_FROM
 
     adopted, decided = uniform_decisions(tool)
     assert decided >= 1, "no decided search committed"
     if decided < 2 * len(METHODS):
-        expected = _earlier_search_adoptions()
+        expected, source = _earlier_search_adoptions(), "the baselines' search"
         assert expected, "the earlier search's rows are missing"
     else:
-        expected = adopted
+        expected, source = adopted, UNIFORM_SEARCH
     assert TUNED == expected
+    assert TUNED_FROM == source  # what the report's departures say the change came from
 
 
 @pytest.mark.parametrize("scene", ["reacher", "kuka"])

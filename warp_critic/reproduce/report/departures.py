@@ -6,7 +6,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from warp_critic.reproduce.experiments.naming import stage_name
-from warp_critic.reproduce.experiments.settings import METHOD_LABELS, TUNED
+from warp_critic.reproduce.experiments.settings import METHOD_LABELS, TUNED, TUNED_FROM
 
 
 def scene_gravity(scene: str) -> float | None:
@@ -61,10 +61,11 @@ def departures(scene: str, values: dict, gravity: float | None) -> list[str]:
     if gravity == 0:
         out.append("gravity 0 (torque mode; the paper's text does not state the gravity)")
     for m, changed in TUNED.get(scene, {}).items():
+        own = "its preset's" if m == "ours" else "its published"
         out.append(
             f"{METHOD_LABELS[m]} with "
             + ", ".join(f"{k} {v:g}" for k, v in changed.items())
-            + " from the baselines' search, not its published value"
+            + f" from {TUNED_FROM}, not {own} value"
         )
     return out
 
