@@ -131,3 +131,46 @@ def test_a_complete_stage_drops_its_progress_and_carry_skips_it(tmp_path):
     (d / PROGRESS / "batch-0.pt").write_bytes(b"x")
     carry._copy_stage(d, tmp_path, slim=None, pack=True)
     assert sorted(p.name for p in (tmp_path / d.name).iterdir()) == ["stage.json.xz"]
+
+
+def test_the_budget_command_resumes_a_killed_sweep_from_its_batches(
+    finished_run, tmp_path, monkeypatch
+):
+    """``warp-critic budget``'s driver keeps each batch in ``OUT.progress/`` while it works: a call
+    killed in the sweep goes on without those batches' steps, to the same file, and the folder is
+    gone at the end."""
+    from warp_critic.reproduce.budget import BudgetConfig, run_budget
+
+    run = str(finished_run)
+    cfg = BudgetConfig(
+        runs={"ours": [run, run]},
+        budgets=[1, 3],
+        alpha_scales=[0.5, 2.0],
+        inits=2,
+        report_stds=[0.2],
+        num_goals=2,
+        device="cpu",
+        max_worlds=4,  # one job (2 training goals x 2 inits) a batch: 4 batches
+    )
+    ref = run_budget(cfg, tmp_path / "ref.json")
+    out = tmp_path / "b.json"
+    _count_steps(monkeypatch, kill_after=4)  # two batches of the sweep (steps 0-1, 1-3), then killed
+    with pytest.raises(Killed):
+        run_budget(cfg, out)
+    assert not out.exists()
+    assert sorted(p.name for p in (tmp_path / "b.json.progress" / "ours-sweep").iterdir()) == [
+        "batch-0.pt",
+        "batch-1.pt",
+    ]
+    monkeypatch.undo()
+    taken = _count_steps(monkeypatch)
+    r = run_budget(cfg, out)
+    n = r["chosen"]["ours"]["steps"]  # the report: the chosen scale x 2 runs, 2 batches this far
+    assert sum(taken) == (4 - 2) * 3 + 2 * n  # the sweep's other 2 batches, then the report
+    assert not (tmp_path / "b.json.progress").exists()
+    for key in ("chosen",):
+        assert r[key] == ref[key]
+    assert r["sweep"]["ours"]["curve"] == ref["sweep"]["ours"]["curve"]
+    assert [c["mse_mean"] for c in r["report"]["ours"]["cells"]] == [
+        c["mse_mean"] for c in ref["report"]["ours"]["cells"]
+    ]

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
@@ -137,9 +138,9 @@ def wanted(chosen: dict[str, dict], curves: dict[str, dict]) -> dict[str, list[t
 # ------------------------------------------------------------------------------------------------
 
 
-def sweep_method(cfg: BudgetConfig, method: str) -> dict[str, Any]:
+def sweep_method(cfg: BudgetConfig, method: str, resume: Path | None = None) -> dict[str, Any]:
     """Step 1 of the module docstring for one method
-    (:func:`~warp_critic.reproduce.experiments.budget.sweep`)."""
+    (:func:`~warp_critic.reproduce.experiments.budget.sweep`); ``resume``: its progress folder."""
     return sweep(
         [str(d) for d in cfg.runs[method]],
         budgets=list(cfg.budgets),
@@ -148,14 +149,16 @@ def sweep_method(cfg: BudgetConfig, method: str) -> dict[str, Any]:
         seed=cfg.choose_seed,
         device=cfg.device,
         max_worlds=cfg.max_worlds,
+        resume=resume,
     )
 
 
 def report_method(
-    cfg: BudgetConfig, method: str, budgets: list[tuple[float, int]]
+    cfg: BudgetConfig, method: str, budgets: list[tuple[float, int]], resume: Path | None = None
 ) -> dict[str, Any]:
     """Step 3 for one method: the reporting goals at each ``(scale, N)`` of ``budgets``:
-    ``{"cells": [{"scale", "steps", "std", "mse_mean", "mse_per_seed", "untrained"}], "seconds"}``."""
+    ``{"cells": [{"scale", "steps", "std", "mse_mean", "mse_per_seed", "untrained"}], "seconds"}``;
+    ``resume``: its progress folder (one sub-folder per reporting goal std)."""
     from warp_critic.physics.scene import Variant
     from warp_critic.reproduce.experiments.evaluate import Job, evaluate
     from warp_critic.reproduce.experiments.generalize import draw_goals, train_goals_and_limits
@@ -187,6 +190,7 @@ def report_method(
             max_worlds=cfg.max_worlds,
             progress=False,
             at=ns,
+            resume=resume / f"std{c}" if resume is not None else None,
         )
         for s, n in budgets:
             idx = [k for k, j in enumerate(jobs) if j.alpha_scale == s]
@@ -215,8 +219,9 @@ def run_budget(
     base: Path | None = None,
 ) -> dict[str, Any]:
     """Steps 1-3 for every method of ``cfg.runs``, resumable: ``out`` (JSON) is rewritten after each
-    method's sweep and report, and a rerun with the same settings and runs skips what it holds.
-    ``base``: the run directories are written relative to it (the reproduce folder)."""
+    method's sweep and report, and a rerun with the same settings and runs skips what it holds; a
+    sweep or report cut short goes on from the batches kept in ``OUT.progress/`` (removed at the
+    end). ``base``: the run directories are written relative to it (the reproduce folder)."""
     from warp_critic.reproduce.experiments.evaluate import relpath
 
     cfg.validate()
@@ -244,13 +249,14 @@ def run_budget(
         tmp.write_text(json.dumps(result, indent=1) + "\n")
         tmp.replace(out)
 
+    progress = out.with_name(out.name + ".progress")
     sweeps = result.setdefault("sweep", {})
     for m in runs:
         if m in sweeps and sweeps[m].get("runs") == runs[m]:
             say(f"{m}: sweep kept from {out}")
             continue
         say(f"{m}: sweeping {len(cfg.alpha_scales)} step sizes to {max(cfg.budgets)} steps")
-        sweeps[m] = {**sweep_method(cfg, m), "runs": runs[m]}
+        sweeps[m] = {**sweep_method(cfg, m, progress / f"{m}-sweep"), "runs": runs[m]}
         sweeps[m]["alphas"] = {shown(k): v for k, v in sweeps[m]["alphas"].items()}
         say(f"{m}: {sweeps[m]['seconds']:.0f} s")
         save()
@@ -266,9 +272,10 @@ def run_budget(
         if m in reports and reports[m].get("budgets") == key:
             continue
         say(f"{m}: reporting goals at (scale, steps) {budgets}")
-        reports[m] = {**report_method(cfg, m, budgets), "budgets": key}
+        reports[m] = {**report_method(cfg, m, budgets, progress / f"{m}-report"), "budgets": key}
         save()
     save()
+    shutil.rmtree(progress, ignore_errors=True)  # everything is in ``out`` now
     return result
 
 
