@@ -154,7 +154,9 @@ def test_the_budget_command_resumes_a_killed_sweep_from_its_batches(
     )
     ref = run_budget(cfg, tmp_path / "ref.json")
     out = tmp_path / "b.json"
-    _count_steps(monkeypatch, kill_after=4)  # two batches of the sweep (steps 0-1, 1-3), then killed
+    _count_steps(
+        monkeypatch, kill_after=4
+    )  # two batches of the sweep (steps 0-1, 1-3), then killed
     with pytest.raises(Killed):
         run_budget(cfg, out)
     assert not out.exists()

@@ -769,6 +769,28 @@ def test_ledger_calls_a_run_stopped_inside_a_stage_interrupted(tmp_path):
         assert ledger.read(out)[-1]["status"] == status, error
 
 
+def test_a_working_call_beats_so_a_killed_one_still_counts_its_time(tmp_path):
+    """``alive`` records while a call works: one killed where it cannot write its end (the OS's
+    kill at a session's end, a power cut) counts to its last beat, not to its last stage."""
+    import time
+
+    from warp_critic.reproduce.engine import ledger
+
+    with ledger.Call(tmp_path, "warp-critic reproduce", ["tables"], "cpu", heartbeat=0.05) as c:
+        time.sleep(0.4)
+    rows = ledger.read(tmp_path)
+    events = [r["event"] for r in rows]
+    assert events[0] == "start" and events[-1] == "end" and events.count("alive") >= 3
+    assert all(r["call"] == c.id for r in rows)
+    time.sleep(0.2)
+    assert len(ledger.read(tmp_path)) == len(rows)  # the beat stopped with the call
+    killed = [r for r in rows if r["event"] != "end"]  # as if killed before its end
+    killed[0]["time"] = "2026-12-01T10:00:00Z"
+    killed[-1]["time"] = "2026-12-01T12:30:00Z"  # its last beat
+    s = ledger.summary(killed)
+    assert s["wall"] == 9000 and s["unfinished"] == 1
+
+
 def test_ledger_total_wall_time_counts_every_call():
     from warp_critic.reproduce.engine import ledger
 

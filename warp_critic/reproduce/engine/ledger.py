@@ -1,11 +1,12 @@
 """``ledger.jsonl``: one record per event of every ``reproduce`` call on an output folder.
 
 A call that got the folder's lock appends ``start`` (its command and machine), one ``stage`` per
-stage it completed, and ``end`` (or ``end`` with ``"status": "interrupted"`` / ``"failed"``). A call
-refused before it holds the lock (a bad flag, a folder in use) writes nothing. The report's header
-gives the ledger's total wall time (the sum over calls of end - start; a call without an end
-counts to its last record) next to the sum of the report's stage times, so a run resumed over many
-sittings states what it cost in all.
+stage it completed, ``alive`` every :data:`HEARTBEAT` seconds while it works, and ``end`` (or
+``end`` with ``"status": "interrupted"`` / ``"failed"``). A call refused before it holds the lock
+(a bad flag, a folder in use) writes nothing. The report's header gives the ledger's total wall time
+(the sum over calls of end - start; a call without an end, killed where it could not write one,
+counts to its last record, so to within a heartbeat of its death) next to the sum of the report's
+stage times, so a run resumed over many sittings states what it cost in all.
 """
 
 from __future__ import annotations
@@ -13,11 +14,14 @@ from __future__ import annotations
 import json
 import os
 import platform
+import threading
 import time
 import uuid
 from pathlib import Path
 
 LEDGER = "ledger.jsonl"
+#: seconds between a working call's ``alive`` records
+HEARTBEAT = 300.0
 
 
 def now() -> str:
@@ -63,8 +67,18 @@ class Call:
     entry, :meth:`stage` per completed stage, ``end`` on exit (status done / interrupted /
     failed). Enter it only once the call holds the folder's lock."""
 
-    def __init__(self, out: Path, command: str, selected: list[str], device: str):
-        self.out, self.id = Path(out), new_call()
+    def __init__(
+        self,
+        out: Path,
+        command: str,
+        selected: list[str],
+        device: str,
+        heartbeat: float = HEARTBEAT,
+    ):
+        self.out, self.id, self.heartbeat = Path(out), new_call(), heartbeat
+        self._lock = threading.Lock()  # the heartbeat's thread appends too
+        self._stop = threading.Event()
+        self._beat: threading.Thread | None = None
         self.ran: list[str] = []
         self.start = {
             "event": "start",
@@ -77,15 +91,28 @@ class Call:
 
     def __enter__(self) -> Call:
         self.t0 = time.perf_counter()
-        append(self.out, {**self.start, "time": now()})
+        self._append({**self.start, "time": now()})
+        self._beat = threading.Thread(target=self._alive, name="ledger-heartbeat", daemon=True)
+        self._beat.start()
         return self
+
+    def _append(self, record: dict) -> None:
+        with self._lock:
+            append(self.out, record)
+
+    def _alive(self) -> None:
+        while not self._stop.wait(self.heartbeat):
+            try:
+                self._append({"event": "alive", "call": self.id, "time": now()})
+            except OSError:  # a full disk: the call itself will say so; the beat stops
+                return
 
     def stage(self, name: str, seconds: float, dir_name: str | None = None) -> None:
         self.ran.append(name)
         rec = {"event": "stage", "call": self.id, "stage": name, "seconds": float(seconds)}
         if dir_name is not None:  # the stage's directory: its settings' hash, not only its name
             rec["dir"] = dir_name
-        append(self.out, {**rec, "time": now()})
+        self._append({**rec, "time": now()})
 
     def __exit__(self, kind, value, tb) -> None:
         # a run's own stop (``running.loop.Interrupted``) is a KeyboardInterrupt too: interrupted
@@ -95,8 +122,10 @@ class Call:
             status = "interrupted"
         else:
             status = "failed"
-        append(
-            self.out,
+        self._stop.set()
+        if self._beat is not None:
+            self._beat.join()
+        self._append(
             {
                 "event": "end",
                 "call": self.id,
