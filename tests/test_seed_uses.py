@@ -45,3 +45,21 @@ def test_departures_name_what_differs_from_the_papers_text():
     reacher = departures("reacher", {"critic_input": "full"}, 9.81)
     assert not any("gravity" in x or "goal-relative" in x for x in reacher)
     assert any("DDPG with actor_lr 0.001" in x for x in reacher)  # the search's pick (TUNED)
+    assert "`warp-critic budget` sweeps" in text  # no budget stage in the report: the command
+    own = " ".join(departures("kuka", {"inner_steps": 3}, 0.0, own_budgets=True))
+    assert (
+        "'Each method at its own meta-test budget' chooses" in own
+        and "warp-critic budget" not in own
+    )
+
+
+def test_departures_point_at_the_budget_section_when_its_stages_are_in_the_report():
+    from warp_critic.reproduce.report.departures import departures_of
+
+    class _Rec:
+        data: dict = {"settings": {"values": {"inner_steps": 3}}}
+
+    with_budget = departures_of("kuka", {"metatrain-kuka-ours": _Rec(), "budget-kuka-ours": _Rec()})
+    without = departures_of("kuka", {"metatrain-kuka-ours": _Rec()})
+    assert any("own meta-test budget' chooses" in x for x in with_budget)
+    assert not any("own meta-test budget' chooses" in x for x in without)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from warp_critic.reproduce.experiments.naming import stage_name
+from warp_critic.reproduce.experiments.naming import BUDGET, stage_name
 from warp_critic.reproduce.experiments.settings import METHOD_LABELS, TUNED, TUNED_FROM
 
 
@@ -21,9 +21,12 @@ def scene_gravity(scene: str) -> float | None:
     return None if g is None else float(g)
 
 
-def departures(scene: str, values: dict, gravity: float | None) -> list[str]:
+def departures(
+    scene: str, values: dict, gravity: float | None, own_budgets: bool = False
+) -> list[str]:
     """What differs from the paper's text in ``scene``'s runs: ``values`` are ours' meta-training
-    settings (the stage record's), ``gravity`` the scene's."""
+    settings (the stage record's), ``gravity`` the scene's; ``own_budgets``: the report also
+    holds each method at its own meta-test budget (the budget stages ran)."""
     out = []
     inner = int(values.get("inner_steps", 1))
     if inner != 1:
@@ -32,10 +35,15 @@ def departures(scene: str, values: dict, gravity: float | None) -> list[str]:
             "L_critic's gradient before the task loss)"
         )
     per_policy = inner * int(values.get("policy_lifetime", 1))
+    where = (
+        "the section 'Each method at its own meta-test budget' chooses every method's steps (1-300) "
+        "and step size on its training goals and reports it there"
+        if own_budgets
+        else "`warp-critic budget` sweeps 1-300 steps per method, docs/paper/budget"
+    )
     out.append(
         f"meta-test: every method's fresh policies take {per_policy} critic-gradient step(s) "
-        "(Algorithm 3 trains 'while not done'; `warp-critic budget` sweeps 1-300 steps per method, "
-        "docs/paper/budget)"
+        f"(Algorithm 3 trains 'while not done'; {where})"
     )
     out.append(
         "one critic update per iteration on the mean task loss over all training goals at once "
@@ -75,7 +83,8 @@ def departures_of(scene: str, recs: Mapping) -> list[str]:
     name), read from ours' meta-training record and the scene."""
     rec = recs.get(stage_name("metatrain", scene, "ours"))
     values = rec.data.get("settings", {}).get("values", {}) if rec is not None else {}
-    return departures(scene, values, scene_gravity(scene))
+    own = stage_name(BUDGET, scene, "ours") in recs  # ours' choice: the budget section is there
+    return departures(scene, values, scene_gravity(scene), own_budgets=own)
 
 
 def departures_line(scene: str, items: list[str]) -> str:
