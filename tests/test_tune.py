@@ -350,3 +350,37 @@ def test_jobs_train_candidates_in_parallel_to_the_same_rows(tool, tmp_path):
         got = json.loads(out.read_text())["rows"]
         rows[jobs] = {(json.dumps(r["change"]), r["length"]): r["per_seed"] for r in got}
     assert len(rows[1]) >= 7 and rows[2] == rows[1]
+
+
+def test_a_resumed_candidates_seconds_count_every_call_that_trained_it(tool, tmp_path, monkeypatch):
+    """A candidate resumed over several calls states its whole training time (its seeds' metrics:
+    the batch's seconds per iteration), not only the last call's."""
+    import argparse
+    from types import SimpleNamespace
+
+    import warp_critic.methods as methods
+
+    seeds = [
+        SimpleNamespace(
+            run_dir=tmp_path / f"seed{s}", metrics=[{"seconds": 500.0}, {"seconds": 700.0}]
+        )
+        for s in (100, 101)
+    ]
+    real = methods.method
+
+    class Resumed:  # the method, but its training returns runs resumed over calls
+        def __init__(self, name):
+            self.m = real(name)
+
+        def __getattr__(self, key):
+            return getattr(self.m, key)
+
+        def train(self, cfg, **kw):
+            return SimpleNamespace(seeds=seeds)
+
+    monkeypatch.setattr(methods, "method", Resumed)
+    args = argparse.Namespace(
+        train_steps=tool.TRAIN_STEPS, tiny=True, seeds=[100, 101], device="cpu"
+    )
+    dirs, seconds = tool.train("reacher", "ours", {}, args, tmp_path / "run")
+    assert dirs == [str(s.run_dir) for s in seeds] and seconds == 1200.0
