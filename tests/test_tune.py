@@ -275,7 +275,9 @@ def test_a_confirmation_trains_for_the_methods_whole_reproduce_run(
     def fake_train(cfg, progress, record):
         seen.append(cfg)
         return SimpleNamespace(
-            seeds=[SimpleNamespace(run_dir=str(tmp_path / f"seed{s}")) for s in cfg.seeds]
+            seeds=[
+                SimpleNamespace(run_dir=str(tmp_path / f"seed{s}"), metrics=[]) for s in cfg.seeds
+            ]
         )
 
     args = SimpleNamespace(train_steps=tool.TRAIN_STEPS, tiny=False, seeds=[100, 101], device="cpu")
