@@ -791,6 +791,27 @@ def test_a_working_call_beats_so_a_killed_one_still_counts_its_time(tmp_path):
     assert s["wall"] == 9000 and s["unfinished"] == 1
 
 
+def test_the_ledger_names_the_cpus_instruction_sets(monkeypatch, tmp_path):
+    """Two machines whose CPUs differ in AVX-512 give last-bit different numbers; the ledger says
+    which a call ran on (vendor, family, model and the instruction sets), read from /proc/cpuinfo."""
+    from pathlib import Path
+
+    from warp_critic.reproduce.engine import ledger
+
+    info = tmp_path / "cpuinfo"
+    block = "vendor_id\t: GenuineIntel\ncpu family\t: 6\nmodel\t\t: 143\nmodel name\t: Intel(R) Xeon(R) Processor\nflags\t\t: fpu avx avx2 fma avx512f amx_tile\n"
+    info.write_text(block + "\n" + block.replace("GenuineIntel", "Other"))
+    real = Path.read_text
+    monkeypatch.setattr(
+        Path,
+        "read_text",
+        lambda p, *a, **k: real(info) if str(p) == "/proc/cpuinfo" else real(p, *a, **k),
+    )
+    m = ledger.machine("cpu")
+    assert m["cpu"] == "Intel(R) Xeon(R) Processor" and m["cpu_id"] == "GenuineIntel 6 143"
+    assert m["simd"] == ["avx", "avx2", "fma", "avx512f", "amx_tile"]  # the first CPU's, in order
+
+
 def test_ledger_total_wall_time_counts_every_call():
     from warp_critic.reproduce.engine import ledger
 

@@ -39,11 +39,34 @@ def _cpu_model() -> str:
     return platform.processor() or "?"
 
 
+#: the instruction sets that decide which float kernels torch and its libraries pick: two machines
+#: that differ in them give numbers that differ in the last bits (a virtual machine's CPU name
+#: often does not tell them apart)
+SIMD_FLAGS = ("avx", "avx2", "fma", "avx512f", "avx512_bf16", "avx_vnni", "amx_tile")
+
+
+def _cpu_identity() -> dict:
+    """The CPU's vendor, family and model numbers and its :data:`SIMD_FLAGS` (Linux; else empty)."""
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+    except OSError:
+        return {}
+    first = dict(
+        (k.strip(), v.strip())
+        for k, _, v in (line.partition(":") for line in text.split("\n\n")[0].splitlines())
+    )
+    flags = set(first.get("flags", "").split())
+    ident = " ".join(first.get(k, "?") for k in ("vendor_id", "cpu family", "model"))
+    return {"cpu_id": ident, "simd": [f for f in SIMD_FLAGS if f in flags]}
+
+
 def machine(device: str) -> dict:
-    """What the call ran on: the device, the CPU model and count, the system (no host name)."""
+    """What the call ran on: the device, the CPU model, identity (vendor, family, model, the
+    instruction sets that change float results) and count, the system (no host name)."""
     return {
         "device": device,
         "cpu": _cpu_model(),
+        **_cpu_identity(),
         "cpus": os.cpu_count(),
         "system": f"{platform.system()} {platform.release()}",
         "python": platform.python_version(),
