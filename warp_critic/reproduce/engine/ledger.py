@@ -29,35 +29,29 @@ def now() -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
 
 
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "?"
-
-
 #: the instruction sets that decide which float kernels torch and its libraries pick: two machines
 #: that differ in them give numbers that differ in the last bits (a virtual machine's CPU name
 #: often does not tell them apart)
 SIMD_FLAGS = ("avx", "avx2", "fma", "avx512f", "avx512_bf16", "avx_vnni", "amx_tile")
 
 
-def _cpu_identity() -> dict:
-    """The CPU's vendor, family and model numbers and its :data:`SIMD_FLAGS` (Linux; else empty)."""
+def _cpu() -> dict:
+    """The first CPU's model name, its vendor, family and model numbers and its
+    :data:`SIMD_FLAGS`, from ``/proc/cpuinfo`` (elsewhere the model name alone)."""
     try:
         text = Path("/proc/cpuinfo").read_text()
     except OSError:
-        return {}
+        return {"cpu": platform.processor() or "?"}
     first = dict(
         (k.strip(), v.strip())
         for k, _, v in (line.partition(":") for line in text.split("\n\n")[0].splitlines())
     )
     flags = set(first.get("flags", "").split())
-    ident = " ".join(first.get(k, "?") for k in ("vendor_id", "cpu family", "model"))
-    return {"cpu_id": ident, "simd": [f for f in SIMD_FLAGS if f in flags]}
+    return {
+        "cpu": first.get("model name") or platform.processor() or "?",
+        "cpu_id": " ".join(first.get(k, "?") for k in ("vendor_id", "cpu family", "model")),
+        "simd": [f for f in SIMD_FLAGS if f in flags],
+    }
 
 
 def machine(device: str) -> dict:
@@ -65,8 +59,7 @@ def machine(device: str) -> dict:
     instruction sets that change float results) and count, the system (no host name)."""
     return {
         "device": device,
-        "cpu": _cpu_model(),
-        **_cpu_identity(),
+        **_cpu(),
         "cpus": os.cpu_count(),
         "system": f"{platform.system()} {platform.release()}",
         "python": platform.python_version(),

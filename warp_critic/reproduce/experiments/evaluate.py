@@ -217,13 +217,13 @@ def evaluate(
     diverged = 0
     bar = progress_bar(len(groups), enabled=progress, desc="meta-test batches")
     try:
+        kept = {"steps": steps, "inits": inits, "seed": int(seed), "horizon": horizon}
+        kept.update(at=sorted(int(n) for n in at), device=device)  # what a batch's files depend on
         for b, group in enumerate(groups):
             batch = [jobs[i] for i in group]
             saved = None
             if resume is not None:
-                settings = {"steps": steps, "inits": inits, "seed": int(seed), "horizon": horizon}
-                settings.update(at=sorted(int(n) for n in at), device=device)
-                saved = BatchProgress(resume, b, fingerprint(batch, runs, settings))
+                saved = BatchProgress(resume, b, fingerprint(batch, runs, kept))
             done = saved.finished() if saved is not None else None
             if done is not None:
                 (err0, err, bad, err_at), alphas = done
