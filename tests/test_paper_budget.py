@@ -12,6 +12,7 @@ import pytest
 
 from warp_critic.reproduce.engine.carry import complete_stages
 from warp_critic.reproduce.experiments.records import stage_problem
+from warp_critic.running.rundir import OMITTED
 
 PAPER = Path(__file__).resolve().parents[1] / "docs" / "paper"
 # at most 45 MB in the tree (1 MB = 10**6 bytes): issue 44's 40 MB, plus the held-out seeds'
@@ -53,6 +54,8 @@ def test_every_stage_the_report_read_is_carried_complete():
         ):
             seeds = sorted((d / "run").glob("seed*/checkpoint.pt"))
             assert seeds, f"{d.name}: its critics are gone (the tables/maps stages read them)"
+            for run in sorted((d / "run").glob("seed*")):  # each: its critic, or why not
+                assert (run / "checkpoint.pt").is_file() or (run / OMITTED).is_file(), run
         if d.name.startswith("beyond-metatrain-"):
             kept = sorted(p.name for p in d.iterdir())
             assert kept == ["stage.json.xz"], f"{d.name}: a recipe keeps its record alone: {kept}"

@@ -547,7 +547,28 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
     for name in recipes:
         kept = [p.name for p in (dest / "stages" / name).iterdir()]
         assert kept in (["stage.json.xz"], ["stage.json"]), (name, kept)
-    assert list((dest / "stages" / nominal / "run").glob("seed*/checkpoint.pt"))
+    # of a paper meta-training, the first seed's critic is published; a note stands in for the
+    # other seeds' (their records and configs stay), and reading one says why on one line
+    from warp_critic.core.errors import UserError
+    from warp_critic.running.rundir import OMITTED, load_checkpoint_file
+
+    runs = dest / "stages" / nominal / "run"
+    assert [p.parent.name for p in runs.glob("seed*/checkpoint.pt")] == ["seed0"]
+    assert sorted(p.parent.name for p in runs.glob(f"seed*/{OMITTED}")) == ["seed1"]
+    assert (runs / "seed1" / "config.json.xz").is_file()
+    with pytest.raises(UserError, match="not in this archive .a published report keeps"):
+        load_checkpoint_file(runs / "seed1" / "checkpoint.pt")
+    assert "run(s) published without their checkpoint" in printed  # the first call omitted them
+    # the report regenerates from the published archive alone: every stage is complete there
+    again = tmp_path / "again"
+    assert carry.main(["restore", str(dest / "stages"), str(again)]) == 0
+    assert reproduce_main(["--quick", "--out", str(again), "--device", "cpu"]) == 0
+    assert "0 stage(s) to run" in capsys.readouterr().err
+    volatile = {"stages", "command", "call", "ledger", "sections"}  # the call, not the numbers
+    first, second = (json.loads((o / "results.json").read_text()) for o in (out, again))
+    assert {k: v for k, v in second.items() if k not in volatile} == {
+        k: v for k, v in first.items() if k not in volatile
+    }
 
     empty = tmp_path / "empty"
     empty.mkdir()
@@ -562,6 +583,61 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
         assert e.value.code == 2
         err = capsys.readouterr().err.strip()
         assert words in err and len(err.splitlines()) == 1
+
+
+@pytest.mark.slow
+def test_every_table_cell_is_pooled_from_its_raw_errors_read_as_float32(quick):
+    """``errors.json`` holds each raw error as the shortest decimal of its float32 (half the size
+    compressed): read as float32, the raw errors give every cell of the tables stage exactly."""
+    from warp_critic.reproduce.experiments.evaluate import pool_errors
+
+    out, rc, _ = quick
+    assert rc == 0
+    (folder,) = [
+        p.parent
+        for p in out.glob("tables-*/stage.json")
+        if json.loads(p.read_text())["stage"] == "tables"
+    ]
+    data = json.loads((folder / "stage.json").read_text())
+    raw = json.loads((folder / "errors.json").read_text())["jobs"]
+    first = raw[0]["final_sq_error"][0][0]
+    assert len(repr(first)) <= 12, first  # not float64's 17 digits
+    dof = data["result"]["dof"]
+    for cell in data["result"]["cells"]:
+        errs = [
+            np.asarray(j["final_sq_error"], dtype=np.float32).astype(np.float64)
+            for j in raw
+            if (j["table"], j["column"], j["method"])
+            == (cell["table"], cell["column"], cell["method"])
+        ]
+        again = pool_errors(errs, dof)
+        assert again["mse_mean"] == cell["mse_mean"] and again["n"] == cell["n"], cell["table"]
+
+
+def test_an_archive_names_a_shipped_scene_from_any_checkout_as_scenes_name():
+    """A run trained from another checkout (``/elsewhere/scenes/kuka.usda``) is archived as
+    ``scenes/kuka.usda``, as one of this install's is: an archive names no machine's folders. A
+    file that is no shipped scene keeps its path (its run reads it there or fails on one line)."""
+    from warp_critic.physics.scene import scenes_dir
+    from warp_critic.reproduce.engine.carry import _portable
+
+    here = str(scenes_dir().resolve() / "reacher.usda")
+    record = {
+        "scene": "/elsewhere/checkout/scenes/kuka.usda",
+        "scene_file": here,
+        "scene_path": "/elsewhere/checkout/scenes/mine.usda",
+        "seed": 3,
+    }
+    assert _portable(record) == {
+        "scene": "scenes/kuka.usda",
+        "scene_file": "scenes/reacher.usda",
+        "scene_path": "/elsewhere/checkout/scenes/mine.usda",
+        "seed": 3,
+    }
+    assert (
+        _portable({"scene": "/elsewhere/robots/kuka.usda"})["scene"]
+        == "/elsewhere/robots/kuka.usda"
+    )
 
 
 @pytest.mark.slow

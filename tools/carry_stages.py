@@ -52,11 +52,19 @@ def main(argv: list[str] | None = None) -> int:
             print(carry.summary(Path(args.archive), CARRY.check))
             return 0
         if args.what == "publish":
-            names, pruned = carry.publish(Path(args.out), Path(args.dest), CARRY)
+            done = carry.publish(Path(args.out), Path(args.dest), CARRY)
             print(
-                f"{PROG}: the report written to {args.dest}, with the {len(names)} stage record(s) "
-                f"it read in {Path(args.dest) / carry.ARCHIVE}"
-                + "".join(f"\n  removed the record written beside the report: {n}" for n in pruned)
+                f"{PROG}: the report written to {args.dest}, with the {len(done.stages)} stage "
+                f"record(s) it read in {Path(args.dest) / carry.ARCHIVE}"
+                + (
+                    f"; {len(done.omitted)} run(s) published without their checkpoint (a note "
+                    "says why)"
+                    if done.omitted
+                    else ""
+                )
+                + "".join(
+                    f"\n  removed the record written beside the report: {n}" for n in done.pruned
+                )
             )
             return 0
         if args.what == "save":

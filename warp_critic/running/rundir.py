@@ -47,6 +47,9 @@ RUN_KIND = "warp-critic/run-v1"
 CHECKPOINT_KIND = "warp-critic/checkpoint-v1"
 RECORDING = "recording.rrd"
 SEGMENT = "recording.segment.rrd"
+#: the note that stands in for a checkpoint a published archive leaves out (one line of text: why,
+#: and how to get the run's weights back); :func:`load_checkpoint_file` reports it
+OMITTED = "checkpoint.omitted"
 
 
 class RunExistsError(UserError):
@@ -234,6 +237,10 @@ def load_checkpoint_file(path: str | Path, require: Iterable[str] = ()) -> dict:
     """Load a checkpoint without running code from it, or raise a one-line :class:`UserError`."""
     path = Path(path)
     if not path.is_file():
+        note = path.with_name(OMITTED)
+        if note.is_file():
+            why = " ".join(note.read_text(errors="replace").split())
+            raise UserError(f"{path}: not in this archive ({why})")
         raise UserError(f"{path}: no checkpoint")
     try:
         ckpt = torch.load(path, map_location="cpu", weights_only=True)

@@ -20,7 +20,9 @@ output folder on another machine, where ``reproduce`` then skips them and runs o
 * :func:`publish` copies a finished report (``REPORT.md``, ``results.json``, the ledger and the
   figures) into a folder to commit, such as ``docs/paper``, and saves the stages it read into that
   folder's ``stages/`` archive, so every number in the report traces to a record there. A recipe's
-  stage the rules name (:attr:`CarryRules.record_only`) is published as its record alone.
+  stage the rules name (:attr:`CarryRules.record_only`) is published as its record alone, and of
+  another meta-training only the checkpoints :attr:`CarryRules.published_checkpoint` names (a
+  note stands in for each other one: a published folder is part of every clone for ever).
 
 Each stage is copied into a temporary sibling directory and renamed into place, so an interrupted
 call leaves no half-copied stage behind.
@@ -59,6 +61,11 @@ class CarryRules:
     metrics_keys: tuple[str, ...]  # the columns of ``metrics.jsonl`` kept...
     metrics_row: str  # ...of the rows that hold this one
     record_only: Callable[[dict], bool]  # ``stage.json`` -> publish keeps only the record
+    #: ``stage.json``, a run directory relative to its stage (``run/seed3``) -> whether publish keeps
+    #: that run's checkpoint (of the slimmed group's stages it keeps whole)
+    published_checkpoint: Callable[[dict, str], bool]
+    #: the text of the note publish leaves where it drops a checkpoint (``running.rundir.OMITTED``)
+    omitted_note: str
 
 
 #: files never carried
@@ -88,16 +95,24 @@ SCENE_KEYS = ("scene", "scene_path", "scene_file")
 def _portable(record: dict) -> dict:
     """``record`` with a shipped scene's absolute path as ``scenes/NAME``: an archive names no
     machine's folders, and a run's scene is found by its content hash wherever it is
-    (:func:`~warp_critic.running.scenefile.find_run_scene`)."""
+    (:func:`~warp_critic.running.scenefile.find_run_scene`). A shipped scene is a file of this
+    install's ``scenes/`` folder, or an absolute ``.../scenes/NAME`` where NAME is one: the run may
+    have trained from another checkout than the one that carries it. (A file of another content by
+    that name is refused when the run is read: its content hash differs.)"""
     from warp_critic.physics.scene import scenes_dir
 
-    shipped = scenes_dir().resolve()
+    shipped_dir = scenes_dir().resolve()
+    shipped = (
+        {p.name for p in shipped_dir.iterdir() if p.is_file()} if shipped_dir.is_dir() else set()
+    )
     out = dict(record)
     for key in SCENE_KEYS:
         value = out.get(key)
         if isinstance(value, str) and Path(value).is_absolute():
-            path = Path(value).resolve()
-            if path.parent == shipped:
+            path = Path(value)
+            if path.resolve().parent == shipped_dir or (
+                path.parent.name == "scenes" and path.name in shipped
+            ):
                 out[key] = f"scenes/{path.name}"
     return out
 
@@ -267,18 +282,19 @@ def _published_record(d: Path) -> bool:
 ARCHIVE = "stages"
 
 
-def publish(out: Path, dest: Path, rules: CarryRules) -> tuple[list[str], list[str]]:
+def publish(out: Path, dest: Path, rules: CarryRules) -> Published:
     """Copy the report of ``out`` into ``dest``, for committing: ``REPORT.md``, ``results.json``,
     ``ledger.jsonl`` (where there is one) and ``figures/*.png``; and save each stage the report
     read (``results.json``'s ``stages``) into the archive ``dest/stages`` as :func:`save` does, so
     every number in the report traces to a record there (``tables-*/errors.json`` named in the
     report is ``dest/stages/tables-*/errors.json.xz``). A recipe's meta-training is archived as its
-    record alone (``rules.record_only``; also one an earlier call archived whole).
+    record alone (``rules.record_only``; also one an earlier call archived whole), and another
+    meta-training keeps the checkpoints ``rules.published_checkpoint`` names, each other one replaced
+    by a note that says why (its record and config stay: the report reads no checkpoint).
 
     ``dest``'s figures that this report did not draw are removed, and so are the stage records an
     earlier version of this function wrote beside the report; anything else in ``dest`` (a README,
-    the archive's other stages, search rows) is left alone. Returns (the stages the report read,
-    the stage directories removed)."""
+    the archive's other stages, search rows) is left alone."""
     from warp_critic.running.files import atomic_write_bytes
 
     out, dest = Path(out), Path(dest)
@@ -300,11 +316,16 @@ def publish(out: Path, dest: Path, rules: CarryRules) -> tuple[list[str], list[s
         (dest / ARCHIVE).mkdir(parents=True, exist_ok=True)
         archive = dest / ARCHIVE
         _carry(out, archive, rules, slim=True, pack=True, started=ARCHIVE_STARTED, only=set(stages))
+        omitted = []
         for name, data in complete_stages(archive, rules.check).items():  # now or earlier
-            if name in stages and rules.record_only(data):
+            if name not in stages or data["group"] != rules.slim_group:
+                continue
+            if rules.record_only(data):
                 for extra in sorted((archive / name).iterdir()):
                     if extra.name not in (STAGE_FILE, STAGE_FILE + PACKED):
                         shutil.rmtree(extra) if extra.is_dir() else extra.unlink()
+            else:
+                omitted += _omit_checkpoints(archive / name, data, rules)
         figures = sorted((out / "figures").glob("*.png"))
         (dest / "figures").mkdir(exist_ok=True)
         keep = {p.name for p in figures}
@@ -322,7 +343,34 @@ def publish(out: Path, dest: Path, rules: CarryRules) -> tuple[list[str], list[s
         atomic_write_bytes(dest / "REPORT.md", report)  # last: a report only beside its files
     except OSError as e:
         raise UserError(f"{dest}: cannot write ({e.strerror or e})") from None
-    return stages, pruned
+    return Published(stages, pruned, omitted)
+
+
+@dataclass(frozen=True)
+class Published:
+    """What :func:`publish` did."""
+
+    stages: list[str]  # the stages the report read, archived in ``dest/stages``
+    pruned: list[str]  # the stage records an earlier version wrote beside the report, removed
+    omitted: list[str]  # the run directories (``STAGE/run/seedN``) published without checkpoint
+
+
+def _omit_checkpoints(stage: Path, data: dict, rules: CarryRules) -> list[str]:
+    """Drop the checkpoints of ``stage`` that ``rules.published_checkpoint`` does not keep, each
+    replaced by the note :data:`~warp_critic.running.rundir.OMITTED` (written first: an interrupted
+    call never leaves a run with neither); the run directories, relative to the archive."""
+    from warp_critic.running.files import atomic_write_text
+    from warp_critic.running.rundir import OMITTED
+
+    dropped = []
+    for ckpt in sorted(stage.rglob("checkpoint.pt")):
+        run = ckpt.parent.relative_to(stage).as_posix()
+        if rules.published_checkpoint(data, run):
+            continue
+        atomic_write_text(ckpt.with_name(OMITTED), rules.omitted_note.strip() + "\n")
+        ckpt.unlink()
+        dropped.append(f"{stage.name}/{run}")
+    return dropped
 
 
 def summary(archive: Path, check: Check) -> str:
@@ -334,4 +382,4 @@ def summary(archive: Path, check: Check) -> str:
     return "\n".join(rows) if rows else f"{archive}: no complete stage"
 
 
-__all__ = ["CarryRules", "complete_stages", "save", "restore", "publish", "summary"]
+__all__ = ["CarryRules", "Published", "complete_stages", "save", "restore", "publish", "summary"]

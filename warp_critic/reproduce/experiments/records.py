@@ -53,6 +53,27 @@ def record_only(data: dict) -> bool:
     return data.get("group") == "metatrain" and is_beyond(str(data.get("stage", "")))
 
 
+def published_checkpoint(data: dict, run: str) -> bool:
+    """Whether publishing keeps the checkpoint of the run directory ``run`` (relative to its stage,
+    ``run/seed3``) of the meta-training whose ``stage.json`` is ``data``: its first seed's only.
+
+    A published folder (``docs/paper``) is part of every clone for ever, and a rerun's critics are
+    new blobs (float weights barely compress: about 0.7 MB a seed); one critic per meta-training
+    lets a reader meta-test it again beside the per-seed numbers every record holds."""
+    seeds = data.get("result", {}).get("seeds", {})
+    firsts = sorted(seeds, key=lambda s: int(s))[:1]
+    return bool(firsts) and run == str(seeds[firsts[0]].get("run_dir"))
+
+
+#: the note that stands in for a checkpoint publishing leaves out (``running.rundir.OMITTED``)
+OMITTED_NOTE = (
+    "a published report keeps the critic of each meta-training's first seed only, to keep the "
+    "clone small (docs/paper/README.md, 'What this folder keeps'); this seed's record and config "
+    "are here, and its numbers are in the stage record; train it again with warp-critic "
+    "reproduce on an output folder without this stage"
+)
+
+
 #: what carrying keeps of the paper's stages: a meta-training's runs lose the checkpoint entries
 #: only a resumed training reads (optimisers, ours' last policies, the baselines' target networks
 #: and replay buffers), and its ``metrics.jsonl`` keeps only Meta-Critic's auxiliary-loss columns
@@ -64,4 +85,6 @@ CARRY = CarryRules(
     metrics_keys=AUX_KEYS,
     metrics_row="aux_loss",
     record_only=record_only,
+    published_checkpoint=published_checkpoint,
+    omitted_note=OMITTED_NOTE,
 )
