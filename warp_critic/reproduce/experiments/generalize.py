@@ -26,13 +26,13 @@ limits, MSE per goal over ``seeds x inits``; (b) a 2-D grid over the masses (m1,
 ``reach_iterations`` > 0, each goal and each cell also gets the open-loop reachability floor (the best
 over the Adam learning rates ``reach_lrs``).
 
-Both write each job's raw final errors to ``errors.json`` (``raw_file``): the float32 values the
-meta-test computed, each in its shortest decimal form (:func:`float32_list`); read them as float32
-to get the exact values every cell was pooled from.
+Raw final errors go to ``errors.json`` as float32 values in shortest decimal form
+(:func:`~warp_critic.reproduce.experiments.records.float32_list`): read them as float32.
 """
 
 from __future__ import annotations
 
+import json
 from functools import partial
 from pathlib import Path
 
@@ -49,6 +49,7 @@ from warp_critic.reproduce.experiments.evaluate import (
     pool_errors,
     relpath,
 )
+from warp_critic.reproduce.experiments.records import float32_list
 from warp_critic.running.task_inputs import inside_limits
 
 
@@ -121,8 +122,6 @@ def run_tables_stage(
     of every row (default: ours' meta-test's, :func:`default_steps`); ``scales``: row -> its step
     size as a multiple of its run's own (default 1; a meta-test budget,
     :mod:`~warp_critic.reproduce.experiments.budget`)."""
-    import json
-
     first = str(runs["ours"][0])
     runs = {m: runs[m] for m in (only if only is not None else runs)}
     scene, train_goals, lo, hi = train_goals_and_limits(first)
@@ -205,19 +204,6 @@ def run_tables_stage(
         "raw_file": "errors.json",
         "dynamics_goals": dyn_goals.tolist(),
     }
-
-
-def float32_list(a: np.ndarray) -> list:
-    """``a`` as nested lists for JSON, each float32-representable value (every raw meta-test error:
-    the descent runs in float32) written as the shortest decimal that reads back as that float32
-    (``2.9574289`` rather than float64's ``2.9574289321899414``): about half the size compressed,
-    nothing lost. An array with other values is written as it is (float64)."""
-    a = np.asarray(a)
-    a32 = a.astype(np.float32)
-    if not np.array_equal(a32.astype(a.dtype), a, equal_nan=True):
-        return a.tolist()
-    flat = [float(str(x)) for x in a32.ravel()]  # numpy's str of a float32 is its shortest form
-    return flat if a.ndim == 1 else np.asarray(flat, dtype=object).reshape(a.shape).tolist()
 
 
 def _table_jobs(
@@ -307,8 +293,6 @@ def run_maps_stage(
     ``floors_from``: a complete maps stage directory next to ``d`` that computed the reachability
     floors of the same grids from the same nominal runs (:func:`~warp_critic.reproduce.experiments.units.paper_maps_floors`); its
     floors are taken instead of computed again (``reach_floor_from`` names it)."""
-    import json
-
     first = str(runs["ours"][0])
     runs = {m: runs[m] for m in (only if only is not None else runs)}
     scene, train_goals, lo, hi = train_goals_and_limits(first)
