@@ -430,7 +430,11 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
         assert ckpt["scene_file"].startswith("scenes/") and ckpt["config"]["scene"].startswith(
             "scenes/"
         ), c
-        assert shipped not in lzma.decompress((c.parent / "config.json.xz").read_bytes()).decode()
+        config = lzma.decompress((c.parent / "config.json.xz").read_bytes()).decode()
+        assert shipped not in config and str(out) not in config, c
+        # the run's own directory as it lies in the output: STAGE/run/seedN, no machine's folder
+        rel = c.parent.relative_to(archive).as_posix()
+        assert ckpt["config"]["out"] == rel and json.loads(config)["out"] == rel, c
     # JSON is stored compressed; a run's metrics only where the report reads them (Meta-Critic's
     # auxiliary-loss columns), never ours' or DDPG's (their curves are in stage.json)
     assert not list(archive.rglob("*.json")) and not list(archive.rglob("*.jsonl"))

@@ -92,13 +92,19 @@ def complete_stages(folder: Path, check: Check) -> dict[str, dict]:
 SCENE_KEYS = ("scene", "scene_path", "scene_file")
 
 
-def _portable(record: dict) -> dict:
-    """``record`` with a shipped scene's absolute path as ``scenes/NAME``: an archive names no
-    machine's folders, and a run's scene is found by its content hash wherever it is
-    (:func:`~warp_critic.running.scenefile.find_run_scene`). A shipped scene is a file of this
-    install's ``scenes/`` folder, or an absolute ``.../scenes/NAME`` where NAME is one: the run may
-    have trained from another checkout than the one that carries it. (A file of another content by
-    that name is refused when the run is read: its content hash differs.)"""
+#: the entries of a run's config that name its own run directory (written as the user gave it)
+OUT_KEYS = ("out",)
+
+
+def _portable(record: dict, base: Path | None = None) -> dict:
+    """``record`` as an archive keeps it, naming no machine's folders: a shipped scene's absolute
+    path as ``scenes/NAME`` (a run's scene is found by its content hash wherever it is,
+    :func:`~warp_critic.running.scenefile.find_run_scene`), and its run directory (``out``), where
+    it is an absolute path inside ``base`` (the reproduce output carried), relative to ``base``
+    (``STAGE/run/seed0``; a run is opened by where it lies, never by this entry). A shipped scene
+    is a file of this install's ``scenes/`` folder, or an absolute ``.../scenes/NAME`` where NAME
+    is one: the run may have trained from another checkout than the one that carries it. (A file
+    of another content by that name is refused when the run is read: its content hash differs.)"""
     from warp_critic.physics.scene import scenes_dir
 
     shipped_dir = scenes_dir().resolve()
@@ -114,27 +120,34 @@ def _portable(record: dict) -> dict:
                 path.parent.name == "scenes" and path.name in shipped
             ):
                 out[key] = f"scenes/{path.name}"
+    for key in OUT_KEYS if base is not None else ():
+        value = out.get(key)
+        if isinstance(value, str) and Path(value).is_absolute():
+            try:
+                out[key] = Path(value).resolve().relative_to(base.resolve()).as_posix()
+            except ValueError:
+                pass  # outside the output carried: not this archive's to rename
     return out
 
 
-def _slim_checkpoint(src: Path, dst: Path, training_only: tuple[str, ...]) -> None:
+def _slim_checkpoint(src: Path, dst: Path, training_only: tuple[str, ...], base: Path) -> None:
     from warp_critic.running.files import atomic_torch_save
     from warp_critic.running.rundir import load_checkpoint_file
 
     ckpt = load_checkpoint_file(src)
     slim = _portable({k: v for k, v in ckpt.items() if k not in training_only})
     if isinstance(slim.get("config"), dict):
-        slim["config"] = _portable(slim["config"])
+        slim["config"] = _portable(slim["config"], base)
     atomic_torch_save(slim, dst)
 
 
-def _portable_config(src: Path) -> bytes:
+def _portable_config(src: Path, base: Path) -> bytes:
     """A run's ``config.json`` with a shipped scene named ``scenes/NAME``; another file as it is."""
     try:
         config = json.loads(src.read_text())
     except (ValueError, UnicodeDecodeError):
         return src.read_bytes()  # not a run's config: carried as it is
-    text = json.dumps(_portable(config) if isinstance(config, dict) else config, indent=2)
+    text = json.dumps(_portable(config, base) if isinstance(config, dict) else config, indent=2)
     return (text + "\n").encode()
 
 
@@ -177,10 +190,10 @@ def _copy_stage(src: Path, dst_parent: Path, slim: CarryRules | None, pack: bool
             target = tmp / rel
             target.parent.mkdir(parents=True, exist_ok=True)
             if slim and path.name == "checkpoint.pt":
-                _slim_checkpoint(path, target, slim.training_only)
+                _slim_checkpoint(path, target, slim.training_only, src.parent)
                 continue
             if slim and path.name == "config.json":
-                data = _portable_config(path)
+                data = _portable_config(path, src.parent)
             elif slim and path.name == METRICS:
                 thin = thin_metrics(path.read_text(), slim)
                 if thin is None:
