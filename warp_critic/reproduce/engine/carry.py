@@ -120,11 +120,12 @@ def _portable(record: dict, base: Path | None = None) -> dict:
                 path.parent.name == "scenes" and path.name in shipped
             ):
                 out[key] = f"scenes/{path.name}"
-    for key in OUT_KEYS if base is not None else ():
+    root = base.resolve() if base is not None else None
+    for key in OUT_KEYS if root is not None else ():
         value = out.get(key)
-        if isinstance(value, str) and Path(value).is_absolute():
+        if root is not None and isinstance(value, str) and Path(value).is_absolute():
             try:
-                out[key] = Path(value).resolve().relative_to(base.resolve()).as_posix()
+                out[key] = Path(value).resolve().relative_to(root).as_posix()
             except ValueError:
                 pass  # outside the output carried: not this archive's to rename
     return out
