@@ -120,10 +120,12 @@ def _portable(record: dict, base: Path | None = None) -> dict:
                 path.parent.name == "scenes" and path.name in shipped
             ):
                 out[key] = f"scenes/{path.name}"
-    root = base.resolve() if base is not None else None
-    for key in OUT_KEYS if root is not None else ():
+    if base is None:
+        return out
+    root = base.resolve()
+    for key in OUT_KEYS:
         value = out.get(key)
-        if root is not None and isinstance(value, str) and Path(value).is_absolute():
+        if isinstance(value, str) and Path(value).is_absolute():
             try:
                 out[key] = Path(value).resolve().relative_to(root).as_posix()
             except ValueError:
