@@ -518,6 +518,10 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
     }
     assert {p.name for p in dest.iterdir() if p.is_dir()} == {"figures", "stages"}
     assert (dest / "README.md").read_text() == "kept"
+    # the published ledger: the same calls, the output folder by its name, not this machine's path
+    ledger = (dest / "ledger.jsonl").read_text()
+    assert str(out) not in ledger and f"--out {out.name} " in ledger
+    assert len(ledger.splitlines()) == len((out / "ledger.jsonl").read_text().splitlines())
     assert (dest / "stages" / "toy-0000000000" / "stage.json").read_text() == "{}"
     for name in read:
         assert archived[name] == json.loads((out / name / "stage.json").read_text())
@@ -616,6 +620,23 @@ def test_every_table_cell_is_pooled_from_its_raw_errors_read_as_float32(quick):
         ]
         again = pool_errors(errs, dof)
         assert again["mse_mean"] == cell["mse_mean"] and again["n"] == cell["n"], cell["table"]
+
+
+def test_a_published_ledger_names_the_output_folder_as_the_report_did(tmp_path):
+    """Each call that gave the output folder's absolute path names it as shown; a call on another
+    folder, a record without a command and a torn last line are kept byte for byte."""
+    from warp_critic.reproduce.engine.publish import portable_ledger
+
+    out = tmp_path / "runs" / "paper"
+    out.mkdir(parents=True)
+    mine = {"call": "a", "command": f"warp-critic reproduce --out {out} --beyond", "event": "start"}
+    other = {"call": "b", "command": "warp-critic reproduce --out /elsewhere/x", "event": "start"}
+    beat = {"call": "a", "event": "alive", "time": "t"}
+    lines = [json.dumps(r, sort_keys=True) + "\n" for r in (mine, other, beat)] + ['{"torn']
+    text = portable_ledger("".join(lines), out, "runs/paper")
+    got = text.splitlines(keepends=True)
+    assert json.loads(got[0])["command"] == "warp-critic reproduce --out runs/paper --beyond"
+    assert got[1:] == lines[1:] and str(tmp_path) not in text
 
 
 def test_an_archive_names_a_shipped_scene_from_any_checkout_as_scenes_name():

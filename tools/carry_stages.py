@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> int:
     pb.add_argument("out", metavar="OUT", help="a reproduce output folder with its report")
     pb.add_argument("dest", metavar="DEST", help="the folder to commit (created if new)")
     args = p.parse_args(argv)
-    from warp_critic.reproduce.engine import carry
+    from warp_critic.reproduce.engine import carry, publish
     from warp_critic.reproduce.experiments.records import CARRY
 
     try:
@@ -52,10 +52,10 @@ def main(argv: list[str] | None = None) -> int:
             print(carry.summary(Path(args.archive), CARRY.check))
             return 0
         if args.what == "publish":
-            done = carry.publish(Path(args.out), Path(args.dest), CARRY)
+            done = publish.publish(Path(args.out), Path(args.dest), CARRY)
             print(
                 f"{PROG}: the report written to {args.dest}, with the {len(done.stages)} stage "
-                f"record(s) it read in {Path(args.dest) / carry.ARCHIVE}"
+                f"record(s) it read in {Path(args.dest) / publish.ARCHIVE}"
                 + (
                     f"; {len(done.omitted)} run(s) published without their checkpoint (a note "
                     "says why)"
