@@ -22,6 +22,8 @@ import re
 import sys
 from pathlib import Path
 
+from warp_critic.core.generated import check_or_write, replace_block
+
 PROG = "design_table"
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "warp_critic"
@@ -87,15 +89,6 @@ def table(package: Path = PACKAGE) -> str:
     return "\n".join(lines)
 
 
-def rewrite(text: str, new_table: str) -> str:
-    """``text`` (``docs/design.md``) with the table between the markers replaced."""
-    if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
-        raise ValueError(f"{DESIGN.name} needs one {BEGIN!r} line, then one {END!r} line")
-    head, rest = text.split(BEGIN)
-    _, tail = rest.split(END)
-    return f"{head}{BEGIN}\n{new_table}\n{END}{tail}"
-
-
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n\n")[0])
     what = p.add_mutually_exclusive_group()
@@ -108,19 +101,12 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     text = DESIGN.read_text(encoding="utf-8")
     try:
-        new = rewrite(text, current)
+        new = replace_block(text, BEGIN, END, current, DESIGN.name)
     except ValueError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
-    if args.check:
-        if new != text:
-            print(f"{PROG}: {DESIGN.name}'s module table is not current: run --write")
-            return 1
-        print(f"{PROG}: {DESIGN.name}'s module table is current ({len(modules())} modules)")
-        return 0
-    DESIGN.write_text(new, encoding="utf-8")
-    print(f"{PROG}: wrote {len(modules())} modules into {DESIGN.relative_to(ROOT)}")
-    return 0
+    what = f"the module table ({len(modules())} modules)"
+    return check_or_write(DESIGN, text, new, check=args.check, prog=PROG, what=what)
 
 
 if __name__ == "__main__":

@@ -19,6 +19,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from warp_critic.core.generated import replace_block
 from warp_critic.physics import schema
 from warp_critic.physics.scene_writer import Joint, Link, Robot, write_robot
 
@@ -269,11 +270,7 @@ README_BEGIN, README_END = "<!-- scene-schema:begin -->", "<!-- scene-schema:end
 
 def readme_with_table(text: str) -> str:
     """``text`` (the README) with the block between the markers replaced by the schema's table."""
-    head, begin, rest = text.partition(README_BEGIN)
-    _, end, tail = rest.partition(README_END)
-    if not begin or not end:
-        raise ValueError(f"the README has no {README_BEGIN} ... {README_END} block")
-    return f"{head}{README_BEGIN}\n{schema.markdown_table()}\n{README_END}{tail}"
+    return replace_block(text, README_BEGIN, README_END, schema.markdown_table(), "README.md")
 
 
 def main(argv: list[str]) -> int:

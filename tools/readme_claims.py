@@ -19,6 +19,8 @@ import re
 import sys
 from pathlib import Path
 
+from warp_critic.core.generated import check_or_write, replace_block
+
 PROG = "readme_claims"
 ROOT = Path(__file__).resolve().parents[1]
 BEGIN, END = "<!-- claims:begin -->", "<!-- claims:end -->"
@@ -223,15 +225,6 @@ def block(r: dict) -> str:
     return "\n".join(lines)
 
 
-def rewrite(readme: str, table: str) -> str:
-    """``readme`` with its claims block replaced by ``table``."""
-    if readme.count(BEGIN) != 1 or readme.count(END) != 1:
-        raise Missing(f"README.md: needs one {BEGIN} and one {END}")
-    head, rest = readme.split(BEGIN)
-    _, tail = rest.split(END)
-    return f"{head}{BEGIN}\n{table}\n{END}{tail}"
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n")[0])
     mode = ap.add_mutually_exclusive_group(required=True)
@@ -243,22 +236,12 @@ def main(argv: list[str] | None = None) -> int:
     try:
         r = json.loads(args.results.read_text())
         text = args.readme.read_text()
-        new = rewrite(text, block(r))
+        new = replace_block(text, BEGIN, END, block(r), str(args.readme))
     except (OSError, ValueError, KeyError, TypeError) as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
-    if args.check:
-        if new != text:
-            print(
-                f"{PROG}: {args.readme} claims block is not current: {PROG} --write",
-                file=sys.stderr,
-            )
-            return 1
-        print(f"{PROG}: {args.readme} claims block is current")
-        return 0
-    args.readme.write_text(new)
-    print(f"{PROG}: wrote {len(rows(r))} rows into {args.readme}")
-    return 0
+    what = f"the claims block ({len(rows(r))} rows)"
+    return check_or_write(args.readme, text, new, check=args.check, prog=PROG, what=what)
 
 
 if __name__ == "__main__":

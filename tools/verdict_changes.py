@@ -23,6 +23,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from warp_critic.core.generated import check_or_write, replace_block
+
 PROG = "verdict_changes"
 ROOT = Path(__file__).resolve().parents[1]
 BEGIN, END = "<!-- verdicts:begin -->", "<!-- verdicts:end -->"
@@ -144,15 +146,6 @@ def block(before: tuple[str, list[dict]], after: tuple[str, list[dict]]) -> str:
     return "\n".join(lines)
 
 
-def rewrite(text: str, body: str, where: str) -> str:
-    """``text`` with the block between the markers replaced by ``body``."""
-    if text.count(BEGIN) != 1 or text.count(END) != 1 or text.index(BEGIN) > text.index(END):
-        raise Bad(f"{where}: needs one {BEGIN} line and one {END} line after it")
-    head, rest = text.split(BEGIN)
-    _, tail = rest.split(END)
-    return f"{head}{BEGIN}\n{body}\n{END}{tail}"
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n")[0])
     ap.add_argument("before", metavar="BEFORE", help="results.json, or REV:PATH from git")
@@ -171,22 +164,12 @@ def main(argv: list[str] | None = None) -> int:
             text = target.read_text()
         except (OSError, UnicodeDecodeError) as e:
             raise Bad(f"{target}: cannot read ({getattr(e, 'strerror', None) or e})") from None
-        new = rewrite(text, body, str(target))
-    except Bad as e:
+        new = replace_block(text, BEGIN, END, body, str(target))
+    except ValueError as e:  # Bad, or a file without its block
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
-    if args.check is not None:
-        if new != text:
-            print(
-                f"{PROG}: {target}: its verdicts block is not current: {PROG} --write",
-                file=sys.stderr,
-            )
-            return 1
-        print(f"{PROG}: {target}: its verdicts block is current")
-        return 0
-    target.write_text(new)
-    print(f"{PROG}: wrote the verdicts of {args.before} and {args.after} into {target}")
-    return 0
+    what = f"the verdicts block of {args.before} and {args.after}"
+    return check_or_write(target, text, new, check=args.check is not None, prog=PROG, what=what)
 
 
 if __name__ == "__main__":
