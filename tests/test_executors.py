@@ -19,6 +19,7 @@ pytestmark = pytest.mark.xdist_group("test_executors")
 
 VOLATILE = (
     "seconds",
+    "seconds_each",
     "train_seconds",
     "wall",
     "finished",
@@ -29,17 +30,18 @@ VOLATILE = (
 )
 
 
+def numbers_of(x):
+    """``x`` without wall times and command lines (:data:`VOLATILE`), at every depth."""
+    if isinstance(x, dict):
+        return {k: numbers_of(v) for k, v in x.items() if k not in VOLATILE}
+    if isinstance(x, list):
+        return [numbers_of(v) for v in x]
+    return x
+
+
 def numbers(out: Path) -> dict:
     """``results.json`` without wall times and the command line: every number the report shows."""
-
-    def strip(x):
-        if isinstance(x, dict):
-            return {k: strip(v) for k, v in x.items() if k not in VOLATILE}
-        if isinstance(x, list):
-            return [strip(v) for v in x]
-        return x
-
-    return strip(json.loads((out / "results.json").read_text()))
+    return numbers_of(json.loads((out / "results.json").read_text()))
 
 
 @pytest.fixture(scope="module")
@@ -51,14 +53,17 @@ def in_process(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def on_ray(tmp_path_factory) -> tuple[Path, Path, subprocess.CompletedProcess]:
-    """A local 2-CPU Ray cluster started by reproduce itself; the first try of one meta-training unit
-    kills its worker process (SIGKILL), as a lost node or an OOM kill would."""
+    """A local 2-CPU Ray cluster started by reproduce itself, for the reacher's maps and the three
+    meta-trainings they read (a stage that waits for others); the first try of one meta-training
+    unit kills its worker process (SIGKILL), as a lost node or an OOM kill would."""
     pytest.importorskip("ray")
     tmp = tmp_path_factory.mktemp("ray")
     out, marker = tmp / "out", tmp / "killed"
     p = run_cli(
         "reproduce",
         "--quick",
+        "--only",
+        "maps",
         "--out",
         str(out),
         "--device",
@@ -75,10 +80,22 @@ def on_ray(tmp_path_factory) -> tuple[Path, Path, subprocess.CompletedProcess]:
 @pytest.mark.slow
 @pytest.mark.subprocess
 def test_ray_reproduce_gives_the_in_process_numbers(in_process, on_ray):
+    """Every stage Ray ran (the maps and the meta-trainings they read) holds the in-process
+    stage's numbers, and so does the report's maps section."""
     out, _, p = on_ray
     assert p.returncode == 0, p.stderr[-3000:]
     assert "submitted to Ray" in p.stderr
-    assert numbers(out) == numbers(in_process)
+    ran = sorted(d.name for d in out.iterdir() if (d / "stage.json").is_file())
+    assert [n.rsplit("-", 1)[0] for n in ran] == [
+        "maps",
+        "metatrain-reacher-ddpg",
+        "metatrain-reacher-meta-critic",
+        "metatrain-reacher-ours",
+    ]
+    for name in ran:
+        mine, ref = (json.loads((o / name / "stage.json").read_text()) for o in (out, in_process))
+        assert numbers_of(mine["result"]) == numbers_of(ref["result"]), name
+    assert numbers(out)["maps"] == numbers(in_process)["maps"]
     assert (out / "REPORT.md").read_text().count("|") > 50
 
 
