@@ -9,6 +9,9 @@ import pytest
 from conftest import ROOT
 from helpers import load_tool
 
+# one worker runs this module: the tiny search its tests read is made once
+pytestmark = pytest.mark.xdist_group("test_tune")
+
 METHODS = ("ours", "ddpg", "meta-critic", "td3")
 TUNING = ROOT / "docs" / "paper" / "tuning"
 
@@ -16,6 +19,22 @@ TUNING = ROOT / "docs" / "paper" / "tuning"
 @pytest.fixture(scope="module")
 def tool():
     return load_tool("tune", "bench")
+
+
+def _tiny_argv(tmp, jobs: int = 1) -> list[str]:
+    """A tiny search of ours on the reacher (7 candidates, 2 seeds, a few iterations each)."""
+    return ["--tiny", "--train-steps", "400", "--scenes", "reacher", "--methods", "ours",
+            "--inits", "1", "--jobs", str(jobs), "--out", str(tmp / "tune.json"),
+            "--runs", str(tmp / "runs")]  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def tiny_search(tool, tmp_path_factory):
+    """``(argv, out)`` of one complete tiny search, made once for the tests that read it."""
+    tmp = tmp_path_factory.mktemp("tiny-search")
+    argv = _tiny_argv(tmp)
+    assert tool.main(argv) == 0
+    return argv, tmp / "tune.json"
 
 
 @pytest.mark.parametrize("scene", ["reacher", "kuka"])
@@ -110,12 +129,9 @@ def test_a_complete_search_proposes_and_only_full_length_confirms(tool):
 
 @pytest.mark.slow
 def test_a_tiny_search_scores_every_candidate_and_resumes_without_retraining(
-    tool, tmp_path, capsys
+    tool, tiny_search, tmp_path, capsys
 ):
-    out = tmp_path / "tune.json"
-    argv = ["--tiny", "--train-steps", "400", "--scenes", "reacher", "--methods", "ours",
-            "--inits", "1", "--out", str(out), "--runs", str(tmp_path / "runs")]  # fmt: skip
-    assert tool.main(argv) == 0
+    argv, out = tiny_search
     rows = json.loads(out.read_text())["rows"]
     search = [r for r in rows if r["length"] == "truncated"]
     assert [r["change"] for r in search] == tool.candidates("reacher", "ours")
@@ -136,6 +152,7 @@ def test_a_tiny_search_scores_every_candidate_and_resumes_without_retraining(
     with pytest.raises(SystemExit) as e:  # another procedure's file is refused, not mixed in
         tool.main([*argv[:2], "800", *argv[3:]])
     assert e.value.code == 2
+    assert json.loads(out.read_text())["rows"] == rows
 
 
 @pytest.mark.parametrize(
@@ -175,18 +192,20 @@ def test_an_adoption_for_ours_reaches_reproduce_and_the_search_undoes_it(tool, m
 
 
 @pytest.mark.slow
-def test_a_candidate_stopped_before_its_first_checkpoint_starts_again(tool, tmp_path):
+def test_a_candidate_stopped_before_its_first_checkpoint_starts_again(tool, tiny_search, tmp_path):
     """A search killed mid-candidate leaves seed folders without a checkpoint: the next call
-    trains that candidate from the start instead of refusing the folder."""
-    argv = ["--tiny", "--train-steps", "400", "--scenes", "reacher", "--methods", "ours",
-            "--inits", "1", "--out", str(tmp_path / "tune.json"), "--runs", str(tmp_path / "runs")]  # fmt: skip
+    trains that candidate from the start instead of refusing the folder, to the row one
+    uninterrupted search gives (one candidate, ``--candidate``)."""
     for s in tool.SEEDS:
         seed = tmp_path / "runs" / "reacher-ours-own" / f"seed{s}"
         seed.mkdir(parents=True)
         (seed / "metrics.jsonl").write_text('{"iteration": 0}\n')  # a started run, no checkpoint
+    row = tmp_path / "row.json"
+    argv = [*_tiny_argv(tmp_path), "--candidate", '[{}, "truncated"]', "--row-out", str(row)]
     assert tool.main(argv) == 0
-    rows = json.loads((tmp_path / "tune.json").read_text())["rows"]
-    assert rows[0]["change"] == {} and rows[0]["score"] > 0
+    got = json.loads(row.read_text())
+    ref = json.loads(tiny_search[1].read_text())["rows"][0]
+    assert got["change"] == ref["change"] == {} and got["per_seed"] == ref["per_seed"]
 
 
 def _earlier_search_adoptions() -> dict:
@@ -339,16 +358,13 @@ def test_the_summary_says_what_the_rule_decided(tool):
 
 @pytest.mark.slow
 @pytest.mark.subprocess
-def test_jobs_train_candidates_in_parallel_to_the_same_rows(tool, tmp_path):
+def test_jobs_train_candidates_in_parallel_to_the_same_rows(tool, tiny_search, tmp_path):
     """``--jobs 2`` (worker processes) scores every candidate, confirmations included, exactly as
     one process does: each candidate is seeded on its own."""
     rows = {}
-    for jobs in (1, 2):
-        out = tmp_path / f"jobs{jobs}.json"
-        argv = ["--tiny", "--train-steps", "400", "--scenes", "reacher", "--methods", "ours",
-                "--inits", "1", "--jobs", str(jobs), "--out", str(out),
-                "--runs", str(tmp_path / f"runs{jobs}")]  # fmt: skip
-        assert tool.main(argv) == 0
+    for jobs, out in ((1, tiny_search[1]), (2, tmp_path / "tune.json")):
+        if jobs == 2:
+            assert tool.main(_tiny_argv(tmp_path, jobs=2)) == 0
         got = json.loads(out.read_text())["rows"]
         rows[jobs] = {(json.dumps(r["change"]), r["length"]): r["per_seed"] for r in got}
     assert len(rows[1]) >= 7 and rows[2] == rows[1]
