@@ -276,3 +276,17 @@ def test_the_budget_stages_run_through_the_cli_and_reach_the_report(tmp_path, ca
     assert (out / "figures" / "budget_kuka.png").is_file()
     assert cli_main([*argv, "--out", str(out)]) == 0
     assert "0 stage(s) to run" in capsys.readouterr().err
+
+
+def test_the_held_out_section_points_at_the_budget_section_only_when_it_is_there():
+    """The held-out claims give every method seed 1's steps; where they are, the report's own-budget
+    section gives each its own, else the section names how to get them (never a folder that a
+    republished report no longer holds)."""
+    from warp_critic.reproduce.report.heldout_section import heldout_render
+
+    view = {"equal_steps": [], "tables": None, "maps": None}
+    there = " ".join(heldout_render({**view, "own_budgets": True}))
+    absent = " ".join(heldout_render({**view, "own_budgets": False}))
+    assert "the section 'Each method at its own meta-test budget' gives each method" in there
+    assert "`warp-critic budget`, or `reproduce --beyond`" in absent
+    assert "docs/paper/budget" not in there + absent

@@ -45,7 +45,7 @@ def test_departures_name_what_differs_from_the_papers_text():
     reacher = departures("reacher", {"critic_input": "full"}, 9.81)
     assert not any("gravity" in x or "goal-relative" in x for x in reacher)
     assert any("DDPG with actor_lr 0.001" in x for x in reacher)  # the search's pick (TUNED)
-    assert "`warp-critic budget` sweeps" in text  # no budget stage in the report: the command
+    assert "`warp-critic budget` or `reproduce --beyond` chooses" in text  # no budget stage: how
     own = " ".join(departures("kuka", {"inner_steps": 3}, 0.0, own_budgets=True))
     assert (
         "'Each method at its own meta-test budget' chooses" in own

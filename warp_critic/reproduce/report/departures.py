@@ -39,7 +39,8 @@ def departures(
         "the section 'Each method at its own meta-test budget' chooses every method's steps (1-300) "
         "and step size on its training goals and reports it there"
         if own_budgets
-        else "`warp-critic budget` sweeps 1-300 steps per method, docs/paper/budget"
+        else "`warp-critic budget` or `reproduce --beyond` chooses each method's steps (1-300) "
+        "and step size on its training goals"
     )
     out.append(
         f"meta-test: every method's fresh policies take {per_policy} critic-gradient step(s) "

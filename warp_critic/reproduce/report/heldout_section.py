@@ -8,8 +8,8 @@ from __future__ import annotations
 from collections.abc import Mapping
 
 from warp_critic.reproduce.experiments.heldout import EQUAL_STEPS_ROW
-from warp_critic.reproduce.experiments.naming import stage_name
-from warp_critic.reproduce.experiments.settings import METHOD_LABELS, METHODS
+from warp_critic.reproduce.experiments.naming import BUDGET, stage_name
+from warp_critic.reproduce.experiments.settings import METHOD_LABELS, METHODS, SCENES
 from warp_critic.reproduce.report.heldout import (
     COLUMN,
     RESAMPLES,
@@ -51,7 +51,13 @@ def heldout_compute(inp: Inputs) -> dict:
     if not tables and not maps:
         return part(None)
     out: dict = {}
-    view: dict = {"equal_steps": equal_steps(inp.recs), "tables": None, "maps": None}
+    own = any(inp.recs.get(stage_name(BUDGET, s, "ours")) is not None for s in SCENES)
+    view: dict = {
+        "equal_steps": equal_steps(inp.recs),
+        "tables": None,
+        "maps": None,
+        "own_budgets": own,  # the report's own-budget section is there
+    }
     claims: list[dict] = []
     if tables:
         pooled = pool_tables(tables, inp.solved.get("kuka", {}))
@@ -82,8 +88,14 @@ def heldout_render(v: dict | None) -> list[str]:
         "number is the mean over the meta-training seeds x held-out goal seeds; in brackets its "
         f"95% crossed-bootstrap interval ({RESAMPLES} resamples of both kinds of seed; "
         "`warp_critic/reproduce/report/heldout.py`). Every method gets the same "
-        "critic-gradient steps as on seed 1 (the meta-test budget of each method is in "
-        "`docs/paper/budget/`).",
+        "critic-gradient steps as on seed 1 "
+        + (
+            "(the section 'Each method at its own meta-test budget' gives each method the steps "
+            "and step size chosen on its training goals)."
+            if v.get("own_budgets")
+            else "(each method's own meta-test budget: `warp-critic budget`, or `reproduce "
+            "--beyond`)."
+        ),
         "",
     ]
     if v["equal_steps"]:
