@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from helpers import load_tool
 
 from warp_critic.reproduce.engine.carry import complete_stages
 from warp_critic.reproduce.experiments.records import stage_problem
@@ -64,3 +65,37 @@ def test_every_stage_the_report_read_is_carried_complete():
 @pytest.mark.parametrize("name", ["REPORT.md", "results.json", "README.md"])
 def test_report_files_present(name):
     assert (PAPER / name).is_file()
+
+
+def test_the_readme_says_what_the_folder_holds_measured():
+    """docs/paper/README.md's contents table is the one ``tools/paper_contents.py`` measures."""
+    tool = load_tool("paper_contents")
+    assert tool.main(["--check", str(PAPER / "README.md")]) == 0
+
+
+def test_every_published_file_is_in_one_category_with_its_size(tmp_path, capsys):
+    """Critics, notes, records, the report and an unknown file each land in their row; the counts
+    and sizes are the files'; the kept seeds are named."""
+    tool = load_tool("paper_contents")
+    files = {
+        "stages/metatrain-a-0/run/seed0/checkpoint.pt": 2_000_000,
+        f"stages/metatrain-a-0/run/seed1/{OMITTED}": 10,
+        "stages/metatrain-a-0/stage.json.xz": 300_000,
+        "stages/maps-0/errors.json.xz": 200_000,
+        "REPORT.md": 50_000,
+        "README.md": 123,  # the page itself: not measured
+        "stray.bin": 7,
+    }
+    for name, size in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_bytes(b"x" * size)
+    rows = {(k.what if k else "other"): (n, b) for k, n, b in tool.measure(tmp_path)}
+    assert rows[tool.KINDS[0].what] == (1, 2_000_000)
+    assert rows[tool.KINDS[1].what] == (1, 10)
+    assert rows[tool.KINDS[2].what] == (2, 500_000)
+    assert rows["other"] == (1, 7) and sum(n for n, _ in rows.values()) == 6
+    text = tool.block(tmp_path)
+    assert text.startswith("2.6 MB in 6 files besides this page")
+    assert "1 of the 2 seeds' critics of 1 meta-trainings are kept (seed0)" in text
+    assert tool.main(["--folder", str(tmp_path / "none")]) == 2
+    assert "no such folder" in capsys.readouterr().err
