@@ -99,3 +99,9 @@ def test_every_published_file_is_in_one_category_with_its_size(tmp_path, capsys)
     assert "1 of the 2 seeds' critics of 1 meta-trainings are kept (seed0)" in text
     assert tool.main(["--folder", str(tmp_path / "none")]) == 2
     assert "no such folder" in capsys.readouterr().err
+
+
+def test_the_readme_lists_the_ledgers_calls_as_the_ledger_holds_them():
+    """docs/paper/README.md's calls table is the one ``tools/ledger_calls.py`` writes."""
+    tool = load_tool("ledger_calls")
+    assert tool.main([str(PAPER), "--check", str(PAPER / "README.md")]) == 0

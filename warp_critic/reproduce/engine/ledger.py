@@ -210,6 +210,42 @@ def summary(rows: list[dict], open_call: str | None = None, open_wall: float = 0
     }
 
 
+def calls(rows: list[dict]) -> list[dict]:
+    """One entry per call of the ledger ``rows``, in start order: ``{"call", "command", "cpu",
+    "start", "end", "wall_s", "status", "stages"}``. A call without an end (killed where it could
+    not write one) ends at its last record (a stage or its 5-minute heartbeat) and its status is
+    ``"killed"``; its wall time is counted to there, as :func:`summary` counts it (a call that
+    wrote its end: the wall time it measured). ``stages``: the stage directories it completed."""
+    out: dict[str, dict] = {}
+    for r in rows:
+        c = out.get(r.get("call", "?"))
+        if r.get("event") == "start":
+            out[r["call"]] = {
+                "call": r["call"],
+                "command": r.get("command", ""),
+                "cpu": (r.get("machine") or {}).get("cpu", ""),
+                "start": r["time"],
+                "end": r["time"],
+                "wall_s": 0.0,
+                "status": "killed",
+                "stages": [],
+            }
+            continue
+        if c is None:
+            continue  # a record of a call whose start is not in the ledger
+        c["end"] = r.get("time", c["end"])
+        if r.get("event") == "stage":
+            c["stages"].append(r.get("dir", r.get("stage", "?")))
+        elif r.get("event") == "end":
+            c["status"] = str(r.get("status", "?"))
+            if isinstance(r.get("wall_s"), (int, float)):
+                c["wall_s"] = float(r["wall_s"])  # measured by the call, finer than the stamps
+    for c in out.values():
+        if c["status"] == "killed" or not c["wall_s"]:
+            c["wall_s"] = max(_epoch(c["end"]) - _epoch(c["start"]), 0.0)
+    return sorted(out.values(), key=lambda c: c["start"])
+
+
 def stage_compute(rec) -> float:
     """A stage record's compute (s): its completing call's wall time, or the sum of its iteration
     times over all calls where that is more (a meta-training stage resumed over several calls

@@ -24,6 +24,15 @@ def dir_name(name: str, h: str) -> str:
     return f"{name}-{h}"
 
 
+def stage_of_dir(directory: str) -> str:
+    """The stage name of a :func:`dir_name` (``maps-heldout-1010-a0bbedb7fc`` -> ``maps-heldout-1010``);
+    a name without a hash as it is."""
+    name, _, h = directory.rpartition("-")
+    return (
+        name if name and len(h) == 10 and all(ch in "0123456789abcdef" for ch in h) else directory
+    )
+
+
 @dataclass(frozen=True)
 class Stage:
     """One stage (sub-stage) of a plan."""
