@@ -99,6 +99,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "HOST:PORT the head at that address (pip install -e '.[ray]'); results come back to --out",
     )
     A(
+        "--status",
+        action="store_true",
+        help="print where --out stands for this command (each stage complete, part way with its "
+        "iteration and time left, or not started) and exit: runs nothing, writes nothing, works "
+        "beside a running call",
+    )
+    A(
         "--set",
         dest="overrides",
         action="append",
@@ -176,6 +183,11 @@ def run_from_args(args: argparse.Namespace) -> int:
 
     rc = config_from_args(args)
     rc.validate()  # one-line UserError before any work
+    if getattr(args, "status", False):
+        from warp_critic.reproduce.status import status
+
+        print(status(rc))
+        return 0
     init()
     executor = make_executor(
         getattr(args, "jobs", None), getattr(args, "ray", None), resolve_device(rc.device)

@@ -1,0 +1,89 @@
+"""``warp-critic reproduce --status``: each stage of the command's plan complete, part way (a
+meta-training's iteration and time left, a meta-test's kept batches) or not started, read without
+running, locking or writing anything."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from warp_critic.cli.main import main
+
+QUICK = ["reproduce", "--quick", "--device", "cpu"]
+
+
+def _lines(capsys) -> list[str]:
+    return capsys.readouterr().out.strip().splitlines()
+
+
+@pytest.fixture(scope="module")
+def toy_done(tmp_path_factory):
+    """An output folder where only the toy ran."""
+    out = tmp_path_factory.mktemp("status") / "out"
+    assert main([*QUICK, "--only", "toy", "--out", str(out)]) == 0
+    return out
+
+
+def test_a_new_folder_is_all_not_started_and_is_not_created(tmp_path, capsys):
+    out = tmp_path / "new"
+    assert main([*QUICK, "--out", str(out), "--status"]) == 0
+    lines = _lines(capsys)
+    assert lines[0].startswith(f"reproduce: {out}: 0 of ") and "0 part way" in lines[0]
+    assert lines[1] == "no reproduce call is running on this folder now"
+    assert all(line.split()[0:2] == ["not", "started"] for line in lines[2:]) and len(lines) > 10
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_complete_part_way_and_not_started_stages_are_told_apart(toy_done, capsys):
+    out = toy_done
+    assert main([*QUICK, "--out", str(out), "--status"]) == 0
+    by_dir = {line.split()[-1] if "(" not in line else line.split(" (")[0].split()[-1]: line
+              for line in _lines(capsys)[2:]}  # fmt: skip
+    toy = next(d for d in by_dir if d.startswith("toy-"))
+    assert by_dir[toy].split()[0] == "complete" and " min)" in by_dir[toy]
+    # a meta-training stopped at iteration 30 of 200, 2 s per iteration: 170 x 2 s left
+    ours = next(d for d in by_dir if d.startswith("metatrain-reacher-ours-"))
+    run = out / ours / "run" / "seed0"
+    run.mkdir(parents=True)
+    (run / "config.json").write_text(json.dumps({"iterations": 200}))
+    rows = [{"iteration": i, "seconds": 2.0} for i in range(30)]
+    (run / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows) + '{"torn')
+    # a maps stage with two meta-test batches kept and one part way
+    maps = next(d for d in by_dir if d.startswith("maps-") and "heldout" not in d)
+    for name in ("batch-0.pt", "batch-1.pt", "batch-2-partial.pt"):
+        (out / maps / "progress").mkdir(parents=True, exist_ok=True)
+        (out / maps / "progress" / name).write_bytes(b"")
+    before = sorted(p.name for p in out.iterdir())
+    assert main([*QUICK, "--out", str(out), "--status"]) == 0
+    lines = _lines(capsys)
+    assert "1 of " in lines[0] and "2 part way" in lines[0]
+    assert "need about 0.1 h more" in lines[0]  # 340 s
+    (mt,) = [line for line in lines if ours in line]
+    assert mt.split()[:2] == ["part", "way"]
+    assert "(iteration 30 of 200, 2.00 s per iteration; about 0.1 h left)" in mt
+    (mp,) = [line for line in lines if maps in line]
+    assert "(2 meta-test batch(es) done, 1 part way)" in mp
+    assert sorted(p.name for p in out.iterdir()) == before  # nothing written
+
+
+@pytest.mark.slow
+def test_a_call_holding_the_folder_is_named(toy_done, capsys):
+    from warp_critic.running.locks import FolderLock
+
+    lock = FolderLock(toy_done, "reproduce output")
+    lock.acquire()
+    try:
+        assert main([*QUICK, "--out", str(toy_done), "--status"]) == 0
+    finally:
+        lock.release()
+    assert _lines(capsys)[1].startswith("a reproduce call is running on this folder now (process")
+
+
+def test_a_folder_that_is_no_reproduce_output_is_one_line_exit_2(tmp_path, capsys):
+    (tmp_path / "mine.txt").write_text("x")
+    assert main([*QUICK, "--out", str(tmp_path), "--status"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "not a reproduce output" in err[0] and str(tmp_path) in err[0]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.txt"]

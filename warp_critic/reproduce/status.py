@@ -1,0 +1,152 @@
+"""``reproduce --status``: where an output folder stands for one reproduce command, read from its
+stage folders without running anything, taking no lock and writing nothing.
+
+A paper-setting reproduction runs over many sittings (every stage resumes where it stopped). Before
+the next sitting one asks what is done, what is part way and how long the part-way meta-trainings
+have left; this answers beside a running call too. Each stage of the command's plan is
+
+* **complete**: its record is there (its time, the record's);
+* **part way**: its folder is there without a record: a meta-training's iteration (its first seed's
+  ``metrics.jsonl``; the seeds of a stage train as one batch) of the run's iterations, and the time
+  left at its mean seconds per iteration over the last :data:`RECENT` iterations; a meta-test stage's
+  batches kept in its ``progress/`` folder;
+* **not started**.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from warp_critic.reproduce.engine.stage import PROGRESS, dir_name
+
+__all__ = ["RECENT", "StageState", "render", "stage_states", "status"]
+
+#: the iterations a part-way meta-training's speed is read from
+RECENT = 50
+
+
+@dataclass(frozen=True)
+class StageState:
+    """One stage of a plan in an output folder."""
+
+    name: str
+    directory: str
+    state: str  # "complete", "part way" or "not started"
+    detail: str  # what is done, in words
+    seconds_left: float | None = None  # a part-way meta-training's estimate
+
+
+def _last_rows(path: Path, n: int) -> list[dict]:
+    """The last ``n`` readable rows of a JSON-lines file (a torn last line skipped)."""
+    rows = []
+    for line in path.read_text(encoding="utf-8", errors="replace").splitlines()[-(n + 1) :]:
+        try:
+            row = json.loads(line)
+        except ValueError:
+            continue
+        if isinstance(row, dict):
+            rows.append(row)
+    return rows[-n:]
+
+
+def _training(d: Path) -> tuple[str, float | None] | None:
+    """A part-way meta-training's progress (words, seconds left), or ``None`` when ``d`` holds no
+    run with metrics."""
+    seeds = sorted(d.glob("run/seed*/metrics.jsonl"))
+    if not seeds:
+        return None
+    metrics = seeds[0]
+    try:
+        rows = [r for r in _last_rows(metrics, RECENT) if "iteration" in r]
+        total = int(json.loads((metrics.parent / "config.json").read_text())["iterations"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if not rows:
+        return "started, no iteration finished", None
+    done = int(rows[-1]["iteration"]) + 1
+    times = [float(r["seconds"]) for r in rows if isinstance(r.get("seconds"), (int, float))]
+    if not times:
+        return f"iteration {done} of {total}", None
+    per = sum(times) / len(times)
+    left = max(total - done, 0) * per
+    return f"iteration {done} of {total}, {per:.2f} s per iteration", left
+
+
+def _state(out: Path, name: str, h: str, kind: str, check) -> StageState:
+    from warp_critic.reproduce.engine.stages import read_complete
+
+    d = out / dir_name(name, h)
+    data = read_complete(d, kind, check)
+    if (
+        data is not None
+    ):  # a meta-training resumed over calls: its iteration times, not the last call's
+        seeds = (data.get("result") or {}).get("seeds") if kind == "metatrain" else None
+        trained = [float(v.get("seconds", 0.0)) for v in (seeds or {}).values()]
+        took = max([float(data["seconds"]), *trained])
+        return StageState(name, d.name, "complete", f"{took / 60:.1f} min")
+    if not d.is_dir():
+        return StageState(name, d.name, "not started", "")
+    trained = _training(d) if kind == "metatrain" else None
+    if trained is not None:
+        return StageState(name, d.name, "part way", trained[0], trained[1])
+    kept = sorted((d / PROGRESS).glob("batch-*.pt"))
+    done = [p for p in kept if not p.stem.endswith("-partial")]
+    if kept:
+        partial = len(kept) - len(done)
+        return StageState(
+            name, d.name, "part way", f"{len(done)} meta-test batch(es) done, {partial} part way"
+        )
+    return StageState(name, d.name, "part way", "started (resumes from its start)")
+
+
+def stage_states(rc) -> list[StageState]:
+    """Each stage the reproduce command ``rc`` (a validated
+    :class:`~warp_critic.reproduce.experiments.plan.ReproduceConfig`) would run, in its order, as
+    its output folder holds it."""
+    from warp_critic.reproduce.experiments.plan import needed, plan
+    from warp_critic.reproduce.experiments.records import stage_problem
+
+    settings = rc.validate()
+    stages = plan(settings, rc.plans_beyond, rc.extra, rc.plans_budget)
+    names = [n for wave in needed(rc, stages) for n in wave]
+    out = Path(rc.out)
+    return [_state(out, n, stages[n].hash, stages[n].kind, stage_problem) for n in names]
+
+
+def render(states: list[StageState], out: Path, running: str | None) -> str:
+    """The status lines: a summary, then one line per stage."""
+    count = {s: sum(x.state == s for x in states) for s in ("complete", "part way", "not started")}
+    left = sum(x.seconds_left or 0.0 for x in states)
+    lines = [
+        f"reproduce: {out}: {count['complete']} of {len(states)} stages complete, "
+        f"{count['part way']} part way, {count['not started']} not started"
+        + (f"; the part-way meta-trainings need about {left / 3600:.1f} h more" if left else ""),
+        running or "no reproduce call is running on this folder now",
+    ]
+    for x in states:
+        eta = f"; about {x.seconds_left / 3600:.1f} h left" if x.seconds_left else ""
+        detail = f" ({x.detail}{eta})" if x.detail else ""
+        lines.append(f"  {x.state:<11}  {x.directory}{detail}")
+    return "\n".join(lines)
+
+
+def status(rc) -> str:
+    """:func:`render` of :func:`stage_states` for ``rc``'s output folder, naming a call that holds
+    it now. Raises a one-line ``UserError`` for a folder that is not a reproduce output."""
+    from warp_critic.core.errors import UserError
+    from warp_critic.reproduce.engine.stages import MARKER
+    from warp_critic.running.locks import holder
+
+    out = Path(rc.out)
+    if out.exists() and not (out / MARKER).is_file():
+        raise UserError(f"--out {out}: not a reproduce output (no {MARKER})")
+    who = holder(out) if out.is_dir() else None
+    running = None
+    if who is not None:
+        running = (
+            f"a reproduce call is running on this folder now (process {who.get('pid', '?')} on "
+            f"{who.get('host', '?')})"
+        )
+    return render(stage_states(rc), out, running)
