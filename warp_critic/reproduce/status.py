@@ -83,8 +83,8 @@ def _state(out: Path, name: str, h: str, kind: str, check) -> StageState:
         data is not None
     ):  # a meta-training resumed over calls: its iteration times, not the last call's
         seeds = (data.get("result") or {}).get("seeds") if kind == "metatrain" else None
-        trained = [float(v.get("seconds", 0.0)) for v in (seeds or {}).values()]
-        took = max([float(data["seconds"]), *trained])
+        per_seed = [float(v.get("seconds", 0.0)) for v in (seeds or {}).values()]
+        took = max([float(data["seconds"]), *per_seed])
         return StageState(name, d.name, "complete", f"{took / 60:.1f} min")
     if not d.is_dir():
         return StageState(name, d.name, "not started", "")
