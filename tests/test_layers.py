@@ -389,3 +389,22 @@ def test_no_test_module_imports_another():
             )
             found += [f"{path.name}: {n}" for n in names if n.split(".")[0].startswith("test_")]
     assert not found, found
+
+
+@pytest.mark.subprocess
+def test_the_command_line_parser_loads_no_simulator():
+    """``warp-critic --help`` and every command's flags need the method configs, never the
+    simulator: building the parser imports neither Newton nor Warp nor rerun (they take seconds;
+    a module that names the simulator only as a type imports it under ``TYPE_CHECKING``)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys\n"
+        "from warp_critic.cli.main import build_parser\n"
+        "build_parser()\n"
+        "print(sorted(m for m in ('newton', 'warp', 'rerun', 'pxr') if m in sys.modules))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert done.stdout.strip().splitlines()[-1] == "[]", done.stdout

@@ -9,6 +9,7 @@ a differentiable function of the critic's parameters (second order, through ``to
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import torch
 
@@ -17,7 +18,10 @@ from warp_critic.learning.losses import critic_loss, critic_loss_at
 from warp_critic.learning.networks import PolicyParams
 from warp_critic.learning.protocols import CriticFn, Policy, StepSize
 from warp_critic.learning.rollout import Trajectory, hold_diverged, rollout, settled_worlds
-from warp_critic.physics.simulator import Simulator
+
+if TYPE_CHECKING:  # a type only: the simulator module loads Newton (seconds), which the command
+    # line's method configs, importing this module, do not need
+    from warp_critic.physics.simulator import Simulator
 
 #: the most critic-gradient steps one fresh policy takes at meta-test (``--policy-steps``, or a
 #: run's inner steps x policy lifetime): on the reacher's default meta-test (50 worlds, horizon 50)

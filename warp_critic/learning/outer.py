@@ -4,6 +4,7 @@ through the differentiable Newton model and through the inner update into the cr
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 
@@ -12,7 +13,9 @@ from warp_critic.learning.losses import task_loss
 from warp_critic.learning.networks import PolicyParams
 from warp_critic.learning.protocols import CriticFn, Policy
 from warp_critic.learning.rollout import Trajectory, rollout, settled_worlds
-from warp_critic.physics.simulator import Simulator
+
+if TYPE_CHECKING:  # a type only: importing it loads Newton (seconds)
+    from warp_critic.physics.simulator import Simulator
 
 
 @dataclass

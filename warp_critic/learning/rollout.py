@@ -9,11 +9,15 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
 
 from warp_critic.core.errors import DivergenceError
-from warp_critic.physics.simulator import Simulator
+
+if TYPE_CHECKING:  # a type only: importing the simulator loads Newton (seconds), which a
+    # module that merely names a Trajectory (the command line's method configs) does not need
+    from warp_critic.physics.simulator import Simulator
 
 PolicyFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]  # (q, qd) -> tau, all (W, dof)
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import math
+from typing import TYPE_CHECKING
 
 import torch
 
@@ -14,7 +15,9 @@ from warp_critic.learning.losses import critic_loss, final_error
 from warp_critic.learning.networks import MLPPolicy, Normalizer
 from warp_critic.learning.rollout import rollout
 from warp_critic.methods.q_networks import NegQ
-from warp_critic.physics.simulator import Simulator
+
+if TYPE_CHECKING:  # a type only: importing it loads Newton (seconds)
+    from warp_critic.physics.simulator import Simulator
 
 ALPHA_GRID = tuple(10.0 ** (k / 2) for k in range(-12, 1))  # 1e-6, 3.2e-6, ..., 0.32, 1
 

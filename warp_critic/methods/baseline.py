@@ -58,7 +58,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import torch
 
@@ -69,10 +69,12 @@ from warp_critic.learning.rollout import Trajectory, rollout
 from warp_critic.methods.alpha_search import ALPHA_GRID, fresh_policy_errors
 from warp_critic.methods.baseline_config import BaselineConfig
 from warp_critic.methods.replay import ReplayBuffer, rewards
-from warp_critic.physics.simulator import Simulator
 from warp_critic.running.config import filled
 from warp_critic.running.loop import Callback, Session, TrainResult
 from warp_critic.running.task import Task
+
+if TYPE_CHECKING:  # a type only: importing it loads Newton (seconds)
+    from warp_critic.physics.simulator import Simulator
 
 
 class Agent(Protocol):
@@ -316,6 +318,8 @@ class _BaselineRun:
 
 def _one_seed_simulator(cfg: BaselineConfig, task: Task) -> Simulator:
     """The alpha search runs one seed's worlds at a time (as in a single-seed run)."""
+    from warp_critic.physics.simulator import Simulator
+
     if task.S == 1:
         return task.sim
     return Simulator(

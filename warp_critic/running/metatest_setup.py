@@ -7,7 +7,7 @@ registered (:mod:`warp_critic.running.methods`): ours, or ``L = -Q`` of a baseli
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import torch
 
@@ -17,7 +17,7 @@ from warp_critic.core.runtime import check_seed
 from warp_critic.learning.inner import MAX_POLICY_STEPS, inner_update
 from warp_critic.learning.networks import MLPPolicy, Normalizer
 from warp_critic.physics.scene import Scene
-from warp_critic.physics.simulator import STANDARD_GRAVITY, Simulator
+from warp_critic.physics.schema import STANDARD_GRAVITY
 from warp_critic.running.config import SerializableConfig, check_fields, spec
 from warp_critic.running.goals import GOAL_NOISE, sample_goals
 from warp_critic.running.methods import method, names
@@ -25,6 +25,9 @@ from warp_critic.running.rundir import RunDir
 from warp_critic.running.scenefile import find_run_scene
 from warp_critic.running.task import TaskConfig, build_task, task_variant
 from warp_critic.running.task_inputs import estimate_memory, goals_tensor
+
+if TYPE_CHECKING:  # a type only: the simulator module loads Newton (seconds)
+    from warp_critic.physics.simulator import Simulator
 
 
 @dataclass
