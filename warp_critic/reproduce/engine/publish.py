@@ -44,10 +44,20 @@ def _published_record(d: Path) -> bool:
 ARCHIVE = "stages"
 
 
+@dataclass(frozen=True)
+class Published:
+    """What :func:`publish` did."""
+
+    stages: list[str]  # the stages the report read, archived in ``dest/stages``
+    pruned: list[str]  # the stage records an earlier version wrote beside the report, removed
+    omitted: list[str]  # the run directories (``STAGE/run/seedN``) published without checkpoint
+
+
 def publish(out: Path, dest: Path, rules: CarryRules) -> Published:
     """Copy the report of ``out`` into ``dest``, for committing: ``REPORT.md``, ``results.json``,
     ``ledger.jsonl`` (where there is one) and ``figures/*.png``; and save each stage the report
-    read (``results.json``'s ``stages``) into the archive ``dest/stages`` as :func:`save` does, so
+    read (``results.json``'s ``stages``) into the archive ``dest/stages`` as
+    :func:`~warp_critic.reproduce.engine.carry.save` does, so
     every number in the report traces to a record there (``tables-*/errors.json`` named in the
     report is ``dest/stages/tables-*/errors.json.xz``). A recipe's meta-training is archived as its
     record alone (``rules.record_only``; also one an earlier call archived whole), and another
@@ -110,15 +120,6 @@ def publish(out: Path, dest: Path, rules: CarryRules) -> Published:
     except OSError as e:
         raise UserError(f"{dest}: cannot write ({e.strerror or e})") from None
     return Published(stages, pruned, omitted)
-
-
-@dataclass(frozen=True)
-class Published:
-    """What :func:`publish` did."""
-
-    stages: list[str]  # the stages the report read, archived in ``dest/stages``
-    pruned: list[str]  # the stage records an earlier version wrote beside the report, removed
-    omitted: list[str]  # the run directories (``STAGE/run/seedN``) published without checkpoint
 
 
 def _omit_checkpoints(stage: Path, data: dict, rules: CarryRules) -> list[str]:
