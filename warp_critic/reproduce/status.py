@@ -79,9 +79,8 @@ def _state(out: Path, name: str, h: str, kind: str, check) -> StageState:
 
     d = out / dir_name(name, h)
     data = read_complete(d, kind, check)
-    if (
-        data is not None
-    ):  # a meta-training resumed over calls: its iteration times, not the last call's
+    if data is not None:
+        # a meta-training resumed over calls took its seeds' iteration times, not its last call's
         seeds = (data.get("result") or {}).get("seeds") if kind == "metatrain" else None
         per_seed = [float(v.get("seconds", 0.0)) for v in (seeds or {}).values()]
         took = max([float(data["seconds"]), *per_seed])
