@@ -276,6 +276,13 @@ def test_lock_mimic_welds_the_coupled_joint_where_the_coupling_puts_it(tmp_path,
     assert joints == ["j1"]
 
 
+def test_the_import_line_names_the_tip_beyond_the_end_effector_body(tmp_path, capfd):
+    """A tip offset (a hand merged into the last link, or ``--tip-offset``) is said with the end
+    effector body, so the body named is not taken for the tip."""
+    stdout, _, _ = _import(tmp_path, capfd, "r.urdf", urdf(), "--tip-offset", "0,0,0.3")
+    assert "(2 joints, end effector l2 + a tip 0.3 m out in its frame)" in stdout
+
+
 @pytest.mark.slow
 def test_urdf_saved_as_xml_imports_as_a_urdf_and_mjcf_ctrlrange_bounds_the_effort(tmp_path, capfd):
     stdout, _, repairs = _import(tmp_path, capfd, "arm.xml", urdf())

@@ -50,7 +50,11 @@ def cmd_import(args: argparse.Namespace) -> int:
     from warp_critic.cli import signals
 
     signals.note(f"the scene {out} was written whole")
-    print(f"scene: {out} ({scene.dof} joints, end effector {scene.body_names[scene.ee_body]})")
+    ee = scene.body_names[scene.ee_body]
+    reach = float(math.hypot(*scene.tip_offset))
+    # a hand fixed to the last link is merged into it: the tip is the hand's frame, offset from it
+    tip_text = f" + a tip {reach:.3g} m out in its frame" if reach > 0 else ""
+    print(f"scene: {out} ({scene.dof} joints, end effector {ee}{tip_text})")
     print(f"meta-train: warp-critic meta-train {out}")
     return 0
 
