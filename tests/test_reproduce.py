@@ -622,6 +622,45 @@ def test_every_table_cell_is_pooled_from_its_raw_errors_read_as_float32(quick):
         assert again["mse_mean"] == cell["mse_mean"] and again["n"] == cell["n"], cell["table"]
 
 
+@pytest.mark.slow
+def test_republish_publishes_and_writes_every_generated_block(quick, tmp_path, capsys):
+    """tools/republish.py: the report and its stages published, the replaced report's verdicts
+    beside the new ones (a changed one in bold), the ledger's calls and the folder's contents
+    written where the page has their markers; a run with carried stages is refused untouched."""
+    out, rc, _ = quick
+    assert rc == 0
+    tool = load_tool("republish")
+    results = json.loads((out / "results.json").read_text())
+    flipped = results["claims"][0]
+    old = {"claims": [{**flipped, "verdict": "met" if flipped["verdict"] != "met" else "not met"}]}
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    dest = tmp_path / "paper"
+    dest.mkdir()
+    markers = ("verdicts", "calls", "contents")
+    (dest / "README.md").write_text(
+        "".join(f"<!-- {m}:begin -->\n<!-- {m}:end -->\n" for m in markers)
+    )
+    (dest / "figures").mkdir()
+    (dest / "figures" / "gone.png").write_bytes(PNG_MAGIC)  # the replaced report's figure
+    argv = [str(out), "--dest", str(dest), "--before", str(tmp_path / "old.json")]
+    assert tool.main([*argv, "--readme", str(tmp_path / "none.md")]) == 0
+    page = (dest / "README.md").read_text()
+    assert f"| {flipped['claim']} | **" in page and "changed verdict" in page
+    assert "| call | start (UTC) |" in page and "files besides this page" in page
+    assert not (dest / "figures" / "gone.png").exists() and (dest / "REPORT.md").is_file()
+    assert "run(s) without their checkpoint" in capsys.readouterr().out
+    # a report with carried stages: refused on one line, the folder untouched
+    fake = tmp_path / "carried"
+    fake.mkdir()
+    ledger = {"stages_before_ledger": ["toy-e95b4993a1"]}
+    (fake / "results.json").write_text(json.dumps({"ledger": ledger}))
+    before = sorted(str(p) for p in dest.rglob("*"))
+    assert tool.main([str(fake), "--dest", str(dest), "--before", str(tmp_path / "old.json")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "1 stage(s) of its report were carried in" in err
+    assert sorted(str(p) for p in dest.rglob("*")) == before
+
+
 def test_a_published_ledger_names_the_output_folder_as_the_report_did(tmp_path):
     """Each call that gave the output folder's absolute path names it as shown; a call on another
     folder, a record without a command and a torn last line are kept byte for byte."""

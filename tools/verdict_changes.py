@@ -52,6 +52,10 @@ def load(source: str) -> tuple[str, list[dict]]:
             why = (done.stderr.strip().splitlines() or ["git show failed"])[-1]
             raise Bad(f"{source}: not in this repository's history ({why})")
         text = done.stdout
+        rev_id = subprocess.run(
+            ["git", "rev-parse", "--short", rev], cwd=ROOT, capture_output=True, text=True
+        ).stdout.strip()
+        source = f"{rev_id or rev}:{inner}"  # HEAD moves; the commit it named does not
     else:
         raise Bad(f"{source}: no such file (give a results.json, or REV:PATH from git)")
     try:
