@@ -18,7 +18,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from warp_critic.core.generated import check_or_write, replace_block
+from warp_critic.core.generated import emit
 from warp_critic.reproduce.engine.ledger import calls, read
 from warp_critic.reproduce.engine.stage import stage_of_dir
 
@@ -63,21 +63,14 @@ def main(argv: list[str] | None = None) -> int:
     mode.add_argument("--write", type=Path, metavar="FILE", help="rewrite FILE's calls block")
     mode.add_argument("--check", type=Path, metavar="FILE", help="exit 1 if FILE's block is stale")
     args = ap.parse_args(argv)
-    target = args.write or args.check
     try:
         if not (args.folder / "ledger.jsonl").is_file():
             raise ValueError(f"{args.folder}: no ledger.jsonl")
         body = block(read(args.folder))
-        if target is None:
-            print(body)
-            return 0
-        text = target.read_text(encoding="utf-8")
-        new = replace_block(text, BEGIN, END, body, str(target))
-    except (OSError, UnicodeDecodeError, ValueError) as e:
+    except (OSError, ValueError) as e:
         print(f"{PROG}: error: {getattr(e, 'strerror', None) or e}", file=sys.stderr)
         return 2
-    what = "the calls block"
-    return check_or_write(target, text, new, check=args.check is not None, prog=PROG, what=what)
+    return emit(PROG, body, BEGIN, END, write=args.write, check=args.check, what="the calls block")
 
 
 if __name__ == "__main__":

@@ -20,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
-from warp_critic.core.generated import check_or_write, replace_block
+from warp_critic.core.generated import emit
 from warp_critic.running.rundir import OMITTED
 
 PROG = "paper_contents"
@@ -150,19 +150,15 @@ def main(argv: list[str] | None = None) -> int:
     if not args.folder.is_dir():
         print(f"{PROG}: error: {args.folder}: no such folder", file=sys.stderr)
         return 2
-    body = block(args.folder)
-    target = args.write or args.check
-    if target is None:
-        print(body)
-        return 0
-    try:
-        text = target.read_text(encoding="utf-8")
-        new = replace_block(text, BEGIN, END, body, str(target))
-    except (OSError, UnicodeDecodeError, ValueError) as e:
-        print(f"{PROG}: error: {getattr(e, 'strerror', None) or e}", file=sys.stderr)
-        return 2
-    what = "the contents block"
-    return check_or_write(target, text, new, check=args.check is not None, prog=PROG, what=what)
+    return emit(
+        PROG,
+        block(args.folder),
+        BEGIN,
+        END,
+        write=args.write,
+        check=args.check,
+        what="the contents block",
+    )
 
 
 if __name__ == "__main__":

@@ -23,7 +23,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from warp_critic.core.generated import check_or_write, replace_block
+from warp_critic.core.generated import emit
 
 PROG = "verdict_changes"
 ROOT = Path(__file__).resolve().parents[1]
@@ -160,20 +160,11 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     try:
         body = block(load(args.before), load(args.after))
-        target = args.write or args.check
-        if target is None:
-            print(body)
-            return 0
-        try:
-            text = target.read_text()
-        except (OSError, UnicodeDecodeError) as e:
-            raise Bad(f"{target}: cannot read ({getattr(e, 'strerror', None) or e})") from None
-        new = replace_block(text, BEGIN, END, body, str(target))
-    except ValueError as e:  # Bad, or a file without its block
+    except Bad as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
     what = f"the verdicts block of {args.before} and {args.after}"
-    return check_or_write(target, text, new, check=args.check is not None, prog=PROG, what=what)
+    return emit(PROG, body, BEGIN, END, write=args.write, check=args.check, what=what)
 
 
 if __name__ == "__main__":

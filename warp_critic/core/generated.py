@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["check_or_write", "replace_block"]
+__all__ = ["check_or_write", "emit", "replace_block"]
 
 
 def replace_block(text: str, begin: str, end: str, body: str, where: str) -> str:
@@ -38,3 +38,31 @@ def check_or_write(path: Path, text: str, new: str, *, check: bool, prog: str, w
     path.write_text(new, encoding="utf-8")
     print(f"{prog}: {path}: wrote {what}")
     return 0
+
+
+def emit(
+    prog: str,
+    body: str,
+    begin: str,
+    end: str,
+    *,
+    write: Path | None = None,
+    check: Path | None = None,
+    what: str = "the block",
+) -> int:
+    """A block tool's output: ``body`` printed (neither ``write`` nor ``check``), or put between
+    ``begin`` and ``end`` of the file ``write`` / compared with ``check``'s (:func:`check_or_write`).
+    A file that cannot be read or lacks its markers is one line and exit 2."""
+    import sys
+
+    target = write or check
+    if target is None:
+        print(body)
+        return 0
+    try:
+        text = target.read_text(encoding="utf-8")
+        new = replace_block(text, begin, end, body, str(target))
+    except (OSError, UnicodeDecodeError, ValueError) as e:
+        print(f"{prog}: error: {getattr(e, 'strerror', None) or e}", file=sys.stderr)
+        return 2
+    return check_or_write(target, text, new, check=check is not None, prog=prog, what=what)
