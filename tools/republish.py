@@ -22,7 +22,6 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
-import shutil
 import sys
 from pathlib import Path
 
@@ -87,9 +86,7 @@ def main(argv: list[str] | None = None) -> int:
                 f"call of its ledger ({', '.join(sorted(extra))}); a republished report is one "
                 "run (--allow-carried publishes it anyway)"
             )
-        for old in ("stages", "figures"):
-            shutil.rmtree(args.dest / old, ignore_errors=True)
-        done = publish(args.out, args.dest, CARRY)
+        done = publish(args.out, args.dest, CARRY, replace=True)
     except (ValueError, UserError) as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2

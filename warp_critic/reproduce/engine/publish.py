@@ -53,7 +53,7 @@ class Published:
     omitted: list[str]  # the run directories (``STAGE/run/seedN``) published without checkpoint
 
 
-def publish(out: Path, dest: Path, rules: CarryRules) -> Published:
+def publish(out: Path, dest: Path, rules: CarryRules, replace: bool = False) -> Published:
     """Copy the report of ``out`` into ``dest``, for committing: ``REPORT.md``, ``results.json``,
     ``ledger.jsonl`` (where there is one) and ``figures/*.png``; and save each stage the report
     read (``results.json``'s ``stages``) into the archive ``dest/stages`` as
@@ -66,7 +66,9 @@ def publish(out: Path, dest: Path, rules: CarryRules) -> Published:
 
     ``dest``'s figures that this report did not draw are removed, and so are the stage records an
     earlier version of this function wrote beside the report; anything else in ``dest`` (a README,
-    the archive's other stages, search rows) is left alone."""
+    the archive's other stages, search rows) is left alone. ``replace``: ``dest``'s ``stages/``
+    and ``figures/`` go first, once ``out`` is checked (a republished report replaces the one
+    before it, whose files the history keeps)."""
     from warp_critic.running.files import atomic_write_bytes
 
     out, dest = Path(out), Path(dest)
@@ -85,6 +87,8 @@ def publish(out: Path, dest: Path, rules: CarryRules) -> Published:
             raise UserError(f"{out / 'results.json'}: names stage {name!r}, which {out} lacks")
     complete_stages(out, rules.check)  # an edited stage.json is refused before anything is written
     try:
+        for replaced in (ARCHIVE, "figures") if replace else ():
+            shutil.rmtree(dest / replaced, ignore_errors=True)
         (dest / ARCHIVE).mkdir(parents=True, exist_ok=True)
         archive = dest / ARCHIVE
         copy_stages(
