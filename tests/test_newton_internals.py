@@ -3,7 +3,9 @@
 The bridge's exact reverse mode swaps a private copy of ``SolverFeatherstone``'s mass-matrix scratch
 (``M, J, P, H, L`` and, with tile GEMM, the grouped views ``_J_by_size``, ``_M_by_size``,
 ``_H_by_size``, ``_L_by_size`` built from ``_group_to_art`` and ``articulation_*_start``) into the
-solver before every taped step. None of that is public API. These fast checks fail, with one message,
+solver before every taped step, and on a CPU it swaps the solver's tile kernel for the mass matrix
+(``_tile_kernels_by_size``) for a register kernel (``physics/mass_matrix.py``, compared bit for bit
+with Newton's in ``tests/test_mass_matrix.py``). None of that is public API. These fast checks fail, with one message,
 as soon as a Newton or Warp upgrade changes any of it; ``tests/test_bridge.py``'s exactness tests are
 the real proof and must be re-run before the pins here and in ``pyproject.toml`` are moved.
 """
@@ -238,6 +240,32 @@ def test_a_step_writes_the_swapped_in_scratch_and_leaves_the_solver_own(sim):
             own[name].numpy().tobytes() == before[name].tobytes(),
             f"a step wrote the solver's own {name} while it was swapped out",
         )
+
+
+def test_the_mass_matrix_kernel_swap_internals_present(sim):
+    """``physics/mass_matrix.py`` swaps the CPU solver's tile kernels: ``step`` must still launch
+    ``self._tile_kernels_by_size[size]`` with (J, M, group, dof start, armature) -> (H, L), the flags
+    it reads must exist, and Newton's tile kernel (the reference of tests/test_mass_matrix.py) too."""
+    import newton
+    from newton._src.solvers.featherstone import kernels
+
+    solver = sim.bridge.solver
+    src = inspect.getsource(newton.solvers.SolverFeatherstone.step)
+    for text in (
+        "self._tile_kernels_by_size.items()",
+        "self.articulation_dof_start",
+        "self.joint_armature_effective",
+        "outputs=[self._H_by_size[size], self._L_by_size[size]]",
+        "self.fuse_cholesky and not self._has_joint_mimics",
+    ):
+        pin(text in src, f"SolverFeatherstone.step no longer has {text!r}")
+    for name in ("fuse_cholesky", "_has_joint_mimics", "joint_armature_effective", "model"):
+        pin(hasattr(solver, name), f"SolverFeatherstone.{name} is gone")
+    pin(
+        callable(getattr(kernels, "create_inertia_matrix_cholesky_kernel", None)),
+        "newton's create_inertia_matrix_cholesky_kernel is gone",
+    )
+    pin(sim.bridge.register_kernels == [(2, 2)], "the reacher's solver got no register kernel")
 
 
 def test_redraw_internals_present(sim):

@@ -42,6 +42,10 @@ are bitwise those of the direct calls (``tests/test_bridge.py`` checks it).
 counts its own steps. Buffers are reused across rollouts: starting a newer one invalidates the
 older one's, and calling ``backward`` through an older graph raises instead of silently returning
 wrong gradients.
+
+**The mass matrix on a CPU** (:mod:`warp_critic.physics.mass_matrix`): the solver's tile kernel
+for ``H = J^T M J`` and its Cholesky factor is swapped for a register kernel with bitwise the same
+results, forward and reverse, at a quarter of the cost.
 """
 
 from __future__ import annotations
@@ -52,6 +56,7 @@ import newton
 import torch
 import warp as wp
 
+from warp_critic.physics.mass_matrix import use_register_kernels
 from warp_critic.physics.replay import (
     ControlBuffers,
     Replay,
@@ -73,7 +78,9 @@ class NewtonBridge:
         dt: physics time step (s).
         substeps: physics steps per call of :meth:`step` (the control is held constant over them).
         use_tile_gemm: let Featherstone form ``H = J^T M J`` and its Cholesky factor with Warp tile
-            kernels (3x faster than the dense batched GEMM at 64 iiwa worlds on a CPU).
+            kernels (3x faster than the dense batched GEMM at 64 iiwa worlds on a CPU); on a CPU
+            the tile kernel is then swapped for a register kernel of the same results
+            (:func:`~warp_critic.physics.mass_matrix.use_register_kernels`).
         graphs: replay captured graphs instead of re-issuing each step's Warp launches (see the
             module docstring); ``False`` issues every launch from Python (bitwise the same results).
     """
@@ -100,6 +107,7 @@ class NewtonBridge:
         self.torch_device = torch.device(wp.device_to_torch(model.device))
         self.requires_grad = bool(model.requires_grad)
         self.solver = newton.solvers.SolverFeatherstone(model, use_tile_gemm=use_tile_gemm)
+        self.register_kernels = use_register_kernels(self.solver)  # the sizes swapped (CPU)
         self._is_cuda = self.torch_device.type == "cuda"
         self._wp_streams: dict[int, wp.Stream] = {}  # torch stream handle -> its Warp stream
         self.scratch = SolverScratch(self.solver)  # the solver's own, and a copy per taped step
