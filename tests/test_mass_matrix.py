@@ -32,21 +32,39 @@ def _sim(worlds: int, differentiable: bool, name: str = "kuka") -> Simulator:
     )
 
 
-def _launch(kernel, solver, size, J, M, H, L) -> None:
-    wp.launch_tiled(
-        kernel,
-        dim=solver._group_to_art[size].shape[0],
-        inputs=[
-            J,
-            M,
-            solver._group_to_art[size],
-            solver.articulation_dof_start,
-            solver.joint_armature_effective,
-        ],
-        outputs=[H, L],
-        device="cpu",
-        block_dim=64,
-    )
+def _both_kernels(size, J0, M0, group, dof_start, armature, adj_H, adj_L) -> dict:
+    """``{"tile"|"register": [H, L, adj J, adj M]}`` of Newton's kernel and ours for articulations
+    of ``size = (joints, dofs)``: ``J0 (n, 6 joints, dofs)``, ``M0 (n, 6 joints, 6 joints)``, the
+    adjoints given to ``H`` and ``L`` ``(n, dofs, dofs)`` (numpy); ``group``, ``dof_start`` and
+    ``armature`` Warp arrays as the solver passes them."""
+    out = {}
+    for name, kernel in (
+        ("tile", create_inertia_matrix_cholesky_kernel(*size)),
+        ("register", mass_matrix_cholesky_kernel(*size)),
+    ):
+        J = wp.array(J0, requires_grad=True)
+        M = wp.array(M0, requires_grad=True)
+        H = wp.zeros(adj_H.shape, requires_grad=True)
+        L = wp.zeros(adj_H.shape, requires_grad=True)
+        tape = wp.Tape()
+        with tape:
+            wp.launch_tiled(
+                kernel,
+                dim=J0.shape[0],
+                inputs=[J, M, group, dof_start, armature],
+                outputs=[H, L],
+                device="cpu",
+                block_dim=64,
+            )
+        tape.backward(grads={H: wp.array(adj_H), L: wp.array(adj_L)})
+        out[name] = [a.numpy().copy() for a in (H, L, J.grad, M.grad)]
+    return out
+
+
+def _assert_bitwise(out: dict) -> None:
+    for what, tile, reg in zip(("H", "L", "adj J", "adj M"), out["tile"], out["register"]):
+        assert np.array_equal(tile, reg), f"{what} differs from the tile kernel's"
+    assert np.abs(out["register"][2]).max() > 0, "no gradient reached J"
 
 
 def test_the_cpu_bridge_uses_the_register_kernel():
@@ -72,23 +90,42 @@ def test_same_h_l_and_gradients_as_the_tile_kernel_on_a_real_step(name):
     shape = (5, size[1], size[1])
     adj_H = rng.standard_normal(shape).astype(np.float32)
     adj_L = rng.standard_normal(shape).astype(np.float32)
-    out = {}
-    for name, kernel in (
-        ("tile", create_inertia_matrix_cholesky_kernel(*size)),
-        ("register", mass_matrix_cholesky_kernel(*size)),
-    ):
-        J = wp.array(J0, requires_grad=True)
-        M = wp.array(M0, requires_grad=True)
-        H = wp.zeros(shape, requires_grad=True)
-        L = wp.zeros(shape, requires_grad=True)
-        tape = wp.Tape()
-        with tape:
-            _launch(kernel, solver, size, J, M, H, L)
-        tape.backward(grads={H: wp.array(adj_H), L: wp.array(adj_L)})
-        out[name] = [a.numpy().copy() for a in (H, L, J.grad, M.grad)]
-    for what, tile, reg in zip(("H", "L", "adj J", "adj M"), out["tile"], out["register"]):
-        assert np.array_equal(tile, reg), f"{what} differs from the tile kernel's"
-    assert np.abs(out["register"][2]).max() > 0, "no gradient reached J"
+    group = solver._group_to_art[size]
+    out = _both_kernels(
+        size,
+        J0,
+        M0,
+        group,
+        solver.articulation_dof_start,
+        solver.joint_armature_effective,
+        adj_H,
+        adj_L,
+    )
+    _assert_bitwise(out)
+
+
+def test_same_as_the_tile_kernel_with_more_dofs_than_joints():
+    """A size no shipped robot has (3 joints, 8 dofs: a free base and two hinges), random
+    Jacobians and block-diagonal inertias, per-dof armature: the same numbers to the last bit."""
+    rng = np.random.default_rng(3)
+    n, (joints, dofs) = 4, (3, 8)
+    J0 = rng.standard_normal((n, 6 * joints, dofs)).astype(np.float32)
+    M0 = np.zeros((n, 6 * joints, 6 * joints), np.float32)
+    for b in range(joints):
+        A = rng.standard_normal((n, 6, 6))
+        M0[:, 6 * b : 6 * b + 6, 6 * b : 6 * b + 6] = A @ A.transpose(0, 2, 1) + np.eye(6)
+    adj = rng.standard_normal((2, n, dofs, dofs)).astype(np.float32)
+    out = _both_kernels(
+        (joints, dofs),
+        J0,
+        M0,
+        wp.array(np.arange(n, dtype=np.int32)),
+        wp.array(np.arange(n, dtype=np.int32) * dofs),
+        wp.array(rng.uniform(0.01, 0.5, n * dofs).astype(np.float32)),
+        adj[0],
+        adj[1],
+    )
+    _assert_bitwise(out)
 
 
 def test_a_differentiable_rollout_is_bitwise_the_tile_kernels():
