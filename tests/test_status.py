@@ -69,6 +69,32 @@ def test_complete_part_way_and_not_started_stages_are_told_apart(toy_done, capsy
 
 
 @pytest.mark.slow
+def test_a_not_started_stage_names_its_time_in_the_reference_run(toy_done, tmp_path):
+    """A reference archive holding the same stage directory (the same settings) gives its time and
+    the sum over the not-started stages; a stage it lacks gets none."""
+    import shutil
+
+    from warp_critic.reproduce.experiments.plan import ReproduceConfig
+    from warp_critic.reproduce.status import published_archive, status
+
+    (toy,) = [p for p in toy_done.iterdir() if p.name.startswith("toy-")]
+    took = json.loads((toy / "stage.json").read_text())["seconds"]
+    reference = tmp_path / "archive"
+    shutil.copytree(toy, reference / toy.name)
+    rc = ReproduceConfig(quick=True, device="cpu", out=str(tmp_path / "new"))
+    lines = status(rc, reference).splitlines()
+    assert lines[0].endswith(
+        f"; 1 of the not-started stages took {took / 3600:.1f} h of stage time in the reference run"
+    )
+    (line,) = [x for x in lines if toy.name in x]
+    assert line.split()[:2] == ["not", "started"]
+    assert line.endswith(f"(the reference run: {took / 60:.1f} min)")
+    assert all("reference run" not in x for x in lines[2:] if toy.name not in x)
+    # the published run's settings are not --quick's: nothing of it matches here
+    assert "reference run" not in status(rc, published_archive())
+
+
+@pytest.mark.slow
 def test_a_call_holding_the_folder_is_named(toy_done, capsys):
     from warp_critic.running.locks import FolderLock
 

@@ -102,8 +102,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--status",
         action="store_true",
         help="print where --out stands for this command (each stage complete, part way with its "
-        "iteration and time left, or not started) and exit: runs nothing, writes nothing, works "
-        "beside a running call",
+        "iteration and time left, or not started, with the time it took in the published run of "
+        "docs/paper where that ran it) and exit: runs nothing, writes nothing, works beside a "
+        "running call",
     )
     A(
         "--set",
@@ -184,9 +185,9 @@ def run_from_args(args: argparse.Namespace) -> int:
     rc = config_from_args(args)
     rc.validate()  # one-line UserError before any work
     if getattr(args, "status", False):
-        from warp_critic.reproduce.status import status
+        from warp_critic.reproduce.status import published_archive, status
 
-        print(status(rc))
+        print(status(rc, published_archive()))
         return 0
     init()
     executor = make_executor(

@@ -10,7 +10,10 @@ have left; this answers beside a running call too. Each stage of the command's p
   ``metrics.jsonl``; the seeds of a stage train as one batch) of the run's iterations, and the time
   left at its mean seconds per iteration over the last :data:`RECENT` iterations; a meta-test stage's
   batches kept in its ``progress/`` folder;
-* **not started**.
+* **not started**, with the stage time the same stage took in a reference run where its archive
+  holds it (by default the published run, ``docs/paper/stages`` of this checkout: the same stage
+  directory, so the same settings), and the sum of those times: what a sitting plan can go by,
+  measured on that run's machine (``docs/paper/README.md`` names it).
 """
 
 from __future__ import annotations
@@ -21,7 +24,7 @@ from pathlib import Path
 
 from warp_critic.reproduce.engine.stage import PROGRESS, dir_name
 
-__all__ = ["RECENT", "StageState", "render", "stage_states", "status"]
+__all__ = ["RECENT", "StageState", "published_archive", "render", "stage_states", "status"]
 
 #: the iterations a part-way meta-training's speed is read from
 RECENT = 50
@@ -36,6 +39,7 @@ class StageState:
     state: str  # "complete", "part way" or "not started"
     detail: str  # what is done, in words
     seconds_left: float | None = None  # a part-way meta-training's estimate
+    reference_seconds: float | None = None  # a not-started stage's time in the reference run
 
 
 def _last_rows(path: Path, n: int) -> list[dict]:
@@ -74,19 +78,33 @@ def _training(d: Path) -> tuple[str, float | None] | None:
     return f"iteration {done} of {total}, {per:.2f} s per iteration", left
 
 
-def _state(out: Path, name: str, h: str, kind: str, check) -> StageState:
+def _took(data: dict, kind: str) -> float:
+    """A complete stage's time (s) from its record: a meta-training resumed over calls took its
+    seeds' iteration times, not its last call's."""
+    seeds = (data.get("result") or {}).get("seeds") if kind == "metatrain" else None
+    per_seed = [float(v.get("seconds", 0.0)) for v in (seeds or {}).values() if isinstance(v, dict)]
+    return max([float(data["seconds"]), *per_seed])
+
+
+def _reference(reference: Path | None, directory: str, kind: str) -> float | None:
+    """The time the stage ``directory`` took in the ``reference`` archive, where it has a record."""
+    from warp_critic.reproduce.engine.stages import read_stage, record_problem
+
+    data = read_stage(reference / directory) if reference is not None else None
+    return None if data is None or record_problem(data) else _took(data, kind)
+
+
+def _state(out: Path, name: str, h: str, kind: str, check, reference: Path | None) -> StageState:
     from warp_critic.reproduce.engine.stages import read_complete
 
     d = out / dir_name(name, h)
     data = read_complete(d, kind, check)
     if data is not None:
-        # a meta-training resumed over calls took its seeds' iteration times, not its last call's
-        seeds = (data.get("result") or {}).get("seeds") if kind == "metatrain" else None
-        per_seed = [float(v.get("seconds", 0.0)) for v in (seeds or {}).values()]
-        took = max([float(data["seconds"]), *per_seed])
-        return StageState(name, d.name, "complete", f"{took / 60:.1f} min")
+        return StageState(name, d.name, "complete", f"{_took(data, kind) / 60:.1f} min")
     if not d.is_dir():
-        return StageState(name, d.name, "not started", "")
+        ref = _reference(reference, d.name, kind)
+        detail = f"the reference run: {ref / 60:.1f} min" if ref is not None else ""
+        return StageState(name, d.name, "not started", detail, reference_seconds=ref)
     trained = _training(d) if kind == "metatrain" else None
     if trained is not None:
         return StageState(name, d.name, "part way", trained[0], trained[1])
@@ -100,10 +118,11 @@ def _state(out: Path, name: str, h: str, kind: str, check) -> StageState:
     return StageState(name, d.name, "part way", "started (resumes from its start)")
 
 
-def stage_states(rc) -> list[StageState]:
+def stage_states(rc, reference: Path | None = None) -> list[StageState]:
     """Each stage the reproduce command ``rc`` (a validated
     :class:`~warp_critic.reproduce.experiments.plan.ReproduceConfig`) would run, in its order, as
-    its output folder holds it."""
+    its output folder holds it; a not-started stage with its time in the ``reference`` archive (a
+    folder of stage directories, e.g. ``docs/paper/stages``) where that holds it."""
     from warp_critic.reproduce.experiments.plan import needed, plan
     from warp_critic.reproduce.experiments.records import stage_problem
 
@@ -111,17 +130,31 @@ def stage_states(rc) -> list[StageState]:
     stages = plan(settings, rc.plans_beyond, rc.extra, rc.plans_budget)
     names = [n for wave in needed(rc, stages) for n in wave]
     out = Path(rc.out)
-    return [_state(out, n, stages[n].hash, stages[n].kind, stage_problem) for n in names]
+    return [_state(out, n, stages[n].hash, stages[n].kind, stage_problem, reference) for n in names]
+
+
+def published_archive() -> Path | None:
+    """``docs/paper/stages`` of the checkout this package runs from (``None`` for an installed
+    package without it)."""
+    archive = Path(__file__).resolve().parents[2] / "docs" / "paper" / "stages"
+    return archive if archive.is_dir() else None
 
 
 def render(states: list[StageState], out: Path, running: str | None) -> str:
     """The status lines: a summary, then one line per stage."""
     count = {s: sum(x.state == s for x in states) for s in ("complete", "part way", "not started")}
     left = sum(x.seconds_left or 0.0 for x in states)
+    timed = [x.reference_seconds for x in states if x.reference_seconds is not None]
     lines = [
         f"reproduce: {out}: {count['complete']} of {len(states)} stages complete, "
         f"{count['part way']} part way, {count['not started']} not started"
-        + (f"; the part-way meta-trainings need about {left / 3600:.1f} h more" if left else ""),
+        + (f"; the part-way meta-trainings need about {left / 3600:.1f} h more" if left else "")
+        + (
+            f"; {len(timed)} of the not-started stages took {sum(timed) / 3600:.1f} h of stage "
+            "time in the reference run"
+            if timed
+            else ""
+        ),
         running or "no reproduce call is running on this folder now",
     ]
     for x in states:
@@ -131,9 +164,10 @@ def render(states: list[StageState], out: Path, running: str | None) -> str:
     return "\n".join(lines)
 
 
-def status(rc) -> str:
-    """:func:`render` of :func:`stage_states` for ``rc``'s output folder, naming a call that holds
-    it now. Raises a one-line ``UserError`` for a folder that is not a reproduce output."""
+def status(rc, reference: Path | None = None) -> str:
+    """:func:`render` of :func:`stage_states` for ``rc``'s output folder (with the not-started
+    stages' times in the ``reference`` archive), naming a call that holds it now. Raises a one-line
+    ``UserError`` for a folder that is not a reproduce output."""
     from warp_critic.core.errors import UserError
     from warp_critic.reproduce.engine.stages import MARKER
     from warp_critic.running.locks import holder
@@ -148,4 +182,4 @@ def status(rc) -> str:
             f"a reproduce call is running on this folder now (process {who.get('pid', '?')} on "
             f"{who.get('host', '?')})"
         )
-    return render(stage_states(rc), out, running)
+    return render(stage_states(rc, reference), out, running)
