@@ -45,7 +45,7 @@ wrong gradients.
 
 **The mass matrix on a CPU** (:mod:`warp_critic.physics.mass_matrix`): the solver's tile kernel
 for ``H = J^T M J`` and its Cholesky factor is swapped for a register kernel with bitwise the same
-results, forward and reverse, at a quarter of the cost.
+results, forward and reverse, 4x faster forward and 3x in reverse on the KUKA.
 """
 
 from __future__ import annotations
