@@ -113,3 +113,20 @@ def test_a_folder_that_is_no_reproduce_output_is_one_line_exit_2(tmp_path, capsy
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "not a reproduce output" in err[0] and str(tmp_path) in err[0]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.txt"]
+
+
+@pytest.mark.parametrize(
+    "flags, words",
+    [
+        (["--jobs", "0"], "--jobs must be an integer in 1..1024"),
+        (["--jobs", "2", "--ray", "local"], "exclude each other"),
+    ],
+)
+def test_status_refuses_the_executor_flags_its_call_would_refuse(tmp_path, capsys, flags, words):
+    """``--status`` answers for the same command without it: flags that call refuses are refused
+    here too, in one line, and nothing is created (Ray is not started)."""
+    out = tmp_path / "new"
+    assert main([*QUICK, "--out", str(out), *flags, "--status"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0]
+    assert not out.exists()

@@ -178,21 +178,21 @@ def run_from_args(args: argparse.Namespace) -> int:
     """Validate the flags, run the stages, write the report; returns the exit code (0)."""
     from warp_critic.core.runtime import init
     from warp_critic.physics.simulator import resolve_device
-    from warp_critic.reproduce.engine.choose_executor import make_executor
+    from warp_critic.reproduce.engine.choose_executor import check_executor_flags, make_executor
     from warp_critic.reproduce.pipeline import reproduce
     from warp_critic.running.loop import Interrupted
 
     rc = config_from_args(args)
     rc.validate()  # one-line UserError before any work
+    jobs, ray = getattr(args, "jobs", None), getattr(args, "ray", None)
+    check_executor_flags(jobs, ray)
     if getattr(args, "status", False):
         from warp_critic.reproduce.status import published_archive, status
 
         print(status(rc, published_archive()))
         return 0
     init()
-    executor = make_executor(
-        getattr(args, "jobs", None), getattr(args, "ray", None), resolve_device(rc.device)
-    )
+    executor = make_executor(jobs, ray, resolve_device(rc.device))
     try:
         result = reproduce(rc, executor)
     except KeyboardInterrupt as e:
