@@ -93,3 +93,39 @@ def test_bad_input_is_one_line(tmp_path, capsys, argv, message):
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1
     assert message.replace("{tmp}", str(tmp_path)) in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    "flags,message",
+    [
+        ({"--scene": "pendulum"}, "--scene: 'pendulum': unknown; one of reacher, kuka"),
+        ({"--methods": "ours,ppo"}, "--methods: unknown method(s) ppo"),
+        ({"--methods": None, "--from": "{tmp}"}, "no complete stage metatrain-reacher-<method>-*"),
+        ({"--choose-seed": "-1"}, "--choose-seed must be an integer in 0.."),
+        ({"--device": "tpu"}, "--device must be cpu, cuda or auto (got 'tpu')"),
+        ({"--out": "{tmp}/b.txt"}, "--out {tmp}/b.txt: must be a .json file"),
+        ({"--figure": "{tmp}/notes.txt"}, "--figure {tmp}/notes.txt: must be a .png file"),
+        ({"--figure": "{tmp}/mine.png"}, "exists and is not a PNG image; not overwriting it"),
+        ({"--figure": "{tmp}/nowhere/f.png"}, "{tmp}/nowhere is not a folder"),
+    ],
+)
+def test_every_flag_is_checked_before_any_work(tmp_path, capsys, flags, message):
+    """A bad flag is one line and exit 2 before the sweep starts (which can take hours), and a user's
+    file named by ``--figure`` or ``--out`` is left byte for byte."""
+    stage = tmp_path / "paper" / "metatrain-reacher-ours-0123456789"
+    (stage / "run" / "seed0").mkdir(parents=True)
+    (stage / "stage.json").write_text("{}")
+    (tmp_path / "notes.txt").write_text("my notes")
+    (tmp_path / "mine.png").write_text("not a picture")
+    argv = {"--from": f"{tmp_path}/paper", "--scene": "reacher", "--methods": "ours"}
+    argv.update({"--out": f"{tmp_path}/b.json", **flags})
+    words = [
+        w for k, v in argv.items() if v is not None for w in (k, v.replace("{tmp}", str(tmp_path)))
+    ]
+    code = main(["budget", *words])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "Traceback" not in err, err
+    assert message.replace("{tmp}", str(tmp_path)) in err
+    assert (tmp_path / "notes.txt").read_text() == "my notes"
+    assert (tmp_path / "mine.png").read_text() == "not a picture"
+    assert not (tmp_path / "b.json").exists() and not list(tmp_path.glob("b.json.progress*"))

@@ -89,9 +89,14 @@ def run_from_args(args: argparse.Namespace) -> int:
         run_budget,
         runs_of_reproduce,
     )
+    from warp_critic.running.files import check_figure_file, check_output_file
+    from warp_critic.running.locks import check_not_owned
 
     rename = {
         "from": "--from",
+        "scene": "--scene",
+        "choose_seed": "--choose-seed",
+        "device": "--device",
         "out": "--out",
         "runs": "--methods",
         "budgets": "--budgets",
@@ -105,9 +110,12 @@ def run_from_args(args: argparse.Namespace) -> int:
         src = Path(args.source)
         if not src.is_dir():
             raise UserError(f"--from: {src}: not a folder")
-        out = Path(args.out)
+        out = check_output_file(args.out, "--out")  # a .json in a folder that is there
         if not out.parent.is_dir():
             raise UserError(f"--out: {out.parent}: no such folder")
+        check_not_owned(out, "--out")
+        if args.figure:
+            check_figure_file(args.figure, "--figure")
         cfg = BudgetConfig(
             runs=runs_of_reproduce(src, args.scene, args.methods),
             budgets=args.budgets,

@@ -40,6 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from warp_critic.core.errors import FieldError
+from warp_critic.core.runtime import check_seed
 from warp_critic.evaluation.seed_uses import CHOOSE_BUDGET_SEED, chose
 from warp_critic.reproduce.experiments.budget import (
     ALPHA_SCALES,
@@ -104,6 +105,10 @@ class BudgetConfig:
                 f"{self.report_seed}: the reporting goals' seeds {reporting} include the choosing "
                 f"seed {self.choose_seed}",
             )
+        for name in ("choose_seed", "report_seed"):
+            check_seed(getattr(self, name), name)
+        if self.device not in ("auto", "cpu", "cuda") and not str(self.device).startswith("cuda:"):
+            raise FieldError("device", f"must be cpu, cuda or auto (got {self.device!r})")
         for s in reporting:
             if chose(s):
                 raise FieldError(
@@ -290,8 +295,16 @@ def runs_of_reproduce(out: Path, scene: str, methods: list[str] | None) -> dict[
     output folder, exactly one complete stage per method; ``methods`` None: every registered method
     (ours first) whose stage the folder holds."""
     from warp_critic.reproduce.experiments.naming import stage_name
+    from warp_critic.reproduce.experiments.settings import SCENES
     from warp_critic.running.methods import names
 
+    if scene not in SCENES:
+        raise FieldError("scene", f"{scene!r}: unknown; one of {', '.join(SCENES)}")
+    unknown = [m for m in methods or [] if m not in names()]
+    if unknown:
+        raise FieldError(
+            "runs", f"unknown method(s) {', '.join(unknown)} (one of {', '.join(names())})"
+        )
     runs = {}
     for m in names() if methods is None else methods:
         prefix = stage_name("metatrain", scene, m)
@@ -309,6 +322,13 @@ def runs_of_reproduce(out: Path, scene: str, methods: list[str] | None) -> dict[
         if not seeds:
             raise FieldError("from", f"{found[0]}: no run/seed* directories")
         runs[m] = [str(p) for p in seeds]
+    if not runs:
+        raise FieldError(
+            "from",
+            f"{out}: no complete stage {stage_name('metatrain', scene, '<method>')}-* here (a "
+            "warp-critic reproduce output folder holds them; a published report's stages keep "
+            "one seed's critic, too few to sweep)",
+        )
     return runs
 
 

@@ -133,6 +133,32 @@ def check_output_file(path: str | Path, what: str = "output") -> Path:
     return path
 
 
+#: the first bytes of every PNG file
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def check_figure_file(path: str | Path, what: str = "--figure") -> Path:
+    """Check, before any work, that ``path`` is a place for a figure: a ``.png`` that is not a
+    folder, in a folder we can write, and, where a file is there already, a PNG (a user's other file
+    is never overwritten by a picture)."""
+    path = Path(path)
+    if path.suffix.lower() != ".png":
+        raise UserError(f"{what} {path}: must be a .png file")
+    if path.is_dir():
+        raise UserError(f"{what} {path}: is a directory")
+    if not path.parent.is_dir():
+        raise UserError(f"{what} {path}: {path.parent} is not a folder")
+    _writable_dir(path.parent, what)
+    if path.exists() or path.is_symlink():
+        try:
+            head = read_bounded(path)[: len(PNG_SIGNATURE)]
+        except UserError as e:
+            raise UserError(f"{what} {e}") from None
+        if head != PNG_SIGNATURE:
+            raise UserError(f"{what} {path}: exists and is not a PNG image; not overwriting it")
+    return path
+
+
 #: A file read back to decide whether it may be replaced is at most this big (bytes): every result
 #: this package writes is far smaller, and a device such as ``/dev/zero`` never ends.
 MAX_RESULT_BYTES = 64 * 2**20
