@@ -50,7 +50,7 @@ def main(argv=None) -> int:
     import torch
 
     from warp_critic.core.errors import UserError
-    from warp_critic.reproduce.experiments.generalize import goal_grid
+    from warp_critic.reproduce.experiments.goals import goal_grid
     from warp_critic.reproduce.experiments.settings import default_settings
     from warp_critic.running.task import TaskConfig, load_task_scene
 

@@ -48,7 +48,7 @@ def main(argv=None) -> int:
     from warp_critic.core import runtime
 
     runtime.init()  # before the imports below, which would start Warp with its banner
-    from warp_critic.reproduce.experiments.generalize import run_maps_stage
+    from warp_critic.reproduce.experiments.maps import run_maps_stage
     from warp_critic.reproduce.experiments.settings import default_settings
     from warp_critic.reproduce.report.maps import elbow_bent
 

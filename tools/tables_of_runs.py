@@ -68,8 +68,8 @@ def main(argv=None) -> int:
     from warp_critic.core import runtime
 
     runtime.init()  # before the imports below, which would start Warp with its banner
-    from warp_critic.reproduce.experiments.generalize import run_tables_stage
     from warp_critic.reproduce.experiments.settings import default_settings
+    from warp_critic.reproduce.experiments.tables import run_tables_stage
 
     # the paper's Tables 2-3 are left at their trained column: this tool is for issue 25's tables
     s = dict(default_settings(quick=False, seeds=1)["tables"], reach_iterations=0)

@@ -166,7 +166,7 @@ def report_method(
     ``resume``: its progress folder (one sub-folder per reporting goal std)."""
     from warp_critic.physics.scene import Variant
     from warp_critic.reproduce.experiments.evaluate import Job, evaluate
-    from warp_critic.reproduce.experiments.generalize import draw_goals, train_goals_and_limits
+    from warp_critic.reproduce.experiments.goals import draw_goals, train_goals_and_limits
 
     t = time.perf_counter()
     dirs = [str(d) for d in cfg.runs[method]]

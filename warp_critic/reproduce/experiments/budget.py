@@ -137,7 +137,7 @@ def sweep(
     "alphas", "diverged", "worlds", "seconds"}`` (MSE in rad^2)."""
     from warp_critic.physics.scene import Variant
     from warp_critic.reproduce.experiments.evaluate import Job, evaluate
-    from warp_critic.reproduce.experiments.generalize import train_goals_and_limits
+    from warp_critic.reproduce.experiments.goals import train_goals_and_limits
 
     t = time.perf_counter()
     jobs = []

@@ -136,7 +136,7 @@ def maps_floor(run_dir: str, s: dict, grid, train_goals, pairs: dict, variant, d
     """The open-loop reachability floor (MSE over the joints) of every goal of the goal grid ``(n, n,
     dof)`` and of every cell of the 2-D maps (mean over the training goals): what the best open-loop
     torques within the policy's bounds and horizon reach from home (:func:`best_open_loop_floor`).
-    The maps stage's (:func:`~warp_critic.reproduce.experiments.generalize.run_maps_stage`)."""
+    The maps stage's (:func:`~warp_critic.reproduce.experiments.maps.run_maps_stage`)."""
     its, lrs = int(s["reach_iterations"]), [float(x) for x in s["reach_lrs"]]
 
     def floor(variants: list, goals) -> np.ndarray:

@@ -21,7 +21,7 @@ Paper settings (non-quick):
   ``N(g, std^2)`` around training goals 0 and 1; Tables 2-3 use 10 goals drawn the same way at
   ``dynamics_goal_std`` (0.1: the paper does not say which goals it used there).
 * ``maps``: reacher Figures 4-6: a goal grid over the joint space and 2-D grids over the masses
-  (m1, m2) and the lengths (l1, l2) of both links (:mod:`warp_critic.reproduce.experiments.generalize`), each goal
+  (m1, m2) and the lengths (l1, l2) of both links (:mod:`warp_critic.reproduce.experiments.maps`), each goal
   and cell with its open-loop reachability floor (``reach_iterations`` Adam steps at each of
   ``reach_lrs``; 0 = none).
 * ``tables``: also two stress tables (added tip mass, stretched link 7) with their open-loop

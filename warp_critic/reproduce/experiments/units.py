@@ -19,8 +19,8 @@ STAGE_FUNCTIONS = {
     "toy": "warp_critic.reproduce.experiments.analyses:run_toy_stage",
     "landscape": "warp_critic.reproduce.experiments.analyses:run_landscape_stage",
     "metatrain": "warp_critic.reproduce.experiments.metatrain:run_metatrain_stage",
-    "maps": "warp_critic.reproduce.experiments.generalize:run_maps_stage",
-    "tables": "warp_critic.reproduce.experiments.generalize:run_tables_stage",
+    "maps": "warp_critic.reproduce.experiments.maps:run_maps_stage",
+    "tables": "warp_critic.reproduce.experiments.tables:run_tables_stage",
     "budget": "warp_critic.reproduce.experiments.budget:run_budget_stage",
 }
 
