@@ -78,6 +78,8 @@ ADOPT_RULE = (
 )
 #: a row's training length: the search's truncation or the method's whole reproduce run
 TRUNCATED, FULL = "truncated", "full"
+#: the most iterations between two checkpoints of a candidate's runs
+CHECKPOINT_EVERY = 100
 
 
 # ------------------------------------------------------------------------------------------------
@@ -175,7 +177,10 @@ def train(
     if length == FULL:
         iterations = 2 * iterations if args.tiny else int(values["iterations"])
     every = max(1, iterations // 4)
-    values.update(iterations=iterations, checkpoint_every=every, record_every=every)
+    # a checkpoint at least every CHECKPOINT_EVERY iterations: a call killed mid-candidate (the end
+    # of a sitting) loses at most that much of it; how often a run checkpoints changes no number
+    checkpoint = min(every, CHECKPOINT_EVERY)
+    values.update(iterations=iterations, checkpoint_every=checkpoint, record_every=every)
     if args.tiny:  # plumbing only (tests)
         values.update(
             worlds_per_goal=1, horizon=5, critic_hidden=min(values.get("critic_hidden") or 400, 16)

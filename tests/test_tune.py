@@ -314,6 +314,8 @@ def test_a_confirmation_trains_for_the_methods_whole_reproduce_run(
             tool.train(scene, m, change, args, tmp_path / f"{m}-{length}", length)
             cfg = seen[-1]
             assert cfg.iterations == want and cfg.seeds == [100, 101], (m, length)
+            # a sitting's end loses at most 100 iterations of a candidate
+            assert cfg.checkpoint_every == min(want // 4, tool.CHECKPOINT_EVERY) <= 100
             ((key, value),) = change.items()
             assert getattr(cfg, key) == value
 
