@@ -636,6 +636,7 @@ def test_republish_publishes_and_writes_every_generated_block(quick, tmp_path, c
     (tmp_path / "old.json").write_text(json.dumps(old))
     dest = tmp_path / "paper"
     dest.mkdir()
+    (dest / "results.json").write_text(json.dumps(old))  # the replaced report
     markers = ("verdicts", "calls", "contents")
     (dest / "README.md").write_text(
         "".join(f"<!-- {m}:begin -->\n<!-- {m}:end -->\n" for m in markers)
@@ -643,6 +644,17 @@ def test_republish_publishes_and_writes_every_generated_block(quick, tmp_path, c
     (dest / "figures").mkdir()
     (dest / "figures" / "gone.png").write_bytes(PNG_MAGIC)  # the replaced report's figure
     argv = [str(out), "--dest", str(dest), "--before", str(tmp_path / "old.json")]
+    # refused before anything is written: a quick run's report, a folder of other files
+    assert tool.main([*argv, "--readme", str(tmp_path / "none.md")]) == 2
+    assert "a --quick run's report" in capsys.readouterr().err
+    mine = tmp_path / "mine"
+    (mine / "figures").mkdir(parents=True)
+    (mine / "figures" / "plot.png").write_bytes(PNG_MAGIC)
+    assert tool.main([str(out), "--dest", str(mine), "--before", argv[-1], "--allow-quick"]) == 2
+    assert "holds files but no published report" in capsys.readouterr().err
+    assert [p.name for p in mine.rglob("*")] == ["figures", "plot.png"]
+    assert not (dest / "REPORT.md").exists()
+    argv.append("--allow-quick")
     assert tool.main([*argv, "--readme", str(tmp_path / "none.md")]) == 0
     page = (dest / "README.md").read_text()
     assert f"| {flipped['claim']} | **" in page and "changed verdict" in page

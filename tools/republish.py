@@ -53,6 +53,32 @@ def carried(out: Path) -> list[str]:
     return list(ledger.get("stages_before_ledger") or [])
 
 
+def check_dest(dest: Path) -> None:
+    """``dest`` is new, empty, or holds a published report (its ``results.json``): the replaced
+    report's ``stages/`` and ``figures/`` are removed there, so a folder of other files is refused."""
+    if dest.exists() and not dest.is_dir():
+        raise ValueError(f"--dest {dest}: not a folder")
+    if dest.is_dir() and any(dest.iterdir()) and not (dest / "results.json").is_file():
+        raise ValueError(
+            f"--dest {dest}: holds files but no published report (results.json); a republish "
+            "replaces a report's stages/ and figures/, so give the report's folder or a new one"
+        )
+
+
+def check_full(out: Path, allow_quick: bool) -> None:
+    """A ``--quick`` run's report is plumbing, not the paper's setting (its columns and seeds are
+    not the paper's): refused unless ``allow_quick``."""
+    try:
+        quick = bool(json.loads((out / "results.json").read_text()).get("quick"))
+    except (OSError, ValueError, AttributeError):
+        return  # carried() says what is wrong with it
+    if quick and not allow_quick:
+        raise ValueError(
+            f"{out}: a --quick run's report (plumbing, not the paper's setting); republish a full "
+            "run (--allow-quick publishes it anyway)"
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog=PROG, description=__doc__.split("\n")[0])
     ap.add_argument("out", type=Path, help="a finished reproduce output folder")
@@ -68,6 +94,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--allow-carried", action="store_true", help="publish a run with carried stages"
     )
+    ap.add_argument(
+        "--allow-quick", action="store_true", help="publish a --quick run (plumbing checks)"
+    )
     args = ap.parse_args(argv)
     from warp_critic.core.errors import UserError
     from warp_critic.core.generated import replace_block
@@ -80,6 +109,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         before = verdicts.load(args.before)  # read first: the destination is about to change
         extra = carried(args.out)
+        check_full(args.out, args.allow_quick)
+        check_dest(args.dest)
         if extra and not args.allow_carried:
             raise ValueError(
                 f"{args.out}: {len(extra)} stage(s) of its report were carried in, not run by a "
