@@ -44,7 +44,12 @@ def test_departures_name_what_differs_from_the_papers_text():
     assert "inner steps" not in one and "final error" not in one and "take 1 critic" in one
     reacher = departures("reacher", {"critic_input": "full"}, 9.81)
     assert not any("gravity" in x or "goal-relative" in x for x in reacher)
-    assert any("DDPG with actor_lr 0.001" in x for x in reacher)  # the search's pick (TUNED)
+    from warp_critic.reproduce.experiments.settings import METHOD_LABELS, TUNED, TUNED_FROM
+
+    for m, changed in TUNED.get("reacher", {}).items():  # each adopted setting, and its source
+        ((key, value), *_) = changed.items()
+        said = [x for x in reacher if x.startswith(f"{METHOD_LABELS[m]} with {key} {value:g}")]
+        assert len(said) == 1 and TUNED_FROM in said[0], (m, reacher)
     assert "`warp-critic budget` or `reproduce --beyond` chooses" in text  # no budget stage: how
     own = " ".join(departures("kuka", {"inner_steps": 3}, 0.0, own_budgets=True))
     assert (

@@ -51,19 +51,37 @@ def test_every_method_gets_seven_candidates_on_the_same_three_knobs(tool, scene)
             assert got == pytest.approx(sorted(knob["factors"]), rel=2e-3), (m, name)
 
 
-def test_the_own_setting_undoes_earlier_adoptions(tool):
-    """The search starts from the published settings, not from an earlier search's pick."""
-    from warp_critic.reproduce.experiments.settings import TUNED, default_settings
+def test_the_own_setting_undoes_earlier_adoptions(tool, monkeypatch):
+    """The search starts from the published settings, not from an earlier search's pick: whatever
+    ``settings.TUNED`` holds (here the committed one, and a stand-in that adopts a change of every
+    kind), the own setting is reproduce's setting without it."""
+    import warp_critic.reproduce.experiments.settings as settings
 
-    mc = tool.own_setting("reacher", "meta-critic")
-    assert "updates_per_iteration" in TUNED["reacher"]["meta-critic"]  # what is undone here
-    assert "updates_per_iteration" not in mc
-    assert default_settings(False, 1)["metatrain"]["reacher"]["ddpg"]["actor_lr"] == 1e-3
-    assert "actor_lr" not in tool.own_setting("reacher", "ddpg")  # the config's published 1e-4
+    def check():
+        for scene in ("reacher", "kuka"):
+            for m in METHODS:
+                own = tool.own_setting(scene, m)
+                plain = settings.default_settings(False, 1, extra=tool._extra(m))["metatrain"][
+                    scene
+                ][m]
+                changed = settings.TUNED.get(scene, {}).get(m, {})
+                assert {k: v for k, v in plain.items() if k not in changed} == {
+                    k: v for k, v in own.items() if k not in changed
+                }, (scene, m)
+                for key, value in changed.items():
+                    assert plain[key] == value and own.get(key) != value, (scene, m, key)
+
+    check()
+    stand_in = {
+        "reacher": {"ddpg": {"actor_lr": 3.16e-5}, "meta-critic": {"updates_per_iteration": 100}},
+        "kuka": {"ours": {"lr": 0.00948}, "td3": {"critic_hidden": 800}},
+    }
+    monkeypatch.setattr(settings, "TUNED", stand_in)
+    check()
+    assert "updates_per_iteration" not in tool.own_setting("reacher", "meta-critic")
+    assert tool.own_setting("reacher", "ddpg").get("actor_lr", 1e-4) == 1e-4  # the config's
     assert tool.knob_values("reacher", "ddpg")["actor_lr"] == 1e-4
-    assert (
-        tool.own_setting("kuka", "ours") == default_settings(False, 1)["metatrain"]["kuka"]["ours"]
-    )
+    assert tool.own_setting("kuka", "ours")["lr"] != 0.00948
 
 
 @pytest.mark.parametrize("scene", ["reacher", "kuka"])
