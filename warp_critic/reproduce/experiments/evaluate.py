@@ -16,8 +16,8 @@ world's gradient. Independent, but not to the last bit of every world: torch sum
 last-layer bias gradient over the horizon on a ``(T, W, dof)`` tensor, and its vectorised and
 remainder paths add in different orders, so a job's errors move by about 1e-6 (relative) with the
 width of the batch it is in. The same jobs with the same ``max_worlds`` give the same numbers to the
-bit (and two batches in two threads give the one thread's numbers); another ``max_worlds`` can differ
-in the sixth digit (measured on the KUKA, 2026-12-07: 8e-7).
+bit; another ``max_worlds`` can differ in the sixth digit (measured on the KUKA, 2026-12-07: 8e-7;
+``docs/journal/probes.md``).
 
 A world whose state goes non-finite (a light or short link at the scene's ``dt`` under a policy that
 slams it into its limits) does not stop the evaluation: its final error is ``inf`` (``before`` too
