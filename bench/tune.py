@@ -328,6 +328,11 @@ def main(argv=None) -> int:
         p.error("--train-steps, --inits and --jobs at least 1, and at least one seed")
     if any(s < 5 for s in args.seeds):
         p.error("--seeds: use seeds other than the reported 0-4")
+    if args.markdown and not _summary_file(Path(args.markdown)):
+        p.error(
+            f"--markdown {args.markdown}: must be a .md file that is new or a summary this tool "
+            "wrote (it starts with '### '); not overwriting it"
+        )
     if args.candidate is not None:
         return _one(p, args)
     out = Path(args.out)
@@ -401,6 +406,20 @@ def _search(rows: list[dict], args, out: Path) -> None:
             for f in finished:
                 running.pop(f)
                 _done(rows, f.result(), args, out)
+
+
+def _summary_file(path: Path) -> bool:
+    """Whether ``--markdown`` may write ``path``: a ``.md`` in a folder that is there, new or holding
+    a summary of this tool (checked before any candidate trains)."""
+    if path.suffix != ".md" or not path.parent.is_dir() or path.is_dir():
+        return False
+    if not path.exists():
+        return True
+    try:
+        with path.open("rb") as f:
+            return f.read(4) == b"### "
+    except OSError:
+        return False
 
 
 def _one(p, args) -> int:

@@ -193,6 +193,21 @@ def test_bad_input_is_one_line_exit_2(tool, argv, words, capsys):
     assert err.count("\n") == 1 and words in err, err
 
 
+def test_markdown_never_overwrites_a_users_file(tool, tmp_path, capsys):
+    """``--markdown`` writes a new ``.md`` or a summary of this tool; anything else is refused in one
+    line before any candidate trains, and left byte for byte."""
+    notes, readme = tmp_path / "notes.txt", tmp_path / "README.md"
+    notes.write_text("mine")
+    readme.write_text("# my project\n")
+    for path, words in ((notes, "must be a .md file"), (readme, "not overwriting it")):
+        with pytest.raises(SystemExit) as e:
+            tool.main([*_tiny_argv(tmp_path), "--markdown", str(path)])
+        err = capsys.readouterr().err
+        assert e.value.code == 2 and err.count("\n") == 1 and words in err, err
+    assert notes.read_text() == "mine" and readme.read_text() == "# my project\n"
+    assert not (tmp_path / "tune.json").exists()
+
+
 def test_an_adoption_for_ours_reaches_reproduce_and_the_search_undoes_it(tool, monkeypatch):
     """``TUNED`` may name ours too (one procedure for all): reproduce trains ours with the change,
     the task fields the baselines share stay ours' preset's, and the search starts from the preset."""
