@@ -17,9 +17,6 @@ from warp_critic.physics import derive
 from warp_critic.physics.balance import GROWTH, upright_joints, upright_note
 from warp_critic.physics.robot import load_robot
 
-# one worker runs this module: the imported arms, made once
-pytestmark = pytest.mark.xdist_group("test_balance")
-
 
 def _upright_arm(elbow: tuple[float, float]) -> str:
     link = '<inertial><origin xyz="0 0 0.25"/><mass value="{m}"/><inertia ixx="0.02" iyy="0.02" izz="0.001" ixy="0" ixz="0" iyz="0"/></inertial>'

@@ -23,9 +23,6 @@ from helpers import TINY_TRAIN, run_cli, start_cli
 
 from warp_critic.running.recording import read_times
 
-# one worker runs this module: the straight run, trained once
-pytestmark = pytest.mark.xdist_group("test_faults")
-
 TINY = [*TINY_TRAIN, "--checkpoint-every", "1", "--record-every", "1"]
 ITERATIONS = 6
 

@@ -11,9 +11,6 @@ from warp_critic.analysis.landscape.problem import AXIS_MASS, analytic_gain, ana
 from warp_critic.analysis.landscape.run import LandscapeConfig, run_landscape
 from warp_critic.running.recording import read_entity_paths
 
-# one worker runs this module: the landscape result, computed once
-pytestmark = pytest.mark.xdist_group("test_landscape")
-
 GOAL, TEST_GOALS, INITS = (1.0, 1.0), ((-1.5, 0.5), (0.5, -1.5)), ((0.0, 0.0), (-0.5, 0.5))
 
 

@@ -19,9 +19,6 @@ from warp_critic.cli.main import main as cli_main
 from warp_critic.core.errors import UserError
 from warp_critic.reproduce.report.maps import elbow_bent
 
-# one worker runs this module: the quick reproduce output, made once
-pytestmark = pytest.mark.xdist_group("test_reproduce")
-
 
 def reproduce_main(argv):
     return cli_main(["reproduce", *argv])

@@ -9,9 +9,6 @@ import pytest
 from conftest import ROOT
 from helpers import load_tool
 
-# one worker runs this module: the tiny search its tests read is made once
-pytestmark = pytest.mark.xdist_group("test_tune")
-
 METHODS = ("ours", "ddpg", "meta-critic", "td3")
 TUNING = ROOT / "docs" / "paper" / "tuning"
 

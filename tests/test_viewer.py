@@ -27,7 +27,6 @@ RERUN = shutil.which("rerun", path=str(Path(sys.executable).parent)) or shutil.w
 pytestmark = [
     pytest.mark.slow,  # the recordings train and the viewer starts: minutes in all
     pytest.mark.viewer,
-    pytest.mark.xdist_group("test_viewer"),  # one worker: the recordings, made once
     pytest.mark.subprocess,
     pytest.mark.skipif(
         shutil.which("xvfb-run") is None or RERUN is None,
