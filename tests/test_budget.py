@@ -102,7 +102,7 @@ def test_bad_input_is_one_line(tmp_path, capsys, argv, message):
         ({"--methods": "ours,ppo"}, "--methods: unknown method(s) ppo"),
         ({"--methods": None, "--from": "{tmp}"}, "no complete stage metatrain-reacher-<method>-*"),
         ({"--choose-seed": "-1"}, "--choose-seed must be an integer in 0.."),
-        ({"--device": "tpu"}, "--device must be cpu, cuda or auto (got 'tpu')"),
+        ({"--device": "tpu"}, "--device must be auto, cpu, cuda or cuda:N (got 'tpu')"),
         ({"--out": "{tmp}/b.txt"}, "--out {tmp}/b.txt: must be a .json file"),
         ({"--figure": "{tmp}/notes.txt"}, "--figure {tmp}/notes.txt: must be a .png file"),
         ({"--figure": "{tmp}/mine.png"}, "exists and is not a PNG image; not overwriting it"),

@@ -268,6 +268,50 @@ def test_result_files_are_read_bounded(tmp_path):
         read_bounded(big, cap=1000)
 
 
+def test_a_figure_is_checked_by_its_signature_alone(tmp_path):
+    """``--figure``: an existing PNG of any size may be replaced (only its 8-byte signature is
+    read; a large picture is no result file to cap), any other file and a device are refused."""
+    from warp_critic.core.errors import UserError
+    from warp_critic.running.files import MAX_RESULT_BYTES, PNG_SIGNATURE, check_figure_file
+
+    big = tmp_path / "big.png"
+    with open(big, "wb") as f:  # sparse: a signature, then a hole past the result files' cap
+        f.write(PNG_SIGNATURE)
+        f.truncate(MAX_RESULT_BYTES + 1)
+    assert check_figure_file(big) == big
+    (tmp_path / "notes.png").write_bytes(b"my notes, not a picture")
+    with pytest.raises(UserError, match="exists and is not a PNG image"):
+        check_figure_file(tmp_path / "notes.png")
+    link = tmp_path / "dev.png"
+    link.symlink_to("/dev/zero")
+    with pytest.raises(UserError, match="character device"):
+        check_figure_file(link)
+
+
+@pytest.mark.parametrize("name", ["auto", "cpu", "cuda", "cuda:0", "cuda:12"])
+def test_a_device_name_is_checked_once_for_every_command(name):
+    """One check of a device's name (``core.runtime.check_device``) for the simulator, ``reproduce``
+    and ``budget``: what it accepts, each accepts, and each refuses the rest with one message."""
+    from warp_critic.core.errors import FieldError
+    from warp_critic.core.runtime import check_device
+    from warp_critic.reproduce.budget import BudgetConfig
+    from warp_critic.reproduce.experiments.plan import ReproduceConfig
+
+    assert check_device(name) == name
+    for bad in ("tpu", "cuda:", "cuda:x", "CPU", "", None, 0):
+        with pytest.raises(FieldError, match="must be auto, cpu, cuda or cuda:N"):
+            check_device(bad)
+    checks = (
+        lambda d: BudgetConfig(runs={"ours": ["r"]}, device=d).validate(),
+        lambda d: ReproduceConfig(device=d).validate(),
+    )
+    for validate in checks:
+        with pytest.raises(
+            FieldError, match=r"device: must be auto, cpu, cuda or cuda:N \(got 'tp"
+        ):
+            validate("tpu")
+
+
 def test_meta_test_out_a_fifo_is_refused_not_read(world, capfd):  # noqa: F811 (the fixture)
     """A FIFO as ``--out``: refused naming it (opening it to see whether it is an earlier result
     waited for a writer forever). Outside the table: its snapshot would read the FIFO."""

@@ -129,6 +129,17 @@ def init(threads: int | None = None, quiet: bool = True) -> None:
 # ------------------------------------------------------------------------------------------------
 
 
+def check_device(device, name: str = "device") -> str:
+    """``device`` when it names a device the project can run on (``auto``, ``cpu``, ``cuda`` or
+    ``cuda:N``), else a :class:`FieldError` for the flag or field ``name``. Only the name is checked
+    (pure: nothing is imported or started); whether that GPU exists is
+    :func:`warp_critic.physics.simulator.resolve_device`'s question."""
+    d = device if isinstance(device, str) else None
+    if d in ("auto", "cpu", "cuda") or (d is not None and d[:5] == "cuda:" and d[5:].isdigit()):
+        return d
+    raise FieldError(name, f"must be auto, cpu, cuda or cuda:N (got {device!r})")
+
+
 def check_seed(seed, name: str = "seed") -> int:
     if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed <= MAX_SEED:
         raise FieldError(name, f"must be an integer in 0..{MAX_SEED} (got {seed!r})")

@@ -28,8 +28,7 @@ AUTO_PICKS_CUDA = False
 def resolve_device(device: str) -> str:
     """``auto`` -> ``cpu`` (see :data:`AUTO_PICKS_CUDA`); ``cuda``/``cuda:N`` only where Warp and
     torch both see a GPU."""
-    if device not in ("auto", "cpu", "cuda") and not device.startswith("cuda:"):
-        raise FieldError("device", f"must be one of auto, cpu, cuda (got {device!r})")
+    runtime.check_device(device)
     if device == "auto":
         try:
             has_cuda = AUTO_PICKS_CUDA and wp.is_cuda_available() and torch.cuda.is_available()

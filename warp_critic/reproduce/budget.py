@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any
 
 from warp_critic.core.errors import FieldError
-from warp_critic.core.runtime import check_seed
+from warp_critic.core.runtime import check_device, check_seed
 from warp_critic.evaluation.seed_uses import CHOOSE_BUDGET_SEED, chose
 from warp_critic.reproduce.experiments.budget import (
     ALPHA_SCALES,
@@ -107,8 +107,7 @@ class BudgetConfig:
             )
         for name in ("choose_seed", "report_seed"):
             check_seed(getattr(self, name), name)
-        if self.device not in ("auto", "cpu", "cuda") and not str(self.device).startswith("cuda:"):
-            raise FieldError("device", f"must be cpu, cuda or auto (got {self.device!r})")
+        check_device(self.device)
         for s in reporting:
             if chose(s):
                 raise FieldError(

@@ -151,7 +151,7 @@ def check_figure_file(path: str | Path, what: str = "--figure") -> Path:
     _writable_dir(path.parent, what)
     if path.exists() or path.is_symlink():
         try:
-            head = read_bounded(path)[: len(PNG_SIGNATURE)]
+            head = read_head(path, len(PNG_SIGNATURE))
         except UserError as e:
             raise UserError(f"{what} {e}") from None
         if head != PNG_SIGNATURE:
@@ -164,10 +164,9 @@ def check_figure_file(path: str | Path, what: str = "--figure") -> Path:
 MAX_RESULT_BYTES = 64 * 2**20
 
 
-def read_bounded(path: str | Path, cap: int = MAX_RESULT_BYTES) -> bytes:
-    """The bytes of the user-named regular file ``path``, at most ``cap`` of them; a device, a FIFO,
-    a socket or a larger file is one :class:`UserError` line (nothing is read from it)."""
-    path = Path(path)
+def _regular_size(path: Path) -> int:
+    """The size of the user-named regular file ``path`` (bytes); a device, a FIFO, a socket or a
+    file that cannot be read is one :class:`UserError` line (nothing is read from it)."""
     try:
         st = os.stat(path)  # through a symbolic link: what the link names is what would be read
     except OSError as e:
@@ -175,16 +174,36 @@ def read_bounded(path: str | Path, cap: int = MAX_RESULT_BYTES) -> bytes:
     if not stat.S_ISREG(st.st_mode):
         kind = next((name for test, name in _NOT_REGULAR if test(st.st_mode)), "not a regular file")
         raise UserError(f"{path}: is {kind}, not a regular file")
-    if st.st_size > cap:
-        raise UserError(f"{path}: {st.st_size:,} bytes, more than the {cap:,} a result file can be")
+    return st.st_size
+
+
+def _read_at_most(path: Path, n: int) -> bytes:
     try:
         with open(path, "rb") as f:
-            data = f.read(cap + 1)
+            return f.read(n)
     except OSError as e:
         raise UserError(f"{path}: cannot be read ({e.strerror or e})") from None
+
+
+def read_bounded(path: str | Path, cap: int = MAX_RESULT_BYTES) -> bytes:
+    """The bytes of the user-named regular file ``path``, at most ``cap`` of them; a device, a FIFO,
+    a socket or a larger file is one :class:`UserError` line (nothing is read from it)."""
+    path = Path(path)
+    size = _regular_size(path)
+    if size > cap:
+        raise UserError(f"{path}: {size:,} bytes, more than the {cap:,} a result file can be")
+    data = _read_at_most(path, cap + 1)
     if len(data) > cap:  # grew since the stat
         raise UserError(f"{path}: more than the {cap:,} bytes a result file can be")
     return data
+
+
+def read_head(path: str | Path, n: int) -> bytes:
+    """The first ``n`` bytes (fewer where the file is shorter) of the user-named regular file
+    ``path``, whatever its size; not a regular file is one :class:`UserError` line."""
+    path = Path(path)
+    _regular_size(path)
+    return _read_at_most(path, n)
 
 
 _NOT_REGULAR = (

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from warp_critic.core.errors import FieldError, UserError
-from warp_critic.core.runtime import MAX_SEEDS
+from warp_critic.core.runtime import MAX_SEEDS, check_device
 from warp_critic.reproduce.engine.stage import Stage
 from warp_critic.reproduce.experiments.budget import BUDGET_GROUPS, plan_budget
 from warp_critic.reproduce.experiments.extra_baselines import (
@@ -75,8 +75,7 @@ class ReproduceConfig:
                 )
         if self.only is not None and not self.only:
             raise UserError(f"--only: give one or more of {', '.join(STAGES)}")
-        if self.device not in ("auto", "cpu", "cuda") and not str(self.device).startswith("cuda:"):
-            raise UserError(f"--device: must be cpu, cuda or auto (got {self.device!r})")
+        check_device(self.device)
         defaults = default_settings(self.quick, self.seeds, extra)
         settings = apply_overrides(defaults, self.overrides)
         seeds = settings["metatrain"]["seeds"]
