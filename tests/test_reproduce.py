@@ -413,8 +413,10 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
     carry = load_tool("carry_stages")
     archive = tmp_path / "archive"
     assert carry.main(["save", str(out), str(archive)]) == 0
-    names = {p.name for p in archive.iterdir()}
+    calls_saved = (out / "ledger.jsonl").read_text().count('"event": "start"')
+    names = {p.name for p in archive.iterdir() if p.is_dir()}
     assert len(names) == 14 and not list(archive.rglob("*.rrd"))
+    assert {p.name for p in archive.iterdir() if not p.is_dir()} == {"ledger.jsonl.xz"}
     ckpts = list(archive.rglob("checkpoint.pt"))
     assert len(ckpts) == 7 * 2  # 7 meta-trainings (ours twice on the KUKA) x 2 quick seeds
     from warp_critic.physics.scene import scenes_dir
@@ -464,6 +466,10 @@ def test_carried_stages_resume_on_another_machine(quick, tmp_path, capsys):
         for c in json.loads((other / "results.json").read_text())["tables"]
     }
     assert again == cells
+    # the restored stages came with the calls that ran them: none is "carried in", and the ledger
+    # counts the first machine's calls and this one's
+    ledger = json.loads((other / "results.json").read_text())["ledger"]
+    assert ledger["stages_before_ledger"] == [] and ledger["calls"] == calls_saved + 1
     # restored plain: the same records and the report's auxiliary-loss shares from thinned metrics
     for name in names - {n for n in names if n.startswith(("maps-", "tables-"))}:
         assert (other / name / "stage.json").read_bytes() == (
@@ -673,7 +679,7 @@ def test_republish_publishes_and_writes_every_generated_block(quick, tmp_path, c
 def test_a_published_ledger_names_the_output_folder_as_the_report_did(tmp_path):
     """Each call that gave the output folder's absolute path names it as shown; a call on another
     folder, a record without a command and a torn last line are kept byte for byte."""
-    from warp_critic.reproduce.engine.publish import portable_ledger
+    from warp_critic.reproduce.engine.ledger import portable_ledger
 
     out = tmp_path / "runs" / "paper"
     out.mkdir(parents=True)
@@ -685,6 +691,54 @@ def test_a_published_ledger_names_the_output_folder_as_the_report_did(tmp_path):
     got = text.splitlines(keepends=True)
     assert json.loads(got[0])["command"] == "warp-critic reproduce --out runs/paper --beyond"
     assert got[1:] == lines[1:] and str(tmp_path) not in text
+
+
+def test_an_archive_carries_the_calls_that_ran_its_stages_over_sittings(tmp_path):
+    """A run resumed over sittings on fresh machines from an archive it commits: ``save`` merges
+    the output's ledger into the archive's (no machine's folder in it), ``restore`` merges it into
+    the next machine's output, and the stages the first machine's calls completed are then no
+    stage "completed by no call of this ledger". A torn line (a call writing) is dropped, never
+    merged into the middle of a ledger."""
+    from warp_critic.reproduce.engine import carry, ledger
+    from warp_critic.reproduce.engine.stages import MARKER
+    from warp_critic.reproduce.experiments.records import CARRY
+
+    def rec(**r):
+        return json.dumps(r, sort_keys=True) + "\n"
+
+    one, two, archive = tmp_path / "one" / "paper", tmp_path / "two" / "paper", tmp_path / "arch"
+    one.mkdir(parents=True)
+    (one / MARKER).write_text("{}")
+    cmd = f"warp-critic reproduce --out {one}"
+    first = [
+        rec(event="start", call="a", command=cmd, time="2026-12-01T10:00:00Z"),
+        rec(
+            event="stage",
+            call="a",
+            stage="toy",
+            dir="toy-e95b4993a1",
+            seconds=2.0,
+            time="2026-12-01T10:00:02Z",
+        ),
+    ]
+    (one / "ledger.jsonl").write_text("".join(first) + '{"event": "ali')
+    assert carry.save(one, archive, CARRY) == []
+    assert carry.restore(archive, two, CARRY) == []
+    carried = (two / "ledger.jsonl").read_text()
+    assert str(tmp_path) not in carried and "--out paper" in carried
+    assert [json.loads(x)["event"] for x in carried.splitlines()] == ["start", "stage"]
+    # the next sitting: its own call, then a save; the archive holds both sittings' calls, once
+    (two / "ledger.jsonl").write_text(
+        carried + rec(event="start", call="b", time="2026-12-02T09:00:00Z")
+    )
+    carry.save(two, archive, CARRY)
+    carry.save(two, archive, CARRY)
+    both = lzma.decompress((archive / carry.ARCHIVED_LEDGER).read_bytes()).decode()
+    assert [json.loads(x)["call"] for x in both.splitlines()] == ["a", "a", "b"]
+    s = ledger.summary(ledger.read(two))
+    n = ledger.numbers(s, {"toy-e95b4993a1": 2.0, "landscape-08f0d79b23": 160.0})
+    assert n["stages_before_ledger"] == ["landscape-08f0d79b23"] and n["calls"] == 2
+    assert ledger.merge("", "") == "" and ledger.merge(first[0], "".join(first)) == "".join(first)
 
 
 def test_an_archive_names_a_shipped_scene_from_any_checkout_as_scenes_name():
@@ -938,6 +992,28 @@ def test_a_working_call_beats_so_a_killed_one_still_counts_its_time(tmp_path):
     killed[-1]["time"] = "2026-12-01T12:30:00Z"  # its last beat
     s = ledger.summary(killed)
     assert s["wall"] == 9000 and s["unfinished"] == 1
+
+
+@pytest.mark.subprocess
+def test_each_call_says_which_commit_it_ran(tmp_path):
+    """A run resumed over sittings may span commits: each call's ``start`` names the package's
+    version and, from a git checkout (this one, or CI's clone), the commit it ran."""
+    import shutil
+
+    from warp_critic import __version__
+    from warp_critic.reproduce.engine import ledger
+
+    root = Path(ledger.__file__).resolve().parents[3]
+    if not (root / ".git").exists() or shutil.which("git") is None:
+        pytest.skip("not a git checkout")
+    head = subprocess.run(
+        ["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True, text=True, check=True
+    ).stdout.strip()
+    with ledger.Call(tmp_path, "warp-critic reproduce", ["toy"], "cpu"):
+        pass
+    start = ledger.read(tmp_path)[0]
+    assert start["event"] == "start" and start["code"]["warp_critic"] == __version__
+    assert start["code"]["commit"] == head[:12]
 
 
 def test_the_ledger_names_the_cpus_instruction_sets(monkeypatch, tmp_path):

@@ -13,6 +13,15 @@ Usage::
     warp-critic reproduce --out runs/paper                              # runs what is left
     python tools/carry_stages.py list docs/paper/stages
     python tools/carry_stages.py publish runs/paper docs/paper          # the report + its stages, to commit
+
+A run longer than a sitting, on machines that may be fresh each time, is resumed from an archive it
+commits as it goes: each sitting restores it, runs, and saves each complete stage into it (with the
+ledger of the calls that ran them, so the report counts every sitting's wall time and carries in
+nothing)::
+
+    python tools/carry_stages.py restore docs/rerun runs/paper          # a sitting's start
+    warp-critic reproduce --out runs/paper --beyond --baselines ddpg,meta-critic,td3 --jobs 2 &
+    python tools/carry_stages.py save runs/paper docs/rerun && git add docs/rerun && git commit
 """
 
 from __future__ import annotations

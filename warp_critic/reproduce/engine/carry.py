@@ -12,11 +12,15 @@ output folder on another machine, where ``reproduce`` then skips them and runs o
   (:func:`thin_metrics`). JSON and JSONL files are stored xz-compressed (``NAME.xz``: the
   records compress about 5x, and an archive is meant to be committed). A shipped scene's absolute
   path is written ``scenes/NAME`` (the scene is found by its content hash). A stage already in the
-  archive is skipped when its ``stage.json`` is the same, refused when it differs.
+  archive is skipped when its ``stage.json`` is the same, refused when it differs. The output's
+  ledger is merged into the archive's (:data:`ARCHIVED_LEDGER`).
 * :func:`restore` copies every archived stage that ``out`` lacks into ``out``, decompressed (made a
   reproduce output if new; its lock is held while copying). A stage ``out`` already has complete is
   skipped; one that ``out`` holds incomplete (started there) is refused, never overwritten.
-  Archives written before compression (plain JSON, whole metrics) restore as they are.
+  Archives written before compression (plain JSON, whole metrics) restore as they are. The
+  archive's ledger is merged into ``out``'s: a stage travels with the call that completed it, so a
+  run resumed over sittings on fresh machines, saving into an archive it commits as it goes, ends
+  with a ledger that holds every call of every sitting and no stage "carried in".
 Publishing a finished report (a folder to commit, with the archive of the stages it read) is
 :mod:`~warp_critic.reproduce.engine.publish`, on these functions.
 
@@ -34,6 +38,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from warp_critic.core.errors import UserError
+from warp_critic.reproduce.engine import ledger
+from warp_critic.reproduce.engine.ledger import LEDGER
 from warp_critic.reproduce.engine.stage import PROGRESS
 from warp_critic.reproduce.engine.stages import (
     MARKER,
@@ -246,7 +252,8 @@ def copy_stages(
 
 
 def save(out: Path, archive: Path, rules: CarryRules) -> list[str]:
-    """Copy the complete stages of ``out`` into ``archive``; returns the names copied."""
+    """Copy the complete stages of ``out`` into ``archive``, and merge ``out``'s ledger into the
+    archive's (:data:`ARCHIVED_LEDGER`); returns the names of the stages copied."""
     out, archive = Path(out), Path(archive)
     if not (out / MARKER).is_file():
         raise UserError(f"{out}: not a reproduce output (no {MARKER})")
@@ -255,19 +262,22 @@ def save(out: Path, archive: Path, rules: CarryRules) -> list[str]:
         archive.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise UserError(f"{archive}: cannot create ({e.strerror or e})") from None
-    return copy_stages(out, archive, rules, slim=True, pack=True, started=ARCHIVE_STARTED)
+    copied = copy_stages(out, archive, rules, slim=True, pack=True, started=ARCHIVE_STARTED)
+    _save_ledger(out, archive)
+    return copied
 
 
 def restore(archive: Path, out: Path, rules: CarryRules) -> list[str]:
-    """Copy the archived stages that ``out`` lacks into ``out``; returns the names copied."""
+    """Copy the archived stages that ``out`` lacks into ``out``, and merge the archive's ledger
+    into ``out``'s; returns the names of the stages copied."""
     archive = Path(archive)
     if not archive.is_dir():
         raise UserError(f"{archive}: no such directory")
-    if not complete_stages(archive, rules.check):
+    if not complete_stages(archive, rules.check) and not (archive / ARCHIVED_LEDGER).is_file():
         raise UserError(f"{archive}: holds no complete reproduce stage")
     out, lock = claim_out(Path(out))
     try:
-        return copy_stages(
+        copied = copy_stages(
             archive,
             out,
             rules,
@@ -276,8 +286,48 @@ def restore(archive: Path, out: Path, rules: CarryRules) -> list[str]:
             started="this stage was started here and is not complete; remove it to take the "
             "archived one",
         )
+        _restore_ledger(archive, out)
+        return copied
     finally:
         lock.release()
+
+
+#: an archive's copy of the ledger of the outputs it was saved from (``ledger.jsonl`` compressed).
+#: The calls that completed its stages travel with them: restored, they are stages some call of
+#: the ledger ran, never "carried in", and the ledger's wall time counts every sitting of a run
+#: resumed on fresh machines from an archive it commits as it goes.
+ARCHIVED_LEDGER = LEDGER + PACKED
+
+
+def _read_packed_ledger(path: Path) -> str:
+    try:
+        return lzma.decompress(path.read_bytes()).decode("utf-8") if path.is_file() else ""
+    except (OSError, lzma.LZMAError, UnicodeDecodeError) as e:
+        raise UserError(f"{path}: not a readable packed ledger ({e})") from None
+
+
+def _save_ledger(out: Path, archive: Path) -> None:
+    from warp_critic.running.files import atomic_write_bytes
+
+    if not (out / LEDGER).is_file():
+        return
+    first = next((r for r in ledger.read(out) if r.get("event") == "start"), {})
+    shown = ledger.out_as_shown(str(first.get("command", "")), out)
+    mine = ledger.portable_ledger((out / LEDGER).read_text(encoding="utf-8"), out, shown)
+    have = _read_packed_ledger(archive / ARCHIVED_LEDGER)
+    merged = ledger.merge(have, mine)
+    if merged != have:
+        atomic_write_bytes(archive / ARCHIVED_LEDGER, _pack(merged.encode("utf-8")))
+
+
+def _restore_ledger(archive: Path, out: Path) -> None:
+    from warp_critic.running.files import atomic_write_bytes
+
+    carried = _read_packed_ledger(archive / ARCHIVED_LEDGER)
+    have = (out / LEDGER).read_text(encoding="utf-8") if (out / LEDGER).is_file() else ""
+    merged = ledger.merge(have, carried)
+    if merged != have:
+        atomic_write_bytes(out / LEDGER, merged.encode("utf-8"))
 
 
 def summary(archive: Path, check: Check) -> str:
@@ -289,4 +339,12 @@ def summary(archive: Path, check: Check) -> str:
     return "\n".join(rows) if rows else f"{archive}: no complete stage"
 
 
-__all__ = ["CarryRules", "complete_stages", "copy_stages", "save", "restore", "summary"]
+__all__ = [
+    "ARCHIVED_LEDGER",
+    "CarryRules",
+    "complete_stages",
+    "copy_stages",
+    "save",
+    "restore",
+    "summary",
+]

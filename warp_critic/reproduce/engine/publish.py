@@ -28,6 +28,7 @@ from warp_critic.reproduce.engine.carry import (
     complete_stages,
     copy_stages,
 )
+from warp_critic.reproduce.engine.ledger import LEDGER, out_as_shown, portable_ledger
 from warp_critic.reproduce.engine.stages import MARKER, PACKED, STAGE_FILE
 
 
@@ -115,10 +116,10 @@ def publish(out: Path, dest: Path, rules: CarryRules, replace: bool = False) -> 
         pruned = [d.name for d in sorted(dest.iterdir()) if d.is_dir() and _published_record(d)]
         for name in pruned:
             shutil.rmtree(dest / name)
-        if (out / "ledger.jsonl").is_file():  # the calls that made the report, and their times
-            shown = _out_as_shown(str(results.get("command", "")), out)
-            ledger = portable_ledger((out / "ledger.jsonl").read_text(), out, shown)
-            atomic_write_bytes(dest / "ledger.jsonl", ledger.encode())
+        if (out / LEDGER).is_file():  # the calls that made the report, and their times
+            shown = out_as_shown(str(results.get("command", "")), out)
+            ledger = portable_ledger((out / LEDGER).read_text(), out, shown)
+            atomic_write_bytes(dest / LEDGER, ledger.encode())
         atomic_write_bytes(dest / "results.json", (out / "results.json").read_bytes())
         atomic_write_bytes(dest / "REPORT.md", report)  # last: a report only beside its files
     except OSError as e:
@@ -142,52 +143,6 @@ def _omit_checkpoints(stage: Path, data: dict, rules: CarryRules) -> list[str]:
         ckpt.unlink()
         dropped.append(f"{stage.name}/{run}")
     return dropped
-
-
-def _out_flag(command: str) -> tuple[list[str], int] | None:
-    """``(tokens, index of the --out value)`` of a reproduce command line, or ``None``."""
-    import shlex
-
-    try:
-        tokens = shlex.split(command)
-    except ValueError:
-        return None
-    if "--out" not in tokens[:-1]:
-        return None
-    return tokens, tokens.index("--out") + 1
-
-
-def _out_as_shown(command: str, out: Path) -> str:
-    """How a published ledger names the output folder: as the report's command gave it where
-    that is relative (``runs/paper``), else by its own name."""
-    found = _out_flag(command)
-    given = found[0][found[1]] if found else ""
-    return given if given and not Path(given).is_absolute() else Path(out).resolve().name
-
-
-def portable_ledger(text: str, out: Path, shown: str) -> str:
-    """``out``'s ledger as published: each call's command names the output folder ``shown``
-    where it gave its absolute path (a machine's folder; the calls are the same calls), every
-    other byte as it is."""
-    import shlex
-
-    root = Path(out).resolve()
-    lines = []
-    for line in text.splitlines(keepends=True):
-        try:
-            record = json.loads(line)
-        except ValueError:
-            lines.append(line)  # a torn last line: the report's reader skips it too
-            continue
-        found = _out_flag(record.get("command", "")) if isinstance(record, dict) else None
-        if found is not None:
-            tokens, i = found
-            if Path(tokens[i]).is_absolute() and Path(tokens[i]).resolve() == root:
-                tokens[i] = shown
-                record["command"] = shlex.join(tokens)
-                line = json.dumps(record, sort_keys=True) + "\n"
-        lines.append(line)
-    return "".join(lines)
 
 
 __all__ = ["ARCHIVE", "Published", "portable_ledger", "publish"]
