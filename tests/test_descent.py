@@ -133,6 +133,45 @@ def test_a_complete_stage_drops_its_progress_and_carry_skips_it(tmp_path):
     assert sorted(p.name for p in (tmp_path / d.name).iterdir()) == ["stage.json.xz"]
 
 
+def test_a_stage_part_way_goes_on_from_an_archive_in_another_folder(
+    finished_run, tmp_path, monkeypatch
+):
+    """A sitting ends inside a long meta-test: ``carry save`` keeps the stage's finished batches
+    (never a running one's policies), ``restore`` puts them in another machine's output folder,
+    and the meta-test there takes only the steps of the batches not finished, to the same
+    numbers. Once the stage is complete, the next save replaces the batches by its record."""
+    import shutil
+
+    from warp_critic.reproduce.engine import carry
+    from warp_critic.reproduce.engine.stage import PROGRESS
+    from warp_critic.reproduce.engine.stages import MARKER, Runner
+    from warp_critic.reproduce.experiments.records import CARRY
+
+    one, two, archive = tmp_path / "one" / "paper", tmp_path / "two" / "paper", tmp_path / "arch"
+    seed0 = "metatrain-reacher-ours-0123456789/run/seed0"
+    shutil.copytree(finished_run, one / seed0)
+    (one / MARKER).write_text(json.dumps({"kind": "warp-critic/reproduce-output-v1"}) + "\n")
+    progress = one / "toy-abc" / PROGRESS
+    ref = _call(one / seed0, resume=progress)
+    (progress / "batch-1.pt").unlink()  # the sitting ended in batch 1
+    (progress / "batch-1-partial.pt").write_bytes(b"policies")
+    saved = carry.save(one, archive, CARRY)
+    assert saved.partway == ["toy-abc"]
+    assert [p.name for p in (archive / "toy-abc" / PROGRESS).iterdir()] == ["batch-0.pt"]
+    assert carry.restore(archive, two, CARRY).partway == ["toy-abc"]
+    shutil.copytree(finished_run, two / seed0)
+    taken = _count_steps(monkeypatch)
+    ref["alphas"] = {str(two / seed0): ref["alphas"][str(one / seed0)]}  # the same run, moved
+    _same(_call(two / seed0, resume=two / "toy-abc" / PROGRESS), ref)
+    assert sum(taken) == 23  # batch 1 alone: batch 0 was read back
+    assert carry.save(one, archive, CARRY).partway == []  # nothing new
+    runner = Runner(one, CARRY.check, log=lambda line: None)
+    toy = {"closed_form": {}, "numerical": {}, "table_markdown": "", "files": {}}
+    runner.finish("toy", "toy", "abc", {}, toy, 1.0)
+    assert carry.save(one, archive, CARRY).stages == ["toy-abc"]
+    assert sorted(p.name for p in (archive / "toy-abc").iterdir()) == ["stage.json.xz"]
+
+
 def test_the_budget_command_resumes_a_killed_sweep_from_its_batches(
     finished_run, tmp_path, monkeypatch
 ):

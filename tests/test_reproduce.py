@@ -679,7 +679,7 @@ def test_republish_publishes_and_writes_every_generated_block(quick, tmp_path, c
 def test_a_published_ledger_names_the_output_folder_as_the_report_did(tmp_path):
     """Each call that gave the output folder's absolute path names it as shown; a call on another
     folder, a record without a command and a torn last line are kept byte for byte."""
-    from warp_critic.reproduce.engine.ledger import portable_ledger
+    from warp_critic.reproduce.engine.ledger_text import portable_ledger
 
     out = tmp_path / "runs" / "paper"
     out.mkdir(parents=True)
@@ -699,7 +699,7 @@ def test_an_archive_carries_the_calls_that_ran_its_stages_over_sittings(tmp_path
     the next machine's output, and the stages the first machine's calls completed are then no
     stage "completed by no call of this ledger". A torn line (a call writing) is dropped, never
     merged into the middle of a ledger."""
-    from warp_critic.reproduce.engine import carry, ledger
+    from warp_critic.reproduce.engine import carry, ledger, ledger_text
     from warp_critic.reproduce.engine.stages import MARKER
     from warp_critic.reproduce.experiments.records import CARRY
 
@@ -722,8 +722,8 @@ def test_an_archive_carries_the_calls_that_ran_its_stages_over_sittings(tmp_path
         ),
     ]
     (one / "ledger.jsonl").write_text("".join(first) + '{"event": "ali')
-    assert carry.save(one, archive, CARRY) == []
-    assert carry.restore(archive, two, CARRY) == []
+    assert carry.save(one, archive, CARRY) == carry.Carried([], [])
+    assert carry.restore(archive, two, CARRY) == carry.Carried([], [])
     carried = (two / "ledger.jsonl").read_text()
     assert str(tmp_path) not in carried and "--out paper" in carried
     assert [json.loads(x)["event"] for x in carried.splitlines()] == ["start", "stage"]
@@ -738,7 +738,9 @@ def test_an_archive_carries_the_calls_that_ran_its_stages_over_sittings(tmp_path
     s = ledger.summary(ledger.read(two))
     n = ledger.numbers(s, {"toy-e95b4993a1": 2.0, "landscape-08f0d79b23": 160.0})
     assert n["stages_before_ledger"] == ["landscape-08f0d79b23"] and n["calls"] == 2
-    assert ledger.merge("", "") == "" and ledger.merge(first[0], "".join(first)) == "".join(first)
+    assert ledger_text.merge("", "") == "" and ledger_text.merge(
+        first[0], "".join(first)
+    ) == "".join(first)
 
 
 def test_an_archive_names_a_shipped_scene_from_any_checkout_as_scenes_name():

@@ -17,7 +17,8 @@ Usage::
 A run longer than a sitting, on machines that may be fresh each time, is resumed from an archive it
 commits as it goes: each sitting restores it, runs, and saves each complete stage into it (with the
 ledger of the calls that ran them, so the report counts every sitting's wall time and carries in
-nothing)::
+nothing), and the finished batches of a long meta-test part way (a sitting that ends loses at most
+the batch it was in)::
 
     python tools/carry_stages.py restore docs/rerun runs/paper          # a sitting's start
     warp-critic reproduce --out runs/paper --beyond --baselines ddpg,meta-critic,td3 --jobs 2 &
@@ -77,14 +78,18 @@ def main(argv: list[str] | None = None) -> int:
             )
             return 0
         if args.what == "save":
-            names = carry.save(Path(args.out), Path(args.archive), CARRY)
+            done = carry.save(Path(args.out), Path(args.archive), CARRY)
             dest = args.archive
         else:
-            names = carry.restore(Path(args.archive), Path(args.out), CARRY)
+            done = carry.restore(Path(args.archive), Path(args.out), CARRY)
             dest = args.out
     except UserError as e:
         p.exit(2, f"{PROG}: error: {user_message(e)}\n")
-    print(f"{PROG}: {len(names)} stage(s) copied to {dest}" + "".join(f"\n  {n}" for n in names))
+    print(
+        f"{PROG}: {len(done.stages)} stage(s) copied to {dest}"
+        + "".join(f"\n  {n}" for n in done.stages)
+        + "".join(f"\n  {n}: part way, its new finished batches" for n in done.partway)
+    )
     return 0
 
 

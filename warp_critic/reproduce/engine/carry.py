@@ -38,7 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from warp_critic.core.errors import UserError
-from warp_critic.reproduce.engine import ledger
+from warp_critic.reproduce.engine import ledger, ledger_text, partway
 from warp_critic.reproduce.engine.ledger import LEDGER
 from warp_critic.reproduce.engine.stage import PROGRESS
 from warp_critic.reproduce.engine.stages import (
@@ -243,6 +243,8 @@ def copy_stages(
                     "not replacing it"
                 )
             continue
+        if partway.progress_only(dst / name):
+            shutil.rmtree(dst / name)  # an archive's finished batches of it: the stage is done now
         if (dst / name).exists():
             raise UserError(f"{dst / name}: {started}")
         slimmed = rules if slim and data["group"] == rules.slim_group else None
@@ -251,29 +253,45 @@ def copy_stages(
     return copied
 
 
-def save(out: Path, archive: Path, rules: CarryRules) -> list[str]:
-    """Copy the complete stages of ``out`` into ``archive``, and merge ``out``'s ledger into the
-    archive's (:data:`ARCHIVED_LEDGER`); returns the names of the stages copied."""
+@dataclass(frozen=True)
+class Carried:
+    """What :func:`save` or :func:`restore` copied."""
+
+    stages: list[str]  # complete stages
+    partway: list[str]  # stages part way, of which finished batches were copied (:mod:`.partway`)
+
+
+def save(out: Path, archive: Path, rules: CarryRules) -> Carried:
+    """Copy the complete stages of ``out`` into ``archive``, the finished batches of those part
+    way (:mod:`~warp_critic.reproduce.engine.partway`), and merge ``out``'s ledger into the
+    archive's (:data:`ARCHIVED_LEDGER`)."""
     out, archive = Path(out), Path(archive)
     if not (out / MARKER).is_file():
         raise UserError(f"{out}: not a reproduce output (no {MARKER})")
-    complete_stages(out, rules.check)  # an edited stage.json is refused before anything is written
+    complete = complete_stages(out, rules.check)  # an edited stage.json: refused before any write
     try:
         archive.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise UserError(f"{archive}: cannot create ({e.strerror or e})") from None
     copied = copy_stages(out, archive, rules, slim=True, pack=True, started=ARCHIVE_STARTED)
+    batches = partway.copy_batches(
+        out, archive, partway.partway_stages(out, set(complete)), replace=True
+    )
     _save_ledger(out, archive)
-    return copied
+    return Carried(copied, batches)
 
 
-def restore(archive: Path, out: Path, rules: CarryRules) -> list[str]:
-    """Copy the archived stages that ``out`` lacks into ``out``, and merge the archive's ledger
-    into ``out``'s; returns the names of the stages copied."""
+def restore(archive: Path, out: Path, rules: CarryRules) -> Carried:
+    """Copy the archived stages that ``out`` lacks into ``out``, the archived finished batches of
+    the stages part way that ``out`` has not completed, and merge the archive's ledger into
+    ``out``'s."""
     archive = Path(archive)
     if not archive.is_dir():
         raise UserError(f"{archive}: no such directory")
-    if not complete_stages(archive, rules.check) and not (archive / ARCHIVED_LEDGER).is_file():
+    names = [d.name for d in sorted(archive.iterdir()) if partway.progress_only(d)]
+    if not (
+        complete_stages(archive, rules.check) or names or (archive / ARCHIVED_LEDGER).is_file()
+    ):
         raise UserError(f"{archive}: holds no complete reproduce stage")
     out, lock = claim_out(Path(out))
     try:
@@ -286,8 +304,12 @@ def restore(archive: Path, out: Path, rules: CarryRules) -> list[str]:
             started="this stage was started here and is not complete; remove it to take the "
             "archived one",
         )
+        done = set(complete_stages(out, rules.check))
+        batches = partway.copy_batches(
+            archive, out, [n for n in names if n not in done], replace=False
+        )
         _restore_ledger(archive, out)
-        return copied
+        return Carried(copied, batches)
     finally:
         lock.release()
 
@@ -312,10 +334,10 @@ def _save_ledger(out: Path, archive: Path) -> None:
     if not (out / LEDGER).is_file():
         return
     first = next((r for r in ledger.read(out) if r.get("event") == "start"), {})
-    shown = ledger.out_as_shown(str(first.get("command", "")), out)
-    mine = ledger.portable_ledger((out / LEDGER).read_text(encoding="utf-8"), out, shown)
+    shown = ledger_text.out_as_shown(str(first.get("command", "")), out)
+    mine = ledger_text.portable_ledger((out / LEDGER).read_text(encoding="utf-8"), out, shown)
     have = _read_packed_ledger(archive / ARCHIVED_LEDGER)
-    merged = ledger.merge(have, mine)
+    merged = ledger_text.merge(have, mine)
     if merged != have:
         atomic_write_bytes(archive / ARCHIVED_LEDGER, _pack(merged.encode("utf-8")))
 
@@ -325,7 +347,7 @@ def _restore_ledger(archive: Path, out: Path) -> None:
 
     carried = _read_packed_ledger(archive / ARCHIVED_LEDGER)
     have = (out / LEDGER).read_text(encoding="utf-8") if (out / LEDGER).is_file() else ""
-    merged = ledger.merge(have, carried)
+    merged = ledger_text.merge(have, carried)
     if merged != have:
         atomic_write_bytes(out / LEDGER, merged.encode("utf-8"))
 

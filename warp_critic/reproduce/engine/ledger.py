@@ -70,9 +70,12 @@ def code() -> dict:
     """What code the call ran: the package's version and, where it runs from a git checkout, the
     commit checked out (``commit``, read from ``.git`` without running git; uncommitted changes
     are not seen). A run resumed over sittings may span commits; each call says which it ran."""
-    from warp_critic import __version__
+    from importlib import metadata
 
-    found: dict = {"warp_critic": __version__}
+    try:
+        found: dict = {"warp_critic": metadata.version("warp-critic")}
+    except metadata.PackageNotFoundError:  # run from a source tree that was never installed
+        found = {"warp_critic": "?"}
     git = Path(__file__).resolve().parents[3] / ".git"
     try:
         head = (git / "HEAD").read_text().strip()
@@ -334,72 +337,3 @@ def header_line_of(n: dict) -> str:
                 f"{wall / 3600:.1f} h of wall time does not include"
             )
     return line
-
-
-# ------------------------------------------------------------------------------------------------
-# a ledger as a file to commit or carry (pure)
-# ------------------------------------------------------------------------------------------------
-
-
-def _out_flag(command: str) -> tuple[list[str], int] | None:
-    """``(tokens, index of the --out value)`` of a reproduce command line, or ``None``."""
-    import shlex
-
-    try:
-        tokens = shlex.split(command)
-    except ValueError:
-        return None
-    if "--out" not in tokens[:-1]:
-        return None
-    return tokens, tokens.index("--out") + 1
-
-
-def out_as_shown(command: str, out: Path) -> str:
-    """How a published ledger names the output folder: as the report's command gave it where
-    that is relative (``runs/paper``), else by its own name."""
-    found = _out_flag(command)
-    given = found[0][found[1]] if found else ""
-    return given if given and not Path(given).is_absolute() else Path(out).resolve().name
-
-
-def portable_ledger(text: str, out: Path, shown: str) -> str:
-    """``out``'s ledger as published: each call's command names the output folder ``shown``
-    where it gave its absolute path (a machine's folder; the calls are the same calls), every
-    other byte as it is."""
-    import shlex
-
-    root = Path(out).resolve()
-    lines = []
-    for line in text.splitlines(keepends=True):
-        try:
-            record = json.loads(line)
-        except ValueError:
-            lines.append(line)  # a torn last line: the report's reader skips it too
-            continue
-        found = _out_flag(record.get("command", "")) if isinstance(record, dict) else None
-        if found is not None:
-            tokens, i = found
-            if Path(tokens[i]).is_absolute() and Path(tokens[i]).resolve() == root:
-                tokens[i] = shown
-                record["command"] = shlex.join(tokens)
-                line = json.dumps(record, sort_keys=True) + "\n"
-        lines.append(line)
-    return "".join(lines)
-
-
-def merge(first: str, second: str) -> str:
-    """The records of the ledger text ``first``, then those of ``second`` that ``first`` lacks, in
-    their order (pure). A line that is no record (a torn last line of a call that was writing) is
-    dropped from both: a merged ledger may go on growing in the middle."""
-    kept: list[str] = []
-    seen: set[str] = set()
-    for text in (first, second):
-        for line in text.splitlines():
-            try:
-                json.loads(line)
-            except ValueError:
-                continue
-            if line not in seen:
-                seen.add(line)
-                kept.append(line + "\n")
-    return "".join(kept)

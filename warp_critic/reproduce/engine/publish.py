@@ -28,7 +28,8 @@ from warp_critic.reproduce.engine.carry import (
     complete_stages,
     copy_stages,
 )
-from warp_critic.reproduce.engine.ledger import LEDGER, out_as_shown, portable_ledger
+from warp_critic.reproduce.engine.ledger import LEDGER
+from warp_critic.reproduce.engine.ledger_text import out_as_shown, portable_ledger
 from warp_critic.reproduce.engine.stages import MARKER, PACKED, STAGE_FILE
 
 

@@ -35,14 +35,22 @@ from warp_critic.core.errors import warn
 from warp_critic.running.files import atomic_torch_save
 
 
-def fingerprint(jobs: list, runs: dict, settings: dict) -> str:
-    """A hash of one batch's inputs: ``jobs`` (its :class:`~.evaluate.Job` list), ``runs`` (run
+def run_key(run_dir: str | Path) -> str:
+    """How a batch's files name a run: its last three path parts (``STAGE/run/seedN``), so that the
+    same batch in an output folder restored elsewhere from an archive (another machine, another
+    folder) is the same batch."""
+    return "/".join(Path(run_dir).parts[-3:])
+
+
+def fingerprint(jobs: list, runs: dict, settings: dict, key=run_key) -> str:
+    """A hash of one batch's inputs: ``jobs`` (its :class:`~.evaluate.Job` list; each run by
+    ``key``, :func:`run_key` unless two runs share one), ``runs`` (run
     directory -> its loaded run: the checkpoint's run id and iteration count) and ``settings``
     (plain JSON: steps, inits, seed, horizon, budgets read, device)."""
     described = [
         {
             "key": repr(j.key),
-            "run_dir": str(j.run_dir),
+            "run_dir": key(j.run_dir),
             "run": [runs[str(j.run_dir)].ckpt.get(k) for k in ("run_id", "iteration")],
             "goals": j.goals.to(torch.float64).tolist(),
             "variant": repr(j.variant),

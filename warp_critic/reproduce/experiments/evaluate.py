@@ -39,7 +39,12 @@ from warp_critic.core.errors import UserError
 from warp_critic.learning.critic_inputs import rollout_data_of
 from warp_critic.physics.inertia import NominalInertia
 from warp_critic.physics.scene import Variant
-from warp_critic.reproduce.experiments.descent import BatchProgress, descend, fingerprint
+from warp_critic.reproduce.experiments.descent import (
+    BatchProgress,
+    descend,
+    fingerprint,
+    run_key,
+)
 
 #: Task fields every run of one evaluation must share (they define the dynamics and the policy's scaling).
 SHARED_FIELDS = ("dt", "substeps", "gravity", "max_torque", "qd_scale")
@@ -224,16 +229,20 @@ def evaluate(
     try:
         kept = {"steps": steps, "inits": inits, "seed": int(seed), "horizon": horizon}
         kept.update(at=sorted(int(n) for n in at), device=device)  # what a batch's files depend on
+        dirs = {str(j.run_dir) for j in jobs}
+        # a run's name in the batch files: STAGE/run/seedN, or its whole path where two share that
+        name_of = run_key if len({run_key(d) for d in dirs}) == len(dirs) else str
         for b, group in enumerate(groups):
             batch = [jobs[i] for i in group]
             saved = None
             if resume is not None:
-                saved = BatchProgress(resume, b, fingerprint(batch, runs, kept))
+                saved = BatchProgress(resume, b, fingerprint(batch, runs, kept, name_of))
             done = saved.finished() if saved is not None else None
             if done is not None:
                 (err0, err, bad, err_at), alphas = done
-                for rd, alpha in alphas.items():
-                    runs[rd].alpha = alpha
+                named = {name_of(j.run_dir): str(j.run_dir) for j in batch}
+                for key, alpha in alphas.items():
+                    runs[named[key]].alpha = alpha
             else:
                 sim, policy = _batch_model(scene, batch, inits, cfg0, gravity, device)
                 critic, rate, goal, p = _batch_inputs(
@@ -244,7 +253,7 @@ def evaluate(
                 )
                 if saved is not None:
                     rds = {str(j.run_dir) for j in batch}  # each one's alpha set by _batch_inputs
-                    alphas = {rd: a for rd in rds if (a := runs[rd].alpha) is not None}
+                    alphas = {name_of(rd): a for rd in rds if (a := runs[rd].alpha) is not None}
                     saved.finish((err0, err, bad, err_at), alphas)
             diverged += bad
             _split(errors, group, jobs, inits, err)
