@@ -68,3 +68,31 @@ def test_departures_point_at_the_budget_section_when_its_stages_are_in_the_repor
     without = departures_of("kuka", {"metatrain-kuka-ours": _Rec()})
     assert any("own meta-test budget' chooses" in x for x in with_budget)
     assert not any("own meta-test budget' chooses" in x for x in without)
+
+
+def test_departures_name_only_the_adoptions_the_reports_runs_trained_with():
+    """A report without TD3 (``--baselines ddpg,meta-critic``) names no TD3 setting, and one whose
+    meta-training record holds other values than ``TUNED`` (an older run) is not said to hold
+    ``TUNED``'s."""
+    from types import SimpleNamespace
+
+    from warp_critic.reproduce.experiments.settings import METHOD_LABELS, TUNED
+    from warp_critic.reproduce.report.departures import departures_of
+
+    tuned = TUNED.get("reacher", {})
+    assert tuned, "no adoption on the reacher to test with"
+
+    def rec(values):
+        return SimpleNamespace(data={"settings": {"values": values}})
+
+    ours = {"metatrain-reacher-ours": rec({"critic_input": "full"})}
+    assert not [x for x in departures_of("reacher", ours) if "tuning search" in x]
+    ran = {f"metatrain-reacher-{m}": rec(dict(v)) for m, v in tuned.items()}
+    said = [x for x in departures_of("reacher", {**ours, **ran}) if "tuning search" in x]
+    assert len(said) == len(tuned)
+    assert all(any(x.startswith(METHOD_LABELS[m]) for x in said) for m in tuned)
+    other = {
+        k: rec({key: v * 10 for key, v in r.data["settings"]["values"].items()})
+        for k, r in ran.items()
+    }
+    assert not [x for x in departures_of("reacher", {**ours, **other}) if "tuning search" in x]

@@ -22,11 +22,16 @@ def scene_gravity(scene: str) -> float | None:
 
 
 def departures(
-    scene: str, values: dict, gravity: float | None, own_budgets: bool = False
+    scene: str,
+    values: dict,
+    gravity: float | None,
+    own_budgets: bool = False,
+    tuned: Mapping[str, Mapping[str, float]] | None = None,
 ) -> list[str]:
     """What differs from the paper's text in ``scene``'s runs: ``values`` are ours' meta-training
     settings (the stage record's), ``gravity`` the scene's; ``own_budgets``: the report also
-    holds each method at its own meta-test budget (the budget stages ran)."""
+    holds each method at its own meta-test budget (the budget stages ran); ``tuned``: method ->
+    the adopted values its runs trained with (default: ``TUNED``'s for ``scene``)."""
     out = []
     inner = int(values.get("inner_steps", 1))
     if inner != 1:
@@ -69,7 +74,7 @@ def departures(
         )
     if gravity == 0:
         out.append("gravity 0 (torque mode; the paper's text does not state the gravity)")
-    for m, changed in TUNED.get(scene, {}).items():
+    for m, changed in (TUNED.get(scene, {}) if tuned is None else tuned).items():
         own = "its preset's" if m == "ours" else "its published"
         out.append(
             f"{METHOD_LABELS[m]} with "
@@ -85,7 +90,22 @@ def departures_of(scene: str, recs: Mapping) -> list[str]:
     rec = recs.get(stage_name("metatrain", scene, "ours"))
     values = rec.data.get("settings", {}).get("values", {}) if rec is not None else {}
     own = stage_name(BUDGET, scene, "ours") in recs  # ours' choice: the budget section is there
-    return departures(scene, values, scene_gravity(scene), own_budgets=own)
+    return departures(
+        scene, values, scene_gravity(scene), own_budgets=own, tuned=_tuned(scene, recs)
+    )
+
+
+def _tuned(scene: str, recs: Mapping) -> dict[str, dict[str, float]]:
+    """``TUNED``'s adoptions for ``scene`` that the report's meta-trainings trained with: a method
+    the call did not run (``--baselines`` without it), or whose record holds other values, is not
+    named."""
+    out = {}
+    for m, changed in TUNED.get(scene, {}).items():
+        rec = recs.get(stage_name("metatrain", scene, m))
+        ran = rec.data.get("settings", {}).get("values", {}) if rec is not None else {}
+        if changed and all(ran.get(k) == v for k, v in changed.items()):
+            out[m] = dict(changed)
+    return out
 
 
 def departures_line(scene: str, items: list[str]) -> str:
