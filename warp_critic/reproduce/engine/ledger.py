@@ -66,32 +66,47 @@ def machine(device: str) -> dict:
     }
 
 
-def code() -> dict:
-    """What code the call ran: the package's version and, where it runs from a git checkout, the
-    commit checked out (``commit``, read from ``.git`` without running git; uncommitted changes
-    are not seen). A run resumed over sittings may span commits; each call says which it ran."""
+#: the folder this package runs from: a git checkout where it holds ``.git`` (an installed package does not)
+CHECKOUT = Path(__file__).resolve().parents[3]
+
+
+def code(root: Path = CHECKOUT) -> dict:
+    """What code the call ran: the package's version and, where it runs from a git checkout
+    (``root/.git``), the commit checked out (``commit``, read from ``.git`` without running git;
+    uncommitted changes are not seen). A run resumed over sittings may span commits; each call
+    says which it ran."""
     from importlib import metadata
 
     try:
         found: dict = {"warp_critic": metadata.version("warp-critic")}
     except metadata.PackageNotFoundError:  # run from a source tree that was never installed
         found = {"warp_critic": "?"}
-    git = Path(__file__).resolve().parents[3] / ".git"
+    commit = _head_commit(Path(root) / ".git")
+    if commit is not None:
+        found["commit"] = commit
+    return found
+
+
+def _head_commit(git: Path) -> str | None:
+    """The first 12 hex digits of the commit ``git``'s HEAD names (detached, a loose branch ref or a
+    packed one), or ``None`` (no such folder: an installed package; a worktree's ``.git`` file)."""
     try:
         head = (git / "HEAD").read_text().strip()
         if head.startswith("ref: "):
             ref = head[5:]
-            loose = git / ref
-            packed = (git / "packed-refs").read_text() if (git / "packed-refs").is_file() else ""
-            head = loose.read_text().strip() if loose.is_file() else ""
-            head = head or next(
-                (x.split()[0] for x in packed.splitlines() if x.endswith(" " + ref)), ""
-            )
+            if (git / ref).is_file():
+                head = (git / ref).read_text().strip()
+            else:
+                packed = (
+                    (git / "packed-refs").read_text() if (git / "packed-refs").is_file() else ""
+                )
+                head = next(
+                    (x.split()[0] for x in packed.splitlines() if x.endswith(" " + ref)), ""
+                )
     except OSError:
-        return found  # an installed package (or a worktree's .git file): its version is all
-    if len(head) >= 12 and all(c in "0123456789abcdef" for c in head):
-        found["commit"] = head[:12]
-    return found
+        return None
+    ok = len(head) >= 12 and all(c in "0123456789abcdef" for c in head)
+    return head[:12] if ok else None
 
 
 def append(out: Path, record: dict) -> None:
