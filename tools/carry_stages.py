@@ -18,10 +18,10 @@ A run longer than a sitting, on machines that may be fresh each time, is resumed
 commits as it goes: each sitting restores it, runs, and saves each complete stage into it (with the
 ledger of the calls that ran them, so the report counts every sitting's wall time and carries in
 nothing), and the finished batches of a long meta-test part way (a sitting that ends loses at most
-the batch it was in)::
+the batch it was in; ``--hours`` starts no meta-training that cannot end before the sitting does)::
 
     python tools/carry_stages.py restore docs/rerun runs/paper          # a sitting's start
-    warp-critic reproduce --out runs/paper --beyond --baselines ddpg,meta-critic,td3 --jobs 2 &
+    warp-critic reproduce --out runs/paper --beyond --baselines ddpg,meta-critic,td3 --jobs 2 --hours 2.8 &
     python tools/carry_stages.py save runs/paper docs/rerun && git add docs/rerun && git commit
 """
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import shlex
+import sys
 from pathlib import Path
 
 from warp_critic.reproduce.experiments.settings import EXTRA_BASELINES, METHODS, STAGES
@@ -99,6 +100,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "HOST:PORT the head at that address (pip install -e '.[ray]'); results come back to --out",
     )
     A(
+        "--hours",
+        type=_float,
+        default=None,
+        metavar="H",
+        help="a time limit for this call, for runs in sittings (a batch job's wall time, a lent "
+        "machine): start a meta-training only if it is expected to end within H hours (by its "
+        "time in the published run of docs/paper, scaled by this folder's pace, or, part way, by "
+        "its recent speed), and at H hours stop what still runs as Ctrl-C does; a meta-test "
+        "keeps its finished batches. Exits 75 when stopped: the same command goes on from there "
+        "(not part of the report's command)",
+    )
+    A(
         "--status",
         action="store_true",
         help="print where --out stands for this command (each stage complete, part way with its "
@@ -121,6 +134,13 @@ def _int(text: str) -> int:
         return int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"invalid int value: {text!r}") from None
+
+
+def _float(text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"invalid number: {text!r}") from None
 
 
 def _paper_baselines() -> tuple[str, ...]:
@@ -176,9 +196,11 @@ def config_from_args(args: argparse.Namespace):
 
 def run_from_args(args: argparse.Namespace) -> int:
     """Validate the flags, run the stages, write the report; returns the exit code (0)."""
+    from warp_critic.core.errors import FieldError
     from warp_critic.core.runtime import init
     from warp_critic.physics.simulator import resolve_device
     from warp_critic.reproduce.engine.choose_executor import check_executor_flags, make_executor
+    from warp_critic.reproduce.engine.timelimit import EXIT_TIME_LIMIT, TimeLimitReached
     from warp_critic.reproduce.pipeline import reproduce
     from warp_critic.running.loop import Interrupted
 
@@ -186,15 +208,27 @@ def run_from_args(args: argparse.Namespace) -> int:
     rc.validate()  # one-line UserError before any work
     jobs, ray = getattr(args, "jobs", None), getattr(args, "ray", None)
     check_executor_flags(jobs, ray)
+    hours = getattr(args, "hours", None)
+    if hours is not None:
+        from warp_critic.reproduce.engine.timelimit import check_hours
+
+        check_hours(hours)
     if getattr(args, "status", False):
         from warp_critic.reproduce.status import published_archive, status
 
+        if hours is not None:
+            raise FieldError("hours", "limits a call that runs stages; --status runs none")
         print(status(rc, published_archive()))
         return 0
     init()
     executor = make_executor(jobs, ray, resolve_device(rc.device))
     try:
-        result = reproduce(rc, executor)
+        result = reproduce(rc, executor, hours=hours)
+    except TimeLimitReached as e:
+        sys.stderr.write(
+            f"warp-critic: reproduce: stopped: {e}; the same command goes on from here\n"
+        )
+        return EXIT_TIME_LIMIT
     except KeyboardInterrupt as e:
         # a stage's run says what it kept; the way on is this same command (complete stages are
         # skipped, a stage's runs resume from their checkpoints), not a run's --resume flag

@@ -15,8 +15,10 @@ from warp_critic.reproduce.experiments.plan import ReproduceConfig, needed, plan
 from warp_critic.reproduce.experiments.records import stage_problem
 
 
-def reproduce(rc: ReproduceConfig, executor=None) -> dict:
-    """Run the stages of ``rc`` (with ``executor``; default: in this process) and write the report.
+def reproduce(rc: ReproduceConfig, executor=None, hours: float | None = None) -> dict:
+    """Run the stages of ``rc`` (with ``executor``; default: in this process) and write the report;
+    ``hours``: this call's time limit (:mod:`~warp_critic.reproduce.engine.timelimit`: it raises
+    ``TimeLimitReached`` when it stops the call before the report).
 
     Returns ``{"report": path, "records": ..., "out": ..., "plan": ...}``.
     """
@@ -25,15 +27,18 @@ def reproduce(rc: ReproduceConfig, executor=None) -> dict:
     settings = rc.validate()
     out, lock = claim_out(Path(rc.out))
     try:
-        return _reproduce(rc, settings, out, executor or InProcess())
+        return _reproduce(rc, settings, out, executor or InProcess(), hours)
     finally:
         lock.release()
 
 
-def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict:
+def _reproduce(
+    rc: ReproduceConfig, settings: dict, out: Path, executor, hours: float | None
+) -> dict:
     from warp_critic.physics.simulator import resolve_device
     from warp_critic.reproduce.engine.ledger import Call
     from warp_critic.reproduce.engine.scheduler import pending, run_stages
+    from warp_critic.reproduce.engine.timelimit import TimeLimit
     from warp_critic.reproduce.experiments.units import make_unit
     from warp_critic.reproduce.report.write import write_report
 
@@ -41,6 +46,11 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
     runner = Runner(out, stage_problem)
     t0 = time.perf_counter()
     stages = plan(settings, rc.plans_beyond, rc.extra, rc.plans_budget)
+    limit = None
+    if hours is not None:  # counted from here: the plan is built, no stage has started
+        from warp_critic.reproduce.status import estimator, published_archive
+
+        limit = TimeLimit(hours, estimator(out, stages, published_archive()))
     call = Call(out, rc.command, rc.selected(), device)  # the folder's ledger
     waves = needed(rc, stages)
     todo = pending(stages, waves, runner)  # a damaged stage record refuses the call here
@@ -53,6 +63,7 @@ def _reproduce(rc: ReproduceConfig, settings: dict, out: Path, executor) -> dict
             executor,
             call,
             lambda st: make_unit(st, settings, device, rc.progress, out),
+            limit,
         )
         runner.log(
             f"reproduce: writing the report, {(time.perf_counter() - t0) / 60:.1f} min elapsed"

@@ -22,9 +22,18 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from warp_critic.reproduce.engine.stage import PROGRESS, dir_name
+from warp_critic.reproduce.engine.stage import PROGRESS, dir_name, stage_of_dir
 
-__all__ = ["RECENT", "StageState", "published_archive", "render", "stage_states", "status"]
+__all__ = [
+    "RECENT",
+    "StageState",
+    "estimator",
+    "pace",
+    "published_archive",
+    "render",
+    "stage_states",
+    "status",
+]
 
 #: the iterations a part-way meta-training's speed is read from
 RECENT = 50
@@ -116,6 +125,83 @@ def _state(out: Path, name: str, h: str, kind: str, check, reference: Path | Non
             name, d.name, "part way", f"{len(done)} meta-test batch(es) done, {partial} part way"
         )
     return StageState(name, d.name, "part way", "started (resumes from its start)")
+
+
+def pace(out: Path, stages: dict, reference: Path | None) -> float:
+    """How much longer this machine takes than the reference run: the median, over the
+    meta-trainings complete in ``out`` that the ``reference`` archive also holds, of their time
+    over the reference's; 1 where there is none."""
+    from warp_critic.reproduce.engine.stages import read_stage, record_problem
+
+    ratios = []
+    for n, st in stages.items():
+        if st.kind != "metatrain":
+            continue
+        d = dir_name(n, st.hash)
+        data = read_stage(Path(out) / d)
+        ref = _reference(reference, d, st.kind)
+        if data is not None and not record_problem(data) and ref:
+            ratios.append(_took(data, st.kind) / ref)
+    ratios.sort()
+    if not ratios:
+        return 1.0
+    mid = len(ratios) // 2
+    return ratios[mid] if len(ratios) % 2 else 0.5 * (ratios[mid - 1] + ratios[mid])
+
+
+def estimator(out: Path, stages: dict, reference: Path | None):
+    """``name -> (expected seconds, how reckoned) | None`` for ``reproduce --hours``
+    (:class:`~warp_critic.reproduce.engine.timelimit.TimeLimit`): a meta-training part way in
+    ``out`` by its iterations left at its recent speed; one not started by its time in the
+    ``reference`` archive times this folder's :func:`pace`. ``None`` (no estimate: started while
+    time is left) for every other stage, which keeps its finished batches, and for a
+    meta-training without a reference time."""
+    factor = pace(out, stages, reference)
+
+    def estimate(name: str) -> tuple[float, str] | None:
+        st = stages[name]
+        if st.kind != "metatrain":
+            return None
+        d = Path(out) / dir_name(name, st.hash)
+        trained = _training(d) if d.is_dir() else None
+        if trained is not None and trained[1] is not None:
+            return trained[1], f"part way: {trained[0]}"
+        ref = _reference(reference, d.name, st.kind)
+        how = "in the reference run"
+        if ref is None:
+            ref = _reference_by_name(reference, name, st)
+            how = "in the reference run under other settings, per iteration"
+        if ref is None:
+            return None
+        return ref * factor, f"{ref / 60:.0f} min {how}, x {factor:.2f}: this folder's pace"
+
+    return estimate
+
+
+def _iterations(settings) -> int | None:
+    values = settings.get("values") if isinstance(settings, dict) else None
+    n = values.get("iterations") if isinstance(values, dict) else None
+    return n if isinstance(n, int) and not isinstance(n, bool) and n > 0 else None
+
+
+def _reference_by_name(reference: Path | None, name: str, st) -> float | None:
+    """A meta-training's time estimated from the ``reference`` archive's record of the stage of the
+    same name under other settings (a tuned step size changes the hash, not the work): its time
+    per iteration times this stage's iterations. ``None`` where there is none."""
+    from warp_critic.reproduce.engine.stages import read_stage, record_problem
+
+    if reference is None or not reference.is_dir():
+        return None
+    want = _iterations(st.settings)
+    for d in sorted(reference.glob(f"{name}-*")):
+        if stage_of_dir(d.name) != name:
+            continue  # another stage whose name starts with this one's
+        data = read_stage(d)
+        had = _iterations(data.get("settings")) if data is not None else None
+        if data is None or record_problem(data) or want is None or had is None:
+            continue
+        return _took(data, st.kind) * want / had
+    return None
 
 
 def stage_states(rc, reference: Path | None = None) -> list[StageState]:

@@ -3,7 +3,8 @@
 Complete stages are skipped (their records read first: a damaged one refuses the call before any
 work); every other stage is handed to the executor once each stage it ``depends`` on is complete,
 whichever wave it is in; each finished stage is recorded (``stage.json``, written last) and entered
-in the folder's ledger.
+in the folder's ledger. With a time limit (:class:`~warp_critic.reproduce.engine.timelimit.TimeLimit`)
+a stage starts only if it is expected to end in time, and the call stops at the limit.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from warp_critic.reproduce.engine.executors import Unit, jobs_hint
 from warp_critic.reproduce.engine.ledger import Call
 from warp_critic.reproduce.engine.stage import Stage
 from warp_critic.reproduce.engine.stages import Runner, read_complete
+from warp_critic.reproduce.engine.timelimit import TimeLimit
 
 
 def pending(stages: Mapping[str, Stage], waves: list[list[str]], runner: Runner) -> list[list[str]]:
@@ -41,10 +43,14 @@ def run_stages(
     executor,
     call: Call,
     make_unit: Callable[[Stage], Unit],
+    limit: TimeLimit | None = None,
 ) -> None:
     """Run the stages of ``waves`` that are not complete (``todo``, from :func:`pending`) with
     ``executor``, recording each in ``runner`` and ``call``; the complete ones are recorded as
-    skipped. Raises a one-line :class:`UserError` if a stage's input never completed."""
+    skipped. Raises a one-line :class:`UserError` if a stage's input never completed. With
+    ``limit``: a ready stage that it says will not end in time is not started (nor the stages that
+    read it), and at the limit the running ones are stopped; either way the call then ends with
+    :class:`~warp_critic.reproduce.engine.timelimit.TimeLimitReached`."""
 
     def done(unit: Unit, result: dict, seconds: float) -> None:
         st = stages[unit.name]
@@ -63,20 +69,42 @@ def run_stages(
         if runner.complete(stages[n].kind, n, stages[n].hash) is None
     ]
 
+    said: set[str] = set()  # the held-back stages already logged
+
     def ready() -> list[Unit]:
         """The units of the waiting stages whose every input stage is now complete: a stage starts
         as soon as the stages it reads are done, not after all of an earlier wave."""
         units = []
         for n in list(waiting):
             if all(dep in runner.records for dep in stages[n].depends):
+                if limit is not None and not limit.fits(n):
+                    if n not in said:
+                        said.add(n)
+                        runner.log(f"reproduce: {n}: left for the next call: {limit.held[n]}")
+                    continue  # (and so are the stages that read it)
                 waiting.remove(n)
                 units.append(make_unit(stages[n]))
         return units
 
+    def left() -> list[str]:
+        return [
+            n for n in dict.fromkeys(n for wave in todo for n in wave) if n not in runner.records
+        ]
+
+    if limit is not None:
+        limit.start()
     try:
         executor.run(ready(), runner.out, done, runner.log, more=ready)
+    except KeyboardInterrupt as e:
+        if limit is not None and limit.reached:
+            raise limit.outcome(left(), kept=str(e)) from None
+        raise
     finally:
+        if limit is not None:
+            limit.cancel()
         executor.close()
+    if waiting and limit is not None and limit.held:
+        raise limit.outcome(left())
     if waiting:  # an input that this call neither found complete nor ran
         raise UserError(f"reproduce: {', '.join(waiting)}: an input stage did not complete")
 

@@ -1,0 +1,199 @@
+"""``reproduce --hours H``: a call starts a meta-training only if it is expected to end in time, stops
+what still runs at the limit, and exits 75 with one line; the estimates come from the reference
+run's records (the same stage, or the same name under other settings, per iteration) scaled by the
+folder's pace, or from a part-way run's recent speed."""
+
+from __future__ import annotations
+
+import _thread
+import json
+from pathlib import Path
+
+import pytest
+from helpers import run_cli
+
+from warp_critic.reproduce.engine.executors import InProcess, Unit
+from warp_critic.reproduce.engine.stage import Stage
+from warp_critic.reproduce.engine.stages import STAGE_KIND, Runner
+from warp_critic.reproduce.engine.timelimit import (
+    EXIT_TIME_LIMIT,
+    TimeLimit,
+    TimeLimitReached,
+    check_hours,
+)
+
+
+class Clock:
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self) -> float:
+        return self.now
+
+
+def test_a_stage_fits_by_its_estimate_and_an_unknown_one_while_time_is_left():
+    clock = Clock()
+    est = {"long": (3000.0, "ref"), "short": (600.0, "ref"), "huge": (9000.0, "ref")}
+    limit = TimeLimit(1.0, est.get, clock=clock, stop=lambda: None)
+    assert limit.fits("short") and limit.fits("unknown") and not limit.held
+    clock.now = 1000.0  # 2600 s left
+    assert not limit.fits("long")
+    assert limit.held["long"] == "expected 50 min (ref), 43 min left"
+    assert not limit.fits("huge") and "more than the whole --hours 1" in limit.held["huge"]
+    assert limit.fits("short")
+    clock.now = 3600.0
+    assert not limit.fits("unknown") and limit.held["unknown"] == "no time left"
+    out = str(limit.outcome(["long", "unknown", "other"]))
+    assert out.startswith("no stage left could end within --hours 1, 3 stage(s) left")
+    assert "long not started: expected 50 min" in out and "huge" not in out
+
+
+@pytest.mark.parametrize("bad", [0, -1.0, float("nan"), float("inf"), True, "2"])
+def test_hours_must_be_a_positive_finite_number(bad):
+    from warp_critic.core.errors import FieldError
+
+    with pytest.raises(FieldError, match="hours"):
+        check_hours(bad)
+
+
+def _stage(name: str, kind: str, depends: tuple[str, ...] = ()) -> Stage:
+    return Stage(name, kind, {}, {d: f"{d}-0" for d in depends}, "0")
+
+
+class _Call:
+    def stage(self, name, seconds, dir_name):
+        pass
+
+
+def _run(tmp_path: Path, stages: dict, limit: TimeLimit, iterations: dict) -> Runner:
+    from warp_critic.reproduce.engine.scheduler import pending, run_stages
+
+    runner = Runner(tmp_path, lambda group, data: None, log=lambda line: None)
+    waves = [list(stages)]
+    todo = pending(stages, waves, runner)
+
+    def unit(st: Stage) -> Unit:
+        kwargs = {"values": {"iterations": iterations[st.name]}, "pause": 0.05}
+        return Unit(st.name, st.dir_name, "progress_unit:slow_iterations", kwargs)
+
+    run_stages(stages, waves, todo, runner, InProcess(), _Call(), unit, limit)
+    return runner
+
+
+def test_a_meta_training_that_cannot_end_in_time_waits_with_its_readers(tmp_path):
+    """The held meta-training does not start, nor the stage that reads it; the others run; the call
+    ends early with the stages left named."""
+    stages = {
+        "train": _stage("train", "metatrain"),
+        "maps": _stage("maps", "maps", ("train",)),
+        "toy": _stage("toy", "toy"),
+    }
+    est = {"train": (7200.0, "the reference run")}
+    limit = TimeLimit(1.0, est.get, stop=lambda: None)
+    runner = None
+    with pytest.raises(TimeLimitReached) as e:
+        runner = _run(tmp_path, stages, limit, {"train": 2, "maps": 2, "toy": 2})
+    assert runner is None
+    assert (tmp_path / "toy-0" / "stage.json").is_file()
+    assert not (tmp_path / "train-0").exists() and not (tmp_path / "maps-0").exists()
+    msg = str(e.value)
+    assert msg.startswith("no stage left could end within --hours 1, 2 stage(s) left")
+    assert "train not started: expected 120 min (the reference run), more than the whole" in msg
+
+
+def test_at_the_limit_the_running_stage_is_stopped(tmp_path):
+    """The limit interrupts the stage that runs (as Ctrl-C does: here the main thread's
+    KeyboardInterrupt) and the call ends with the limit named; what finished before is kept."""
+    stages = {"toy": _stage("toy", "toy"), "maps": _stage("maps", "maps")}
+    limit = TimeLimit(1.0 / 3600, lambda name: None, stop=_thread.interrupt_main)  # 1 s
+    with pytest.raises(TimeLimitReached) as e:
+        _run(tmp_path, stages, limit, {"toy": 2, "maps": 400})  # maps: 20 s
+    assert limit.reached
+    assert str(e.value).startswith("the --hours 0.000277778 limit was reached, 1 stage(s) left")
+    assert (tmp_path / "toy-0" / "stage.json").is_file()
+    assert not (tmp_path / "maps-0" / "stage.json").exists()
+    assert 0 < len((tmp_path / "maps-0" / "run" / "seed0" / "metrics.jsonl").read_text()) < 400 * 40
+
+
+def _record(d: Path, name: str, seconds: float, iterations: int) -> None:
+    d.mkdir(parents=True)
+    data = {
+        "kind": STAGE_KIND,
+        "stage": name,
+        "group": "metatrain",
+        "settings": {"values": {"iterations": iterations}},
+        "seconds": seconds,
+        "result": {},
+    }
+    (d / "stage.json").write_text(json.dumps(data))
+
+
+def test_estimates_read_the_reference_run_the_pace_and_a_part_way_run(tmp_path):
+    from warp_critic.reproduce.status import estimator, pace
+
+    ref, out = tmp_path / "ref", tmp_path / "out"
+    st = {
+        n: Stage(n, "metatrain", {"values": {"iterations": 100}}, {}, h * 10)
+        for n, h in [("a", "1"), ("b", "2"), ("c", "3"), ("d", "4"), ("b-wide", "5")]
+    }
+    st["maps"] = Stage("maps", "maps", {}, {}, "6" * 10)
+    _record(ref / st["a"].dir_name, "a", 100.0, 100)
+    _record(out / st["a"].dir_name, "a", 150.0, 100)  # complete here: 1.5x the reference
+    _record(ref / st["b"].dir_name, "b", 200.0, 100)  # the same stage: 200 s x 1.5
+    _record(ref / f"c-{'9' * 10}", "c", 400.0, 200)  # other settings: 2 s/iteration x 100 x 1.5
+    _record(ref / f"b-wide-{'7' * 10}", "b-wide", 50.0, 100)  # never taken for stage "b"
+    run = out / st["d"].dir_name / "run" / "seed0"  # part way: 40 of 100 at 3 s
+    run.mkdir(parents=True)
+    (run / "config.json").write_text(json.dumps({"iterations": 100}))
+    (run / "metrics.jsonl").write_text(
+        "".join(json.dumps({"iteration": i, "seconds": 3.0}) + "\n" for i in range(40))
+    )
+    assert pace(out, st, ref) == 1.5
+    est = estimator(out, st, ref)
+    assert est("b") == (300.0, "3 min in the reference run, x 1.50: this folder's pace")
+    c = est("c")
+    assert c[0] == 300.0 and "under other settings, per iteration" in c[1]
+    assert est("d") == (180.0, "part way: iteration 40 of 100, 3.00 s per iteration")
+    assert est("maps") is None  # a meta-test keeps its finished batches: never held back
+    b_wide = est("b-wide")
+    assert b_wide[0] == 75.0 and "under other settings" in b_wide[1]
+    assert pace(tmp_path / "empty", st, ref) == 1.0
+
+
+@pytest.mark.parametrize(
+    "argv, words",
+    [
+        (["--hours", "0"], "--hours must be a positive, finite number of hours (got 0.0)"),
+        (["--hours", "nan"], "--hours must be a positive, finite number of hours"),
+        (["--hours", "two"], "invalid number: 'two'"),
+        (
+            ["--hours", "1", "--status"],
+            "--hours: limits a call that runs stages; --status runs none",
+        ),
+    ],
+)
+def test_bad_hours_are_one_line(tmp_path, capsys, argv, words):
+    from warp_critic.cli.main import main
+
+    try:
+        code = main(["reproduce", "--quick", "--out", str(tmp_path / "o"), *argv])
+    except SystemExit as e:  # argparse's own refusal of a value that is no number
+        code = e.code
+    err = capsys.readouterr().err
+    assert code == 2 and words in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.subprocess
+def test_a_call_stopped_by_its_limit_exits_75_and_the_same_command_goes_on(tmp_path):
+    out = tmp_path / "out"
+    cmd = ["reproduce", "--quick", "--device", "cpu", "--only", "toy", "--out", str(out)]
+    r = run_cli(*cmd, "--hours", "0.00001")
+    assert r.returncode == EXIT_TIME_LIMIT, r.stderr
+    last = r.stderr.strip().splitlines()[-1]
+    assert last.startswith("warp-critic: reproduce: stopped: ")
+    assert last.endswith("; the same command goes on from here")
+    calls = [json.loads(x) for x in (out / "ledger.jsonl").read_text().splitlines()]
+    assert calls[-1].get("status") == "interrupted"
+    r = run_cli(*cmd)
+    assert r.returncode == 0, r.stderr
