@@ -115,13 +115,13 @@ def test_at_the_limit_the_running_stage_is_stopped(tmp_path):
     assert 0 < len((tmp_path / "maps-0" / "run" / "seed0" / "metrics.jsonl").read_text()) < 400 * 40
 
 
-def _record(d: Path, name: str, seconds: float, iterations: int) -> None:
+def _record(d: Path, name: str, seconds: float, iterations: int, **values) -> None:
     d.mkdir(parents=True)
     data = {
         "kind": STAGE_KIND,
         "stage": name,
         "group": "metatrain",
-        "settings": {"values": {"iterations": iterations}},
+        "settings": {"values": {"iterations": iterations, **values}},
         "seconds": seconds,
         "result": {},
     }
@@ -134,13 +134,15 @@ def test_estimates_read_the_reference_run_the_pace_and_a_part_way_run(tmp_path):
     ref, out = tmp_path / "ref", tmp_path / "out"
     st = {
         n: Stage(n, "metatrain", {"values": {"iterations": 100}}, {}, h * 10)
-        for n, h in [("a", "1"), ("b", "2"), ("c", "3"), ("d", "4"), ("b-wide", "5")]
+        for n, h in [("a", "1"), ("b", "2"), ("c", "3"), ("d", "4"), ("b-wide", "5"), ("e", "8")]
     }
     st["maps"] = Stage("maps", "maps", {}, {}, "6" * 10)
     _record(ref / st["a"].dir_name, "a", 100.0, 100)
     _record(out / st["a"].dir_name, "a", 150.0, 100)  # complete here: 1.5x the reference
     _record(ref / st["b"].dir_name, "b", 200.0, 100)  # the same stage: 200 s x 1.5
-    _record(ref / f"c-{'9' * 10}", "c", 400.0, 200)  # other settings: 2 s/iteration x 100 x 1.5
+    # a step size and the length differ: 2 s per iteration x 100 x 1.5
+    _record(ref / f"c-{'9' * 10}", "c", 400.0, 200, actor_lr=0.1)
+    _record(ref / f"e-{'9' * 10}", "e", 400.0, 100, horizon=5)  # other work per iteration
     _record(ref / f"b-wide-{'7' * 10}", "b-wide", 50.0, 100)  # never taken for stage "b"
     run = out / st["d"].dir_name / "run" / "seed0"  # part way: 40 of 100 at 3 s
     run.mkdir(parents=True)
@@ -152,11 +154,12 @@ def test_estimates_read_the_reference_run_the_pace_and_a_part_way_run(tmp_path):
     est = estimator(out, st, ref)
     assert est("b") == (300.0, "3 min in the reference run, x 1.50: this folder's pace")
     c = est("c")
-    assert c[0] == 300.0 and "under other settings, per iteration" in c[1]
+    assert c[0] == 300.0 and "with other step sizes or length, per iteration" in c[1]
+    assert est("e") is None
     assert est("d") == (180.0, "part way: iteration 40 of 100, 3.00 s per iteration")
     assert est("maps") is None  # a meta-test keeps its finished batches: never held back
     b_wide = est("b-wide")
-    assert b_wide[0] == 75.0 and "under other settings" in b_wide[1]
+    assert b_wide[0] == 75.0 and "other step sizes or length" in b_wide[1]
     assert pace(tmp_path / "empty", st, ref) == 1.0
 
 

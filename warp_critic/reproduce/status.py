@@ -103,16 +103,22 @@ def _reference(reference: Path | None, directory: str, kind: str) -> float | Non
     return None if data is None or record_problem(data) else _took(data, kind)
 
 
-def _state(out: Path, name: str, h: str, kind: str, check, reference: Path | None) -> StageState:
+def _state(out: Path, st, check, reference: Path | None) -> StageState:
     from warp_critic.reproduce.engine.stages import read_complete
 
-    d = out / dir_name(name, h)
+    name, kind = st.name, st.kind
+    d = out / dir_name(name, st.hash)
     data = read_complete(d, kind, check)
     if data is not None:
         return StageState(name, d.name, "complete", f"{_took(data, kind) / 60:.1f} min")
     if not d.is_dir():
-        ref = _reference(reference, d.name, kind)
-        detail = f"the reference run: {ref / 60:.1f} min" if ref is not None else ""
+        ref, detail = _reference(reference, d.name, kind), "the reference run"
+        if ref is None and kind == "metatrain":
+            ref, detail = (
+                _reference_by_name(reference, name, st),
+                "the reference run, other step sizes or length",
+            )
+        detail = f"{detail}: {ref / 60:.1f} min" if ref is not None else ""
         return StageState(name, d.name, "not started", detail, reference_seconds=ref)
     trained = _training(d) if kind == "metatrain" else None
     if trained is not None:
@@ -170,7 +176,7 @@ def estimator(out: Path, stages: dict, reference: Path | None):
         how = "in the reference run"
         if ref is None:
             ref = _reference_by_name(reference, name, st)
-            how = "in the reference run under other settings, per iteration"
+            how = "in the reference run with other step sizes or length, per iteration"
         if ref is None:
             return None
         return ref * factor, f"{ref / 60:.0f} min {how}, x {factor:.2f}: this folder's pace"
@@ -184,10 +190,37 @@ def _iterations(settings) -> int | None:
     return n if isinstance(n, int) and not isinstance(n, bool) and n > 0 else None
 
 
+#: settings that do not change a meta-training's work per iteration: a step size, how often it
+#: writes (``iterations`` itself scales the time)
+_COST_NEUTRAL = ("iterations", "record_every", "checkpoint_every")
+
+
+def _leaves(x, prefix: str = "") -> dict:
+    if not isinstance(x, dict):
+        return {prefix: x}
+    out = {}
+    for k, v in x.items():
+        out.update(_leaves(v, f"{prefix}{k}."))
+    return out
+
+
+def _same_work(a, b) -> bool:
+    """Whether meta-training settings ``a`` and ``b`` differ only in step sizes (``*_lr``) and
+    :data:`_COST_NEUTRAL` entries: the same work per iteration."""
+    la, lb = _leaves(a), _leaves(b)
+    for key in set(la) | set(lb):
+        if la.get(key) != lb.get(key):
+            leaf = key.rstrip(".").rpartition(".")[2]
+            if not (leaf.endswith("_lr") or leaf in _COST_NEUTRAL):
+                return False
+    return True
+
+
 def _reference_by_name(reference: Path | None, name: str, st) -> float | None:
     """A meta-training's time estimated from the ``reference`` archive's record of the stage of the
-    same name under other settings (a tuned step size changes the hash, not the work): its time
-    per iteration times this stage's iterations. ``None`` where there is none."""
+    same name whose settings differ only in step sizes or length (a tuned step size changes the
+    hash, not the work): its time per iteration times this stage's iterations. ``None`` where there
+    is none (other settings may do other work per iteration: no estimate)."""
     from warp_critic.reproduce.engine.stages import read_stage, record_problem
 
     if reference is None or not reference.is_dir():
@@ -197,8 +230,14 @@ def _reference_by_name(reference: Path | None, name: str, st) -> float | None:
         if stage_of_dir(d.name) != name:
             continue  # another stage whose name starts with this one's
         data = read_stage(d)
-        had = _iterations(data.get("settings")) if data is not None else None
-        if data is None or record_problem(data) or want is None or had is None:
+        if (
+            data is None
+            or record_problem(data)
+            or not _same_work(st.settings, data.get("settings"))
+        ):
+            continue
+        had = _iterations(data.get("settings"))
+        if want is None or had is None:
             continue
         return _took(data, st.kind) * want / had
     return None
@@ -216,7 +255,7 @@ def stage_states(rc, reference: Path | None = None) -> list[StageState]:
     stages = plan(settings, rc.plans_beyond, rc.extra, rc.plans_budget)
     names = [n for wave in needed(rc, stages) for n in wave]
     out = Path(rc.out)
-    return [_state(out, n, stages[n].hash, stages[n].kind, stage_problem, reference) for n in names]
+    return [_state(out, stages[n], stage_problem, reference) for n in names]
 
 
 def published_archive() -> Path | None:
