@@ -596,6 +596,21 @@ def test_publish_writes_the_report_beside_the_records_it_read(quick, tmp_path, c
         assert words in err and len(err.splitlines()) == 1
 
 
+def test_a_cell_with_a_diverged_world_has_no_spread_and_no_warning():
+    """A diverged world (``inf``) makes the cell's mean ``inf`` and its spreads, pooled and per
+    seed, ``nan``: said as such, not by numpy's ``inf - inf`` with a RuntimeWarning."""
+    import warnings
+
+    from warp_critic.reproduce.experiments.evaluate import pool_errors
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        cell = pool_errors([np.array([[1.0, np.inf]]), np.array([[2.0, 4.0]])], 2)
+    assert cell["mse_mean"] == float("inf") and cell["diverged"] == 1 and cell["n"] == 4
+    assert np.isnan(cell["mse_std"]) and np.isnan(cell["mse_std_per_seed"][0])
+    assert cell["mse_std_per_seed"][1] == 0.5 and cell["mse_per_seed"] == [float("inf"), 1.5]
+
+
 @pytest.mark.slow
 def test_every_table_cell_is_pooled_from_its_raw_errors_read_as_float32(quick):
     """``errors.json`` holds each raw error as the shortest decimal of its float32 (half the size

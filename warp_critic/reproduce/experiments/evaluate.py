@@ -136,16 +136,22 @@ def load_runs(run_dirs) -> dict[str, _Run]:
     return runs
 
 
+def _std(x: np.ndarray) -> float:
+    """The spread of finite errors; ``nan`` (no spread) where a world diverged (numpy's would be
+    ``nan`` too, with a warning from ``inf - inf``)."""
+    return float(x.std()) if np.isfinite(x).all() else float("nan")
+
+
 def pool_errors(errs: list[np.ndarray], dof: int) -> dict:
     """Pool final squared errors (one (G, K) array per seed) into a cell: MSE over joints. A
     diverged world (``inf``) makes the cell's mean ``inf``; ``diverged`` counts them."""
     mse = np.concatenate([e.ravel() for e in errs]) / dof
     return {
         "mse_mean": float(mse.mean()),
-        "mse_std": float(mse.std()) if np.isfinite(mse).all() else float("nan"),
+        "mse_std": _std(mse),
         "diverged": int((~np.isfinite(mse)).sum()),
         "mse_per_seed": [float(e.mean() / dof) for e in errs],
-        "mse_std_per_seed": [float((e / dof).std()) for e in errs],
+        "mse_std_per_seed": [_std(e / dof) for e in errs],
         "n": int(mse.size),
     }
 
