@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import _thread
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -41,6 +42,12 @@ def test_a_stage_fits_by_its_estimate_and_an_unknown_one_while_time_is_left():
     assert limit.held["long"] == "expected 50 min (ref), 43 min left"
     assert not limit.fits("huge") and "more than the whole --hours 1" in limit.held["huge"]
     assert limit.fits("short")
+    limit.estimate = {**est, "blind": (math.nan, "no estimate")}.get
+    assert limit.fits("blind")  # 2600 s of 3600 left: a meta-training of unknown length starts
+    clock.now = 1900.0
+    assert not limit.fits("blind")
+    assert limit.held["blind"] == "no estimate, and less than half of --hours 1 is left"
+    assert limit.fits("unknown")  # a meta-test keeps its batches: it starts while time is left
     clock.now = 3600.0
     assert not limit.fits("unknown") and limit.held["unknown"] == "no time left"
     out = str(limit.outcome(["long", "unknown", "other"]))
@@ -155,7 +162,8 @@ def test_estimates_read_the_reference_run_the_pace_and_a_part_way_run(tmp_path):
     assert est("b") == (300.0, "3 min in the reference run, x 1.50: this folder's pace")
     c = est("c")
     assert c[0] == 300.0 and "with other step sizes or length, per iteration" in c[1]
-    assert est("e") is None
+    e = est("e")  # a meta-training without an estimate: held back in the limit's second half
+    assert math.isnan(e[0]) and e[1].startswith("no estimate")
     assert est("d") == (180.0, "part way: iteration 40 of 100, 3.00 s per iteration")
     assert est("maps") is None  # a meta-test keeps its finished batches: never held back
     b_wide = est("b-wide")

@@ -107,8 +107,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="a time limit for this call, for runs in sittings (a batch job's wall time, a lent "
         "machine): start a meta-training only if it is expected to end within H hours (by its "
         "time in the published run of docs/paper, scaled by this folder's pace, or, part way, by "
-        "its recent speed), and at H hours stop what still runs as Ctrl-C does; a meta-test "
-        "keeps its finished batches. Exits 75 when stopped: the same command goes on from there "
+        "its recent speed; one without an estimate only in the first half), and at H hours stop "
+        "what still runs as Ctrl-C does; a meta-test keeps its finished batches. Exits 75 when stopped: the same command goes on from there "
         "(not part of the report's command)",
     )
     A(

@@ -19,6 +19,7 @@ have left; this answers beside a running call too. Each stage of the command's p
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -160,7 +161,7 @@ def estimator(out: Path, stages: dict, reference: Path | None):
     (:class:`~warp_critic.reproduce.engine.timelimit.TimeLimit`): a meta-training part way in
     ``out`` by its iterations left at its recent speed; one not started by its time in the
     ``reference`` archive times this folder's :func:`pace`. ``None`` (no estimate: started while
-    time is left) for every other stage, which keeps its finished batches, and for a
+    time is left) for every other stage, which keeps its finished batches; seconds ``nan`` for a
     meta-training without a reference time."""
     factor = pace(out, stages, reference)
 
@@ -178,7 +179,7 @@ def estimator(out: Path, stages: dict, reference: Path | None):
             ref = _reference_by_name(reference, name, st)
             how = "in the reference run with other step sizes or length, per iteration"
         if ref is None:
-            return None
+            return math.nan, "no estimate: no reference run with the same work per iteration"
         return ref * factor, f"{ref / 60:.0f} min {how}, x {factor:.2f}: this folder's pace"
 
     return estimate

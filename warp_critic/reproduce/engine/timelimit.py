@@ -9,10 +9,11 @@ are kept and carried). So a call with a limit
 
 * **starts a stage only if it is expected to end in time**, where an estimate exists: a
   meta-training by its time in a reference run (scaled by this folder's pace), or, part way, by its
-  iterations left at its recent speed (:func:`~warp_critic.reproduce.status.expected_seconds`). A
-  stage without an estimate (a meta-test, which keeps its finished batches; a stage no reference
-  ran) starts while time is left. A stage held back waits for the next call, and so do the stages
-  that read it;
+  iterations left at its recent speed (:func:`~warp_critic.reproduce.status.estimator`). A
+  meta-training without an estimate (no reference ran it with the same work per iteration) starts
+  only while half the limit is left, so the second half goes to stages known to end in time. A
+  meta-test, which keeps its finished batches, starts while time is left. A stage held back waits
+  for the next call, and so do the stages that read it;
 * **at the limit, stops what still runs** the way Ctrl-C does (each run closes its files; the
   same command goes on from there), and ends early when nothing more can start in time.
 
@@ -35,7 +36,8 @@ __all__ = ["EXIT_TIME_LIMIT", "Estimate", "TimeLimit", "TimeLimitReached", "chec
 #: command goes on from where it stopped)
 EXIT_TIME_LIMIT = 75
 
-#: a stage's expected seconds and how they were reckoned (words), or ``None`` when unknown
+#: a stage's expected seconds and how they were reckoned (words); seconds ``nan``: a stage that
+#: loses its work when cut off on a fresh machine but has no estimate; ``None``: one that keeps it
 Estimate = Callable[[str], "tuple[float, str] | None"]
 
 
@@ -87,10 +89,16 @@ class TimeLimit:
             self.held[name] = "no time left"
             return False
         guess = self.estimate(name)
+        whole = 3600.0 * self.hours
+        if guess is not None and math.isnan(guess[0]):  # a meta-training of unknown length
+            if left >= 0.5 * whole:
+                self.held.pop(name, None)
+                return True
+            self.held[name] = f"{guess[1]}, and less than half of --hours {self.hours:g} is left"
+            return False
         if guess is None or guess[0] <= left:
             self.held.pop(name, None)
             return True
-        whole = 3600.0 * self.hours
         self.held[name] = f"expected {guess[0] / 60:.0f} min ({guess[1]}), " + (
             f"more than the whole --hours {self.hours:g}"
             if guess[0] > whole
