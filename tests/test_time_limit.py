@@ -72,7 +72,7 @@ class _Call:
         pass
 
 
-def _run(tmp_path: Path, stages: dict, limit: TimeLimit, iterations: dict) -> Runner:
+def _run(tmp_path: Path, stages: dict, limit: TimeLimit, iterations: dict, executor=None) -> Runner:
     from warp_critic.reproduce.engine.scheduler import pending, run_stages
 
     runner = Runner(tmp_path, lambda group, data: None, log=lambda line: None)
@@ -83,7 +83,7 @@ def _run(tmp_path: Path, stages: dict, limit: TimeLimit, iterations: dict) -> Ru
         kwargs = {"values": {"iterations": iterations[st.name]}, "pause": 0.05}
         return Unit(st.name, st.dir_name, "progress_unit:slow_iterations", kwargs)
 
-    run_stages(stages, waves, todo, runner, InProcess(), _Call(), unit, limit)
+    run_stages(stages, waves, todo, runner, executor or InProcess(), _Call(), unit, limit)
     return runner
 
 
@@ -106,6 +106,20 @@ def test_a_meta_training_that_cannot_end_in_time_waits_with_its_readers(tmp_path
     msg = str(e.value)
     assert msg.startswith("no stage left could end within --hours 1, 2 stage(s) left")
     assert "train not started: expected 120 min (the reference run), more than the whole" in msg
+
+
+@pytest.mark.parametrize("jobs", [1, 2])
+def test_a_stage_is_judged_when_a_worker_is_free_for_it_not_when_it_became_ready(tmp_path, jobs):
+    """Both stages are ready at the start, where the meta-training (2 s expected) fits the 3 s
+    limit; a worker is free for it only after the toy's 2 s, when it no longer does."""
+    from warp_critic.reproduce.engine.executors import LocalProcesses
+
+    stages = {"toy": _stage("toy", "toy"), "train": _stage("train", "metatrain")}
+    limit = TimeLimit(3.0 / 3600, {"train": (2.0, "guess")}.get, stop=lambda: None)
+    executor = LocalProcesses(1) if jobs == 2 else InProcess()  # one worker either way
+    with pytest.raises(TimeLimitReached, match="train not started: (expected 0 min|no time left)"):
+        _run(tmp_path, stages, limit, {"toy": 40, "train": 2}, executor)
+    assert (tmp_path / "toy-0" / "stage.json").is_file() and not (tmp_path / "train-0").exists()
 
 
 def test_at_the_limit_the_running_stage_is_stopped(tmp_path):

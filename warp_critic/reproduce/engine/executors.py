@@ -127,11 +127,19 @@ Done = Callable[[Unit, dict, float], None]  # (unit, result, seconds): the drive
 Log = Callable[[str], None]  # one line for the user
 #: after each recorded stage, the units that it made ready (their input stages are now complete)
 More = Callable[[], list[Unit]]
+#: asked when a unit would start (a worker is free for it): may it? One refused is not run by this
+#: call (``reproduce --hours``: it would not end in time)
+Admit = Callable[[Unit], bool]
 
 
 def no_units() -> list[Unit]:
     """No unit made ready (an executor's ``more`` where the driver gives none)."""
     return []
+
+
+def admit_all(unit: Unit) -> bool:
+    """Every unit may start (an executor's ``admit`` where the driver sets no limit)."""
+    return True
 
 
 class InProcess:
@@ -140,11 +148,19 @@ class InProcess:
     name = "in-process"
 
     def run(
-        self, units: list[Unit], root: Path, done: Done, log: Log, more: More = no_units
+        self,
+        units: list[Unit],
+        root: Path,
+        done: Done,
+        log: Log,
+        more: More = no_units,
+        admit: Admit = admit_all,
     ) -> None:
         queue = list(units)
         while queue:
             u = queue.pop(0)
+            if not admit(u):
+                continue
             log(f"reproduce: {u.name}: running ({u.dir_name})")
             t = time.perf_counter()
             result = call_unit(u, root)
@@ -262,10 +278,16 @@ class LocalProcesses:
         )
 
     def run(
-        self, units: list[Unit], root: Path, done: Done, log: Log, more: More = no_units
+        self,
+        units: list[Unit],
+        root: Path,
+        done: Done,
+        log: Log,
+        more: More = no_units,
+        admit: Admit = admit_all,
     ) -> None:
         try:
-            self._run(units, root, done, log, more)
+            self._run(units, root, done, log, more, admit)
         except BaseException:
             # a unit failed for good, or Ctrl-C / SIGTERM: stop the other units' processes too (each
             # resumes from its checkpoints next time) instead of waiting for them to finish
@@ -288,7 +310,9 @@ class LocalProcesses:
                 self._pool_now.shutdown(wait=True, cancel_futures=True)
             raise
 
-    def _run(self, units: list[Unit], root: Path, done: Done, log: Log, more: More) -> None:
+    def _run(
+        self, units: list[Unit], root: Path, done: Done, log: Log, more: More, admit: Admit
+    ) -> None:
         # Units are handed to the pool one per free worker (never queued inside it), so a unit
         # counts as running once it is submitted, and one that a finished stage made ready waits
         # only for the next free worker.
@@ -298,6 +322,8 @@ class LocalProcesses:
         def fill(pool: ProcessPoolExecutor, futures: dict, lost: list[Unit]) -> None:
             while queue and len(futures) < self.jobs and not lost:
                 u = queue.pop(0)
+                if not admit(u):  # asked when a worker is free for it, not when it became ready
+                    continue
                 log(f"reproduce: {u.name}: started in a local process ({u.dir_name})")
                 tries.setdefault(u.name, 0)
                 futures[pool.submit(_process_unit, u, str(root))] = u
@@ -367,7 +393,9 @@ def jobs_hint(executor, widths: list[int]) -> str | None:
 
 
 __all__ = [
+    "Admit",
     "Unit",
+    "admit_all",
     "call_unit",
     "InProcess",
     "LocalProcesses",

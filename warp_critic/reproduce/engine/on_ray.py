@@ -18,11 +18,13 @@ from pathlib import Path
 from warp_critic.core.errors import FieldError, UserError
 from warp_critic.reproduce.engine.executors import (
     UNIT_FAULT_ENV,
+    Admit,
     Done,
     Log,
     More,
     Unit,
     _quiet,
+    admit_all,
     call_unit,
     no_units,
 )
@@ -161,8 +163,16 @@ class RayExecutor:
             raise FieldError("device", f"{device}: the Ray cluster has no GPU")
 
     def run(
-        self, units: list[Unit], root: Path, done: Done, log: Log, more: More = no_units
+        self,
+        units: list[Unit],
+        root: Path,
+        done: Done,
+        log: Log,
+        more: More = no_units,
+        admit: Admit = admit_all,
     ) -> None:
+        """Submit each unit once ready (and ``admit``-ted: Ray queues it for a free worker
+        itself, so a limit is asked at submission)."""
         ray = self.ray
         env = {
             k: v
@@ -185,7 +195,8 @@ class RayExecutor:
             refs[task.remote(u, inputs, env)] = u
 
         for u in units:
-            submit(u)
+            if admit(u):
+                submit(u)
         while refs:
             ready, _ = ray.wait(list(refs), num_returns=1)
             u = refs.pop(ready[0])
@@ -205,7 +216,8 @@ class RayExecutor:
                     p.unlink()
             done(u, result, seconds)
             for ready in more():
-                submit(ready)
+                if admit(ready):
+                    submit(ready)
 
     def close(self) -> None:
         self.ray.shutdown()

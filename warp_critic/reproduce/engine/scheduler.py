@@ -69,22 +69,23 @@ def run_stages(
         if runner.complete(stages[n].kind, n, stages[n].hash) is None
     ]
 
-    said: set[str] = set()  # the held-back stages already logged
-
     def ready() -> list[Unit]:
         """The units of the waiting stages whose every input stage is now complete: a stage starts
         as soon as the stages it reads are done, not after all of an earlier wave."""
         units = []
         for n in list(waiting):
             if all(dep in runner.records for dep in stages[n].depends):
-                if limit is not None and not limit.fits(n):
-                    if n not in said:
-                        said.add(n)
-                        runner.log(f"reproduce: {n}: left for the next call: {limit.held[n]}")
-                    continue  # (and so are the stages that read it)
                 waiting.remove(n)
                 units.append(make_unit(stages[n]))
         return units
+
+    def admit(unit: Unit) -> bool:
+        """Asked when a worker is free for ``unit``: with a limit, whether it can end in time (one
+        that cannot is left for the next call, and so are the stages that read it)."""
+        if limit is None or limit.fits(unit.name):
+            return True
+        runner.log(f"reproduce: {unit.name}: left for the next call: {limit.held[unit.name]}")
+        return False
 
     def left() -> list[str]:
         return [
@@ -94,7 +95,7 @@ def run_stages(
     if limit is not None:
         limit.start()
     try:
-        executor.run(ready(), runner.out, done, runner.log, more=ready)
+        executor.run(ready(), runner.out, done, runner.log, more=ready, admit=admit)
     except KeyboardInterrupt as e:
         if limit is not None and limit.reached:
             raise limit.outcome(left(), kept=str(e)) from None
@@ -103,7 +104,7 @@ def run_stages(
         if limit is not None:
             limit.cancel()
         executor.close()
-    if waiting and limit is not None and limit.held:
+    if left() and limit is not None and limit.held:
         raise limit.outcome(left())
     if waiting:  # an input that this call neither found complete nor ran
         raise UserError(f"reproduce: {', '.join(waiting)}: an input stage did not complete")
