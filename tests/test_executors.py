@@ -282,7 +282,7 @@ def test_jobs_driver_logs_the_progress_of_its_running_units(tmp_path):
 def test_an_in_process_call_on_several_cores_names_jobs(monkeypatch):
     """One line names --jobs where stages could run at once on more than one core; none where they
     cannot (one core, one stage a wave) or already do."""
-    from warp_critic.reproduce.engine import executors as ex
+    from warp_critic.reproduce.engine import choose_executor as ex
 
     monkeypatch.setattr(ex.os, "cpu_count", lambda: 8)
     line = ex.jobs_hint(ex.InProcess(), [6, 3])

@@ -1,8 +1,11 @@
 """The executor ``warp-critic reproduce``'s flags ask for: in this process (none), ``--jobs N`` local
 processes, or ``--ray [ADDRESS]`` (:mod:`warp_critic.reproduce.engine.executors`,
-:mod:`warp_critic.reproduce.engine.on_ray`; Ray itself is imported only when asked for)."""
+:mod:`warp_critic.reproduce.engine.on_ray`; Ray itself is imported only when asked for), and the
+line that names ``--jobs`` to a call that would gain from it."""
 
 from __future__ import annotations
+
+import os
 
 from warp_critic.core.errors import FieldError
 from warp_critic.reproduce.engine.executors import InProcess, LocalProcesses, check_jobs
@@ -29,4 +32,20 @@ def make_executor(jobs: int | None, ray: str | None, device: str):
     return InProcess()
 
 
-__all__ = ["check_executor_flags", "make_executor"]
+def jobs_hint(executor, widths: list[int]) -> str | None:
+    """A line for a call that runs its stages one after the other in this process although the
+    machine has more cores and stages that could run at once (``widths``: how many stages each wave
+    has left to run); ``None`` otherwise. A paper-setting stage takes hours."""
+    cores = os.cpu_count() or 1
+    widest = max(widths, default=0)
+    if not isinstance(executor, InProcess) or cores < 2 or widest < 2:
+        return None
+    n = min(cores, widest)
+    return (
+        f"reproduce: the stages run one after the other in this process; this machine has {cores} "
+        f"cores, and --jobs {n} would run up to {n} independent stages at once (the same numbers; "
+        "a baseline stage takes about 3 GB of memory)"
+    )
+
+
+__all__ = ["check_executor_flags", "jobs_hint", "make_executor"]

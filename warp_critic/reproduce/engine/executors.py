@@ -376,22 +376,6 @@ class LocalProcesses:
         pass
 
 
-def jobs_hint(executor, widths: list[int]) -> str | None:
-    """A line for a call that runs its stages one after the other in this process although the
-    machine has more cores and stages that could run at once (``widths``: how many stages each wave
-    has left to run); ``None`` otherwise. A paper-setting stage takes hours."""
-    cores = os.cpu_count() or 1
-    widest = max(widths, default=0)
-    if not isinstance(executor, InProcess) or cores < 2 or widest < 2:
-        return None
-    n = min(cores, widest)
-    return (
-        f"reproduce: the stages run one after the other in this process; this machine has {cores} "
-        f"cores, and --jobs {n} would run up to {n} independent stages at once (the same numbers; "
-        "a baseline stage takes about 3 GB of memory)"
-    )
-
-
 __all__ = [
     "Admit",
     "Unit",
@@ -401,5 +385,4 @@ __all__ = [
     "LocalProcesses",
     "check_jobs",
     "unit_progress",
-    "jobs_hint",
 ]

@@ -12,7 +12,8 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 
 from warp_critic.core.errors import UserError
-from warp_critic.reproduce.engine.executors import Unit, jobs_hint
+from warp_critic.reproduce.engine.choose_executor import jobs_hint
+from warp_critic.reproduce.engine.executors import Unit
 from warp_critic.reproduce.engine.ledger import Call
 from warp_critic.reproduce.engine.stage import Stage
 from warp_critic.reproduce.engine.stages import Runner, read_complete
