@@ -58,13 +58,24 @@ def test_the_budget_stages_are_added_and_no_other_stage_changes(plans):
     }
     assert added == want
     td3 = with_budget[stage_name("tables", by="td3", heldout=seeds[0], budget=True)]
-    # TD3's rows read ours' and TD3's meta-training and choice, and no other method's
+    # TD3's rows read ours' and TD3's meta-training and choice, and the earlier baselines' choices
+    # (where one chose TD3's number of steps, ours' row at it is that stage's), no other stage
     assert set(td3.depends) == {
         "metatrain-kuka-ours",
         "metatrain-kuka-td3",
         "budget-kuka-ours",
         "budget-kuka-td3",
+        "budget-kuka-ddpg",
+        "budget-kuka-meta-critic",
     }
+    # the first baseline's reads no other baseline's: its hash is the one before rows were shared
+    ddpg = with_budget[stage_name("maps", by="ddpg", heldout=seeds[0], budget=True)]
+    assert list(ddpg.depends) == [
+        "metatrain-reacher-ours",
+        "metatrain-reacher-ddpg",
+        "budget-reacher-ours",
+        "budget-reacher-ddpg",
+    ]
     assert td3.settings == with_budget[stage_name("tables", heldout=seeds[0])].settings
     assert td3.outputs.rows == ("td3", "ours-at-td3") and td3.outputs.budget_of == "td3"
     choice = with_budget["budget-kuka-td3"]
@@ -129,6 +140,81 @@ def test_a_reporting_stage_reads_the_chosen_budgets(tmp_path):
     (tmp_path / "budget-kuka-td3-d" / "stage.json").unlink()
     with pytest.raises(UserError, match="the stage budget-kuka-td3 this one needs is not complete"):
         eb.reporting_kwargs(st, tmp_path)
+
+
+def _choices(tmp_path: Path, steps: dict[str, int]) -> dict[str, str]:
+    """Complete meta-trainings and choices on the KUKA for each method of ``steps`` (method -> its
+    chosen number of steps, at x1; ours' curve best at x0.1 from 30 steps on); their dependencies."""
+    runs = {"seeds": {"0": {"run_dir": "run/seed0"}}}
+    curve = {"0.1": {"3": 0.5, "30": 0.02, "300": 0.01}, "1.0": {"3": 0.01, "30": 0.4, "300": 1.0}}
+    dep = {}
+    for m, n in steps.items():
+        _write(tmp_path, f"metatrain-kuka-{m}-a", runs)
+        result = {"chosen": {"scale": 1.0, "steps": n}, **({"curve": curve} if m == "ours" else {})}
+        _write(tmp_path, f"budget-kuka-{m}-b", result)
+        dep |= {
+            f"metatrain-kuka-{m}": f"metatrain-kuka-{m}-a",
+            f"budget-kuka-{m}": f"budget-kuka-{m}-b",
+        }
+    return dep
+
+
+@pytest.mark.parametrize(
+    "steps,only,shared",
+    [
+        # DDPG chose Meta-Critic's 300 steps: ours at 300 steps is DDPG's stage's row
+        ({"ours": 3, "ddpg": 300, "meta-critic": 300}, ["meta-critic"],
+         {"ours-at-meta-critic": ["ddpg", "ours-at-ddpg"]}),
+        # ours' own 3 steps: ours' own stage's row (ours' best step size at 3 is its chosen x1)
+        ({"ours": 3, "ddpg": 300, "meta-critic": 3}, ["meta-critic"],
+         {"ours-at-meta-critic": ["ours", "ours"]}),
+        # a number of steps no earlier stage runs ours at: this stage's own row
+        ({"ours": 3, "ddpg": 300, "meta-critic": 30}, ["meta-critic", "ours-at-meta-critic"], {}),
+    ],
+)  # fmt: skip
+def test_ours_at_a_number_of_steps_is_meta_tested_once(tmp_path, steps, only, shared):
+    dep = _choices(tmp_path, steps)
+    o = Outputs(scene="kuka", rows=("meta-critic", "ours-at-meta-critic"), budget_of="meta-critic")
+    st = Stage("budget-meta-critic-maps-heldout", "maps", {}, dep, "h", o)
+    kw = eb.reporting_kwargs(st, tmp_path)
+    assert kw["only"] == only and kw["shared"] == shared and kw["steps"] == steps["meta-critic"]
+    # the first baseline's stage reads no other baseline's choice: it runs both its rows
+    first = {k: v for k, v in dep.items() if "meta-critic" not in k}
+    o = Outputs(scene="kuka", rows=("ddpg", "ours-at-ddpg"), budget_of="ddpg")
+    kw = eb.reporting_kwargs(Stage("budget-ddpg-maps-heldout", "maps", {}, first, "h", o), tmp_path)
+    assert kw["only"] == ["ddpg", "ours-at-ddpg"] and kw["shared"] == {}
+
+
+def test_shared_rows_are_filled_in_from_the_stage_that_ran_them():
+    def table(rows):
+        return [{"table": "table1", "column": 0, "method": r, "v": v} for r, v in rows.items()]
+
+    per = {  # TD3's row is Meta-Critic's, which is DDPG's: filled in whatever the order
+        "td3": {"cells": table({"td3": 3.0}), "alpha_scales": {"td3": 1.0},
+                "shared_rows": {"ours-at-td3": ["meta-critic", "ours-at-meta-critic"]}},
+        "meta-critic": {"cells": table({"meta-critic": 2.0}), "alpha_scales": {"meta-critic": 1.0},
+                        "shared_rows": {"ours-at-meta-critic": ["ddpg", "ours-at-ddpg"]}},
+        "ddpg": {"cells": table({"ddpg": 1.0, "ours-at-ddpg": 0.5}),
+                 "alpha_scales": {"ddpg": 1.0, "ours-at-ddpg": 0.1}},
+    }  # fmt: skip
+    got = eb.with_shared_rows(per)
+    assert list(got) == ["td3", "meta-critic", "ddpg"] and got["ddpg"] == per["ddpg"]
+    assert [(c["method"], c["v"]) for c in got["td3"]["cells"]] == [
+        ("td3", 3.0),
+        ("ours-at-td3", 0.5),
+    ]
+    assert got["td3"]["alpha_scales"] == {"td3": 1.0, "ours-at-td3": 0.1}
+    assert per["td3"]["alpha_scales"] == {"td3": 1.0}  # the stage results themselves unchanged
+    assert list(eb.with_shared_rows({m: per[m] for m in ("td3", "meta-critic")})) == []
+    maps = {
+        "ours": {"goals": {"ours": "G"}, "mass": {"ours": "M"}, "length": {"ours": "L"},
+                 "alpha_scales": {"ours": 1.0}},
+        "ddpg": {"goals": {"ddpg": "g"}, "mass": {"ddpg": "m"}, "length": {"ddpg": "l"},
+                 "alpha_scales": {"ddpg": 3.16}, "shared_rows": {"ours-at-ddpg": ["ours", "ours"]}},
+    }  # fmt: skip
+    d = eb.with_shared_rows(maps)["ddpg"]
+    assert d["goals"] == {"ddpg": "g", "ours-at-ddpg": "G"} and d["length"]["ours-at-ddpg"] == "L"
+    assert d["alpha_scales"]["ours-at-ddpg"] == 1.0
 
 
 # ------------------------------------------------------------------------------------------------
@@ -214,6 +300,46 @@ def test_the_report_pools_the_held_out_seeds_and_judges_both_comparisons(tmp_pat
     assert [p.name for _, p, _ in figs] == ["budget_kuka.png"] and figs[0][1].is_file()
 
 
+def test_the_report_reads_a_shared_row_where_it_was_run():
+    """Meta-Critic chose DDPG's 30 steps: its stages hold its own row and name DDPG's for ours'; the
+    report shows ours at Meta-Critic's steps with DDPG's numbers, judges both pairs, says so, and
+    leaves Meta-Critic out where DDPG's stage is missing."""
+    recs = _records(at_ddpg=0.05)
+    recs[stage_name(BUDGET, "kuka", "meta-critic")] = _rec(
+        "budget-kuka-meta-critic", _choice("meta-critic", 0.1, 30)
+    )
+    for seed in (1000, 1010):
+        for group, make in (("tables", _tables), ("maps", _maps)):
+            name = stage_name(group, by="meta-critic", heldout=seed, budget=True)
+            r = make({"meta-critic": 0.2}, 30, {"meta-critic": 0.1})
+            recs[name] = _rec(
+                name, {**r, "shared_rows": {"ours-at-meta-critic": ["ddpg", "ours-at-ddpg"]}}
+            )
+    c = rb.compute(recs)
+    t = c["tables"]
+    assert t["baselines"] == ["ddpg", "meta-critic"]
+    assert t["table1"]["rows"]["ours-at-meta-critic"] == t["table1"]["rows"]["ours-at-ddpg"]
+    assert t["budgets"]["ours-at-meta-critic"] == {
+        "steps": 30,
+        "scale": 0.1,
+        "same_as": "ours-at-ddpg",
+    }
+    assert (
+        c["maps"]["grid_mean"]["mass"]["ours-at-meta-critic"]
+        == c["maps"]["grid_mean"]["mass"]["ours-at-ddpg"]
+    )
+    pairs = [x for x in c["claims"] if "own number of meta-test steps" in x["claim"]]
+    assert len(pairs) == 6  # 3 tables and 3 maps, each with both baselines' pairs
+    assert "ours below in 4 of 4 (column, baseline) pairs" in [x["ours"] for x in pairs][0]
+    md = "\n".join(rb.render(json.loads(json.dumps(c))))
+    assert (
+        "ours at Meta-Critic's steps (30 steps, x0.1) is ours at DDPG's steps (30 steps, x0.1)"
+        in md
+    )
+    missing = {n: r for n, r in recs.items() if not n.startswith("budget-ddpg-")}
+    assert rb.compute(missing)["tables"]["baselines"] == []  # Meta-Critic's ours row is nowhere
+
+
 def test_only_the_sections_of_complete_stages_appear():
     recs = _records(at_ddpg=0.5)
     only_choice = {n: r for n, r in recs.items() if n.startswith("budget-kuka")}
@@ -267,7 +393,14 @@ def test_the_budget_stages_run_through_the_cli_and_reach_the_report(tmp_path, ca
     res, chosen = ddpg["result"], choice["result"]["chosen"]
     assert res["policy_updates"] == chosen["steps"] in (1, 3)
     assert res["alpha_scales"]["ddpg"] == chosen["scale"]
-    assert {c["method"] for c in res["cells"]} == {"ddpg", "ours-at-ddpg"}
+    (ours,) = [json.loads(p.read_text()) for p in out.glob("budget-kuka-ours-*/stage.json")]
+    if ours["result"]["chosen"]["steps"] == chosen["steps"]:  # ours' own stage's row
+        assert res["shared_rows"] == {"ours-at-ddpg": ["ours", "ours"]}
+        assert {c["method"] for c in res["cells"]} == {"ddpg"}
+    else:
+        assert "shared_rows" not in res
+        assert {c["method"] for c in res["cells"]} == {"ddpg", "ours-at-ddpg"}
+    assert "| ours at DDPG's steps (" in (out / "REPORT.md").read_text()
     report = (out / "REPORT.md").read_text()
     assert "## Each method at its own meta-test budget" in report
     assert "### Table 3 at the chosen budgets, held-out goal seeds 1000" in report

@@ -16,6 +16,12 @@ every method ours' 3 critic-gradient steps).
    baseline, ours' rows (``ours-at-<method>``) at the same ``N`` with ours' best step size there
    on the training goals (:func:`best_scale_at`). The budget is read from the choosing stages'
    records when the stage starts (:func:`reporting_kwargs`); their directories are in its hash.
+   Ours' row at ``N`` steps depends on ``N`` alone (ours' critics, its best step size there), so
+   where ``N`` is ours' own budget or an earlier baseline's (in the plan's order), that stage's
+   row is the one meta-test of it: the stage leaves the row out and records where it is
+   (``"shared_rows"``), and the report reads it there (:func:`with_shared_rows`). On the reacher
+   DDPG and Meta-Critic both chose 300 steps: ours' maps at 300 steps, about an hour of a 2-core
+   CPU per goal seed, are computed once instead of twice.
 
 Each method's stages read only its own and ours' meta-training and choice, so ``--baselines td3``
 adds TD3's without rerunning the others. A diverged world makes its ``(s, N)`` cell ``inf``: never
@@ -36,6 +42,7 @@ from warp_critic.evaluation.seed_uses import CHOOSE_BUDGET_SEED
 from warp_critic.reproduce.engine.stage import PROGRESS, Stage
 from warp_critic.reproduce.experiments.naming import BUDGET, Outputs, stage_name
 from warp_critic.reproduce.experiments.settings import (
+    ALL_METHODS,
     BUDGET_SCALES,
     BUDGET_STEPS,
     METHODS,
@@ -63,10 +70,13 @@ __all__ = [
     "envelope",
     "mean_mse",
     "numeric_keys",
+    "owner_row",
     "plan_budget",
     "reporting_kwargs",
     "run_budget_stage",
+    "run_reporting_stage",
     "sweep",
+    "with_shared_rows",
 ]
 
 
@@ -107,6 +117,46 @@ def numeric_keys(curve: dict) -> dict[float, dict[int, Any]]:
 def at_row(method: str) -> str:
     """The row of ours' critics at ``method``'s chosen number of steps."""
     return f"ours-at-{method}"
+
+
+def owner_row(method: str) -> str:
+    """The row of ``method``'s reporting stage that holds ours at its number of steps: ours' own
+    row in ours' stage, :func:`at_row` in a baseline's."""
+    return "ours" if method == "ours" else at_row(method)
+
+
+def with_shared_rows(per: dict[str, dict]) -> dict[str, dict]:
+    """``per`` (method -> its reporting stage's result on one goal seed) with every result's shared
+    rows (``"shared_rows"``: row -> ``[method, that method's row]``, module docstring) filled in
+    from the result that holds them (itself filled in first, where its row is lent too): a
+    table's cells (renamed) or a map's rows, and the row's step size. A method whose rows are in
+    no result of ``per`` is left out."""
+    done: dict[str, dict] = {}
+    left = dict(per)
+    while True:
+        ready = [m for m, r in left.items()
+                 if all(o in done for o, _ in r.get("shared_rows", {}).values())]  # fmt: skip
+        if not ready:
+            return {m: done[m] for m in per if m in done}
+        for m in ready:
+            done[m] = _lend(left.pop(m), done)
+
+
+def _lend(r: dict, done: dict[str, dict]) -> dict:
+    """``r`` with its shared rows copied from the complete results ``done``."""
+    r = {**r, "alpha_scales": dict(r.get("alpha_scales", {}))}
+    for row, (owner, src) in r.get("shared_rows", {}).items():
+        o = done[owner]
+        r["alpha_scales"][row] = o["alpha_scales"][src]
+        if "cells" in r:  # tables: one cell per (table, column, row)
+            r["cells"] = [
+                *r["cells"],
+                *({**c, "method": row} for c in o["cells"] if c["method"] == src),
+            ]
+        else:  # maps: row -> cells, per kind
+            for k in ("goals", "mass", "length"):
+                r[k] = {**r[k], row: o[k][src]}
+    return r
 
 
 # ------------------------------------------------------------------------------------------------
@@ -225,10 +275,14 @@ def plan_budget(settings: dict, p: dict[str, Stage], extra: tuple[str, ...]) -> 
     for group, scene, _ in HELDOUT_EVALUATIONS:
         for seed in (int(x) for x in settings["heldout"]["seeds"]):
             held = p[stage_name(group, heldout=seed)].settings
-            for m in methods:
+            for i, m in enumerate(methods):
                 reads = [
                     stage_name(k, scene, x) for k in ("metatrain", BUDGET) for x in ("ours", m)
                 ]
+                # the earlier baselines' choices: ours' row at a number of steps one of them chose
+                # is its stage's (module docstring); the first baseline reads none
+                if m != "ours":
+                    reads += [stage_name(BUDGET, scene, x) for x in methods[:i] if x != "ours"]
                 dep = {n: p[n].dir_name for n in dict.fromkeys(reads)}
                 name = stage_name(group, by=m, heldout=seed, budget=True)
                 rows = (m,) if m == "ours" else (m, at_row(m))
@@ -263,8 +317,37 @@ def reporting_kwargs(st: Stage, out: Path) -> dict:
     chosen = record(BUDGET, m)["result"]["chosen"]
     steps = int(chosen["steps"])
     runs, scales = {"ours": dirs("ours"), m: dirs(m)}, {m: float(chosen["scale"])}
+    only, shared = list(o.rows), {}
     if m != "ours":
         curve = numeric_keys(record(BUDGET, "ours")["result"]["curve"])
         runs[at_row(m)] = runs["ours"]
         scales[at_row(m)] = best_scale_at(curve, steps)[0]
-    return {"runs": runs, "only": list(o.rows), "steps": steps, "scales": scales}
+
+        # ours' stage, then each earlier baseline's (those whose choice this stage reads): the
+        # first that runs ours at the same steps and step size
+        def ours_there(x: str) -> tuple[int, float]:
+            c = record(BUDGET, x)["result"]["chosen"]
+            n = int(c["steps"])
+            return n, float(c["scale"]) if x == "ours" else best_scale_at(curve, n)[0]
+
+        mine = (steps, scales[at_row(m)])
+        earlier = [x for x in ALL_METHODS if x != m and stage_name(BUDGET, scene, x) in st.depends]
+        owner = next((x for x in earlier if ours_there(x) == mine), None)
+        if owner is not None:
+            only = [r for r in only if r != at_row(m)]
+            shared = {at_row(m): [owner, owner_row(owner)]}
+    return {"runs": runs, "only": only, "steps": steps, "scales": scales, "shared": shared}
+
+
+def run_reporting_stage(d: Path, s: dict, group: str, shared: dict, **kwargs) -> dict:
+    """A held-out tables or maps stage at a method's chosen budget (``group``, with
+    :func:`reporting_kwargs`' inputs): the stage function's result, with ``"shared_rows"`` when a
+    row is another stage's (module docstring)."""
+    from warp_critic.reproduce.experiments.maps import run_maps_stage
+    from warp_critic.reproduce.experiments.tables import run_tables_stage
+
+    if group == "tables":
+        r = run_tables_stage(d, s, **kwargs)
+    else:
+        r = run_maps_stage(d, s, **kwargs)
+    return {**r, "shared_rows": shared} if shared else r

@@ -23,6 +23,9 @@ STAGE_FUNCTIONS = {
     "tables": "warp_critic.reproduce.experiments.tables:run_tables_stage",
     "budget": "warp_critic.reproduce.experiments.budget:run_budget_stage",
 }
+# the held-out tables and maps at a method's chosen budget: the tables / maps function's result,
+# with the rows it shares with another stage named
+REPORTING_FUNCTION = "warp_critic.reproduce.experiments.budget:run_reporting_stage"
 
 
 def make_unit(st: Stage, settings: dict, device: str, progress: bool, out: Path) -> Unit:
@@ -48,7 +51,7 @@ def make_unit(st: Stage, settings: dict, device: str, progress: bool, out: Path)
         from warp_critic.reproduce.experiments.budget import reporting_kwargs
 
         kwargs = {"s": st.settings, **reporting_kwargs(st, out), "device": device}
-        kwargs["progress"] = progress
+        kwargs.update(group=group, progress=progress)
     else:  # maps / tables read the complete meta-training directories of their robot
         kwargs = {
             "s": st.settings,
@@ -66,9 +69,9 @@ def make_unit(st: Stage, settings: dict, device: str, progress: bool, out: Path)
         if floors is not None:
             kwargs["floors_from"] = floors
             reads += (floors,)
-    return Unit(
-        name=name, dir_name=st.dir_name, fn=STAGE_FUNCTIONS[group], kwargs=kwargs, reads=reads
-    )
+    reporting = o is not None and o.budget_of is not None and group != "budget"
+    fn = REPORTING_FUNCTION if reporting else STAGE_FUNCTIONS[group]
+    return Unit(name=name, dir_name=st.dir_name, fn=fn, kwargs=kwargs, reads=reads)
 
 
 def evaluated_runs(st: Stage, out: Path) -> dict[str, list[str]]:

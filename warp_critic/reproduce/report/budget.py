@@ -29,7 +29,12 @@ import numpy as np
 
 from warp_critic.evaluation.seed_uses import HELD_OUT_SEEDS
 from warp_critic.reproduce.engine.stages import StageRecord
-from warp_critic.reproduce.experiments.budget import at_row, envelope, numeric_keys
+from warp_critic.reproduce.experiments.budget import (
+    at_row,
+    envelope,
+    numeric_keys,
+    with_shared_rows,
+)
 from warp_critic.reproduce.experiments.naming import BUDGET, stage_name
 from warp_critic.reproduce.experiments.settings import ALL_METHODS, METHOD_LABELS, SCENES
 from warp_critic.reproduce.report.heldout import COLUMN, TITLES, pool_maps, pool_tables
@@ -101,12 +106,19 @@ def _reported(recs: Recs, group: str, seeds: tuple[int, ...]):
         return rec.data["result"] if rec is not None else None
 
     base = [m for m in ALL_METHODS if m != "ours" and all(result(m, s) for s in got)]
-    per = [{m: result(m, s) for m in ("ours", *base)} for s in got]
-    budgets = {}
+    # each row another stage computed, from it (a baseline whose row is in no complete stage: out)
+    per = [
+        with_shared_rows({m: r for m in ("ours", *base) if (r := result(m, s)) is not None})
+        for s in got
+    ]
+    base = [m for m in base if all(m in p for p in per)]
+    per = [{m: p[m] for m in ("ours", *base)} for p in per]
+    budgets: dict[str, dict] = {}
     for r in per[0].values():
-        assert r is not None  # complete on every seed of got
         for row, scale in r.get("alpha_scales", {}).items():
             budgets[row] = {"steps": int(r["policy_updates"]), "scale": float(scale)}
+        for row, (_, src) in r.get("shared_rows", {}).items():
+            budgets[row]["same_as"] = src  # one meta-test, shown in both rows
     return got, base, per, budgets
 
 
@@ -255,6 +267,23 @@ def _label(row: str, budgets: dict) -> str:
     return f"{name} ({b['steps']} steps, x{b['scale']:g})" if b else name
 
 
+def _shared(budgets: dict) -> list[str]:
+    """The sentence on rows that are another row's meta-test (the same steps and step size)."""
+    same = [
+        f"{_label(row, budgets)} is {_label(b['same_as'], budgets)}"
+        for row, b in budgets.items()
+        if "same_as" in b
+    ]
+    if not same:
+        return []
+    return [
+        "The same meta-test shown in two rows (ours' row depends only on the number of steps "
+        "and the step size: "
+        "`warp_critic/reproduce/experiments/budget.py`): " + "; ".join(same) + ".",
+        "",
+    ]
+
+
 def _ci(c: dict) -> str:
     return f"{fmt(c['mean'])} [{fmt(c['lo'])}, {fmt(c['hi'])}]"
 
@@ -310,7 +339,7 @@ def _render_tables(t: dict | None) -> list[str]:
         for row, cells in p["rows"].items():
             md.append(f"| {_label(row, t['budgets'])} | " + " | ".join(map(_ci, cells)) + " |")
         md.append("")
-    return md
+    return md + _shared(t["budgets"])
 
 
 def _render_maps(m: dict | None) -> list[str]:
@@ -324,7 +353,7 @@ def _render_maps(m: dict | None) -> list[str]:
     for row in m["grid_mean"]["goals"]:
         cells = " | ".join(_ci(m["grid_mean"][k][row]) for k in KINDS)
         md.append(f"| {_label(row, m['budgets'])} | {cells} |")
-    return md + [""]
+    return md + [""] + _shared(m["budgets"])
 
 
 def budget_compute(inp: Inputs) -> dict:
