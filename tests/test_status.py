@@ -130,3 +130,52 @@ def test_status_refuses_the_executor_flags_its_call_would_refuse(tmp_path, capsy
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and words in err[0]
     assert not out.exists()
+
+
+def test_a_stage_at_a_chosen_budget_is_estimated_from_this_folders_default_budget_stage(tmp_path):
+    """No earlier run holds the held-out stages at the chosen budgets (their hours are most of a
+    plan with --beyond): their time is the same evaluation's at the default budget, per row, times
+    their rows and rollouts; no estimate while a choice or that stage is not complete."""
+    from warp_critic.reproduce.engine.stage import Stage
+    from warp_critic.reproduce.engine.stages import STAGE_KIND
+    from warp_critic.reproduce.experiments.naming import Outputs
+    from warp_critic.reproduce.status import StageState, budget_estimate, render
+
+    def write(name: str, result: dict, seconds: float = 1.0) -> None:
+        (tmp_path / name).mkdir()
+        record = {"kind": STAGE_KIND, "seconds": seconds, "result": result}
+        (tmp_path / name / "stage.json").write_text(json.dumps(record))
+
+    runs = {"seeds": {"0": {"run_dir": "run/seed0"}}}
+    curve = {"1.0": {"3": 0.01, "30": 0.4}, "0.1": {"3": 0.5, "30": 0.02}}
+    dep = {}
+    for m, n in (("ours", 3), ("ddpg", 30)):
+        write(f"metatrain-kuka-{m}-h", runs)
+        write(f"budget-kuka-{m}-h", {"chosen": {"scale": 1.0, "steps": n}, "curve": curve})
+        dep |= {
+            f"metatrain-kuka-{m}": f"metatrain-kuka-{m}-h",
+            f"budget-kuka-{m}": f"budget-kuka-{m}-h",
+        }
+    s = {"seed": 1000}
+    base = Stage("tables-heldout", "tables", s, {}, "h", None)
+    o = Outputs(scene="kuka", rows=("ddpg", "ours-at-ddpg"), budget_of="ddpg")
+    st = Stage("budget-ddpg-tables-heldout", "tables", s, dep, "h", o)
+    other = Stage("tables-heldout-1010", "tables", {"seed": 1010}, {}, "h", None)
+    stages = {x.name: x for x in (base, st, other)}
+    assert budget_estimate(tmp_path, st, stages) is None  # no default-budget stage of seed 1000
+    write(other.dir_name, {"cells": [{"method": "ours"}], "policy_updates": 3}, 5.0)
+    assert budget_estimate(tmp_path, st, stages) is None  # another seed's is not this one's
+    cells = [{"method": m} for m in ("ours", "ddpg", "meta-critic", "ours")]
+    write(base.dir_name, {"cells": cells, "policy_updates": 3}, 300.0)
+    seconds, how = budget_estimate(tmp_path, st, stages)
+    assert seconds == pytest.approx(300.0 / 3 * 2 * (30 + 2) / (3 + 2))
+    assert how == (
+        "estimated from tables-heldout: 1.7 min per row x 2 row(s) x (30 + 2) / (3 + 2) rollouts"
+    )
+    assert budget_estimate(tmp_path, base, stages) is None  # not a stage at a chosen budget
+    line = render(
+        [StageState("x", "x-h", "not started", how, estimate_seconds=seconds)], tmp_path, None
+    )
+    assert "1 at a chosen meta-test budget need about 0.4 h, estimated from this folder" in line
+    (tmp_path / "budget-kuka-ddpg-h" / "stage.json").unlink()
+    assert budget_estimate(tmp_path, st, stages) is None  # DDPG's choice is not made yet
