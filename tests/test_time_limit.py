@@ -186,6 +186,17 @@ def test_estimates_read_the_reference_run_the_pace_and_a_part_way_run(tmp_path):
     e = est("e")  # a meta-training without an estimate: held back in the limit's second half
     assert math.isnan(e[0]) and e[1].startswith("no estimate")
     assert est("d") == (180.0, "part way: iteration 40 of 100, 3.00 s per iteration")
+    # part way with a reference time: 60% of 100 s x 1.5 is left, whatever its last iterations took
+    # (here 10 s each, under other work: at that speed it would fit no sitting again)
+    run = out / st["b"].dir_name / "run" / "seed0"
+    run.mkdir(parents=True)
+    (run / "config.json").write_text(json.dumps({"iterations": 100}))
+    (run / "metrics.jsonl").write_text(
+        "".join(json.dumps({"iteration": i, "seconds": 10.0}) + "\n" for i in range(40))
+    )
+    b = est("b")
+    assert b[0] == pytest.approx(180.0) and b[1].startswith("part way: iteration 40 of 100")
+    assert b[1].endswith("3 min in the reference run, x 1.50: this folder's pace, 60% left")
     assert est("maps") is None  # a meta-test keeps its finished batches: never held back
     b_wide = est("b-wide")
     assert b_wide[0] == 75.0 and "other step sizes or length" in b_wide[1]

@@ -72,6 +72,23 @@ def _last_rows(path: Path, n: int) -> list[dict]:
 def _training(d: Path) -> tuple[str, float | None] | None:
     """A part-way meta-training's progress (words, seconds left), or ``None`` when ``d`` holds no
     run with metrics."""
+    got = _iterations_done(d)
+    if got is None:
+        return None
+    done, total, rows = got
+    if not rows:
+        return "started, no iteration finished", None
+    times = [float(r["seconds"]) for r in rows if isinstance(r.get("seconds"), (int, float))]
+    if not times:
+        return f"iteration {done} of {total}", None
+    per = sum(times) / len(times)
+    left = max(total - done, 0) * per
+    return f"iteration {done} of {total}, {per:.2f} s per iteration", left
+
+
+def _iterations_done(d: Path) -> tuple[int, int, list[dict]] | None:
+    """``(iterations done, of, the last RECENT metrics rows)`` of the part-way meta-training ``d``
+    (its first seed's; the seeds train as one batch), ``None`` when it holds no run with metrics."""
     seeds = sorted(d.glob("run/seed*/metrics.jsonl"))
     if not seeds:
         return None
@@ -81,15 +98,7 @@ def _training(d: Path) -> tuple[str, float | None] | None:
         total = int(json.loads((metrics.parent / "config.json").read_text())["iterations"])
     except (OSError, ValueError, KeyError, TypeError):
         return None
-    if not rows:
-        return "started, no iteration finished", None
-    done = int(rows[-1]["iteration"]) + 1
-    times = [float(r["seconds"]) for r in rows if isinstance(r.get("seconds"), (int, float))]
-    if not times:
-        return f"iteration {done} of {total}", None
-    per = sum(times) / len(times)
-    left = max(total - done, 0) * per
-    return f"iteration {done} of {total}, {per:.2f} s per iteration", left
+    return (int(rows[-1]["iteration"]) + 1 if rows else 0), total, rows
 
 
 def _took(data: dict, kind: str) -> float:
@@ -208,11 +217,12 @@ def pace(out: Path, stages: dict, reference: Path | None) -> float:
 
 def estimator(out: Path, stages: dict, reference: Path | None):
     """``name -> (expected seconds, how reckoned) | None`` for ``reproduce --hours``
-    (:class:`~warp_critic.reproduce.engine.timelimit.TimeLimit`): a meta-training part way in
-    ``out`` by its iterations left at its recent speed; one not started by its time in the
-    ``reference`` archive times this folder's :func:`pace`. ``None`` (no estimate: started while
-    time is left) for every other stage, which keeps its finished batches; seconds ``nan`` for a
-    meta-training without a reference time."""
+    (:class:`~warp_critic.reproduce.engine.timelimit.TimeLimit`): a meta-training by its time in
+    the ``reference`` archive times this folder's :func:`pace`, part way in ``out`` the share of
+    its iterations left of that; one that archive lacks, part way, by its iterations left at its
+    recent speed. ``None`` (no estimate: started while time is left) for every other stage, which
+    keeps its finished batches; seconds ``nan`` for a meta-training not started without a
+    reference time."""
     factor = pace(out, stages, reference)
 
     def estimate(name: str) -> tuple[float, str] | None:
@@ -221,16 +231,24 @@ def estimator(out: Path, stages: dict, reference: Path | None):
             return None
         d = Path(out) / dir_name(name, st.hash)
         trained = _training(d) if d.is_dir() else None
-        if trained is not None and trained[1] is not None:
-            return trained[1], f"part way: {trained[0]}"
         ref = _reference(reference, d.name, st.kind)
         how = "in the reference run"
         if ref is None:
             ref = _reference_by_name(reference, name, st)
             how = "in the reference run with other step sizes or length, per iteration"
+        whole = f"{ref / 60:.0f} min {how}, x {factor:.2f}: this folder's pace" if ref else ""
+        got = _iterations_done(d) if trained is not None else None
+        if ref is not None and trained is not None and got is not None and got[1] > 0:
+            # part way: the same reckoning for what is left. Its own last iterations' speed says
+            # more about the load it ran under than about the next call's (a stage slowed by other
+            # work beside it would otherwise never fit a sitting again)
+            left = max(got[1] - got[0], 0) / got[1]
+            return ref * factor * left, f"part way: {trained[0]}; {whole}, {left:.0%} left"
+        if trained is not None and trained[1] is not None:
+            return trained[1], f"part way: {trained[0]}"
         if ref is None:
             return math.nan, "no estimate: no reference run with the same work per iteration"
-        return ref * factor, f"{ref / 60:.0f} min {how}, x {factor:.2f}: this folder's pace"
+        return ref * factor, whole
 
     return estimate
 
