@@ -203,6 +203,40 @@ def test_estimates_read_the_reference_run_the_pace_and_a_part_way_run(tmp_path):
     assert pace(tmp_path / "empty", st, ref) == 1.0
 
 
+def test_a_recipe_that_identifies_the_model_is_reckoned_with_its_identifiers(tmp_path):
+    """A recipe that identifies the model trains one identifier per seed after its meta-training,
+    one after the other. Its reference record, resumed in its last call (``seconds`` 19), took
+    its seeds' training (100 s) and their identifiers (2 x 50 s): 200 s, not 100. Part way, what
+    is left is the training's share left plus the identifiers not complete."""
+    from warp_critic.methods.identify import SUMMARY_FILE
+    from warp_critic.reproduce.reference_times import parts
+    from warp_critic.reproduce.status import estimator
+
+    ref, out = tmp_path / "ref", tmp_path / "out"
+    st = {"p": Stage("p", "metatrain", {"values": {"iterations": 100}}, {}, "1" * 10)}
+    _record(ref / st["p"].dir_name, "p", 19.0, 100)
+    data = json.loads((ref / st["p"].dir_name / "stage.json").read_text())
+    seed = {"seconds": 100.0, "identified": {"seconds": 50.0}}
+    data["result"] = {"seeds": {"0": seed, "1": seed}}
+    (ref / st["p"].dir_name / "stage.json").write_text(json.dumps(data))
+    assert parts(data, "metatrain") == (100.0, 100.0)
+    # one call's record: its seconds hold the identifiers too
+    assert parts({**data, "seconds": 230.0}, "metatrain") == (130.0, 100.0)
+    est = estimator(out, st, ref)
+    assert est("p")[0] == 200.0
+    for n in (0, 1):  # part way: training done, seed 0's identifier complete, seed 1's not
+        run = out / st["p"].dir_name / "run" / f"seed{n}"
+        run.mkdir(parents=True)
+        (run / "config.json").write_text(json.dumps({"iterations": 100}))
+        (run / "metrics.jsonl").write_text(
+            "".join(json.dumps({"iteration": i, "seconds": 1.0}) + "\n" for i in range(100))
+        )
+    (out / st["p"].dir_name / "run" / "seed0-identified").mkdir()
+    (out / st["p"].dir_name / "run" / "seed0-identified" / SUMMARY_FILE).write_text("{}")
+    left = est("p")
+    assert left[0] == pytest.approx(50.0) and left[1].endswith("25% left")
+
+
 @pytest.mark.parametrize(
     "argv, words",
     [

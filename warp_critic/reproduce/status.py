@@ -25,7 +25,8 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
-from warp_critic.reproduce.engine.stage import PROGRESS, dir_name, stage_of_dir
+from warp_critic.reproduce import reference_times as rt
+from warp_critic.reproduce.engine.stage import PROGRESS, dir_name
 
 __all__ = [
     "RECENT",
@@ -101,20 +102,15 @@ def _iterations_done(d: Path) -> tuple[int, int, list[dict]] | None:
     return (int(rows[-1]["iteration"]) + 1 if rows else 0), total, rows
 
 
-def _took(data: dict, kind: str) -> float:
-    """A complete stage's time (s) from its record: a meta-training resumed over calls took its
-    seeds' iteration times, not its last call's."""
-    seeds = (data.get("result") or {}).get("seeds") if kind == "metatrain" else None
-    per_seed = [float(v.get("seconds", 0.0)) for v in (seeds or {}).values() if isinstance(v, dict)]
-    return max([float(data["seconds"]), *per_seed])
+def _identify_left(d: Path) -> float:
+    """The share of a part-way meta-training's seeds (``d/run/seed*``) whose model identifier is
+    not complete yet (``seedN-identified/identify.json``); its reference time says whether the
+    stage identifies at all."""
+    from warp_critic.methods.identify import SUMMARY_FILE
 
-
-def _reference(reference: Path | None, directory: str, kind: str) -> float | None:
-    """The time the stage ``directory`` took in the ``reference`` archive, where it has a record."""
-    from warp_critic.reproduce.engine.stages import read_stage, record_problem
-
-    data = read_stage(reference / directory) if reference is not None else None
-    return None if data is None or record_problem(data) else _took(data, kind)
+    seeds = [p for p in d.glob("run/seed*") if p.is_dir() and p.name[4:].isdigit()]
+    done = [p for p in seeds if (p.with_name(f"{p.name}-identified") / SUMMARY_FILE).is_file()]
+    return 1.0 - len(done) / len(seeds) if seeds else 1.0
 
 
 def budget_estimate(out: Path, st, stages: dict) -> tuple[float, str] | None:
@@ -150,7 +146,7 @@ def budget_estimate(out: Path, st, stages: dict) -> tuple[float, str] | None:
     except UserError:  # a choice it reads is not complete
         return None
     n, n0, k = int(kw["steps"]), int(r["policy_updates"]), len(kw["only"])
-    per_row = _took(data, base.kind) / max(len(rows), 1)
+    per_row = rt.took(data, base.kind) / max(len(rows), 1)
     how = (
         f"estimated from {base.name}: {per_row / 60:.1f} min per row x {k} row(s) x "
         f"({n} + 2) / ({n0} + 2) rollouts"
@@ -165,12 +161,12 @@ def _state(out: Path, st, check, reference: Path | None, stages: dict) -> StageS
     d = out / dir_name(name, st.hash)
     data = read_complete(d, kind, check)
     if data is not None:
-        return StageState(name, d.name, "complete", f"{_took(data, kind) / 60:.1f} min")
+        return StageState(name, d.name, "complete", f"{rt.took(data, kind) / 60:.1f} min")
     if not d.is_dir():
-        ref, detail = _reference(reference, d.name, kind), "the reference run"
+        ref, detail = rt.total(rt.recorded(reference, d.name, kind)), "the reference run"
         if ref is None and kind == "metatrain":
             ref, detail = (
-                _reference_by_name(reference, name, st),
+                rt.total(rt.reference_by_name(reference, name, st)),
                 "the reference run, other step sizes or length",
             )
         if ref is None and (guess := budget_estimate(out, st, stages)) is not None:
@@ -205,9 +201,9 @@ def pace(out: Path, stages: dict, reference: Path | None) -> float:
             continue
         d = dir_name(n, st.hash)
         data = read_stage(Path(out) / d)
-        ref = _reference(reference, d, st.kind)
+        ref = rt.total(rt.recorded(reference, d, st.kind))
         if data is not None and not record_problem(data) and ref:
-            ratios.append(_took(data, st.kind) / ref)
+            ratios.append(rt.took(data, st.kind) / ref)
     ratios.sort()
     if not ratios:
         return 1.0
@@ -231,19 +227,22 @@ def estimator(out: Path, stages: dict, reference: Path | None):
             return None
         d = Path(out) / dir_name(name, st.hash)
         trained = _training(d) if d.is_dir() else None
-        ref = _reference(reference, d.name, st.kind)
+        parts = rt.recorded(reference, d.name, st.kind)
         how = "in the reference run"
-        if ref is None:
-            ref = _reference_by_name(reference, name, st)
+        if parts is None:
+            parts = rt.reference_by_name(reference, name, st)
             how = "in the reference run with other step sizes or length, per iteration"
+        ref = rt.total(parts)
         whole = f"{ref / 60:.0f} min {how}, x {factor:.2f}: this folder's pace" if ref else ""
         got = _iterations_done(d) if trained is not None else None
-        if ref is not None and trained is not None and got is not None and got[1] > 0:
+        if parts is not None and trained is not None and got is not None and got[1] > 0:
             # part way: the same reckoning for what is left. Its own last iterations' speed says
             # more about the load it ran under than about the next call's (a stage slowed by other
             # work beside it would otherwise never fit a sitting again)
-            left = max(got[1] - got[0], 0) / got[1]
-            return ref * factor * left, f"part way: {trained[0]}; {whole}, {left:.0%} left"
+            whole_s = sum(parts) or 1.0
+            left = max(got[1] - got[0], 0) / got[1] * parts[0] + _identify_left(d) * parts[1]
+            left /= whole_s
+            return whole_s * factor * left, f"part way: {trained[0]}; {whole}, {left:.0%} left"
         if trained is not None and trained[1] is not None:
             return trained[1], f"part way: {trained[0]}"
         if ref is None:
@@ -251,65 +250,6 @@ def estimator(out: Path, stages: dict, reference: Path | None):
         return ref * factor, whole
 
     return estimate
-
-
-def _iterations(settings) -> int | None:
-    values = settings.get("values") if isinstance(settings, dict) else None
-    n = values.get("iterations") if isinstance(values, dict) else None
-    return n if isinstance(n, int) and not isinstance(n, bool) and n > 0 else None
-
-
-#: settings that do not change a meta-training's work per iteration: a step size, how often it
-#: writes (``iterations`` itself scales the time)
-_COST_NEUTRAL = ("iterations", "record_every", "checkpoint_every")
-
-
-def _leaves(x, prefix: str = "") -> dict:
-    if not isinstance(x, dict):
-        return {prefix: x}
-    out = {}
-    for k, v in x.items():
-        out.update(_leaves(v, f"{prefix}{k}."))
-    return out
-
-
-def _same_work(a, b) -> bool:
-    """Whether meta-training settings ``a`` and ``b`` differ only in step sizes (``*_lr``) and
-    :data:`_COST_NEUTRAL` entries: the same work per iteration."""
-    la, lb = _leaves(a), _leaves(b)
-    for key in set(la) | set(lb):
-        if la.get(key) != lb.get(key):
-            leaf = key.rstrip(".").rpartition(".")[2]
-            if not (leaf.endswith("_lr") or leaf in _COST_NEUTRAL):
-                return False
-    return True
-
-
-def _reference_by_name(reference: Path | None, name: str, st) -> float | None:
-    """A meta-training's time estimated from the ``reference`` archive's record of the stage of the
-    same name whose settings differ only in step sizes or length (a tuned step size changes the
-    hash, not the work): its time per iteration times this stage's iterations. ``None`` where there
-    is none (other settings may do other work per iteration: no estimate)."""
-    from warp_critic.reproduce.engine.stages import read_stage, record_problem
-
-    if reference is None or not reference.is_dir():
-        return None
-    want = _iterations(st.settings)
-    for d in sorted(reference.glob(f"{name}-*")):
-        if stage_of_dir(d.name) != name:
-            continue  # another stage whose name starts with this one's
-        data = read_stage(d)
-        if (
-            data is None
-            or record_problem(data)
-            or not _same_work(st.settings, data.get("settings"))
-        ):
-            continue
-        had = _iterations(data.get("settings"))
-        if want is None or had is None:
-            continue
-        return _took(data, st.kind) * want / had
-    return None
 
 
 def stage_states(rc, reference: Path | None = None) -> list[StageState]:
