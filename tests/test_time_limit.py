@@ -232,7 +232,9 @@ def test_a_recipe_that_identifies_the_model_is_reckoned_with_its_identifiers(tmp
             "".join(json.dumps({"iteration": i, "seconds": 1.0}) + "\n" for i in range(100))
         )
     (out / st["p"].dir_name / "run" / "seed0-identified").mkdir()
-    (out / st["p"].dir_name / "run" / "seed0-identified" / SUMMARY_FILE).write_text("{}")
+    (out / st["p"].dir_name / "run" / "seed0-identified" / SUMMARY_FILE).write_text(
+        json.dumps(dict.fromkeys(("loss", "held_out", "varied", "seconds", "iterations"), 0))
+    )
     left = est("p")
     assert left[0] == pytest.approx(50.0) and left[1].endswith("25% left")
 

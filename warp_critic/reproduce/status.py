@@ -103,13 +103,13 @@ def _iterations_done(d: Path) -> tuple[int, int, list[dict]] | None:
 
 
 def _identify_left(d: Path) -> float:
-    """The share of a part-way meta-training's seeds (``d/run/seed*``) whose model identifier is
-    not complete yet (``seedN-identified/identify.json``); its reference time says whether the
-    stage identifies at all."""
-    from warp_critic.methods.identify import SUMMARY_FILE
+    """The share of a part-way meta-training's seeds (``d/run/seed*``) whose model identifier
+    (``seedN-identified``, :func:`~warp_critic.reproduce.experiments.metatrain.identify_seed`) is
+    not complete yet."""
+    from warp_critic.methods.identify import identified
 
     seeds = [p for p in d.glob("run/seed*") if p.is_dir() and p.name[4:].isdigit()]
-    done = [p for p in seeds if (p.with_name(f"{p.name}-identified") / SUMMARY_FILE).is_file()]
+    done = [p for p in seeds if identified(p.with_name(f"{p.name}-identified")) is not None]
     return 1.0 - len(done) / len(seeds) if seeds else 1.0
 
 
@@ -239,10 +239,11 @@ def estimator(out: Path, stages: dict, reference: Path | None):
             # part way: the same reckoning for what is left. Its own last iterations' speed says
             # more about the load it ran under than about the next call's (a stage slowed by other
             # work beside it would otherwise never fit a sitting again)
-            whole_s = sum(parts) or 1.0
-            left = max(got[1] - got[0], 0) / got[1] * parts[0] + _identify_left(d) * parts[1]
-            left /= whole_s
-            return whole_s * factor * left, f"part way: {trained[0]}; {whole}, {left:.0%} left"
+            left = max(got[1] - got[0], 0) / got[1] * parts[0]
+            if parts[1]:  # a recipe that identifies the model: its identifiers not complete
+                left += _identify_left(d) * parts[1]
+            share = f"{left / ref:.0%}" if ref else "all"
+            return left * factor, f"part way: {trained[0]}; {whole}, {share} left"
         if trained is not None and trained[1] is not None:
             return trained[1], f"part way: {trained[0]}"
         if ref is None:
